@@ -1,0 +1,3 @@
+from tactbench.cli import main
+
+main()

@@ -1,0 +1,124 @@
+"""The ``tactbench`` command line.
+
+Start-up stays cheap: built-in commands are imported when they run (see
+:data:`BUILTIN_COMMANDS`), plugins load on first need, and heavy libraries are
+imported by the components that use them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from typing import Any
+
+import click
+
+from tactbench import __version__
+
+#: command name → "module:attribute" of its click command, imported on use.
+BUILTIN_COMMANDS: dict[str, str] = {
+    "list": "tactbench.commands.inspect:list_cmd",
+    "plugins": "tactbench.commands.inspect:plugins_cmd",
+}
+
+DEBUG_ENV = "TACTBENCH_DEBUG"
+
+
+class TactbenchGroup(click.Group):
+    """A group whose built-in commands load lazily and whose plugins add commands."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._plugin_commands_loaded = False
+
+    def _load_plugin_commands(self, ctx: click.Context) -> None:
+        if self._plugin_commands_loaded:
+            return
+        self._plugin_commands_loaded = True
+        pm = plugin_manager(ctx)
+        before = set(self.commands)
+        pm.call_each("register_commands", lambda _p, _d: {"cli": self})
+        for name in set(self.commands) - before:
+            if name in BUILTIN_COMMANDS:  # a plugin may not replace a built-in command
+                del self.commands[name]
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        self._load_plugin_commands(ctx)
+        return sorted(set(BUILTIN_COMMANDS) | set(self.commands))
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        target = BUILTIN_COMMANDS.get(cmd_name)
+        if target is not None:
+            module_name, _, attr = target.partition(":")
+            return getattr(importlib.import_module(module_name), attr)
+        self._load_plugin_commands(ctx)
+        return self.commands.get(cmd_name)
+
+    def invoke(self, ctx: click.Context) -> Any:
+        from tactbench.errors import TactbenchError
+
+        try:
+            return super().invoke(ctx)
+        except (TactbenchError, ValueError, FileNotFoundError) as exc:
+            if os.environ.get(DEBUG_ENV):
+                raise
+            raise click.ClickException(" ".join(str(exc).split())) from exc
+
+
+def _state(ctx: click.Context) -> dict[str, Any]:
+    root = ctx.find_root()
+    if root.obj is None:
+        root.obj = {}
+    return root.obj
+
+
+def plugin_manager(ctx: click.Context):
+    """This invocation's plugin manager, built on first use; problems go to stderr once."""
+    state = _state(ctx)
+    if "pm" not in state:
+        from tactbench.errors import PluginError
+        from tactbench.plugins import make_plugin_manager
+
+        try:
+            state["pm"] = make_plugin_manager()
+        except PluginError as exc:
+            raise click.ClickException(str(exc)) from exc
+    return state["pm"]
+
+
+def get_registry(ctx: click.Context | None = None, *, warn: bool = True):
+    """This invocation's component registry (plugins loaded once per invocation)."""
+    ctx = ctx or click.get_current_context()
+    state = _state(ctx)
+    if "registry" not in state:
+        from tactbench.errors import PluginError
+        from tactbench.plugins import collect_registry
+
+        try:
+            state["registry"] = collect_registry(plugin_manager(ctx))
+        except PluginError as exc:
+            raise click.ClickException(str(exc)) from exc
+        if warn:
+            for problem in state["registry"].problems:
+                click.echo(f"tactbench: warning: {problem} (skipped; see 'tactbench plugins')",
+                           err=True)
+    return state["registry"]
+
+
+@click.group(cls=TactbenchGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "--version", prog_name="tactbench")
+def cli() -> None:
+    """Benchmark preprocessing of tactile data for gesture recognition.
+
+    Sensors, datasets, encoders and classifiers are plugins; `tactbench list`
+    shows what is installed.
+    """
+
+
+def main(argv: list[str] | None = None) -> None:
+    cli.main(args=argv, prog_name="tactbench")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main(sys.argv[1:])

@@ -1,0 +1,1 @@
+"""Built-in commands; each module is imported only when its command runs."""

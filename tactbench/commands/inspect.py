@@ -1,0 +1,82 @@
+"""``tactbench list`` and ``tactbench plugins``: what is installed, and what failed."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from tactbench.cli import get_registry
+
+
+def _component_dict(comp) -> dict:
+    missing = set(comp.missing_requirements())
+    return {
+        "kind": comp.kind,
+        "name": comp.name,
+        "summary": comp.summary,
+        "plugin": comp.plugin,
+        "distribution": comp.distribution,
+        "target": comp.target,
+        "requires": [{"module": m, "available": m not in missing} for m in comp.requires],
+        "available": not missing,
+    }
+
+
+def _problem_dict(problem) -> dict:
+    return {"plugin": problem.plugin, "distribution": problem.distribution,
+            "error": problem.message}
+
+
+@click.command("list")
+@click.option("--kind", type=click.Choice(["sensor", "dataset", "encoder", "classifier"]),
+              help="Only components of this kind.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def list_cmd(kind: str | None, as_json: bool) -> None:
+    """List registered sensors, datasets, encoders and classifiers."""
+    registry = get_registry(warn=not as_json)
+    rows = [_component_dict(c) for c in registry.components(kind)]
+    if as_json:
+        click.echo(json.dumps({"components": rows,
+                               "problems": [_problem_dict(p) for p in registry.problems]},
+                              indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="tactbench components", title_justify="left")
+    for col in ("kind", "name", "summary", "plugin", "requires"):
+        table.add_column(col)
+    for row in rows:
+        reqs = " ".join(f"{r['module']} {'✓' if r['available'] else '✗ missing'}"
+                        for r in row["requires"]) or "-"
+        table.add_row(row["kind"], row["name"], row["summary"], row["plugin"], reqs)
+    Console().print(table)
+
+
+@click.command("plugins")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def plugins_cmd(as_json: bool) -> None:
+    """List plugins (built-in and installed), their versions and load errors."""
+    registry = get_registry(warn=False)
+    by_plugin: dict[str, list[str]] = {}
+    for problem in registry.problems:
+        by_plugin.setdefault(problem.plugin, []).append(problem.message)
+    rows = [{"name": p.name, "distribution": p.distribution, "version": p.version,
+             "source": p.source, "hooks": list(p.hooks),
+             "errors": by_plugin.get(p.name, [])} for p in registry.plugins]
+    if as_json:
+        click.echo(json.dumps({"plugins": rows}, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="tactbench plugins", title_justify="left")
+    for col in ("plugin", "distribution", "version", "source", "hooks", "errors"):
+        table.add_column(col)
+    for row in rows:
+        errors = "\n".join(row["errors"])
+        table.add_row(row["name"], row["distribution"], row["version"], row["source"],
+                      ", ".join(row["hooks"]) or "-",
+                      f"[red]{errors}[/red]" if errors else "-")
+    Console().print(table)

@@ -1,0 +1,56 @@
+"""The tactbench plugin API: the hooks a plugin may implement.
+
+A plugin is any module (or object) with functions marked ``@tactbench.hookimpl``
+whose names are hooks below. Installed plugins are found through the
+entry-point group ``tactbench``; built-in components use the same hooks.
+
+The four ``register_*`` hooks receive one argument, ``register``, a callable::
+
+    register(name, target, *, summary, requires=())
+
+``name``
+    the component's name on the command line (``farneback``); lower case
+    letters, digits, ``-``, ``_`` and ``.``.
+``target``
+    ``"module.path:Attribute"``. Nothing is imported until the component is
+    built, so a plugin's hook module must stay light.
+``summary``
+    one line shown by ``tactbench list``.
+``requires``
+    top-level modules the component needs (``("cv2",)``); ``tactbench list``
+    shows whether each is installed.
+
+This signature is public and stable: new keyword arguments may be added, with
+defaults, but none will be removed or made mandatory.
+"""
+
+from __future__ import annotations
+
+import pluggy
+
+hookspec = pluggy.HookspecMarker("tactbench")
+
+
+@hookspec
+def register_sensors(register):
+    """Register sensors: classes that stream frames ``(timestamp, values (N,))``."""
+
+
+@hookspec
+def register_datasets(register):
+    """Register datasets: callables returning a labelled set of recordings."""
+
+
+@hookspec
+def register_encoders(register):
+    """Register image encoders: ``(T, H, W)`` float32 → ``(T, C, H, W)`` float32."""
+
+
+@hookspec
+def register_classifiers(register):
+    """Register classifiers: ``fit`` on encoded windows, ``predict`` class indices."""
+
+
+@hookspec
+def register_commands(cli):
+    """Add commands to the ``tactbench`` click group ``cli``."""
