@@ -198,7 +198,8 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     Values become ``int``, ``float``, ``bool`` (``true``/``false``), ``None``
     (``none``) or stay strings.
     """
-    name, _, rest = spec.strip().partition(":")
+    name, _, rest = spec.partition(":")
+    name = name.strip()
     if not name:
         raise ValueError(f"empty component name in '{spec}'")
     options: dict[str, Any] = {}

@@ -31,3 +31,36 @@ def shared_data() -> Path:
         pytest.skip(f"real data not found at {SHARED_DATA} (set TACTBENCH_SHARED_DATA); "
                     f"a fresh clone does not have it")
     return SHARED_DATA
+
+
+@pytest.fixture
+def plugin_dist(tmp_path, monkeypatch):
+    """Make an installed-looking plugin distribution on ``sys.path`` and ``PYTHONPATH``.
+
+    ``plugin_dist(dist_name, module_name, source, entry_name=...)`` writes
+    ``module_name.py`` with ``source`` and a ``.dist-info`` whose entry point in group
+    ``tactbench`` points at it, exactly what ``pip install`` would leave behind. Returns
+    the folder (already on ``sys.path``; subprocesses see it through ``PYTHONPATH``).
+    """
+    import sys
+    import textwrap
+
+    root = tmp_path / "site"
+    root.mkdir(exist_ok=True)
+    monkeypatch.syspath_prepend(str(root))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
+        [str(root), *filter(None, [os.environ.get("PYTHONPATH")])]))
+
+    def make(dist_name: str, module_name: str, source: str, *,
+             entry_name: str | None = None, version: str = "1.0") -> Path:
+        (root / f"{module_name}.py").write_text(textwrap.dedent(source))
+        info = root / f"{dist_name.replace('-', '_')}-{version}.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(
+            f"Metadata-Version: 2.1\nName: {dist_name}\nVersion: {version}\n")
+        (info / "entry_points.txt").write_text(
+            f"[tactbench]\n{entry_name or module_name} = {module_name}\n")
+        sys.modules.pop(module_name, None)
+        return root
+
+    return make

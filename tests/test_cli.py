@@ -1,0 +1,101 @@
+"""The command-line surface of the foundation: --version, --help, list, plugins."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from click.testing import CliRunner
+
+import tactbench
+from tactbench.cli import BUILTIN_COMMANDS, cli
+
+HEAVY = ("torch", "kornia", "cv2", "can", "skimage", "matplotlib", "dask")
+
+
+def run(*args):
+    return CliRunner().invoke(cli, list(args), catch_exceptions=False)
+
+
+def test_version():
+    result = run("--version")
+    assert result.exit_code == 0 and tactbench.__version__ in result.output
+
+
+def test_help_lists_builtin_commands():
+    result = run("--help")
+    assert result.exit_code == 0
+    for name in ("list", "plugins"):
+        assert name in result.output
+
+
+def test_every_builtin_command_target_imports():
+    for name, target in BUILTIN_COMMANDS.items():
+        module, _, attr = target.partition(":")
+        command = getattr(__import__(module, fromlist=[attr]), attr)
+        assert command.name == name, f"BUILTIN_COMMANDS['{name}'] points at '{command.name}'"
+
+
+def test_list_json_is_one_document_with_every_field():
+    result = CliRunner().invoke(cli, ["list", "--json"])
+    doc = json.loads(result.stdout)
+    raw = next(c for c in doc["components"] if c["name"] == "raw")
+    assert set(raw) == {"kind", "name", "summary", "plugin", "distribution", "target",
+                        "requires", "available"}
+    assert raw["kind"] == "encoder" and raw["plugin"] == "tactbench.encoders"
+
+
+def test_list_filters_by_kind():
+    doc = json.loads(CliRunner().invoke(cli, ["list", "--kind", "encoder", "--json"]).stdout)
+    assert doc["components"] and {c["kind"] for c in doc["components"]} == {"encoder"}
+
+
+def test_list_table_shows_requirements():
+    result = run("list")
+    assert result.exit_code == 0 and "raw" in result.output and "frame-diff" in result.output
+
+
+def test_plugins_json_lists_builtins_with_their_hooks():
+    doc = json.loads(run("plugins", "--json").output)
+    builtin = next(p for p in doc["plugins"] if p["name"] == "tactbench.encoders")
+    assert builtin["source"] == "builtin" and "register_encoders" in builtin["hooks"]
+    assert builtin["version"] == tactbench.__version__ and builtin["errors"] == []
+
+
+def test_unknown_command_fails_with_a_reason():
+    result = CliRunner().invoke(cli, ["no-such-command"])
+    assert result.exit_code != 0 and "No such command" in result.output
+
+
+@pytest.mark.parametrize("argv", [
+    ["-c", "import tactbench.cli"],
+    ["-m", "tactbench", "--help"],
+    ["-m", "tactbench", "list"],
+    ["-m", "tactbench", "list", "--json"],
+    ["-m", "tactbench", "plugins"],
+])
+def test_startup_leaves_heavy_libraries_out(argv):
+    """The CLI's start-up (and listing what is installed) imports no heavy library."""
+    probe = (
+        "import runpy, sys, atexit\n"
+        f"heavy = {HEAVY!r}\n"
+        "def report():\n"
+        "    loaded = [m for m in heavy if m in sys.modules]\n"
+        "    sys.__stderr__.write('HEAVY:' + ','.join(loaded) + '\\n')\n"
+        "atexit.register(report)\n"
+        f"argv = {argv!r}\n"
+        "if argv[0] == '-c':\n"
+        "    exec(argv[1])\n"
+        "else:\n"
+        "    sys.argv = ['tactbench', *argv[2:]]\n"
+        "    runpy.run_module(argv[1], run_name='__main__')\n"
+    )
+    env = {**os.environ, "COLUMNS": "200"}
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                            env=env, timeout=120)
+    assert result.returncode == 0, result.stderr
+    line = [ln for ln in result.stderr.splitlines() if ln.startswith("HEAVY:")][-1]
+    assert line == "HEAVY:", f"{argv} imported heavy modules: {line[6:]}"

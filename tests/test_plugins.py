@@ -1,0 +1,313 @@
+"""The plugin API: hooks, discovery, load errors, duplicates, misspellings, building."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import types
+
+import click
+import pytest
+
+from tactbench import hookimpl, hookspecs
+from tactbench.errors import ComponentLoadError, PluginError, UnknownComponentError
+from tactbench.plugins import (collect_registry, format_spec, make_plugin_manager,
+                               parse_spec)
+
+GOOD_PLUGIN = """
+    from tactbench import hookimpl
+
+    @hookimpl
+    def register_encoders(register):
+        register("negate", "{mod}_impl:Negate", summary="1 - pressure")
+"""
+
+IMPL = """
+    import numpy as np
+    from tactbench.encoders.base import Encoder
+
+    class Negate(Encoder):
+        channels = ("inverted",)
+        ranges = ((0.0, 1.0),)
+        def __init__(self, *, gain: float = 1.0):
+            self.gain = gain
+        def _encode(self, seq):
+            return (1.0 - seq)[:, None].astype(np.float32)
+"""
+
+
+def registry_with(*plugins, strict=False):
+    """A registry of the built-ins plus ``(name, object)`` plugins, ignoring installed ones."""
+    pm = make_plugin_manager(entry_points=False, strict=strict, extra=plugins)
+    return collect_registry(pm)
+
+
+def namespace(**hooks):
+    return types.SimpleNamespace(**{name: hookimpl(fn) for name, fn in hooks.items()})
+
+
+def run_cli(*args, env=None):
+    import os
+
+    full_env = {**os.environ, **(env or {})}
+    return subprocess.run([sys.executable, "-m", "tactbench", *args], capture_output=True,
+                          text=True, env=full_env, timeout=120)
+
+
+# --------------------------------------------------------------------- one test per hook
+
+
+def test_hook_register_sensors():
+    def register_sensors(register):
+        register("fake-sensor", "somewhere.sensor:Fake", summary="a sensor",
+                 requires=("somewhere",))
+
+    reg = registry_with(("p", namespace(register_sensors=register_sensors)))
+    comp = reg.get("sensor", "fake-sensor")
+    assert (comp.kind, comp.plugin, comp.requires) == ("sensor", "p", ("somewhere",))
+    assert comp.missing_requirements() == ["somewhere"]
+    with pytest.raises(ComponentLoadError, match="needs somewhere, which is not installed"):
+        reg.build("sensor", "fake-sensor")
+
+
+def test_hook_register_datasets():
+    def register_datasets(register):
+        register("tiny", "collections:OrderedDict", summary="a dataset factory")
+
+    reg = registry_with(("p", namespace(register_datasets=register_datasets)))
+    assert "tiny" in reg.names("dataset")
+    built = reg.build("dataset", "tiny:users=3")
+    assert built == {"users": 3}  # the target was imported and called with the options
+
+
+def test_hook_register_encoders(plugin_dist):
+    plugin_dist("neg-dist", "negplug", GOOD_PLUGIN.format(mod="negplug"))
+    import pathlib
+    root = pathlib.Path(sys.path[0])
+    (root / "negplug_impl.py").write_text(__import__("textwrap").dedent(IMPL))
+    reg = collect_registry(make_plugin_manager())
+    comp = reg.get("encoder", "negate")
+    assert (comp.plugin, comp.distribution) == ("negplug", "neg-dist")
+    enc = reg.build("encoder", "negate:gain=2")
+    assert enc.gain == 2
+    import numpy as np
+    out = enc.encode(np.full((2, 3, 3), 0.25, np.float32))
+    assert out.shape == (2, 1, 3, 3) and np.allclose(out, 0.75)
+
+
+def test_hook_register_classifiers():
+    def register_classifiers(register):
+        register("majority", "collections:Counter", summary="a classifier")
+
+    reg = registry_with(("p", namespace(register_classifiers=register_classifiers)))
+    assert reg.get("classifier", "majority").target == "collections:Counter"
+
+
+def test_hook_register_commands(plugin_dist):
+    plugin_dist("cmd-dist", "cmdplug", """
+        import click
+        from tactbench import hookimpl
+
+        @hookimpl
+        def register_commands(cli):
+            @cli.command()
+            def hello():
+                "Say hello."
+                click.echo("hello from a plugin")
+    """)
+    result = run_cli("hello")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "hello from a plugin"
+    assert "hello" in run_cli("--help").stdout
+
+
+def test_every_hook_has_its_own_test():
+    hooks = [n for n in dir(hookspecs) if n.startswith("register_")]
+    assert len(hooks) == 5
+    missing = [h for h in hooks if f"test_hook_{h}" not in globals()]
+    assert not missing, f"hooks without a test: {missing}"
+
+
+# --------------------------------------------------------------------- problems reported
+
+
+BROKEN_ON_IMPORT = """
+    raise RuntimeError("this plugin is broken on purpose")
+"""
+
+
+def test_plugin_that_fails_to_import_is_reported_and_skipped(plugin_dist):
+    plugin_dist("broken-dist", "brokenplug", BROKEN_ON_IMPORT)
+    result = run_cli("plugins", "--json")
+    assert result.returncode == 0, result.stderr
+    doc = json.loads(result.stdout)
+    broken = [p for p in doc["plugins"] if p["name"] == "brokenplug"]
+    assert broken and broken[0]["distribution"] == "broken-dist"
+    assert "this plugin is broken on purpose" in broken[0]["errors"][0]
+
+    listed = run_cli("list", "--json")
+    assert listed.returncode == 0
+    names = {c["name"] for c in json.loads(listed.stdout)["components"]}
+    assert {"raw", "frame-diff"} <= names
+    assert "brokenplug" in listed.stderr  # a one-line warning, stdout stays pure JSON
+
+
+def test_strict_mode_makes_a_broken_plugin_fatal(plugin_dist):
+    plugin_dist("broken-dist", "brokenplug2", BROKEN_ON_IMPORT)
+    result = run_cli("list", env={"TACTBENCH_STRICT_PLUGINS": "1"})
+    assert result.returncode != 0
+    assert "brokenplug2" in result.stderr and "broken on purpose" in result.stderr
+    with pytest.raises(PluginError, match="brokenplug2"):
+        make_plugin_manager(strict=True)
+
+
+def test_hook_that_raises_skips_only_that_plugin():
+    def bad(register):
+        register("half-done", "x.y:Z", summary="registered before the failure")
+        raise KeyError("boom")
+
+    reg = registry_with(("bad", namespace(register_encoders=bad)))
+    assert "half-done" not in reg.names("encoder")  # all or nothing per hook call
+    assert "raw" in reg.names("encoder")
+    (problem,) = reg.problems
+    assert problem.plugin == "bad" and "register_encoders raised KeyError" in problem.message
+
+
+def test_duplicate_names_name_both_plugins():
+    def first(register):
+        register("same", "a.b:C", summary="first")
+
+    def second(register):
+        register("same", "d.e:F", summary="second")
+
+    reg = registry_with(("one", namespace(register_encoders=first)),
+                        ("two", namespace(register_encoders=second)))
+    assert reg.get("encoder", "same").plugin == "one"
+    (problem,) = reg.problems
+    text = str(problem)
+    assert "'same'" in text and "'one'" in text and "'two'" in text
+    with pytest.raises(PluginError, match="already registered by plugin 'one'"):
+        registry_with(("one", namespace(register_encoders=first)),
+                      ("two", namespace(register_encoders=second)), strict=True)
+
+
+def test_duplicate_of_a_builtin_cannot_replace_it():
+    def hijack(register):
+        register("raw", "a.b:C", summary="pretends to be raw")
+
+    reg = registry_with(("hijack", namespace(register_encoders=hijack)))
+    assert reg.get("encoder", "raw").plugin == "tactbench.encoders"
+    assert "already registered" in reg.problems[0].message
+
+
+def test_misspelled_hook_is_reported():
+    def register_encoder(register):  # missing the final "s"
+        register("never", "a.b:C", summary="never called")
+
+    reg = registry_with(("typo", namespace(register_encoder=register_encoder)))
+    (problem,) = reg.problems
+    assert "unknown hook 'register_encoder'" in problem.message
+    assert "did you mean 'register_encoders'" in problem.message
+    with pytest.raises(PluginError, match="register_encoder"):
+        registry_with(("typo", namespace(register_encoder=register_encoder)), strict=True)
+
+
+def test_hook_with_wrong_arguments_is_reported():
+    def register_encoders(registrar):  # not an argument of the spec
+        pass
+
+    reg = registry_with(("wrongargs", namespace(register_encoders=register_encoders)))
+    assert reg.problems and "registrar" in reg.problems[0].message
+
+
+def test_target_that_does_not_import_gives_a_clear_error():
+    def register_encoders(register):
+        register("ghost", "no_such_module_anywhere.sub:Ghost", summary="missing code")
+
+    reg = registry_with(("g", namespace(register_encoders=register_encoders)))
+    with pytest.raises(ComponentLoadError) as err:
+        reg.build("encoder", "ghost")
+    msg = str(err.value)
+    assert "encoder 'ghost'" in msg and "plugin 'g'" in msg
+    assert "no_such_module_anywhere.sub:Ghost" in msg and "ModuleNotFoundError" in msg
+
+
+@pytest.mark.parametrize("args, message", [
+    (("Bad Name", "a.b:C"), "name 'Bad Name' is invalid"),
+    (("ok", "a.b.C"), "must look like 'package.module:Attribute'"),
+    (("ok", "a.b:C", ""), "summary must be a non-empty string"),
+])
+def test_register_validates_its_arguments(args, message):
+    def register_encoders(register):
+        name, target, *summary = args
+        register(name, target, summary=summary[0] if summary else "fine")
+
+    reg = registry_with(("v", namespace(register_encoders=register_encoders)))
+    assert message in reg.problems[0].message
+
+
+# --------------------------------------------------------------------- names and options
+
+
+def test_unknown_name_suggests_the_closest():
+    reg = registry_with()
+    with pytest.raises(UnknownComponentError, match="did you mean 'frame-diff'") as err:
+        reg.get("encoder", "frame-dif")
+    assert "raw" in str(err.value)
+
+
+def test_unknown_option_lists_accepted_options(plugin_dist):
+    reg = registry_with()
+    with pytest.raises(ValueError, match="encoder 'raw' has no option 'winsize'"):
+        reg.build("encoder", "raw:winsize=3")
+
+
+@pytest.mark.parametrize("spec, expected", [
+    ("farneback", ("farneback", {})),
+    ("farneback:winsize=9,levels=2", ("farneback", {"winsize": 9, "levels": 2})),
+    ("x:a=0.5,b=true,c=none,d=text", ("x", {"a": 0.5, "b": True, "c": None, "d": "text"})),
+    (" x : a = 1 ", ("x", {"a": 1})),
+])
+def test_parse_spec(spec, expected):
+    assert parse_spec(spec) == expected
+
+
+@pytest.mark.parametrize("spec", ["", ":a=1", "x:a", "x:1a=2", "x:a=1,,b=2"])
+def test_parse_spec_rejects_malformed(spec):
+    with pytest.raises(ValueError):
+        parse_spec(spec)
+
+
+def test_format_spec_round_trips():
+    name, opts = parse_spec("farneback:winsize=9,levels=2,fast=true,pyr=0.5")
+    assert parse_spec(format_spec(name, opts)) == (name, opts)
+
+
+def test_plugin_commands_cannot_replace_builtin_commands():
+    from tactbench.cli import BUILTIN_COMMANDS, TactbenchGroup
+
+    group = TactbenchGroup()
+
+    def register_commands(cli):
+        @cli.command("list")
+        def fake():
+            pass
+
+    group._plugin_commands_loaded = False
+    ctx = click.Context(group, obj={"pm": make_plugin_manager(
+        entry_points=False, extra=[("x", namespace(register_commands=register_commands))])})
+    group.list_commands(ctx)
+    assert group.get_command(ctx, "list").callback.__module__ == \
+        BUILTIN_COMMANDS["list"].split(":")[0]
+
+
+def test_hook_reference_documents_every_hook_with_its_signature():
+    import inspect
+
+    from conftest import REPO
+
+    doc = (REPO / "docs" / "plugins.md").read_text()
+    for name in (n for n in dir(hookspecs) if n.startswith("register_")):
+        params = ", ".join(inspect.signature(getattr(hookspecs, name)).parameters)
+        assert f"### `{name}({params})`" in doc, f"docs/plugins.md lacks hook {name}"
