@@ -332,7 +332,14 @@ def make_plugin_manager(*, builtins: bool = True, entry_points: bool = True,
     pm = PluginManager(strict=strict_from_env() if strict is None else strict)
     if builtins:
         for module_name in BUILTIN_PLUGINS:
-            module = importlib.import_module(module_name)
+            try:
+                module = importlib.import_module(module_name)
+            except Exception as exc:  # a broken built-in must not take the CLI down either
+                pm.infos[module_name] = PluginInfo(module_name, "tactbench", __version__,
+                                                   "builtin", error=f"{type(exc).__name__}: {exc}")
+                pm.report(module_name, "tactbench", f"failed to import: "
+                                                    f"{type(exc).__name__}: {exc}")
+                continue
             pm.add_plugin(module, name=module_name, distribution="tactbench",
                           version=__version__, source="builtin")
     if entry_points:
