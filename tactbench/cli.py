@@ -20,6 +20,8 @@ from tactbench import __version__
 BUILTIN_COMMANDS: dict[str, str] = {
     "list": "tactbench.commands.inspect:list_cmd",
     "plugins": "tactbench.commands.inspect:plugins_cmd",
+    "data": "tactbench.commands.data:data_group",
+    "layout": "tactbench.commands.layout:layout_group",
 }
 
 DEBUG_ENV = "TACTBENCH_DEBUG"

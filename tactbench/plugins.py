@@ -36,6 +36,8 @@ STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
 #: Modules whose hooks register the built-in components, in load order.
 BUILTIN_PLUGINS: tuple[str, ...] = (
     "tactbench.encoders",
+    "tactbench.datasets",
+    "tactbench.sensors",
 )
 
 #: kind → the hook that registers components of that kind.

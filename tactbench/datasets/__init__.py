@@ -1,0 +1,22 @@
+"""Built-in datasets, registered through the same hook as third-party ones.
+
+This module only *describes* datasets (it stays light: no numpy at import
+time); each is imported when it is built. Load any dataset by name or path with
+:func:`tactbench.datasets.loading.load_dataset`.
+"""
+
+from __future__ import annotations
+
+from tactbench import hookimpl
+
+
+@hookimpl
+def register_datasets(register):
+    register("synthetic-forearm", "tactbench.datasets.synthetic:SyntheticForearm",
+             summary="simulated gestures (Grasp, 2hGrasp, Twist, Push, Pull) on a "
+                     "1558-taxel CySkin forearm; 38 users x 50 samples by default")
+    register("cyskin-text", "tactbench.datasets.cyskin_text:CySkinText",
+             summary="CySkin acquisition text files (a folder per class, or one file); "
+                     "option path=...")
+    register("cost", "tactbench.datasets.cost:CoST",
+             summary="Corpus of Social Touch CSV (8x8 grid, 135 Hz); option path=...")

@@ -1,0 +1,17 @@
+"""Built-in sensors, registered through the same hook as third-party ones.
+
+This module only *describes* sensors (no numpy at import time); each is
+imported when it is built.
+"""
+
+from __future__ import annotations
+
+from tactbench import hookimpl
+
+
+@hookimpl
+def register_sensors(register):
+    register("replay", "tactbench.sensors.replay:Replay",
+             summary="plays a recorded sample (dataset folder, CySkin text file, "
+                     "registered dataset) as a stream of frames; options path, sample, "
+                     "realtime")
