@@ -15,3 +15,4 @@ def register_sensors(register):
              summary="plays a recorded sample (dataset folder, CySkin text file, "
                      "registered dataset) as a stream of frames; options path, sample, "
                      "realtime")
+    register("cyskin-can", "tactbench.sensors.cyskin_can:CySkinCAN", summary="CySkin sweeps from a CAN bus via python-can; options interface, channel, bitrate, taxel_ids or layout, format", requires=("can",))
