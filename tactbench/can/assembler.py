@@ -60,6 +60,9 @@ class Sweep:
         How many taxels were not received (0 for a complete sweep).
     first_timestamp : float
         Time of the sweep's first message.
+    label : str or None
+        The label marker in force when the sweep arrived (set by readers that
+        track markers; ``None`` otherwise).
     """
 
     timestamp: float
@@ -68,6 +71,7 @@ class Sweep:
     counter: int
     missing: int
     first_timestamp: float
+    label: str | None = None
 
     @property
     def complete(self) -> bool:

@@ -1,0 +1,292 @@
+"""CAN logs (``.blf``, ``.asc``, and the other formats python-can reads) ↔ sweeps.
+
+:func:`read_log` turns a log of CySkin traffic into labelled segments of sweeps
+(one per label marker pair; see :mod:`tactbench.can.meta`), :func:`write_log`
+writes messages to a log. The taxel ids come, in this order of preference,
+from the caller, from a taxel-map announcement in the log, or from the traffic
+itself (every slot a message carries; absent slots inside a message then show
+up as taxels that are always 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+import numpy as np
+
+from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
+from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
+from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
+
+#: Suffixes python-can reads and writes without extra packages.
+LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc")
+
+
+def is_can_log(path: str | Path) -> bool:
+    """Whether ``path`` looks like a CAN log (by suffix: .blf, .asc, .log, .csv, .trc)."""
+    return Path(path).suffix.lower() in LOG_SUFFIXES
+
+
+def _check_suffix(path: Path) -> None:
+    if path.suffix.lower() not in LOG_SUFFIXES:
+        raise ValueError(f"{path}: not a CAN log file name; use one of "
+                         f"{', '.join(LOG_SUFFIXES)}")
+
+
+def open_writer(path: str | Path):
+    """A python-can writer for ``path`` (format from the suffix); call ``.stop()`` to close."""
+    import can
+
+    path = Path(path)
+    _check_suffix(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return can.Logger(str(path))
+
+
+def write_log(path: str | Path, messages: Iterable[Any]) -> int:
+    """Write ``messages`` to ``path``; returns how many were written."""
+    writer = open_writer(path)
+    n = 0
+    try:
+        for msg in messages:
+            writer.on_message_received(msg)
+            n += 1
+    finally:
+        writer.stop()
+    return n
+
+
+def read_messages(path: str | Path) -> Iterator[Any]:
+    """The messages of a log, in file order."""
+    import can
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such CAN log")
+    _check_suffix(path)
+    try:
+        reader = can.LogReader(str(path))
+    except Exception as exc:
+        raise ValueError(f"{path}: cannot open as a CAN log: {type(exc).__name__}: {exc}") from exc
+    try:
+        yield from reader
+    except ValueError:
+        raise
+    except Exception as exc:
+        raise ValueError(f"{path}: unreadable CAN log: {type(exc).__name__}: {exc}") from exc
+    finally:
+        stop = getattr(reader, "stop", None)
+        if stop is not None:
+            stop()
+
+
+def infer_taxel_ids(messages: Iterable[Any], fmt: FrameFormat | None = None) -> np.ndarray:
+    """Taxel ids seen in the traffic: every slot a data message of ``fmt`` carries.
+
+    Absent slots sent inside a message, and FD padding, appear as taxels too; a
+    taxel-map announcement or the layout gives the exact ids.
+    """
+    fmt = fmt or FrameFormat()
+    ids: set[int] = set()
+    for msg in messages:
+        try:
+            if msg.is_error_frame or msg.is_remote_frame:
+                continue
+            arb, data, ext = int(msg.arbitration_id), bytes(msg.data), bool(msg.is_extended_id)
+        except Exception:
+            continue
+        if fmt.ids == "extended":
+            if not ext or arb >> 24 != fmt.prefix:
+                continue
+            bus, offset, body = (arb >> 12) & 0xFFF, (arb >> 8) & 0xF, data
+        else:
+            if ext or not fmt.base_id <= arb <= 0x7FF or len(data) < 2:
+                continue
+            bus, offset, body = arb - fmt.base_id, data[1], data[2:]
+        n = min(len(body) // 2, fmt.values_per_message, SLOTS_PER_MODULE - offset)
+        if n <= 0 or offset % fmt.values_per_message:
+            continue
+        module = fmt.layout_module(bus)
+        ids.update(module * SLOTS_PER_MODULE + offset + i for i in range(n))
+    if not ids:
+        raise ValueError("no CySkin data messages found (wrong frame format, or an empty log?)")
+    return np.array(sorted(ids), dtype=np.int64)
+
+
+@dataclass
+class Segment:
+    """Consecutive sweeps between a label start and end marker (or unlabelled traffic).
+
+    ``values`` float32 ``(T, N)`` raw 16-bit counts, ``timestamps`` float64
+    ``(T,)`` seconds (the log's clock), ``missing`` int ``(T,)`` taxels not
+    received per sweep, ``info`` the marker's JSON object (``None`` when unlabelled).
+    """
+
+    info: dict[str, Any] | None
+    timestamps: np.ndarray
+    values: np.ndarray
+    missing: np.ndarray
+
+    @property
+    def label(self) -> str | None:
+        return None if self.info is None else str(self.info["label"])
+
+    def __len__(self) -> int:
+        return len(self.timestamps)
+
+
+@dataclass
+class CanLog:
+    """A CAN log read back: its taxels, labelled segments and what the assembler saw."""
+
+    path: Path
+    taxel_ids: np.ndarray
+    taxel_source: str  # "given", "announced" or "inferred"
+    segments: list[Segment]
+    stats: AssemblerStats
+    fmt: FrameFormat
+    broken_meta: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def labelled(self) -> list[Segment]:
+        return [s for s in self.segments if s.info is not None]
+
+    def sweeps(self) -> tuple[np.ndarray, np.ndarray]:
+        """All sweeps in order: timestamps ``(T,)`` and values ``(T, N)``."""
+        if not self.segments:
+            return np.zeros(0), np.zeros((0, self.taxel_ids.size), np.float32)
+        return (np.concatenate([s.timestamps for s in self.segments]),
+                np.concatenate([s.values for s in self.segments]))
+
+    def summary(self) -> dict[str, Any]:
+        """Counts for ``tactbench data info``: JSON-ready."""
+        labels: dict[str, int] = {}
+        for s in self.labelled:
+            labels[s.label] = labels.get(s.label, 0) + 1
+        lengths = [len(s) for s in self.labelled] or [len(s) for s in self.segments]
+        return {
+            "path": str(self.path), "kind": "can-log", "format": self.fmt.to_dict(),
+            "taxels": int(self.taxel_ids.size), "taxel_ids_from": self.taxel_source,
+            "sweeps": int(sum(len(s) for s in self.segments)),
+            "samples": len(self.labelled), "samples_per_class": dict(sorted(labels.items())),
+            "unlabelled_sweeps": int(sum(len(s) for s in self.segments if s.info is None)),
+            "frames_per_sample": ({"min": int(min(lengths)), "median": float(np.median(lengths)),
+                                   "max": int(max(lengths))} if lengths else None),
+            "assembler": self.stats.to_dict(), "broken_meta_messages": self.broken_meta,
+        }
+
+    def to_dataset(self, *, layout: Any = None) -> Any:
+        """The labelled segments as a :class:`tactbench.recording.Dataset`.
+
+        Marker fields ``user``, ``position``, ``repetition`` and ``source`` become the
+        samples' fields when present.
+        """
+        from tactbench.recording import Dataset, Recording, Sample
+
+        samples = []
+        classes = sorted({s.label for s in self.labelled})
+        for seg in self.labelled:
+            rec = Recording(values=seg.values, timestamps=seg.timestamps,
+                            taxel_ids=self.taxel_ids)
+            extra = {k: seg.info[k] for k in ("user", "position", "repetition")
+                     if k in seg.info}
+            samples.append(Sample(recording=rec, label=seg.label,
+                                  source=seg.info.get("source", str(self.path)), **extra))
+        return Dataset(samples=samples, classes=classes, layout=layout)
+
+
+class _SegmentBuilder:
+    def __init__(self, info: dict[str, Any] | None) -> None:
+        self.info = info
+        self.sweeps: list[Sweep] = []
+
+    def build(self, n: int) -> Segment:
+        return Segment(
+            info=self.info,
+            timestamps=np.array([s.timestamp for s in self.sweeps], dtype=np.float64),
+            values=(np.stack([s.values for s in self.sweeps]) if self.sweeps
+                    else np.zeros((0, n), np.float32)),
+            missing=np.array([s.missing for s in self.sweeps], dtype=np.int64))
+
+
+def segment_messages(messages: list[Any], taxels: TaxelMap, *, missing: str = "hold",
+                     meta_prefix: int = META_PREFIX) -> tuple[list[Segment], AssemblerStats, int]:
+    """Split a message stream at label markers and assemble each part's sweeps.
+
+    Returns ``(segments, assembler stats, broken meta messages)``. Unlabelled
+    stretches with no sweeps are dropped; labelled ones are kept even if empty.
+    """
+    asm = SweepAssembler(taxels, missing=missing)
+    meta = MetaAssembler(meta_prefix)
+    segments: list[Segment] = []
+    current = _SegmentBuilder(None)
+
+    def close(next_info: dict[str, Any] | None) -> None:
+        nonlocal current
+        current.sweeps.extend(asm.flush())
+        if current.info is not None or current.sweeps:
+            segments.append(current.build(taxels.n_taxels))
+        current = _SegmentBuilder(next_info)
+
+    for msg in messages:
+        if is_meta(msg, meta_prefix):
+            event: MetaEvent | None = meta.feed(msg)
+            if event is None or event.kind == "taxel_map":
+                continue
+            if event.kind == "label_start":
+                close(event.info)
+            elif current.info is not None:  # label_end of the open segment
+                close(None)
+            continue
+        current.sweeps.extend(asm.feed(msg))
+    close(None)
+    return segments, asm.stats, meta.broken
+
+
+def announced_taxel_ids(messages: Iterable[Any],
+                        meta_prefix: int = META_PREFIX) -> np.ndarray | None:
+    """The first taxel-map announcement in ``messages``, or ``None``."""
+    meta = MetaAssembler(meta_prefix)
+    for msg in messages:
+        if is_meta(msg, meta_prefix):
+            event = meta.feed(msg)
+            if event is not None and event.kind == "taxel_map":
+                return event.taxel_ids
+    return None
+
+
+def read_log(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None = None,
+             missing: str = "hold") -> CanLog:
+    """Read a CAN log of CySkin traffic into labelled segments of sweeps.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.blf``, ``.asc``, ``.log``, ``.csv`` or ``.trc``.
+    taxel_ids : array-like of int, optional
+        The layout's taxel ids; default: announced in the log, else inferred.
+    fmt : FrameFormat, optional
+        The data frames' format (default :class:`FrameFormat()`).
+    missing : {"hold", "nan", "zero"}
+        Rule for taxels of lost messages (see :mod:`tactbench.can.assembler`).
+    """
+    path = Path(path)
+    fmt = fmt or FrameFormat()
+    messages = list(read_messages(path))
+    if taxel_ids is not None:
+        ids, source = np.asarray(taxel_ids, dtype=np.int64), "given"
+    else:
+        ids = announced_taxel_ids(messages)
+        source = "announced"
+        if ids is None:
+            try:
+                ids = infer_taxel_ids(messages, fmt)
+            except ValueError as exc:
+                raise ValueError(f"{path}: {exc}") from None
+            source = "inferred"
+    taxels = TaxelMap(ids, fmt)
+    segments, stats, broken = segment_messages(messages, taxels, missing=missing)
+    return CanLog(path, taxels.taxel_ids, source, segments, stats, fmt, broken)
