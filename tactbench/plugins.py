@@ -38,6 +38,7 @@ BUILTIN_PLUGINS: tuple[str, ...] = (
     "tactbench.encoders",
     "tactbench.datasets",
     "tactbench.sensors",
+    "tactbench.classifiers",
 )
 
 #: kind → the hook that registers components of that kind.

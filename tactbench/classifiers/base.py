@@ -1,0 +1,419 @@
+"""The classifier contract and the torch machinery the built-in classifiers share.
+
+A classifier is built with keyword options (every option has a default)::
+
+    clf = registry.build("classifier", "small-cnn-lstm:epochs=3,input_size=32")
+    report = clf.fit(train, val, seed=0, device="cpu", progress=None)   # → dict
+    clf.predict(test)        # (B,) int64 class indices
+    clf.predict_proba(test)  # (B, K) float32, rows sum to 1
+    clf.save("model.safetensors", {"encoder": "farneback", "classes": [...]})
+
+``train``/``val``/``test`` are :class:`tactbench.windows.Windows`; ``predict``
+also takes an array ``(B, L, *frame_shape)``. Frames are images ``(C, H, W)``
+or taxel vectors ``(N,)``, depending on the classifier's ``frame_rank``.
+Labels are ``0 .. K-1``; ``K`` comes from the ``classes`` option, else from
+``fit(..., n_classes=K)``, else from the largest label seen plus one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, Iterator
+
+import numpy as np
+
+from tactbench.training import (
+    FitReport,
+    ProgressFn,
+    TrainingInterrupted,
+    derive_seed,
+    precision_for,
+    select_device,
+    train_loop,
+)
+from tactbench.windows import Windows
+
+#: Above this size the training frames are not resized up front but per batch.
+MAX_BANK_BYTES = 2 * 1024 ** 3
+#: Frames sampled to estimate the normalisation statistics.
+NORM_SAMPLE_FRAMES = 4096
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class SequenceClassifier:
+    """Base of every built-in classifier: options are the dataclass fields."""
+
+    name: ClassVar[str] = ""
+    #: 3 for image frames ``(C, H, W)``, 1 for taxel vectors ``(N,)``, None for either.
+    frame_rank: ClassVar[int | None] = 3
+
+    classes: int | None = None  # number of classes K; None: from fit
+
+    def __post_init__(self) -> None:
+        self.n_classes: int | None = None
+        self.frame_shape: tuple[int, ...] | None = None
+        self.length: int | None = None
+        self.fit_report: dict[str, Any] | None = None
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
+        return f"{type(self).__name__}({opts})"
+
+    def options(self) -> dict[str, Any]:
+        """The options this classifier was built with (JSON-ready)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @property
+    def fitted(self) -> bool:
+        return self.n_classes is not None
+
+    # -- checks shared by fit and predict --------------------------------------------
+
+    def _check_windows(self, windows: Windows, what: str) -> None:
+        if not isinstance(windows, Windows):
+            raise TypeError(f"{what} must be tactbench.windows.Windows, got {type(windows).__name__}")
+        if len(windows) == 0:
+            raise ValueError(f"{what} has no windows")
+        shape = windows.frame_shape
+        if self.frame_rank is None:
+            if len(shape) not in (1, 3):
+                raise ValueError(f"{what} has frames of shape {shape}; expected images "
+                                 f"(C, H, W) or taxel vectors (N,)")
+        elif len(shape) != self.frame_rank:
+            kind = "images (C, H, W)" if self.frame_rank == 3 else "taxel vectors (N,)"
+            raise ValueError(f"{self.name} classifies {kind}; {what} has frames of shape "
+                             f"{shape}")
+
+    def _resolve_classes(self, train: Windows, val: Windows | None,
+                         n_classes: int | None) -> int:
+        seen = int(train.labels.max()) + 1
+        if val is not None and len(val):
+            seen = max(seen, int(val.labels.max()) + 1)
+        if int(train.labels.min()) < 0:
+            raise ValueError("labels must be 0 .. K-1; found a negative label")
+        k = self.classes if self.classes is not None else n_classes
+        if k is None:
+            k = seen
+        if k < 2:
+            raise ValueError(f"need at least 2 classes, got K = {k}")
+        if seen > k:
+            raise ValueError(f"labels go up to {seen - 1} but only {k} classes were declared")
+        return int(k)
+
+    def _check_input(self, x: Any) -> Windows | np.ndarray:
+        if not self.fitted:
+            raise RuntimeError(f"{self.name} is not fitted: call fit() or load a model first")
+        assert self.frame_shape is not None
+        rank = len(self.frame_shape)
+        if isinstance(x, Windows):
+            shape = x.frame_shape
+        else:
+            x = np.asarray(x, dtype=np.float32)
+            if x.ndim != 2 + rank:
+                raise ValueError(f"expected windows (B, L, *frame) of rank {2 + rank}, "
+                                 f"got shape {x.shape}")
+            shape = x.shape[2:]
+        # Images may come at any size (the network resizes); channels/taxels must match.
+        fixed = self.frame_shape if rank == 1 else self.frame_shape[:1]
+        if tuple(shape[:len(fixed)]) != tuple(fixed) or len(shape) != rank:
+            raise ValueError(f"frames of shape {tuple(shape)} do not match the trained "
+                             f"frame shape {self.frame_shape}")
+        return x
+
+    @staticmethod
+    def _chunks(x: Windows | np.ndarray, size: int) -> Iterator[np.ndarray]:
+        n = len(x)
+        for lo in range(0, n, size):
+            hi = min(n, lo + size)
+            yield x.batch(slice(lo, hi)) if isinstance(x, Windows) else x[lo:hi]
+
+    # -- the public interface ----------------------------------------------------------
+
+    def fit(self, train: Windows, val: Windows | None = None, *, seed: int,
+            device: str = "cpu", progress: ProgressFn | None = None,
+            n_classes: int | None = None) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def predict_proba(self, x: Windows | np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def predict(self, x: Windows | np.ndarray) -> np.ndarray:
+        """Class indices ``(B,)`` int64 (the most probable class of each window)."""
+        return self.predict_proba(x).argmax(axis=1).astype(np.int64)
+
+    def save(self, path, metadata: dict[str, Any] | None = None):
+        """Write weights and metadata to ``path`` (safetensors; see :mod:`.io`)."""
+        from tactbench.classifiers.io import save_model
+
+        return save_model(self, path, metadata or {})
+
+    # -- what io needs -----------------------------------------------------------------
+
+    def _export(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        """``(config, tensors)``: JSON-ready configuration and named torch tensors."""
+        raise NotImplementedError
+
+    @classmethod
+    def _restore(cls, config: dict[str, Any], tensors: dict[str, Any]) -> "SequenceClassifier":
+        raise NotImplementedError
+
+    def _base_config(self) -> dict[str, Any]:
+        return {"options": self.options(), "n_classes": self.n_classes,
+                "frame_shape": list(self.frame_shape or ()), "length": self.length,
+                "fit_report": self.fit_report}
+
+
+class FrameBank:
+    """Every frame of a :class:`Windows`' sequences, prepared once, as one tensor.
+
+    Overlapping training windows share frames (a sequence of ``T`` frames gives
+    ``T - L + 1`` windows of ``L``), so resizing each frame once instead of once per
+    window saves ~``L``× the work. ``frames[-1]`` is the blank padding frame.
+    """
+
+    def __init__(self, windows: Windows, prepare, *, dtype=None) -> None:
+        import torch
+
+        seqs = windows.sequences
+        lengths = np.array([s.shape[0] for s in seqs], dtype=np.int64)
+        offsets = np.concatenate([[0], np.cumsum(lengths)])
+        first = prepare(torch.from_numpy(np.ascontiguousarray(seqs[0][:1], dtype=np.float32)))
+        bank = torch.zeros((int(offsets[-1]) + 1, *first.shape[1:]), dtype=dtype or first.dtype)
+        for i, seq in enumerate(seqs):
+            chunk = torch.from_numpy(np.ascontiguousarray(seq, dtype=np.float32))
+            bank[offsets[i]:offsets[i + 1]] = prepare(chunk)
+        blank = len(bank) - 1
+        steps = np.arange(windows.length, dtype=np.int64)
+        pos = windows.starts[:, None] + steps[None, :]
+        index = offsets[windows.seq_index][:, None] + pos
+        index[pos >= lengths[windows.seq_index][:, None]] = blank
+        self.frames = bank
+        self.index = torch.from_numpy(index)
+        self.labels = torch.from_numpy(np.asarray(windows.labels, dtype=np.int64))
+
+    @staticmethod
+    def nbytes(windows: Windows, prepared_shape: tuple[int, ...]) -> int:
+        total = sum(s.shape[0] for s in windows.sequences) + 1
+        return total * int(np.prod(prepared_shape)) * 4
+
+    def to(self, device) -> "FrameBank":
+        self.frames = self.frames.to(device)
+        self.index = self.index.to(device)
+        self.labels = self.labels.to(device)
+        return self
+
+    def batch(self, idx: np.ndarray):
+        import torch
+
+        sel = torch.as_tensor(idx, dtype=torch.int64, device=self.index.device)
+        return self.frames[self.index[sel]], self.labels[sel]
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class TorchSequenceClassifier(SequenceClassifier):
+    """A torch network trained with :func:`tactbench.training.train_loop`.
+
+    Subclasses write :meth:`_build_net` (and may add options).
+    """
+
+    epochs: int = 4
+    batch_size: int = 64
+    windows_per_epoch: int = 8000  # windows sampled per epoch; 0 = every window
+    optimizer: str = "adam"  # adam, adamw or sgd
+    lr: float = 3e-3
+    momentum: float = 0.0  # SGD only
+    weight_decay: float = 0.0
+    schedule: str = "cosine"  # cosine or constant
+    hidden: int = 64  # LSTM hidden units
+    fc: int = 256  # the fully connected layer after the LSTM
+    dropout: float = 0.3
+    amp: bool | None = None  # mixed precision; None: on for CUDA only
+    eval_batch_size: int = 256
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.net = None
+        self._device = None
+        self._precision = None
+
+    # -- for subclasses ----------------------------------------------------------------
+
+    def _build_net(self, frame_shape: tuple[int, ...], n_classes: int, *,
+                   pretrained: bool) -> Any:
+        raise NotImplementedError
+
+    def _normalization(self, frames) -> tuple[Any, Any]:
+        """Per-channel (images) or per-taxel (vectors) mean and std of prepared frames."""
+        dims = [0] + list(range(2, frames.ndim))
+        return frames.mean(dim=dims), frames.std(dim=dims)
+
+    # -- fit ---------------------------------------------------------------------------
+
+    def fit(self, train: Windows, val: Windows | None = None, *, seed: int,
+            device: str = "cpu", progress: ProgressFn | None = None,
+            n_classes: int | None = None) -> dict[str, Any]:
+        """Train on ``train`` (optionally reporting accuracy on ``val`` every epoch).
+
+        Returns the fit report (:class:`tactbench.training.FitReport` as a dict, plus
+        anything the classifier adds). A keyboard interrupt raises
+        :class:`tactbench.training.TrainingInterrupted` with the model usable.
+        """
+        import torch
+
+        self._check_windows(train, "train")
+        if val is not None:
+            self._check_windows(val, "val")
+            if val.frame_shape[:1] != train.frame_shape[:1]:
+                raise ValueError(f"val frames {val.frame_shape} do not match train frames "
+                                 f"{train.frame_shape}")
+        k = self._resolve_classes(train, val, n_classes)
+        dev = select_device(device)
+        precision = precision_for(dev, self.amp)
+        report = FitReport(classifier=self.name, seed=int(seed), device=str(dev),
+                           amp=precision.enabled, n_classes=k, options=self.options())
+        forked = [dev.index or 0] if dev.type == "cuda" else []
+        with torch.random.fork_rng(devices=forked):
+            torch.manual_seed(derive_seed(seed, self.name, "init"))
+            net = self._build_net(tuple(train.frame_shape), k, pretrained=True)
+            self.net = net
+            self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+            self._device, self._precision = dev, precision
+            with torch.no_grad():
+                self._set_normalization(net, train, seed)
+            get_batch = self._batches(net, train, dev)
+            evaluate = None
+            if val is not None:
+                def evaluate() -> float:
+                    return float((self.predict(val) == val.labels).mean())
+            net.to(dev)
+            try:
+                train_loop(net, get_batch, n_windows=len(train), report=report,
+                           epochs=self.epochs, batch_size=self.batch_size,
+                           windows_per_epoch=self.windows_per_epoch, optimizer=self.optimizer,
+                           lr=self.lr, momentum=self.momentum, weight_decay=self.weight_decay,
+                           schedule=self.schedule, device=dev, precision=precision,
+                           progress=progress, evaluate=evaluate)
+            except TrainingInterrupted as exc:
+                self.fit_report = self._finish_report(exc.report)
+                raise
+        self.fit_report = self._finish_report(report)
+        return dict(self.fit_report)
+
+    def _finish_report(self, report: FitReport) -> dict[str, Any]:
+        out = report.as_dict()
+        out.update(self._extra_report())
+        return out
+
+    def _extra_report(self) -> dict[str, Any]:
+        return {}
+
+    def _set_normalization(self, net, train: Windows, seed: int) -> None:
+        import torch
+
+        rng = np.random.default_rng(derive_seed(seed, self.name, "normalize"))
+        seqs = train.sequences
+        lengths = np.array([s.shape[0] for s in seqs])
+        total = int(lengths.sum())
+        flat = np.sort(rng.choice(total, size=min(total, NORM_SAMPLE_FRAMES), replace=False))
+        offsets = np.concatenate([[0], np.cumsum(lengths)])
+        which = np.searchsorted(offsets, flat, side="right") - 1
+        frames = np.stack([seqs[i][t - offsets[i]] for i, t in zip(which, flat)])
+        prepared = net.prepare(torch.from_numpy(frames.astype(np.float32, copy=False)))
+        mean, std = self._normalization(prepared)
+        net.normalize.set(mean, std)
+
+    def _batches(self, net, train: Windows, dev):
+        """``get_batch(indices) → (x, y)`` on ``dev``: from a :class:`FrameBank` of frames
+        resized once when it fits in memory, else materialised and resized per batch."""
+        import torch
+
+        probe = net.prepare(torch.zeros((1, *train.frame_shape)))
+        if FrameBank.nbytes(train, tuple(probe.shape[1:])) <= MAX_BANK_BYTES:
+            with torch.no_grad():
+                bank = FrameBank(train, net.prepare)
+            if dev.type == "cuda":
+                bank.to(dev)
+
+            def get_batch(idx):
+                x, y = bank.batch(idx)
+                return x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+            return get_batch
+        labels = torch.from_numpy(np.asarray(train.labels, dtype=np.int64))
+
+        def get_streamed(idx):
+            x = torch.from_numpy(train.batch(np.asarray(idx)))
+            return x.to(dev, non_blocking=True), labels[torch.as_tensor(idx)].to(dev)
+        return get_streamed
+
+    # -- predict -----------------------------------------------------------------------
+
+    def predict_proba(self, x: Windows | np.ndarray) -> np.ndarray:
+        """Class probabilities ``(B, K)`` float32, in batches, without gradients."""
+        import torch
+
+        x = self._check_input(x)
+        net, dev = self.net, self._device
+        precision = self._precision or precision_for(dev, self.amp)
+        was_training = net.training
+        net.eval()
+        out = []
+        try:
+            with torch.inference_mode():
+                for chunk in self._chunks(x, self.eval_batch_size):
+                    xb = torch.from_numpy(np.ascontiguousarray(chunk, dtype=np.float32)).to(dev)
+                    with precision.autocast(dev):
+                        logits = net(xb)
+                    out.append(torch.softmax(logits.float(), dim=1).cpu().numpy())
+        finally:
+            net.train(was_training)
+        if not out:
+            return np.zeros((0, self.n_classes), dtype=np.float32)
+        return np.concatenate(out).astype(np.float32, copy=False)
+
+    # -- save / load -------------------------------------------------------------------
+
+    def _export(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        if self.net is None:
+            raise RuntimeError(f"{self.name} is not fitted: nothing to save")
+        tensors = {k: v.detach().cpu() for k, v in self.net.state_dict().items()}
+        return self._base_config(), tensors
+
+    @classmethod
+    def _restore(cls, config: dict[str, Any], tensors: dict[str, Any]) -> "TorchSequenceClassifier":
+        import torch
+
+        clf = cls(**config["options"])
+        clf.n_classes = int(config["n_classes"])
+        clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
+        clf.length = config.get("length")
+        clf.fit_report = config.get("fit_report")
+        net = clf._build_net(clf.frame_shape, clf.n_classes, pretrained=False)
+        expected = net.state_dict()
+        missing = sorted(set(expected) - set(tensors))
+        unexpected = sorted(set(tensors) - set(expected))
+        bad_shapes = [f"{k} {tuple(v.shape)} vs {tuple(expected[k].shape)}"
+                      for k, v in tensors.items()
+                      if k in expected and tuple(expected[k].shape) != tuple(v.shape)]
+        if missing or unexpected or bad_shapes:
+            raise ValueError(f"weights do not fit a {cls.name} network with these options: "
+                             f"missing {missing[:5]}, unexpected {unexpected[:5]}, "
+                             f"other shape {bad_shapes[:5]}")
+        net.load_state_dict(tensors, strict=True)
+        net.eval()
+        clf.net = net
+        clf._device = torch.device("cpu")
+        return clf
+
+    def to(self, device: str) -> "TorchSequenceClassifier":
+        """Move a fitted (or loaded) model to ``device`` for prediction."""
+        dev = select_device(device)
+        if self.net is not None:
+            self.net.to(dev)
+        self._device = dev
+        self._precision = precision_for(dev, self.amp)
+        return self
+
+
+def n_params(module) -> int:
+    return int(sum(p.numel() for p in module.parameters()))
+

@@ -1,0 +1,178 @@
+"""A cheap classical reference: logistic regression on pooled per-frame statistics.
+
+Every table needs a floor: what a linear model gets from a few numbers per frame.
+Per frame, per channel: mean, standard deviation, maximum, and the mean over a
+``grid × grid`` partition of the image (for taxel vectors: over ``grid²``
+consecutive groups of taxels). A window's features are its ``L`` frames'
+features side by side, standardised with the training statistics; a
+multinomial logistic regression with an L2 penalty is fitted by full-batch
+L-BFGS in float64 (deterministic; no extra dependency, and it saves like the
+other classifiers).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tactbench.classifiers.base import FrameBank, SequenceClassifier
+from tactbench.training import FitReport, ProgressFn, TrainingInterrupted
+from tactbench.windows import Windows
+
+
+def frame_features(frames, grid: int):
+    """``(N, C, H, W)`` or ``(N, n)`` float32 → ``(N, F)`` float32 pooled statistics.
+
+    ``F = C × (3 + grid²)`` for images, ``3 + grid²`` for vectors. A blank frame
+    gives all zeros.
+    """
+    import torch
+    import torch.nn.functional as F
+
+    x = frames if frames.ndim == 4 else frames[:, None, None, :]
+    flat = x.flatten(2)
+    stats = [flat.mean(2), flat.std(2, unbiased=False), flat.amax(2)]
+    if frames.ndim == 4:
+        pooled = F.adaptive_avg_pool2d(x, grid).flatten(1)
+    else:
+        pooled = F.adaptive_avg_pool1d(frames[:, None, :], grid * grid).flatten(1)
+    return torch.cat(stats + [pooled], dim=1)
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class PooledLogReg(SequenceClassifier):
+    """Multinomial logistic regression on pooled per-frame features (images or taxel vectors)."""
+
+    name = "logreg"
+    frame_rank = None
+    grid: int = 4  # image partition grid × grid (vectors: grid² taxel groups)
+    l2: float = 1e-3  # penalty on the weights (not the biases), per training window
+    max_iter: int = 200  # L-BFGS iterations
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.weight = None  # (K, D) float64 torch tensor
+        self.bias = None
+        self.feat_mean = None
+        self.feat_std = None
+
+    def _window_features(self, x: Windows | np.ndarray):
+        import torch
+
+        prepare = lambda t: frame_features(t, self.grid)  # noqa: E731
+        with torch.no_grad():
+            if isinstance(x, Windows):
+                bank = FrameBank(x, prepare)
+                feats = bank.frames[bank.index]
+            else:
+                t = torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))
+                b, length = t.shape[:2]
+                feats = prepare(t.reshape(b * length, *t.shape[2:])).reshape(b, length, -1)
+        return feats.flatten(1).double()
+
+    def fit(self, train: Windows, val: Windows | None = None, *, seed: int,
+            device: str = "cpu", progress: ProgressFn | None = None,
+            n_classes: int | None = None) -> dict[str, Any]:
+        """Fit on all training windows (CPU; ``seed`` is recorded, the solver is
+        deterministic). ``progress(done, max_iter, loss=...)`` per L-BFGS evaluation."""
+        import torch
+        import torch.nn.functional as F
+
+        from tactbench.training import select_device
+
+        self._check_windows(train, "train")
+        select_device(device)  # validate; the solve is small and runs on the CPU
+        k = self._resolve_classes(train, val, n_classes)
+        report = FitReport(classifier=self.name, seed=int(seed), device="cpu", amp=False,
+                           n_classes=k, options=self.options(), train_windows=len(train))
+        start = time.perf_counter()
+        feats = self._window_features(train)
+        mean = feats.mean(0)
+        std = feats.std(0)
+        std = torch.where(std < 1e-9, torch.ones_like(std), std)
+        z = (feats - mean) / std
+        y = torch.from_numpy(np.asarray(train.labels, dtype=np.int64))
+        weight = torch.zeros((k, z.shape[1]), dtype=torch.float64, requires_grad=True)
+        bias = torch.zeros(k, dtype=torch.float64, requires_grad=True)
+        opt = torch.optim.LBFGS([weight, bias], lr=1.0, max_iter=self.max_iter,
+                                line_search_fn="strong_wolfe")
+        calls = [0]
+
+        def closure():
+            opt.zero_grad()
+            loss = F.cross_entropy(z @ weight.T + bias, y) + 0.5 * self.l2 * (weight ** 2).sum()
+            loss.backward()
+            calls[0] += 1
+            if progress is not None:
+                progress(min(calls[0], self.max_iter), self.max_iter, epoch=1, epochs=1,
+                         loss=float(loss))
+            return loss
+
+        self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+        self.feat_mean, self.feat_std = mean, std
+        try:
+            opt.step(closure)
+        except KeyboardInterrupt:
+            self.weight, self.bias = weight.detach(), bias.detach()
+            report.interrupted = True
+            report.train_seconds = time.perf_counter() - start
+            self.fit_report = report.as_dict()
+            raise TrainingInterrupted(report) from None
+        self.weight, self.bias = weight.detach(), bias.detach()
+        with torch.no_grad():
+            final = F.cross_entropy(z @ self.weight.T + self.bias, y)
+        report.epochs, report.steps, report.windows_seen = 1, calls[0], len(train)
+        report.final_loss = float(final)
+        report.epoch_losses = [report.final_loss]
+        if val is not None and len(val):
+            report.val_accuracy = [float((self.predict(val) == val.labels).mean())]
+        report.train_seconds = time.perf_counter() - start
+        report.windows_per_second = len(train) / max(report.train_seconds, 1e-9)
+        self.fit_report = report.as_dict()
+        return dict(self.fit_report)
+
+    def predict_proba(self, x: Windows | np.ndarray) -> np.ndarray:
+        import torch
+
+        x = self._check_input(x)
+        if isinstance(x, np.ndarray) and len(x) == 0:
+            return np.zeros((0, self.n_classes), dtype=np.float32)
+        if isinstance(x, np.ndarray) and x.shape[2:] != self.frame_shape:
+            raise ValueError(f"logreg needs frames of the trained shape {self.frame_shape}, "
+                             f"got {x.shape[2:]}")
+        if isinstance(x, Windows) and x.frame_shape != self.frame_shape:
+            raise ValueError(f"logreg needs frames of the trained shape {self.frame_shape}, "
+                             f"got {x.frame_shape}")
+        with torch.no_grad():
+            z = (self._window_features(x) - self.feat_mean) / self.feat_std
+            p = torch.softmax(z @ self.weight.T + self.bias, dim=1)
+        return p.float().numpy()
+
+    def _export(self):
+        if self.weight is None:
+            raise RuntimeError("logreg is not fitted: nothing to save")
+        tensors = {"weight": self.weight, "bias": self.bias, "feat_mean": self.feat_mean,
+                   "feat_std": self.feat_std}
+        return self._base_config(), tensors
+
+    @classmethod
+    def _restore(cls, config, tensors):
+        clf = cls(**config["options"])
+        clf.n_classes = int(config["n_classes"])
+        clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
+        clf.length = config.get("length")
+        clf.fit_report = config.get("fit_report")
+        need = {"weight", "bias", "feat_mean", "feat_std"}
+        if set(tensors) != need:
+            raise ValueError(f"expected tensors {sorted(need)}, found {sorted(tensors)}")
+        w = tensors["weight"]
+        if w.ndim != 2 or w.shape[0] != clf.n_classes or tensors["bias"].shape != (clf.n_classes,) \
+                or tensors["feat_mean"].shape != (w.shape[1],):
+            raise ValueError(f"tensor shapes do not fit {clf.n_classes} classes: weight "
+                             f"{tuple(w.shape)}, bias {tuple(tensors['bias'].shape)}")
+        clf.weight, clf.bias = w.double(), tensors["bias"].double()
+        clf.feat_mean, clf.feat_std = tensors["feat_mean"].double(), tensors["feat_std"].double()
+        return clf

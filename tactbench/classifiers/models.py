@@ -1,0 +1,158 @@
+"""The built-in torch classifiers: ``cnn-lstm``, ``small-cnn-lstm``, ``taxel-lstm``.
+
+Options are keyword arguments (dataclass fields), each with a default; the
+defaults are the ``quick`` profile's (see :mod:`tactbench.training`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+from tactbench.classifiers.base import TorchSequenceClassifier, n_params
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class ImageSequenceClassifier(TorchSequenceClassifier):
+    """Image frames ``(C, H, W)``, resized to ``input_size`` and normalised."""
+
+    input_size: int = 32  # frames are resized to input_size × input_size
+    normalize: str = "data"  # data (training statistics), imagenet (3 channels) or none
+
+    def _wrap(self, encoder, frame_shape, n_classes):
+        import torch
+
+        from tactbench.classifiers.nets import IMAGENET_MEAN, IMAGENET_STD, SequenceNet
+
+        if self.input_size < 8:
+            raise ValueError(f"input_size must be ≥ 8, got {self.input_size}")
+        if self.normalize not in ("data", "imagenet", "none"):
+            raise ValueError(f"normalize must be data, imagenet or none, got '{self.normalize}'")
+        if self.normalize == "imagenet" and frame_shape[0] != 3:
+            raise ValueError(f"normalize=imagenet needs 3 channels; frames have {frame_shape[0]}")
+        net = SequenceNet(encoder, frame_shape=frame_shape, n_classes=n_classes,
+                          hidden=self.hidden, fc=self.fc, dropout=self.dropout,
+                          input_size=self.input_size)
+        if self.normalize == "imagenet":
+            net.normalize.set(torch.tensor(IMAGENET_MEAN), torch.tensor(IMAGENET_STD))
+        return net
+
+    def _set_normalization(self, net, train, seed) -> None:
+        if self.normalize == "data":  # the fixed choices were set when the net was built
+            super()._set_normalization(net, train, seed)
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class SmallCnnLstm(ImageSequenceClassifier):
+    """A CPU-sized CNN-LSTM: ``layers`` conv blocks of ``width`` → LSTM → FC 256 → classes."""
+
+    name = "small-cnn-lstm"
+    width: int = 16
+    layers: int = 4
+
+    def _build_net(self, frame_shape, n_classes, *, pretrained):
+        from tactbench.classifiers.nets import SmallCNN
+
+        return self._wrap(SmallCNN(frame_shape[0], self.width, self.layers), frame_shape,
+                          n_classes)
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class CnnLstm(ImageSequenceClassifier):
+    """The study's model: EfficientNet-B0 per frame → LSTM → dropout 0.3 → FC 256 → classes.
+
+    ``weights``: a local file of ImageNet EfficientNet-B0 weights (lukemelas,
+    torchvision or timm layout; see :mod:`tactbench.classifiers.efficientnet`); without
+    it the backbone starts from random initialisation, with a warning.
+    ``backbone``: ``efficientnet-b0`` (built in) or ``timm:<model name>`` when timm
+    is installed.
+    """
+
+    name = "cnn-lstm"
+    hidden: int = 256
+    epochs: int = 2
+    windows_per_epoch: int = 1500
+    batch_size: int = 32
+    lr: float = 1e-3
+    weights: str | None = None
+    backbone: str = "efficientnet-b0"
+    drop_path: float = 0.2
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.weights_report: dict[str, Any] | None = None
+
+    def _build_net(self, frame_shape, n_classes, *, pretrained):
+        channels = frame_shape[0]
+        if self.backbone.startswith("timm:"):
+            encoder = self._timm_backbone(self.backbone[5:], channels, pretrained)
+        elif self.backbone == "efficientnet-b0":
+            from tactbench.classifiers.efficientnet import EfficientNetB0, load_weights
+
+            encoder = EfficientNetB0(channels, drop_path=self.drop_path)
+            if pretrained:
+                if self.weights:
+                    self.weights_report = load_weights(encoder, self.weights).as_dict()
+                else:
+                    warnings.warn("cnn-lstm: no ImageNet weights given (weights=PATH): the "
+                                  "EfficientNet-B0 backbone starts from random initialisation",
+                                  stacklevel=3)
+                    self.weights_report = {"source": None, "loaded": 0}
+        else:
+            raise ValueError(f"unknown backbone '{self.backbone}': use efficientnet-b0 or "
+                             f"timm:<name>")
+        return self._wrap(encoder, frame_shape, n_classes)
+
+    def _timm_backbone(self, model_name: str, channels: int, pretrained: bool):
+        import importlib.util
+
+        if importlib.util.find_spec("timm") is None:
+            raise ValueError(f"backbone 'timm:{model_name}' needs timm, which is not "
+                             f"installed; use backbone=efficientnet-b0")
+        import timm
+        from torch import nn
+
+        model = timm.create_model(model_name, pretrained=False, num_classes=0,
+                                  in_chans=channels)
+        if pretrained and self.weights:
+            from tactbench.classifiers.efficientnet import read_state_dict
+
+            result = model.load_state_dict(read_state_dict(self.weights), strict=False)
+            self.weights_report = {"source": self.weights, "missing": result.missing_keys,
+                                   "unused": result.unexpected_keys}
+
+        class _Timm(nn.Module):  # gives timm models the out_features the LSTM needs
+            def __init__(self, inner):
+                super().__init__()
+                self.inner = inner
+                self.out_features = inner.num_features
+
+            def forward(self, x):
+                return self.inner(x)
+
+        return _Timm(model)
+
+    def _extra_report(self) -> dict[str, Any]:
+        return {"weights": self.weights_report,
+                "parameters": n_params(self.net) if self.net is not None else 0}
+
+
+@dataclass(eq=False, repr=False, kw_only=True)
+class TaxelLstm(TorchSequenceClassifier):
+    """For taxel vectors without a layout ``(N,)``: per-frame MLP → LSTM → FC 256 → classes.
+
+    Each taxel is standardised with its training mean and deviation.
+    """
+
+    name = "taxel-lstm"
+    frame_rank = 1
+    width: int = 128  # hidden units of the per-frame MLP
+    features: int = 64  # per-frame features fed to the LSTM
+
+    def _build_net(self, frame_shape, n_classes, *, pretrained):
+        from tactbench.classifiers.nets import SequenceNet, TaxelMLP
+
+        return SequenceNet(TaxelMLP(frame_shape[0], self.width, self.features),
+                           frame_shape=frame_shape, n_classes=n_classes, hidden=self.hidden,
+                           fc=self.fc, dropout=self.dropout, input_size=None)
