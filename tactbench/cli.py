@@ -22,6 +22,8 @@ BUILTIN_COMMANDS: dict[str, str] = {
     "plugins": "tactbench.commands.inspect:plugins_cmd",
     "data": "tactbench.commands.data:data_group",
     "layout": "tactbench.commands.layout:layout_group",
+    "run": "tactbench.commands.run:run_cmd",
+    "cache": "tactbench.commands.cache:cache_group",
 }
 
 DEBUG_ENV = "TACTBENCH_DEBUG"

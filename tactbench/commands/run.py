@@ -1,0 +1,83 @@
+"""``tactbench run``: compare encoders × classifiers × L × seeds on one split."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+from tactbench.cli import get_registry
+
+
+@click.command("run")
+@click.argument("scene_file", required=False, type=click.Path(dir_okay=False))
+@click.option("--dataset", help="Registered dataset (with options) or a dataset path. "
+              "[default: synthetic-forearm]")
+@click.option("--encoder", "encoders", multiple=True,
+              help="Encoder, repeatable, with options: farneback:winsize=9. "
+                   "[default: raw, farneback]")
+@click.option("--classifier", "classifiers", multiple=True,
+              help="Classifier, repeatable, with options. [default: small-cnn-lstm]")
+@click.option("-L", "lengths", multiple=True,
+              help="Window length in frames, repeatable or a range: -L 5, -L 1-6. "
+                   "[default: 5]")
+@click.option("--seed", "seeds", multiple=True, type=int,
+              help="Seed, repeatable. [default: 0 1 2]")
+@click.option("--split", type=click.Choice(["paper", "users"]),
+              help="paper: 30 random test samples per class (the study's); users: "
+                   "leave-users-out. [default: paper]")
+@click.option("--profile", type=click.Choice(["quick", "paper"]),
+              help="quick: CPU-sized (default); paper: the study's settings (a GPU job).")
+@click.option("--pixel-mm", type=float, help="Tactile-image pixel size in mm "
+              "[default: the profile's: quick 5, paper 1].")
+@click.option("--device", help="cpu, cuda, cuda:N or auto. [default: cpu]")
+@click.option("--threads", type=int, help="torch threads per cell [default: cores/workers].")
+@click.option("--executor", type=click.Choice(["local", "dask"]), help="[default: local]")
+@click.option("--workers", type=int, help="Parallel cells (processes). [default: 1]")
+@click.option("--scheduler", help="dask scheduler address tcp://HOST:PORT (with "
+              "--executor dask); default: a local cluster.")
+@click.option("--out", help="Output folder. [default: tactbench-out]")
+@click.option("--rerun", is_flag=True, default=None, help="Recompute finished cells.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
+@click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, profile,
+            pixel_mm, device, threads, executor, workers, scheduler, out, rerun, as_json,
+            no_plots) -> None:
+    """Run a benchmark grid and report accuracy beside its cost.
+
+    Finished cells are kept in OUT/cells and skipped when the same command runs again;
+    encodings are cached (see `tactbench cache ls`).
+    """
+    from tactbench.reports import print_table, summarise, write_reports
+    from tactbench.runner import Scene, load_scene_file, parse_lengths, run
+
+    fields = load_scene_file(scene_file) if scene_file else {}
+    given = {"dataset": dataset, "encoders": list(encoders) or None,
+             "classifiers": list(classifiers) or None,
+             "lengths": parse_lengths(lengths) if lengths else None,
+             "seeds": list(seeds) or None, "split": split, "profile": profile,
+             "pixel_mm": pixel_mm, "device": device, "threads": threads,
+             "executor": executor, "workers": workers, "scheduler": scheduler, "out": out,
+             "rerun": rerun}
+    fields.update({k: v for k, v in given.items() if v is not None})
+    if fields.get("scheduler") and fields.get("executor", "local") != "dask":
+        raise click.UsageError("--scheduler needs --executor dask")
+    scene = Scene(**fields)
+    registry = get_registry()
+    result = run(scene, registry=registry, progress=sys.stderr.isatty() or not as_json)
+    meta = {"command": " ".join(["tactbench", *sys.argv[1:]]),
+            "git": result.rows[0]["run"]["git"] if result.rows else None,
+            "computed": result.computed, "skipped": result.skipped,
+            "seconds": result.seconds}
+    paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots)
+    summaries = summarise(result.rows)
+    if as_json:
+        click.echo(json.dumps({"meta": meta, "summary": summaries,
+                               "files": {k: str(v) for k, v in paths.items()}}, indent=2))
+        return
+    print_table(summaries, title=f"{scene.dataset} · split {scene.split} · profile "
+                                 f"{scene.profile}")
+    click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
+               f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, results.csv, "
+               f"results.json, plots)")
