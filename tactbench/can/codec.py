@@ -130,11 +130,15 @@ class FrameFormat:
 
     @classmethod
     def from_spec(cls, spec: str | None) -> "FrameFormat":
-        """Parse ``"ids=standard,base_id=0x200,fd=true"`` (empty → the default format)."""
+        """Parse ``"ids=standard,base_id=0x200,fd=true"`` (empty → the default format).
+
+        Items may also be separated by ``;`` (for use inside a component spec,
+        where ``,`` separates the component's own options).
+        """
         if not spec or not spec.strip():
             return cls()
         options: dict[str, str] = {}
-        for item in spec.split(","):
+        for item in spec.replace(";", ",").split(","):
             key, eq, value = item.partition("=")
             if not eq or not key.strip():
                 raise ValueError(f"bad frame format item '{item}' in '{spec}': "
