@@ -21,6 +21,7 @@ BUILTIN_COMMANDS: dict[str, str] = {
     "list": "tactbench.commands.inspect:list_cmd",
     "plugins": "tactbench.commands.inspect:plugins_cmd",
     "data": "tactbench.commands.data:data_group",
+    "can": "tactbench.commands.can:can_group",
     "layout": "tactbench.commands.layout:layout_group",
     "run": "tactbench.commands.run:run_cmd",
     "cache": "tactbench.commands.cache:cache_group",

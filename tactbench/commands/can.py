@@ -1,0 +1,378 @@
+"""``tactbench can``: CySkin traffic on a python-can bus — simulate, record, bus load, info."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from tactbench.errors import TactbenchError
+
+
+def _err(text: str) -> None:
+    click.echo(text, err=True)
+
+
+def bus_options(func):
+    """The options every bus-facing command shares."""
+    opts = [
+        click.option("--interface", default="virtual", show_default=True,
+                     help="python-can interface (virtual, socketcan, pcan, udp_multicast, ...)."),
+        click.option("--channel", default="tactbench", show_default=True,
+                     help="Interface channel (vcan0, PCAN_USBBUS1, any name for virtual)."),
+        click.option("--bitrate", default=1_000_000, show_default=True, type=int,
+                     help="Nominal bitrate, bit/s."),
+        click.option("--data-bitrate", type=int, default=None,
+                     help="CAN FD data-phase bitrate, bit/s."),
+        click.option("--format", "format_spec", default="", metavar="SPEC",
+                     help="Frame format, e.g. 'ids=standard,base_id=0x200,fd=true' "
+                          "(see docs/cyskin-can.md)."),
+        click.option("--format-file", type=click.Path(dir_okay=False), default=None,
+                     help="Frame format as a JSON file (ids, fd, prefix, base_id, byteorder, "
+                          "module_map)."),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def _format(format_spec: str, format_file: str | None):
+    from tactbench.can.codec import FrameFormat
+
+    return FrameFormat.from_json(format_file) if format_file else FrameFormat.from_spec(format_spec)
+
+
+def _open_bus(interface: str, channel: str, bitrate: int, data_bitrate: int | None, fd: bool):
+    import can
+
+    kwargs: dict[str, Any] = {"interface": interface, "channel": channel}
+    if interface != "virtual":
+        kwargs["bitrate"] = bitrate
+        if fd:
+            kwargs.update(fd=True, data_bitrate=data_bitrate or bitrate)
+    try:
+        return can.Bus(**kwargs)
+    except Exception as exc:
+        raise TactbenchError(f"cannot open {interface} channel '{channel}': "
+                             f"{type(exc).__name__}: {exc}") from exc
+
+
+def load_samples(source: str, *, rate_hz: float = 10.0):
+    """Samples to play and their taxel ids, from a CAN log or a dataset (path or spec)."""
+    from tactbench.can.logs import is_can_log, read_log
+    from tactbench.can.simulate import SimSample, as_sim_sample
+
+    if is_can_log(source):
+        log = read_log(source)
+        segs = log.labelled or log.segments
+        return [SimSample(s.values, s.timestamps, s.info) for s in segs], log.taxel_ids
+    try:
+        from tactbench.datasets.loading import load_dataset
+    except ImportError as exc:
+        raise TactbenchError(f"cannot load dataset '{source}': dataset loading is not "
+                             f"available ({exc})") from exc
+    dataset = load_dataset(source)
+    samples = [as_sim_sample(s, rate_hz) for s in dataset.samples]
+    ids = _dataset_taxel_ids(dataset)
+    return samples, ids
+
+
+def _dataset_taxel_ids(dataset: Any):
+    import numpy as np
+
+    layout = getattr(dataset, "layout", None)
+    if layout is not None and getattr(layout, "ids", None) is not None:
+        return np.asarray(layout.ids, dtype=np.int64)
+    first = dataset.samples[0]
+    rec = getattr(first, "recording", first)
+    ids = getattr(rec, "taxel_ids", None)
+    if ids is None:
+        raise TactbenchError("the dataset has neither a layout nor taxel ids; "
+                             "CySkin traffic needs taxel ids")
+    return np.asarray(ids, dtype=np.int64)
+
+
+@click.group("can")
+def can_group() -> None:
+    """CySkin taxel traffic on a CAN bus: simulate, record, bus load, log info.
+
+    The frame format is documented in docs/cyskin-can.md.
+    """
+
+
+@can_group.command("simulate")
+@click.argument("source")
+@bus_options
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Write the traffic to a log (.blf/.asc) instead of a bus.")
+@click.option("--samples", "limit", type=int, default=None, help="Play at most N samples.")
+@click.option("--speed", type=float, default=1.0, show_default=True,
+              help="Playback speed; 0 sends as fast as possible.")
+@click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
+              help="Sweep rate (Hz) for samples without timestamps, and for the bus load.")
+@click.option("--gap", "gap_s", type=float, default=0.5, show_default=True,
+              help="Seconds between samples.")
+@click.option("--no-markers", is_flag=True, help="Send no label markers.")
+@click.option("--loop", is_flag=True, help="Repeat until interrupted (bus only).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
+                 data_bitrate: int | None, format_spec: str, format_file: str | None,
+                 out: str | None, limit: int | None, speed: float, rate_hz: float,
+                 gap_s: float, no_markers: bool, loop: bool, as_json: bool) -> None:
+    """Play SOURCE's samples as CySkin CAN traffic at the sensor's rate.
+
+    SOURCE is a dataset (folder, or a registered name with options such as
+    'synthetic-forearm:users=2') or a CAN log. Each labelled sample is framed
+    by label markers, so a recording of the bus keeps the labels.
+    """
+    from tactbench.can.busload import bus_load
+    from tactbench.can.codec import TaxelMap
+    from tactbench.can.logs import write_log
+    from tactbench.can.meta import is_meta
+    from tactbench.can.simulate import play, schedule_messages, traffic
+
+    fmt = _format(format_spec, format_file)
+    samples, ids = load_samples(source, rate_hz=rate_hz)
+    if limit is not None:
+        samples = samples[:max(0, limit)]
+    if not samples:
+        raise TactbenchError(f"{source}: no samples to play")
+    taxels = TaxelMap(ids, fmt)
+    load = bus_load(taxels, bitrate=bitrate, rate_hz=rate_hz, data_bitrate=data_bitrate)
+    if not as_json:
+        _err(f"tactbench can simulate: {load.describe()}")
+    result: dict[str, Any] = {"source": source, "samples": len(samples),
+                              "sweeps": int(sum(len(s.values) for s in samples)),
+                              "bus_load": load.to_dict(), "format": fmt.to_dict()}
+    bursts = lambda: traffic(samples, taxels, rate_hz=rate_hz, gap_s=gap_s,  # noqa: E731
+                             markers=not no_markers)
+    if out is not None:
+        if loop:
+            raise click.UsageError("--loop needs a bus, not --out")
+        n = write_log(out, schedule_messages(bursts(), t0=time.time()))
+        result.update(out=str(out), messages=n)
+    else:
+        if speed < 0:
+            raise click.UsageError("--speed must be ≥ 0")
+        from rich.progress import Progress
+
+        bus = _open_bus(interface, channel, bitrate, data_bitrate, fmt.fd)
+        sent = 0
+        try:
+            with Progress(console=_stderr_console(), disable=as_json) as progress:
+                task = progress.add_task("sending sweeps", total=result["sweeps"])
+
+                def tick(_t: float, msgs: list) -> None:
+                    if msgs and not is_meta(msgs[0]):  # a sweep, not a marker
+                        progress.advance(task)
+
+                while True:
+                    sent += play(bus, bursts(), speed=speed, on_burst=tick)
+                    if not loop:
+                        break
+                    progress.reset(task)
+        except KeyboardInterrupt:
+            _err("tactbench can simulate: interrupted")
+        finally:
+            bus.shutdown()
+        result.update(interface=interface, channel=channel, messages=sent)
+    if as_json:
+        click.echo(json.dumps(result, indent=2))
+    else:
+        where = result.get("out") or f"{interface}:{channel}"
+        _err(f"sent {result['messages']} messages ({result['samples']} samples, "
+             f"{result['sweeps']} sweeps) to {where}")
+
+
+def _stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+@can_group.command("record")
+@click.option("--out", required=True, type=click.Path(dir_okay=False),
+              help="Log file to write: .blf or .asc (also .log, .csv, .trc).")
+@bus_options
+@click.option("--duration", type=float, default=None, help="Stop after this many seconds.")
+@click.option("--idle-timeout", type=float, default=None,
+              help="Stop after this many seconds without a message.")
+@click.option("--max-messages", type=int, default=None, help="Stop after N messages.")
+@click.option("--label", default=None,
+              help="Write a label start marker before and an end marker after the recording.")
+@click.option("--user", default=None, help="User recorded in the label marker.")
+@click.option("--taxel-ids", default=None,
+              help="Announce these taxel ids in the log ('0-10,16-26').")
+@click.option("--layout", type=click.Path(dir_okay=False), default=None,
+              help="Announce this layout's taxel ids in the log.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrate: int | None,
+               format_spec: str, format_file: str | None, duration: float | None,
+               idle_timeout: float | None, max_messages: int | None, label: str | None,
+               user: str | None, taxel_ids: str | None, layout: str | None,
+               as_json: bool) -> None:
+    """Write the bus to a CAN log (.blf/.asc), with label markers when given.
+
+    Stops at --duration, --idle-timeout, --max-messages or Ctrl-C. The log reads
+    back with 'tactbench can info', 'tactbench data info' and the replay sensor.
+    """
+    from tactbench.can.logs import open_writer
+    from tactbench.can.meta import marker_messages, taxel_map_messages
+    from tactbench.sensors.cyskin_can import resolve_taxel_ids
+
+    fmt = _format(format_spec, format_file)
+    if duration is None and idle_timeout is None and max_messages is None and sys.stdin.isatty():
+        _err("recording until Ctrl-C")
+    ids = resolve_taxel_ids(taxel_ids, layout) if (taxel_ids or layout) else None
+    writer = open_writer(out)
+    bus = _open_bus(interface, channel, bitrate, data_bitrate, fmt.fd)
+    info = {"label": label, **({"user": user} if user else {})} if label else None
+    n = meta = 0
+    t_start = time.time()
+    try:
+        if ids is not None:
+            for msg in taxel_map_messages(ids, 0, timestamp=t_start):
+                writer.on_message_received(msg)
+                meta += 1
+        if info is not None:
+            for msg in marker_messages(True, info, 1, timestamp=t_start):
+                writer.on_message_received(msg)
+                meta += 1
+        start = last = time.monotonic()
+        while True:
+            now = time.monotonic()
+            if duration is not None and now - start >= duration:
+                break
+            if idle_timeout is not None and now - last >= idle_timeout:
+                break
+            if max_messages is not None and n >= max_messages:
+                break
+            msg = bus.recv(timeout=0.05)
+            if msg is None:
+                continue
+            last = time.monotonic()
+            writer.on_message_received(msg)
+            n += 1
+    except KeyboardInterrupt:
+        _err("tactbench can record: stopped")
+    finally:
+        if info is not None:
+            for msg in marker_messages(False, info, 1, timestamp=time.time()):
+                writer.on_message_received(msg)
+                meta += 1
+        writer.stop()
+        bus.shutdown()
+    result = {"out": str(out), "messages": n, "meta_messages": meta,
+              "seconds": time.time() - t_start, "label": label}
+    if as_json:
+        click.echo(json.dumps(result, indent=2))
+    else:
+        _err(f"recorded {n} messages to {out} in {result['seconds']:.1f} s")
+
+
+@can_group.command("load")
+@click.option("--taxels", "n_taxels", type=int, default=None,
+              help="A CySkin-like layout of N taxels (modules of 11 in slots 0-10).")
+@click.option("--taxel-ids", default=None, help="Taxel ids, e.g. '0-10,16-26'.")
+@click.option("--layout", type=click.Path(dir_okay=False), default=None, help="Layout file.")
+@click.option("--bitrate", default=1_000_000, show_default=True, type=int)
+@click.option("--data-bitrate", type=int, default=None, help="CAN FD data-phase bitrate.")
+@click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
+              help="Sweeps per second.")
+@click.option("--format", "format_spec", default="", metavar="SPEC", help="Frame format.")
+@click.option("--format-file", type=click.Path(dir_okay=False), default=None)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bitrate: int,
+             data_bitrate: int | None, rate_hz: float, format_spec: str,
+             format_file: str | None, as_json: bool) -> None:
+    """Messages and bus load per sweep for a layout, bitrate and sweep rate."""
+    import numpy as np
+
+    from tactbench.can.busload import bus_load
+    from tactbench.can.codec import TaxelMap
+    from tactbench.sensors.cyskin_can import resolve_taxel_ids
+
+    given = [x is not None for x in (n_taxels, taxel_ids, layout)]
+    if sum(given) != 1:
+        raise click.UsageError("give exactly one of --taxels, --taxel-ids, --layout")
+    if n_taxels is not None:
+        if n_taxels < 1:
+            raise click.UsageError("--taxels must be ≥ 1")
+        ids = np.array([m * 16 + s for m in range(n_taxels // 11 + 1) for s in range(11)])
+        ids = ids[:n_taxels]
+    else:
+        ids = resolve_taxel_ids(taxel_ids, layout)
+    fmt = _format(format_spec, format_file)
+    load = bus_load(TaxelMap(ids, fmt), bitrate=bitrate, rate_hz=rate_hz,
+                    data_bitrate=data_bitrate)
+    if as_json:
+        click.echo(json.dumps({"format": fmt.to_dict(), **load.to_dict()}, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="CySkin CAN bus load", title_justify="left")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for name, value in [
+        ("taxels", f"{load.taxels}"), ("messages per sweep", f"{load.messages_per_sweep}"),
+        ("payload bytes per sweep", f"{load.payload_bytes_per_sweep}"),
+        ("bits per sweep (nominal / worst)",
+         f"{load.bits_per_sweep:.0f} / {load.bits_per_sweep_worst:.0f}"),
+        ("sweep time on the wire", f"{load.sweep_ms:.1f} ms"),
+        ("messages per second", f"{load.messages_per_second:.0f}"),
+        ("bus load (nominal / worst)", f"{100 * load.load:.1f} % / {100 * load.load_worst:.1f} %"),
+        ("fits", "yes" if load.fits else "NO"),
+    ]:
+        table.add_row(name, value)
+    Console().print(table)
+    click.echo(load.describe())
+
+
+@can_group.command("info")
+@click.argument("log", type=click.Path(exists=True, dir_okay=False))
+@click.option("--taxel-ids", default=None, help="The layout's taxel ids (default: from the log).")
+@click.option("--format", "format_spec", default="", metavar="SPEC", help="Frame format.")
+@click.option("--format-file", type=click.Path(dir_okay=False), default=None)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def info_cmd(log: str, taxel_ids: str | None, format_spec: str, format_file: str | None,
+             as_json: bool) -> None:
+    """What a CAN log holds: sweeps, labelled samples per class, lost messages."""
+    from tactbench.can.logs import read_log
+    from tactbench.sensors.cyskin_can import parse_taxel_ids
+
+    fmt = _format(format_spec, format_file)
+    ids = parse_taxel_ids(taxel_ids) if taxel_ids else None
+    summary = read_log(Path(log), taxel_ids=ids, fmt=fmt).summary()
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"CAN log {log}", title_justify="left")
+    table.add_column("quantity")
+    table.add_column("value")
+    asm = summary["assembler"]
+    fps = summary["frames_per_sample"]
+    for name, value in [
+        ("taxels", f"{summary['taxels']} ({summary['taxel_ids_from']})"),
+        ("sweeps", str(summary["sweeps"])),
+        ("samples", str(summary["samples"])),
+        ("samples per class", ", ".join(f"{k}: {v}" for k, v in
+                                        summary["samples_per_class"].items()) or "-"),
+        ("frames per sample (min/median/max)",
+         f"{fps['min']}/{fps['median']:g}/{fps['max']}" if fps else "-"),
+        ("unlabelled sweeps", str(summary["unlabelled_sweeps"])),
+        ("incomplete sweeps / lost messages",
+         f"{asm['incomplete_sweeps']} / {asm['lost_messages']}"),
+        ("duplicates / late / lost sweeps",
+         f"{asm['duplicates']} / {asm['late']} / {asm['lost_sweeps']}"),
+        ("other traffic", ", ".join(f"{k}: {v}" for k, v in asm["rejected"].items()) or "-"),
+    ]:
+        table.add_row(name, value)
+    Console().print(table)
