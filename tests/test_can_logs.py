@@ -149,3 +149,19 @@ def test_a_marker_with_a_lost_part_is_counted_not_raised():
     assert meta.broken == 1
     with pytest.raises(ValueError, match="needs a 'label'"):
         marker_messages(True, {}, seq=0)
+
+
+def test_a_log_becomes_a_dataset(tmp_path):
+    recording = pytest.importorskip("tactbench.recording")
+    path = tmp_path / "run.blf"
+    write_log(path, schedule_messages(traffic(samples(), TaxelMap(IDS)), t0=5.0))
+    dataset = read_log(path).to_dataset(name="run")
+    assert isinstance(dataset, recording.Dataset)
+    assert dataset.classes == ("Grasp", "Pull")
+    assert dataset.labels.tolist() == [0, 1, 0]
+    assert dataset.users == ["0", "1", "0"]
+    for sample, orig in zip(dataset.samples, samples()):
+        np.testing.assert_array_equal(sample.recording.values, orig.values)
+        np.testing.assert_allclose(sample.recording.timestamps,
+                                   orig.timestamps - orig.timestamps[0], atol=2e-6)
+        np.testing.assert_array_equal(sample.recording.taxel_ids, IDS)

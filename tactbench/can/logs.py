@@ -178,24 +178,34 @@ class CanLog:
             "assembler": self.stats.to_dict(), "broken_meta_messages": self.broken_meta,
         }
 
-    def to_dataset(self, *, layout: Any = None) -> Any:
+    def to_dataset(self, *, name: str | None = None, layout: Any = None,
+                   normalisation: Any = "fixed") -> Any:
         """The labelled segments as a :class:`tactbench.recording.Dataset`.
 
-        Marker fields ``user``, ``position``, ``repetition`` and ``source`` become the
-        samples' fields when present.
+        Classes are the sorted label names; marker fields ``user``, ``position``,
+        ``repetition`` and ``source`` become the samples' fields when present.
+        Each sample's timestamps start at 0 (the log's clock is wall time);
+        labelled segments without a single sweep are left out.
         """
         from tactbench.recording import Dataset, Recording, Sample
 
-        samples = []
+        if not self.labelled:
+            raise ValueError(f"{self.path}: no labelled samples (no label markers in the log)")
         classes = sorted({s.label for s in self.labelled})
+        samples = []
         for seg in self.labelled:
-            rec = Recording(values=seg.values, timestamps=seg.timestamps,
+            if len(seg) == 0:
+                continue
+            info = seg.info
+            rec = Recording(values=seg.values, timestamps=seg.timestamps - seg.timestamps[0],
                             taxel_ids=self.taxel_ids)
-            extra = {k: seg.info[k] for k in ("user", "position", "repetition")
-                     if k in seg.info}
-            samples.append(Sample(recording=rec, label=seg.label,
-                                  source=seg.info.get("source", str(self.path)), **extra))
-        return Dataset(samples=samples, classes=classes, layout=layout)
+            samples.append(Sample(recording=rec, label=classes.index(seg.label),
+                                  user=str(info.get("user", "")),
+                                  position=str(info.get("position", "")),
+                                  repetition=int(info.get("repetition", 0)),
+                                  source=str(info.get("source", self.path))))
+        return Dataset(name or self.path.stem, samples, classes, layout=layout,
+                       normalisation=normalisation)
 
 
 class _SegmentBuilder:

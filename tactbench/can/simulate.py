@@ -28,8 +28,12 @@ class SimSample:
     info: dict[str, Any] | None = None
 
 
-def as_sim_sample(sample: Any, rate_hz: float = 10.0) -> SimSample:
-    """Accept a :class:`tactbench.recording.Sample`, a ``Recording``, or a ``(T, N)`` array."""
+def as_sim_sample(sample: Any, rate_hz: float = 10.0,
+                  classes: Any = None) -> SimSample:
+    """Accept a :class:`tactbench.recording.Sample`, a ``Recording``, or a ``(T, N)`` array.
+
+    A sample's integer label becomes its class name when ``classes`` is given.
+    """
     rec = getattr(sample, "recording", sample)
     values = np.asarray(getattr(rec, "values", rec), dtype=np.float32)
     if values.ndim != 2:
@@ -40,10 +44,12 @@ def as_sim_sample(sample: Any, rate_hz: float = 10.0) -> SimSample:
     info = None
     label = getattr(sample, "label", None)
     if label is not None:
+        if classes is not None and isinstance(label, (int, np.integer)):
+            label = classes[int(label)]
         info = {"label": str(label)}
         for key in ("user", "position", "repetition", "source"):
             value = getattr(sample, key, None)
-            if value is not None:
+            if value is not None and value != "":
                 info[key] = value if isinstance(value, (int, float)) else str(value)
     return SimSample(values, ts, info)
 

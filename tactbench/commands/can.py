@@ -76,7 +76,7 @@ def load_samples(source: str, *, rate_hz: float = 10.0):
         raise TactbenchError(f"cannot load dataset '{source}': dataset loading is not "
                              f"available ({exc})") from exc
     dataset = load_dataset(source)
-    samples = [as_sim_sample(s, rate_hz) for s in dataset.samples]
+    samples = [as_sim_sample(s, rate_hz, dataset.classes) for s in dataset.samples]
     ids = _dataset_taxel_ids(dataset)
     return samples, ids
 
