@@ -1,0 +1,81 @@
+"""One entry point for every dataset: a registered name with options, or a path.
+
+>>> load_dataset("synthetic-forearm:users=2,repetitions=1")   # doctest: +SKIP
+>>> load_dataset("/data/cyskin-fingers")                        # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from tactbench.recording import MANIFEST, Dataset
+
+
+def detect_format(path: Path) -> str:
+    """``"dataset"`` (tactbench folder), ``"cyskin-text"`` or ``"cost"``, from the path."""
+    if path.is_dir():
+        if (path / MANIFEST).is_file():
+            return "dataset"
+        if any(p.is_file() for p in path.rglob("*.txt")):
+            return "cyskin-text"
+        raise ValueError(f"{path}: neither a tactbench dataset folder (no {MANIFEST}) nor a "
+                         f"folder of CySkin text files (*.txt)")
+    suffix = path.suffix.lower()
+    if suffix == ".txt":
+        return "cyskin-text"
+    if suffix == ".csv":
+        return "cost"
+    if path.name == MANIFEST:
+        return "dataset"
+    raise ValueError(f"{path}: unknown data format {suffix or '(no suffix)'!r}; expected a "
+                     f"dataset folder, CySkin text (.txt, or a folder of them) or CoST (.csv)")
+
+
+def load_path(path: str | Path) -> Dataset:
+    """Load a dataset folder, a CySkin text file or folder, or a CoST CSV file."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file or folder")
+    kind = detect_format(path)
+    if kind == "dataset":
+        return Dataset.load(path if path.is_dir() else path.parent)
+    if kind == "cyskin-text":
+        from tactbench.datasets.cyskin_text import read_cyskin_folder
+
+        return read_cyskin_folder(path)
+    from tactbench.datasets.cost import read_cost_csv
+
+    return read_cost_csv(path)
+
+
+def _looks_like_path(text: str) -> bool:
+    return ("/" in text or "\\" in text or text.startswith(".")
+            or Path(text).suffix.lower() in (".txt", ".csv", ".json"))
+
+
+def load_dataset(spec_or_path: str | Path, registry: Any = None) -> Dataset:
+    """A :class:`Dataset` from a path or a registered dataset spec.
+
+    An existing path is read by :func:`load_path`. Anything else is a spec
+    ``"name:key=value,..."`` built through the registry
+    (``registry.build("dataset", spec).load()``; the installed registry when
+    ``registry`` is ``None``). A spec that names no registered dataset and
+    looks like a path reports the missing path.
+    """
+    text = str(spec_or_path)
+    path = Path(text).expanduser()
+    if path.exists():
+        return load_path(path)
+    if isinstance(spec_or_path, Path) or _looks_like_path(text) and ":" not in text.split("/")[0]:
+        raise FileNotFoundError(f"{text}: no such file or folder (and not a dataset name)")
+    if registry is None:
+        from tactbench.plugins import load_registry
+
+        registry = load_registry()
+    source = registry.build("dataset", text)
+    dataset = source.load()
+    if not isinstance(dataset, Dataset):
+        raise TypeError(f"dataset {text!r}: load() returned {type(dataset).__name__}, "
+                        f"expected a tactbench.recording.Dataset")
+    return dataset
