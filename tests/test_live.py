@@ -1,0 +1,163 @@
+"""Live classification: incremental encoding equals full encoding; live = offline predictions."""
+
+from __future__ import annotations
+
+import threading
+import uuid
+
+import numpy as np
+import pytest
+
+from tactbench.live import IncrementalEncoder, LiveClassifier, LiveModel, live_metadata
+from tactbench.plugins import load_registry
+
+REGISTRY = load_registry()
+
+
+def blob_sequence(t: int = 6, h: int = 20, w: int = 24, seed: int = 0) -> np.ndarray:
+    """A Gaussian contact (σ 3 px) moving and pressing harder: float32 (T, H, W) in [0, 1]."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    cy, cx = rng.uniform(6, h - 6), rng.uniform(6, 10)
+    seq = [np.exp(-((y - cy - 0.5 * k) ** 2 + (x - cx - 1.5 * k) ** 2) / (2 * 3.0 ** 2))
+           * min(1.0, 0.3 + 0.15 * k) for k in range(t)]
+    return np.clip(np.stack(seq), 0, 1).astype(np.float32)
+
+
+@pytest.mark.parametrize("name", REGISTRY.names("encoder"))
+def test_incremental_encoding_equals_full_encoding(name):
+    """Frame k of encode(seq) == frame 1 of encode([I_{k-1}, I_k]), for every encoder."""
+    comp = REGISTRY.get("encoder", name)
+    if comp.missing_requirements():
+        pytest.skip(f"{name} needs {comp.missing_requirements()}")
+    encoder = REGISTRY.build("encoder", name)
+    seq = blob_sequence()
+    full = encoder.encode(seq)
+    inc = IncrementalEncoder(encoder)
+    stream = np.stack([inc.push(frame) for frame in seq])
+    assert stream.shape == full.shape and stream.dtype == np.float32
+    np.testing.assert_allclose(stream, full, atol=1e-5, rtol=0,
+                               err_msg=f"{name}: incremental encoding differs")
+    # and via the generic two-frame path, not only a flow shortcut
+    pair = np.stack([encoder.encode(seq[k - 1:k + 1])[1] for k in range(1, len(seq))])
+    np.testing.assert_allclose(pair, full[1:], atol=1e-5, rtol=0)
+    inc.reset()
+    np.testing.assert_allclose(inc.push(seq[0]), full[0], atol=1e-5, rtol=0)
+
+
+# ------------------------------------------------------------- a tiny trained model
+
+def tiny_dataset():
+    """Two classes of contacts sliding left or right over an 8 × 8 taxel patch."""
+    from tactbench.layout import TaxelLayout
+    from tactbench.recording import Dataset, Recording, Sample
+
+    ids = np.array([m * 16 + s for m in range(1, 7) for s in range(11)])[:64]
+    gy, gx = np.divmod(np.arange(64), 8)
+    layout = TaxelLayout(ids=ids, positions=np.column_stack([gx, gy]) * 7.5, name="patch")
+    rng = np.random.default_rng(3)
+    samples = []
+    for i in range(16):
+        label = i % 2
+        t = 6 + i % 3
+        cx0 = 10.0 if label == 0 else 42.0
+        vx = 5.0 if label == 0 else -5.0
+        cy = rng.uniform(15, 40)
+        frames = [20000 * np.exp(-((gx * 7.5 - cx0 - vx * k) ** 2 + (gy * 7.5 - cy) ** 2)
+                                 / (2 * 8.0 ** 2)) for k in range(t)]
+        values = np.round(np.stack(frames) + rng.uniform(0, 50, (t, 64))).astype(np.float32)
+        rec = Recording(values=values, timestamps=0.1 * np.arange(t), taxel_ids=ids)
+        samples.append(Sample(recording=rec, label=label, user=str(i % 4)))
+    return Dataset("tiny", samples, ["right", "left"], layout=layout,
+                   normalisation="fixed:scale=20000")
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    from tactbench.windows import training_windows
+
+    dataset = tiny_dataset()
+    encoder_spec, L, px = "frame-diff", 3, 5.0
+    encoder = REGISTRY.build("encoder", encoder_spec)
+    encoded = [encoder.encode(img) for img in dataset.images(pixel_mm=px)]
+    train = training_windows(encoded, dataset.labels, L)
+    clf = REGISTRY.build("classifier", "small-cnn-lstm:epochs=2,windows_per_epoch=0,input_size=16,width=4,"
+                                       "layers=2,hidden=8,fc=16", classes=2)
+    clf.fit(train, None, seed=0, device="cpu", progress=None)
+    path = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    clf.save(path, live_metadata(dataset, encoder=encoder_spec, length=L, pixel_mm=px))
+    return dataset, encoded, path
+
+
+def test_live_predictions_equal_offline_predictions(trained):
+    dataset, encoded, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    assert model.classes == ["right", "left"] and model.length == 3
+    live = LiveClassifier(model)
+    sample = dataset.samples[5]
+    preds = [live.push(v, t) for t, v in zip(sample.recording.timestamps,
+                                             sample.recording.values)]
+    assert preds[:2] == [None, None]  # warm-up: wait for L frames
+    enc = encoded[5]
+    windows = np.stack([enc[k - 2:k + 1] for k in range(2, len(enc))])
+    offline = model.clf.predict_proba(windows)
+    got = np.stack([p.probabilities for p in preds[2:]])
+    np.testing.assert_allclose(got, offline, atol=1e-5)
+    p = preds[-1]
+    assert p.label == model.classes[int(np.argmax(offline[-1]))]
+    assert p.confidence == pytest.approx(float(offline[-1].max()))
+    assert p.frames == len(enc) and p.latency_ms > 0
+    assert set(p.to_dict(model.classes)["probabilities"]) == {"right", "left"}
+
+
+def test_pad_warmup_predicts_from_the_first_sweep(trained):
+    dataset, encoded, path = trained
+    live = LiveClassifier(LiveModel.from_file(path, registry=REGISTRY), warmup="pad")
+    first = live.push(dataset.samples[0].recording.values[0])
+    padded = np.zeros((1, 3, *encoded[0].shape[1:]), np.float32)
+    padded[0, 0] = encoded[0][0]
+    np.testing.assert_allclose(first.probabilities, live.model.clf.predict_proba(padded)[0],
+                               atol=1e-5)
+
+
+def test_live_over_the_virtual_bus(trained):
+    """Simulated CAN traffic → cyskin-can sensor → predictions, same as from the array."""
+    import can
+
+    from tactbench.can.simulate import as_sim_sample, play, traffic
+    from tactbench.sensors.cyskin_can import CySkinCAN
+
+    dataset, _, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    sample = dataset.samples[2]
+    direct = LiveClassifier(model)
+    expected = [p for p in (direct.push(v) for v in sample.recording.values) if p is not None]
+    channel = f"live-{uuid.uuid4().hex[:8]}"
+    with CySkinCAN(channel=channel, taxel_ids=model.taxel_ids, idle_timeout=0.5) as sensor:
+        def send():
+            with can.Bus(interface="virtual", channel=channel) as bus:
+                play(bus, traffic([as_sim_sample(sample, classes=dataset.classes)],
+                                  sensor.taxel_map), speed=10)
+
+        sender = threading.Thread(target=send, daemon=True)
+        sender.start()
+        preds = list(LiveClassifier(model).run(sensor.frames()))
+        sender.join()
+    assert [p.label for p in preds] == [p.label for p in expected]
+    np.testing.assert_allclose([p.probabilities for p in preds],
+                               [p.probabilities for p in expected], atol=1e-5)
+
+
+def test_model_without_live_metadata_is_refused(trained, tmp_path):
+    from tactbench.errors import TactbenchError
+
+    _, _, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    bare = tmp_path / "bare.safetensors"
+    model.clf.save(bare, {"note": "no live metadata"})
+    with pytest.raises(TactbenchError, match="no 'classes'"):
+        LiveModel.from_file(bare, registry=REGISTRY)
+    with pytest.raises(ValueError, match="60 values"):
+        LiveClassifier(model).push(np.zeros(60))
+    with pytest.raises(TactbenchError, match="classifier expects frames"):
+        LiveModel.from_file(path, registry=REGISTRY, encoder="raw")
