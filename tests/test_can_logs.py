@@ -165,3 +165,31 @@ def test_a_log_becomes_a_dataset(tmp_path):
         np.testing.assert_allclose(sample.recording.timestamps,
                                    orig.timestamps - orig.timestamps[0], atol=2e-6)
         np.testing.assert_array_equal(sample.recording.taxel_ids, IDS)
+
+
+def test_unmarked_log_becomes_an_unlabelled_dataset(tmp_path):
+    pytest.importorskip("tactbench.recording")
+    path = tmp_path / "plain.asc"
+    taxels = TaxelMap(IDS)
+    write_log(path, [m for k in range(4) for m in encode_sweep(np.full(IDS.size, k), taxels, k,
+                                                                timestamp=10 + 0.1 * k)])
+    dataset = read_log(path, taxel_ids=IDS).to_dataset()
+    assert dataset.classes == ("unlabelled",) and len(dataset) == 1
+    np.testing.assert_array_equal(dataset.samples[0].recording.values[:, 0], [0, 1, 2, 3])
+
+
+def test_log_replay_sensor_plays_every_sweep_in_order(tmp_path):
+    from tactbench.can.logs import LogReplay
+    from tactbench.contracts import Sensor
+
+    path = tmp_path / "run.blf"
+    originals = samples()
+    write_log(path, schedule_messages(traffic(originals, TaxelMap(IDS))))
+    with LogReplay(path) as sensor:
+        assert isinstance(sensor, Sensor)
+        frames = list(sensor.frames())
+    np.testing.assert_array_equal(np.stack([f.values for f in frames]),
+                                  np.concatenate([s.values for s in originals]))
+    assert [f.label for f in frames] == [s.info["label"] for s in originals
+                                         for _ in range(len(s.values))]
+    assert all(np.diff([f.timestamp for f in frames]) > 0)

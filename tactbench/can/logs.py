@@ -20,12 +20,16 @@ from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
 from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
 
-#: Suffixes python-can reads and writes without extra packages.
-LOG_SUFFIXES = (".blf", ".asc", ".log", ".csv", ".trc")
+#: Class name of the samples of a log without label markers.
+UNLABELLED = "unlabelled"
+
+#: Suffixes of the CAN logs read and written here (python-can needs no extra package
+#: for them). python-can's ``.csv`` is left out: that suffix means CoST data here.
+LOG_SUFFIXES = (".blf", ".asc", ".log", ".trc")
 
 
 def is_can_log(path: str | Path) -> bool:
-    """Whether ``path`` looks like a CAN log (by suffix: .blf, .asc, .log, .csv, .trc)."""
+    """Whether ``path`` looks like a CAN log (by suffix: .blf, .asc, .log, .trc)."""
     return Path(path).suffix.lower() in LOG_SUFFIXES
 
 
@@ -185,17 +189,20 @@ class CanLog:
         Classes are the sorted label names; marker fields ``user``, ``position``,
         ``repetition`` and ``source`` become the samples' fields when present.
         Each sample's timestamps start at 0 (the log's clock is wall time);
-        labelled segments without a single sweep are left out.
+        labelled segments without a single sweep are left out. A log without
+        label markers gives one sample per unlabelled stretch, of class
+        ``"unlabelled"``.
         """
         from tactbench.recording import Dataset, Recording, Sample
 
-        if not self.labelled:
-            raise ValueError(f"{self.path}: no labelled samples (no label markers in the log)")
-        classes = sorted({s.label for s in self.labelled})
+        segments = self.labelled or [Segment({"label": UNLABELLED}, s.timestamps, s.values,
+                                             s.missing) for s in self.segments]
+        segments = [s for s in segments if len(s)]
+        if not segments:
+            raise ValueError(f"{self.path}: no sweeps in the log")
+        classes = sorted({s.label for s in segments})
         samples = []
-        for seg in self.labelled:
-            if len(seg) == 0:
-                continue
+        for seg in segments:
             info = seg.info
             rec = Recording(values=seg.values, timestamps=seg.timestamps - seg.timestamps[0],
                             taxel_ids=self.taxel_ids)
@@ -206,6 +213,57 @@ class CanLog:
                                   source=str(info.get("source", self.path))))
         return Dataset(name or self.path.stem, samples, classes, layout=layout,
                        normalisation=normalisation)
+
+
+class LogReplay:
+    """A sensor that plays every sweep of a CAN log, in order (all segments).
+
+    Frames are :class:`~tactbench.can.assembler.Sweep`-like objects with
+    ``timestamp`` (the log's clock), ``values`` float32 ``(N,)``, ``label``
+    (the marker in force, or ``None``) and ``missing``. With ``realtime`` the
+    sweeps are released at their logged pace.
+    """
+
+    def __init__(self, path: str | Path, *, taxel_ids: Any = None,
+                 fmt: FrameFormat | None = None, realtime: bool = False,
+                 missing: str = "hold") -> None:
+        self.log = read_log(path, taxel_ids=taxel_ids, fmt=fmt, missing=missing)
+        self.taxel_ids = self.log.taxel_ids
+        self.realtime = bool(realtime)
+        self._closed = False
+
+    def frames(self) -> Iterator[Sweep]:
+        import time
+
+        start_wall = time.monotonic()
+        start_ts: float | None = None
+        k = 0
+        for seg in self.log.segments:
+            for t, values, missing in zip(seg.timestamps, seg.values, seg.missing):
+                if self._closed:
+                    return
+                if start_ts is None:
+                    start_ts = float(t)
+                if self.realtime:
+                    delay = (float(t) - start_ts) - (time.monotonic() - start_wall)
+                    if delay > 0:
+                        time.sleep(delay)
+                yield Sweep(timestamp=float(t), values=values.copy(), sequence=k,
+                            counter=k % 256, missing=int(missing), first_timestamp=float(t),
+                            label=seg.label)
+                k += 1
+
+    def __iter__(self) -> Iterator[Sweep]:
+        return self.frames()
+
+    def close(self) -> None:
+        self._closed = True
+
+    def __enter__(self) -> "LogReplay":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
 
 
 class _SegmentBuilder:
@@ -275,7 +333,7 @@ def read_log(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None
     Parameters
     ----------
     path : str or Path
-        ``.blf``, ``.asc``, ``.log``, ``.csv`` or ``.trc``.
+        ``.blf``, ``.asc``, ``.log`` (canutils) or ``.trc``.
     taxel_ids : array-like of int, optional
         The layout's taxel ids; default: announced in the log, else inferred.
     fmt : FrameFormat, optional
