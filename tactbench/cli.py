@@ -22,6 +22,7 @@ BUILTIN_COMMANDS: dict[str, str] = {
     "plugins": "tactbench.commands.inspect:plugins_cmd",
     "data": "tactbench.commands.data:data_group",
     "can": "tactbench.commands.can:can_group",
+    "live": "tactbench.commands.live:live_cmd",
     "layout": "tactbench.commands.layout:layout_group",
     "run": "tactbench.commands.run:run_cmd",
     "cache": "tactbench.commands.cache:cache_group",
