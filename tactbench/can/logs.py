@@ -186,7 +186,8 @@ class CanLog:
                    normalisation: Any = "fixed") -> Any:
         """The labelled segments as a :class:`tactbench.recording.Dataset`.
 
-        Classes are the sorted label names; marker fields ``user``, ``position``,
+        Classes are the label names, in the order of the markers' ``class_index``
+        when every marker has one (the simulator writes it), else sorted; marker fields ``user``, ``position``,
         ``repetition`` and ``source`` become the samples' fields when present.
         Each sample's timestamps start at 0 (the log's clock is wall time);
         labelled segments without a single sweep are left out. A log without
@@ -200,7 +201,7 @@ class CanLog:
         segments = [s for s in segments if len(s)]
         if not segments:
             raise ValueError(f"{self.path}: no sweeps in the log")
-        classes = sorted({s.label for s in segments})
+        classes = _class_order(segments)
         samples = []
         for seg in segments:
             info = seg.info
@@ -213,6 +214,19 @@ class CanLog:
                                   source=str(info.get("source", self.path))))
         return Dataset(name or self.path.stem, samples, classes, layout=layout,
                        normalisation=normalisation)
+
+
+def _class_order(segments: list[Segment]) -> list[str]:
+    """Class names in the order markers' ``class_index`` gives, else sorted."""
+    names = sorted({s.label for s in segments})
+    index: dict[str, int] = {}
+    for s in segments:
+        k = s.info.get("class_index")
+        if not isinstance(k, int) or index.setdefault(s.label, k) != k:
+            return names
+    if sorted(index.values()) != list(range(len(names))):
+        return names  # a subset of the classes, or clashing indices: no order to trust
+    return sorted(names, key=index.__getitem__)
 
 
 class LogReplay:

@@ -44,9 +44,11 @@ def as_sim_sample(sample: Any, rate_hz: float = 10.0,
     info = None
     label = getattr(sample, "label", None)
     if label is not None:
+        info = {}
         if classes is not None and isinstance(label, (int, np.integer)):
+            info["class_index"] = int(label)  # keeps the dataset's class order in a log
             label = classes[int(label)]
-        info = {"label": str(label)}
+        info["label"] = str(label)
         for key in ("user", "position", "repetition", "source"):
             value = getattr(sample, key, None)
             if value is not None and value != "":
