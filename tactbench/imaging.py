@@ -32,10 +32,11 @@ Coarse pixels
     edge are dimmed in proportion to the skin they cover.
 
 Missing taxels (NaN or ±Inf readings)
-    A non-finite reading is treated as *missing*: each pixel is the weighted
-    mean of its remaining (finite) taxels, weights renormalised, times the
-    pixel's skin coverage. A pixel whose taxels are all missing is 0. So a
-    missing taxel is filled from its neighbours and never propagates.
+    A non-finite reading is treated as *missing* and replaced, before
+    imaging, by the mean of the finite readings of its neighbours (taxels
+    within 1.5 × the median spacing) in the same frame; a missing taxel with no
+    finite neighbour reads 0. So a missing taxel is filled from its
+    neighbours and never propagates.
 
 Values are float32. Inputs in [0, 1] give outputs in [0, 1] (every pixel is a
 convex combination of taxel values, times a coverage ≤ 1).
@@ -136,6 +137,35 @@ class Imager:
         self._matrix = mat.astype(np.float32)
         self._matrix_t = self._matrix.T.tocsr()  # (N, P): batch @ this is row-major output
         self.coverage = np.asarray(mat.sum(axis=1), dtype=np.float32).reshape(h, w)
+        self._neighbours = None  # built on first missing reading
+
+    def _neighbour_matrix(self):
+        """Sparse ``(N, N)`` 0/1 matrix: taxels within 1.5 × spacing of each other."""
+        if self._neighbours is None:
+            from scipy import sparse
+            from scipy.spatial import cKDTree
+
+            pairs = cKDTree(self.layout.positions).query_pairs(1.5 * self.spacing,
+                                                               output_type="ndarray")
+            n = self.n_taxels
+            rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+            cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+            self._neighbours = sparse.csr_matrix(
+                (np.ones(rows.size, dtype=np.float32), (rows, cols)), shape=(n, n))
+        return self._neighbours
+
+    def fill_missing(self, values: np.ndarray) -> np.ndarray:
+        """Replace non-finite readings in ``(T, N)`` by their neighbours' mean (or 0)."""
+        batch = np.asarray(values, dtype=np.float32)
+        finite = np.isfinite(batch)
+        if finite.all():
+            return batch
+        adj = self._neighbour_matrix()
+        known = np.where(finite, batch, 0.0).astype(np.float32)
+        total = np.asarray(known @ adj)  # adj is symmetric
+        count = np.asarray(finite.astype(np.float32) @ adj)
+        mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+        return np.where(finite, batch, mean).astype(np.float32)
 
     @property
     def matrix(self):
@@ -161,17 +191,9 @@ class Imager:
                 or arr.dtype == np.bool_):
             raise ValueError(f"expected numeric taxel values, got dtype {arr.dtype}")
         batch = np.atleast_2d(arr).astype(np.float32, copy=False)
-        finite = np.isfinite(batch)
-        all_finite = bool(finite.all())
-        if all_finite:
-            out = batch @ self._matrix_t
-        else:
-            filled = np.where(finite, batch, 0.0).astype(np.float32)
-            num = filled @ self._matrix_t
-            den = finite.astype(np.float32) @ self._matrix_t
-            cov = self.coverage.reshape(1, -1)
-            out = np.zeros_like(num, dtype=np.float32)
-            np.divide(num * cov, den, out=out, where=den > 1e-6)
+        if not np.isfinite(batch).all():
+            batch = self.fill_missing(batch)
+        out = batch @ self._matrix_t
         out = np.asarray(out, dtype=np.float32).reshape(-1, *self.shape)
         return out[0] if single else out
 

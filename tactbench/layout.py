@@ -160,21 +160,19 @@ class TaxelLayout:
     # ------------------------------------------------------------------ writers
 
     def to_csv(self, path: str | Path) -> None:
-        """Write ``id,x_mm,y_mm[,z_mm]`` (z only when 3-D positions are known).
+        """Write ``id,x_mm,y_mm`` (the 2-D positions), after a comment line
+        ``# bounds_mm=x_min,y_min,x_max,y_max`` that :meth:`from_csv` reads back.
 
         Floats are written with ``repr`` so reading back is exact.
         """
         path = Path(path)
         with path.open("w", newline="") as fh:
+            fh.write("# bounds_mm=" + ",".join(repr(float(b)) for b in self.bounds) + "\n")
             writer = csv.writer(fh)
-            has_z = self.positions_3d is not None
-            writer.writerow(["id", "x_mm", "y_mm"] + (["z_mm"] if has_z else []))
+            writer.writerow(["id", "x_mm", "y_mm"])
             for k in range(self.n_taxels):
-                row = [int(self.ids[k]), repr(float(self.positions[k, 0])),
-                       repr(float(self.positions[k, 1]))]
-                if has_z:
-                    row.append(repr(float(self.positions_3d[k, 2])))
-                writer.writerow(row)
+                writer.writerow([int(self.ids[k]), repr(float(self.positions[k, 0])),
+                                 repr(float(self.positions[k, 1]))])
 
     # ------------------------------------------------------------------ loaders
 
@@ -182,22 +180,39 @@ class TaxelLayout:
     def from_csv(cls, path: str | Path) -> "TaxelLayout":
         """Read a CSV with header ``id,x_mm,y_mm`` and optionally ``z_mm``.
 
-        ``z_mm`` is kept as the third coordinate of ``positions_3d``
-        (``(x, y, z)``). Bad rows raise ``ValueError`` naming the line.
+        ``x_mm, y_mm`` are the 2-D positions; with ``z_mm`` the 3-D positions
+        are ``(x, y, z)``. Lines starting with ``#`` before the header are
+        comments; ``# bounds_mm=x_min,y_min,x_max,y_max`` sets the image bounds.
+        Bad rows raise ``ValueError`` naming the line.
         """
         path = Path(path)
         text = _read_text(path)
-        rows = list(csv.reader(text.splitlines()))
+        lines = text.splitlines()
+        bounds = None
+        first = 0
+        while first < len(lines) and lines[first].lstrip().startswith("#"):
+            comment = lines[first].lstrip("# \t")
+            if comment.startswith("bounds_mm="):
+                try:
+                    bounds = tuple(float(v) for v in comment[len("bounds_mm="):].split(","))
+                except ValueError:
+                    raise ValueError(f"{path}, line {first + 1}: bounds_mm must be four "
+                                     f"numbers x_min,y_min,x_max,y_max") from None
+                if len(bounds) != 4:
+                    raise ValueError(f"{path}, line {first + 1}: bounds_mm must be four "
+                                     f"numbers x_min,y_min,x_max,y_max")
+            first += 1
+        rows = list(csv.reader(lines[first:]))
         if not rows or not any(cell.strip() for cell in rows[0]):
             raise ValueError(f"{path}: empty layout file (expected a header id,x_mm,y_mm)")
         header = [c.strip().lower() for c in rows[0]]
         if header[:3] != ["id", "x_mm", "y_mm"] or len(header) > 4 or \
                 (len(header) == 4 and header[3] != "z_mm"):
-            raise ValueError(f"{path}, line 1: header must be 'id,x_mm,y_mm' or "
+            raise ValueError(f"{path}, line {first + 1}: header must be 'id,x_mm,y_mm' or "
                              f"'id,x_mm,y_mm,z_mm', got {','.join(rows[0])!r}")
         ncol = len(header)
         ids, xyz = [], []
-        for lineno, row in enumerate(rows[1:], start=2):
+        for lineno, row in enumerate(rows[1:], start=first + 2):
             if not row or all(not c.strip() for c in row):
                 continue
             if len(row) != ncol:
@@ -225,7 +240,7 @@ class TaxelLayout:
             raise ValueError(f"{path}: no taxels after the header")
         arr = np.asarray(xyz, dtype=np.float64)
         p3 = arr if ncol == 4 else None
-        return _build(cls, ids, arr[:, :2], p3, None, path)
+        return _build(cls, ids, arr[:, :2], p3, None, path, bounds)
 
     @classmethod
     def from_json(cls, path: str | Path, *, map_index: int = 0) -> "TaxelLayout":
@@ -314,10 +329,10 @@ def _check_points(arr: Any, n: int, dims: int, what: str, name: str) -> np.ndarr
     return a
 
 
-def _build(cls, ids, pos2, p3, nrm, path: Path) -> TaxelLayout:
+def _build(cls, ids, pos2, p3, nrm, path: Path, bounds=None) -> TaxelLayout:
     try:
         return cls(ids=np.asarray(ids, dtype=np.int64), positions=pos2, positions_3d=p3,
-                   normals=nrm, name=path.stem)
+                   normals=nrm, bounds=bounds, name=path.stem)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
 
@@ -406,7 +421,7 @@ _EMPTY_SLOT = 11
 
 def cyskin_forearm(n_taxels: int = 1558, *, circumference_mm: float = 334.0,
                    length_mm: float = 357.0, pitch_mm: float = 7.5,
-                   module_side_mm: float = 41.5, seed: int = 0) -> TaxelLayout:
+                   module_side_mm: float = 44.0, seed: int = 0) -> TaxelLayout:
     """A CySkin-like forearm: triangular modules on a cylinder, unrolled.
 
     The cylinder's circumference (``x``) and length (``y``) give the sheet

@@ -1,6 +1,8 @@
-"""``tactbench layout``: inspect taxel layouts."""
+"""``tactbench layout``: inspect and generate taxel layouts."""
 
 from __future__ import annotations
+
+import json
 
 import click
 
@@ -8,3 +10,51 @@ import click
 @click.group("layout")
 def layout_group() -> None:
     """Inspect and generate taxel layouts."""
+
+
+@layout_group.command("info")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--pixel-mm", "pixel_mm", multiple=True, type=float,
+              help="Also give the image shape at this pixel size (repeatable; "
+                   "default 1, 4 and 5 mm).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
+    """Taxel count, extent in mm, median spacing of a layout (.json or .csv)."""
+    import math
+
+    from tactbench.layout import load_layout
+
+    layout = load_layout(file)
+    summary = layout.summary()
+    summary["path"] = file
+    x0, y0, x1, y1 = layout.bounds
+    summary["image_shapes"] = {
+        f"{p:g}": [math.ceil((y1 - y0) / p - 1e-9), math.ceil((x1 - x0) / p - 1e-9)]
+        for p in (pixel_mm or (1.0, 4.0, 5.0))}
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+        return
+    w, h = summary["extent_mm"]
+    click.echo(f"{file}: {summary['taxels']} taxels in {summary['modules']} modules "
+               f"(id // 16)")
+    click.echo(f"  extent: {w:g} × {h:g} mm (x × y); image bounds "
+               f"{', '.join(f'{b:g}' for b in summary['bounds_mm'])} mm")
+    click.echo(f"  median nearest-neighbour spacing: {summary['median_spacing_mm']:g} mm")
+    click.echo(f"  3-D positions: {'yes' if summary['has_3d'] else 'no'}; "
+               f"normals: {'yes' if summary['has_normals'] else 'no'}")
+    for p, (rows, cols) in summary["image_shapes"].items():
+        click.echo(f"  image at {p} mm/pixel: {rows} × {cols} (H × W)")
+
+
+@layout_group.command("generate")
+@click.option("--out", required=True, type=click.Path(dir_okay=False),
+              help="CSV file to write (id,x_mm,y_mm,z_mm).")
+@click.option("--taxels", default=1558, show_default=True, type=click.IntRange(1))
+@click.option("--seed", default=0, show_default=True, type=int)
+def generate_cmd(out: str, taxels: int, seed: int) -> None:
+    """Write the generated CySkin-like forearm layout as CSV."""
+    from tactbench.layout import cyskin_forearm
+
+    layout = cyskin_forearm(taxels, seed=seed)
+    layout.to_csv(out)
+    click.echo(f"wrote {layout.n_taxels} taxels to {out}", err=True)
