@@ -101,6 +101,14 @@ class Encoder:
         params = inspect.signature(type(self)).parameters
         return {name: getattr(self, name) for name in params if hasattr(self, name)}
 
+    def metadata(self) -> dict[str, Any]:
+        """What a reader of an encoded array needs: name, version, options, channels, ranges.
+
+        Written next to encoded arrays (``tactbench encode``) and usable in cache keys.
+        """
+        return {"encoder": self.name, "version": self.version, "options": self.options(),
+                "channels": list(self.channels), "ranges": [list(r) for r in self.ranges]}
+
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
         return f"{type(self).__name__}({opts})"

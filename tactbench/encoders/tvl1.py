@@ -1,0 +1,59 @@
+"""``tvl1``: OpenCV-contrib's dual TV-L1 flow (accurate, slow)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
+
+
+class TVL1(FlowEncoder):
+    """Pressure, flow magnitude and direction from ``cv2.optflow.DualTVL1OpticalFlow``.
+
+    Options are OpenCV's: ``tau`` (time step), ``lam`` (data-term weight,
+    OpenCV's ``lambda``; smaller = smoother flow), ``theta``, ``scales``
+    (pyramid levels), ``warps`` (per level), ``epsilon`` (stopping tolerance),
+    ``iterations`` (outer iterations), ``median`` (median-filter size, 0/1 off).
+    Frames are scaled to [0, 255], the intensity range OpenCV's defaults are
+    tuned for. Shared flow options: see :mod:`tactbench.encoders.flow`.
+    """
+
+    name = "tvl1"
+    version = "1"
+
+    def __init__(self, *, tau: float = 0.25, lam: float = 0.15, theta: float = 0.3,
+                 scales: int = 5, warps: int = 5, epsilon: float = 0.01,
+                 iterations: int = 10, median: int = 5,
+                 max_flow: float = DEFAULT_MAX_FLOW,
+                 min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
+        super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
+        for key, value in (("tau", tau), ("lam", lam), ("theta", theta), ("epsilon", epsilon)):
+            if not (isinstance(value, (int, float)) and value > 0):
+                raise ValueError(f"{key} must be > 0, got {value!r}")
+        for key, value, low in (("scales", scales, 1), ("warps", warps, 1),
+                                ("iterations", iterations, 1), ("median", median, 0)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{key} must be an integer ≥ {low}, got {value!r}")
+        self.tau = float(tau)
+        self.lam = float(lam)
+        self.theta = float(theta)
+        self.scales = scales
+        self.warps = warps
+        self.epsilon = float(epsilon)
+        self.iterations = iterations
+        self.median = median
+
+    def _prepare(self, images: np.ndarray) -> np.ndarray:
+        return images * np.float32(255.0)
+
+    def _flow(self, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
+        import cv2
+
+        tv = cv2.optflow.DualTVL1OpticalFlow_create(
+            tau=self.tau, lambda_=self.lam, theta=self.theta, nscales=self.scales,
+            warps=self.warps, epsilon=self.epsilon, outerIterations=self.iterations,
+            medianFiltering=max(1, self.median))
+        out = np.empty((*prev.shape, 2), dtype=np.float32)
+        for i in range(prev.shape[0]):
+            out[i] = tv.calc(prev[i], curr[i], None)
+        return out
