@@ -114,13 +114,13 @@ class Imager:
         sub = (np.arange(s) + 0.5) / s
         ys = y0 + (np.arange(h)[:, None] + sub[None, :]).ravel() * pixel_mm
         xs = x0 + (np.arange(w)[:, None] + sub[None, :]).ravel() * pixel_mm
-        gy, gx = np.meshgrid(ys, xs, indexing="ij")  # (h*s, w*s)
-        pts = np.column_stack([gx.ravel(), gy.ravel()])
         if method == "linear":
-            rows, cols, vals = _linear_weights(layout.positions, pts,
+            rows, cols, vals = _linear_weights(layout.positions, xs, ys,
                                                max_edge if max_edge is not None
                                                else 2.5 * spacing)
         else:
+            gy, gx = np.meshgrid(ys, xs, indexing="ij")  # (h*s, w*s)
+            pts = np.column_stack([gx.ravel(), gy.ravel()])
             rows, cols, vals = _gaussian_weights(layout.positions, pts,
                                                  sigma if sigma is not None else spacing / 2,
                                                  1.0 * spacing)
@@ -205,8 +205,14 @@ class Imager:
                 f"{self.method}, supersample {self.supersample})")
 
 
-def _linear_weights(taxels: np.ndarray, pts: np.ndarray, max_edge: float):
-    """Barycentric weights of each point in its Delaunay triangle (long-edged ones dropped)."""
+def _linear_weights(taxels: np.ndarray, xs: np.ndarray, ys: np.ndarray, max_edge: float):
+    """Barycentric weights of the grid points ``ys × xs`` (row-major) in the Delaunay
+    triangles of the taxels; triangles with an edge longer than ``max_edge`` dropped.
+
+    Triangles are rasterised directly (each one visits the grid points in its
+    bounding box) rather than located with ``Delaunay.find_simplex``, whose walk
+    is slow on the regular lattices of CySkin layouts.
+    """
     from scipy.spatial import Delaunay, QhullError
 
     n = len(taxels)
@@ -217,22 +223,44 @@ def _linear_weights(taxels: np.ndarray, pts: np.ndarray, max_edge: float):
     except QhullError as exc:
         raise ValueError(f"cannot triangulate the layout (taxels collinear or duplicated "
                          f"positions?): {str(exc).splitlines()[0]}") from None
-    simplex_pts = taxels[tri.simplices]  # (M, 3, 2)
-    edges = np.linalg.norm(simplex_pts - np.roll(simplex_pts, 1, axis=1), axis=2)
-    good = edges.max(axis=1) <= max_edge
-    simplex = tri.find_simplex(pts)
-    inside = simplex >= 0
-    inside[inside] = good[simplex[inside]]
-    idx = np.nonzero(inside)[0]
-    s = simplex[idx]
-    trans = tri.transform[s]  # (K, 3, 2)
-    delta = pts[idx] - trans[:, 2]
-    bary2 = np.einsum("kij,kj->ki", trans[:, :2], delta)
-    bary = np.column_stack([bary2, 1.0 - bary2.sum(axis=1)])
-    bary = np.clip(bary, 0.0, 1.0)
+    corners = taxels[tri.simplices]  # (M, 3, 2)
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    # barycentric transforms by hand (Delaunay.transform is slow on degenerate lattices)
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
+    area_ok = np.abs(det) > 1e-9 * np.maximum(edges.max(axis=1), 1e-12) ** 2
+    good = np.nonzero((edges.max(axis=1) <= max_edge) & area_ok)[0]
+    corners, simplices = corners[good], tri.simplices[good]
+    e1, e2, det = e1[good], e2[good], det[good]
+    inv = np.stack([np.stack([e2[:, 1], -e2[:, 0]], axis=1),
+                    np.stack([-e1[:, 1], e1[:, 0]], axis=1)], axis=1) / det[:, None, None]
+    nx, ny = len(xs), len(ys)
+    dx = xs[1] - xs[0] if nx > 1 else 1.0
+    dy = ys[1] - ys[0] if ny > 1 else 1.0
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    i0 = np.clip(np.ceil((lo[:, 0] - xs[0]) / dx - 1e-9), 0, nx).astype(np.int64)
+    i1 = np.clip(np.floor((hi[:, 0] - xs[0]) / dx + 1e-9), -1, nx - 1).astype(np.int64)
+    j0 = np.clip(np.ceil((lo[:, 1] - ys[0]) / dy - 1e-9), 0, ny).astype(np.int64)
+    j1 = np.clip(np.floor((hi[:, 1] - ys[0]) / dy + 1e-9), -1, ny - 1).astype(np.int64)
+    wide = np.maximum(i1 - i0 + 1, 0)
+    tall = np.maximum(j1 - j0 + 1, 0)
+    counts = wide * tall
+    which = np.repeat(np.arange(len(good)), counts)
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    ix = i0[which] + local % np.maximum(wide[which], 1)
+    iy = j0[which] + local // np.maximum(wide[which], 1)
+    pts = np.column_stack([xs[ix], ys[iy]])
+    lam = np.einsum("kij,kj->ki", inv[which], pts - corners[which, 0])  # weights of B, C
+    bary = np.column_stack([1.0 - lam.sum(axis=1), lam])
+    inside = np.all(bary >= -1e-9, axis=1)  # NaN (flat triangles) fails too
+    flat = iy * nx + ix
+    # a point on a shared edge belongs to one triangle only
+    _, first = np.unique(flat[inside], return_index=True)
+    keep = np.nonzero(inside)[0][first]
+    bary = np.clip(bary[keep], 0.0, 1.0)
     bary /= bary.sum(axis=1, keepdims=True)
-    rows = np.repeat(idx, 3)
-    cols = tri.simplices[s].ravel()
+    rows = np.repeat(flat[keep], 3)
+    cols = simplices[which[keep]].ravel()
     return rows, cols, bary.ravel()
 
 

@@ -69,6 +69,7 @@ DRIFT_SD = 30.0  # per sample and module, counts / s
 NOISE_SD = 45.0  # white, counts
 DEAD_TAXELS = 5  # stuck at their baseline
 FOOTPRINT_MM = 2.0  # electrode size, widens each contact (added in quadrature)
+SLIP_MM = 0.6  # micro-slips of a held contact: random walk, mm per √s
 
 
 def _rng(*keys) -> np.random.Generator:
@@ -255,7 +256,8 @@ def _grip(p: Patches, hand: Hand, t: np.ndarray, force: float, tau: float,
     onset = r.normal(0.0, 0.03, n)  # the fingers land at slightly different times
     overshoot = r.uniform(0.0, 0.25)
     tremor = 1.0 + 0.03 * _ar_noise(r, (n, len(t)))
-    slip = np.cumsum(r.normal(0.0, 0.25, (2, n, len(t))), axis=2)  # micro-slips, mm
+    dt = np.diff(t, prepend=t[0] - 1 / RATE_HZ).clip(1e-3)
+    slip = np.cumsum(r.normal(0.0, 1.0, (2, n, len(t))) * SLIP_MM * np.sqrt(dt), axis=2)
     for j in range(n):
         tj = t - onset[j]
         env = _rise(tj, tau)
