@@ -1,0 +1,66 @@
+"""load_dataset: one entry point for registered datasets and paths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactbench.datasets.loading import detect_format, load_dataset
+from tactbench.errors import UnknownComponentError
+from tactbench.plugins import load_registry
+from tactbench.recording import Dataset, Recording, Sample
+
+
+@pytest.fixture(scope="module")
+def registry():
+    return load_registry()
+
+
+def test_registered_name_with_options(registry):
+    ds = load_dataset("synthetic-forearm:users=2,repetitions=1", registry=registry)
+    assert isinstance(ds, Dataset) and len(ds) == 20
+
+
+def test_dataset_folder_and_its_manifest(tmp_path):
+    rec = Recording(np.ones((3, 2)), [0, 0.1, 0.2], [1, 2])
+    Dataset("saved", [Sample(rec, 0)], ("a",)).save(tmp_path / "d")
+    assert detect_format(tmp_path / "d") == "dataset"
+    assert load_dataset(str(tmp_path / "d")).name == "saved"
+    assert load_dataset(tmp_path / "d" / "manifest.json").name == "saved"
+
+
+def test_cyskin_text_file_and_folder(tmp_path):
+    folder = tmp_path / "cls"
+    folder.mkdir()
+    (folder / "a.txt").write_text("1 2\n0 0 1 2\n1 0.1 3 4\n")
+    assert load_dataset(folder / "a.txt").classes == ("cls",)
+    assert len(load_dataset(str(tmp_path))) == 1
+
+
+def test_cost_csv(tmp_path):
+    from tactbench.datasets.cost import COLUMNS
+
+    path = tmp_path / "c.csv"
+    path.write_text(",".join(COLUMNS) + "\n" + ",".join(["1", "gentle", "pat", "0"] +
+                                                         ["5"] * 64) + "\n")
+    assert load_dataset(path).classes == ("pat",)
+
+
+def test_unknown_things(tmp_path, registry):
+    with pytest.raises(FileNotFoundError, match="no such file or folder"):
+        load_dataset(str(tmp_path / "absent"), registry=registry)
+    with pytest.raises(FileNotFoundError):
+        load_dataset("./nothing/here.txt", registry=registry)
+    with pytest.raises(UnknownComponentError, match="did you mean 'synthetic-forearm'"):
+        load_dataset("synthetic-forarm", registry=registry)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="neither a tactbench dataset folder"):
+        load_dataset(tmp_path / "empty")
+    (tmp_path / "x.bin").write_bytes(b"1")
+    with pytest.raises(ValueError, match="unknown data format '.bin'"):
+        load_dataset(tmp_path / "x.bin")
+
+
+def test_the_real_fingers_set_by_path(shared_data):
+    ds = load_dataset(shared_data / "cyskin-fingers")
+    assert len(ds) == 373 and ds.layout is None
