@@ -193,9 +193,11 @@ class Imager:
         batch = np.atleast_2d(arr).astype(np.float32, copy=False)
         if not np.isfinite(batch).all():
             batch = self.fill_missing(batch)
+        if single:  # CSR matrix-vector product: the cheapest form for one frame
+            return np.asarray(self._matrix @ batch[0], dtype=np.float32).reshape(self.shape)
+        # (T, N) @ (N, P) keeps the output row-major (T, P) without a transpose copy
         out = batch @ self._matrix_t
-        out = np.asarray(out, dtype=np.float32).reshape(-1, *self.shape)
-        return out[0] if single else out
+        return np.asarray(out, dtype=np.float32).reshape(-1, *self.shape)
 
     __call__ = apply
 
