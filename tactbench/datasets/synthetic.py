@@ -47,7 +47,7 @@ RATE_HZ = 10.0
 # ---- sheet (unrolled forearm): x around the arm (0..C, wraps), y along it (0..L)
 CIRCUMFERENCE_MM = 334.0
 LENGTH_MM = 357.0
-TOP_X = CIRCUMFERENCE_MM / 2  # top of the arm, where the skin is densest
+TOP_X = CIRCUMFERENCE_MM / 2  # the top of the arm (the underside seam is at x = 0)
 
 # ---- users
 HAND_LENGTH_MM = (160.0, 200.0)  # uniform
