@@ -375,7 +375,7 @@ def load_encoding(folder: str | Path) -> tuple[list[Any], dict[str, Any]]:
 
     folder = str(folder)
     if folder not in _LOADED:
-        frames = np.load(Path(folder) / "frames.npy", mmap_mode="r")
+        frames = np.load(Path(folder) / "frames.npy", mmap_mode="c")  # copy-on-write: writable views, file untouched
         offsets = np.load(Path(folder) / "offsets.npy")
         meta = json.loads((Path(folder) / "meta.json").read_text())
         seqs = [frames[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
