@@ -64,3 +64,20 @@ def test_unknown_things(tmp_path, registry):
 def test_the_real_fingers_set_by_path(shared_data):
     ds = load_dataset(shared_data / "cyskin-fingers")
     assert len(ds) == 373 and ds.layout is None
+
+
+def test_a_can_log_of_cyskin_traffic(tmp_path):
+    pytest.importorskip("can")
+    from tactbench.can.codec import TaxelMap
+    from tactbench.can.logs import write_log
+    from tactbench.can.simulate import as_sim_sample, schedule_messages, traffic
+
+    ids = np.array([16, 17, 18, 32, 33], dtype=np.int64)
+    samples = [Sample(Recording(np.full((3, 5), 100.0 * (k + 1)), [0, 0.1, 0.2], ids), k,
+                      user="u1") for k in range(2)]
+    sims = [as_sim_sample(s, classes=("a", "b")) for s in samples]
+    write_log(tmp_path / "s.asc", schedule_messages(traffic(sims, TaxelMap(ids))))
+    assert detect_format(tmp_path / "s.asc") == "can-log"
+    ds = load_dataset(tmp_path / "s.asc")
+    assert ds.classes == ("a", "b") and len(ds) == 2
+    assert np.array_equal(ds[1].recording.values, samples[1].recording.values)

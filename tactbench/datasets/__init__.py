@@ -13,10 +13,8 @@ from tactbench import hookimpl
 @hookimpl
 def register_datasets(register):
     register("synthetic-forearm", "tactbench.datasets.synthetic:SyntheticForearm",
-             summary="simulated gestures (Grasp, 2hGrasp, Twist, Push, Pull) on a "
-                     "1558-taxel CySkin forearm; 38 users x 50 samples by default")
+             summary="simulated 5-gesture study on a 1558-taxel forearm (1900 samples)")
     register("cyskin-text", "tactbench.datasets.cyskin_text:CySkinText",
-             summary="CySkin acquisition text files (a folder per class, or one file); "
-                     "option path=...")
+             summary="CySkin acquisition text files; path=FOLDER|FILE")
     register("cost", "tactbench.datasets.cost:CoST",
-             summary="Corpus of Social Touch CSV (8x8 grid, 135 Hz); option path=...")
+             summary="Corpus of Social Touch CSV (8x8, 135 Hz); path=FILE")

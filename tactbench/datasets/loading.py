@@ -11,9 +11,13 @@ from typing import Any
 
 from tactbench.recording import MANIFEST, Dataset
 
+#: CAN log suffixes read through :mod:`tactbench.can.logs` (python-can's ``.csv``
+#: is not among them: ``.csv`` means CoST here).
+CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".trc")
+
 
 def detect_format(path: Path) -> str:
-    """``"dataset"`` (tactbench folder), ``"cyskin-text"`` or ``"cost"``, from the path."""
+    """``"dataset"`` (tactbench folder), ``"cyskin-text"``, ``"cost"`` or ``"can-log"``."""
     if path.is_dir():
         if (path / MANIFEST).is_file():
             return "dataset"
@@ -22,6 +26,8 @@ def detect_format(path: Path) -> str:
         raise ValueError(f"{path}: neither a tactbench dataset folder (no {MANIFEST}) nor a "
                          f"folder of CySkin text files (*.txt)")
     suffix = path.suffix.lower()
+    if suffix in CAN_LOG_SUFFIXES:
+        return "can-log"
     if suffix == ".txt":
         return "cyskin-text"
     if suffix == ".csv":
@@ -29,11 +35,12 @@ def detect_format(path: Path) -> str:
     if path.name == MANIFEST:
         return "dataset"
     raise ValueError(f"{path}: unknown data format {suffix or '(no suffix)'!r}; expected a "
-                     f"dataset folder, CySkin text (.txt, or a folder of them) or CoST (.csv)")
+                     f"dataset folder, CySkin text (.txt, or a folder of them), CoST (.csv) "
+                     f"or a CAN log ({', '.join(CAN_LOG_SUFFIXES)})")
 
 
 def load_path(path: str | Path) -> Dataset:
-    """Load a dataset folder, a CySkin text file or folder, or a CoST CSV file."""
+    """Load a dataset folder, a CySkin text file or folder, a CoST CSV file or a CAN log."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
@@ -44,6 +51,10 @@ def load_path(path: str | Path) -> Dataset:
         from tactbench.datasets.cyskin_text import read_cyskin_folder
 
         return read_cyskin_folder(path)
+    if kind == "can-log":  # CySkin traffic recorded by `tactbench can record`
+        from tactbench.can.logs import read_log
+
+        return read_log(path).to_dataset()
     from tactbench.datasets.cost import read_cost_csv
 
     return read_cost_csv(path)

@@ -12,7 +12,5 @@ from tactbench import hookimpl
 @hookimpl
 def register_sensors(register):
     register("replay", "tactbench.sensors.replay:Replay",
-             summary="plays a recorded sample (dataset folder, CySkin text file, "
-                     "registered dataset) as a stream of frames; options path, sample, "
-                     "realtime")
+             summary="plays a recorded sample as frames; path, sample, realtime")
     register("cyskin-can", "tactbench.sensors.cyskin_can:CySkinCAN", summary="CySkin sweeps from a CAN bus via python-can; options interface, channel, bitrate, taxel_ids or layout, format", requires=("can",))
