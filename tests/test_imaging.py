@@ -132,3 +132,28 @@ def test_matrix_is_sparse(forearm):
     im = Imager(forearm, pixel_mm=1.0)
     assert im.matrix.shape == (357 * 334, 1558)
     assert im.matrix.nnz <= 3 * 357 * 334
+
+
+def test_a_missing_taxel_reads_its_neighbours_mean(grid):
+    im = Imager(grid, pixel_mm=1.0)
+    values = np.arange(30, dtype=np.float32) ** 2
+    values[8] = np.nan  # row 1, column 2 of the 6-wide grid
+    filled = im.fill_missing(values[None])[0]
+    # taxels within 1.5 × 7.5 mm: the 4 at 7.5 mm and the 4 diagonal ones at 10.6 mm
+    assert filled[8] == pytest.approx(np.mean(np.array([2, 7, 9, 14, 1, 3, 13, 15]) ** 2))
+    assert np.array_equal(np.delete(filled, 8), np.delete(values, 8))
+
+
+@pytest.mark.parametrize("pixel_mm", [1.0, 4.0, 5.0, 6.0])
+def test_coarse_images_keep_where_the_pressure_is(forearm, pixel_mm):
+    """The pressure-weighted centre of the image matches that of the taxels."""
+    xy = forearm.positions
+    centre = np.array([150.0, 200.0])
+    values = np.exp(-0.5 * ((xy - centre) ** 2).sum(1) / 12.0 ** 2).astype(np.float32)
+    im = Imager(forearm, pixel_mm=pixel_mm)
+    img = im.apply(values)
+    ii, jj = np.mgrid[0:im.shape[0], 0:im.shape[1]]
+    x0, y0, _, _ = forearm.bounds
+    cx = (img * (x0 + (jj + 0.5) * pixel_mm)).sum() / img.sum()
+    cy = (img * (y0 + (ii + 0.5) * pixel_mm)).sum() / img.sum()
+    assert np.hypot(cx - centre[0], cy - centre[1]) < 1.5
