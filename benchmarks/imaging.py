@@ -1,6 +1,7 @@
 """Imaging Φ speed: 1558 taxels → 357 × 334 images, against scipy's griddata per frame.
 
-    python benchmarks/imaging.py [--frames 2000] [--griddata-frames 10] [--json docs/imaging-benchmark.json]
+    python benchmarks/imaging.py [--frames 500] [--griddata-frames 10] \
+        [--json docs/imaging-benchmark.json]
 
 Runs on one core (BLAS/OpenMP threads pinned to 1 before numpy loads). For each
 method and pixel size it reports the operator's build time, frames per second

@@ -42,7 +42,8 @@ def test_write_and_read_back_is_exact(tmp_path):
 @pytest.mark.parametrize("text, message", [
     ("", "empty file"),
     ("\n\n", "empty file"),
-    ("frame timestamp a b\n0 0 1 2\n", r"line 1: the header must list integer taxel ids, found 'frame'"),
+    ("frame timestamp a b\n0 0 1 2\n",
+     r"line 1: the header must list integer taxel ids, found 'frame'"),
     ("1 2 2\n0 0 1 2 3\n", "line 1: duplicate taxel id.s. 2"),
     ("1 2 3\n", "no frames after the header"),
     ("1 2 3\n0 0 1 2 3\n1 0.1 1 2\n", "line 3: truncated or ragged row: expected 5 fields"),

@@ -122,7 +122,8 @@ def test_bad_arguments(grid):
     with pytest.raises(ValueError, match="pixel_mm must be a positive"):
         Imager(grid, pixel_mm=0)
     im = Imager(grid, pixel_mm=3)
-    with pytest.raises(ValueError, match=r"expected values of shape \(N,\) or \(T, N\) with N = 30"):
+    with pytest.raises(ValueError,
+                       match=r"expected values of shape \(N,\) or \(T, N\) with N = 30"):
         im.apply(np.zeros(29))
     with pytest.raises(ValueError, match="at least 3 taxels"):
         Imager(TaxelLayout(ids=[1, 2], positions=[[0, 0], [1, 0]]))

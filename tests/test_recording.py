@@ -92,7 +92,8 @@ def test_dataset_validation():
     with pytest.raises(ValueError, match="no samples"):
         Dataset("x", [], ("a",))
     lay = TaxelLayout(ids=[100, 101, 102], positions=[[0, 0], [1, 0], [0, 1]], name="small")
-    with pytest.raises(ValueError, match="13 taxel id.s. of the dataset 'x' are not in layout small"):
+    with pytest.raises(ValueError,
+                       match="13 taxel id.s. of the dataset 'x' are not in layout small"):
         Dataset("x", [ds[0]], ("a",), layout=lay)
 
 

@@ -469,7 +469,8 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
              progress: Callable[[int, int], None] | None = None) -> Dataset:
     """Generate the dataset (no cache); see :class:`SyntheticForearm`."""
     if users < 1 or repetitions < 1 or not 1 <= positions <= len(POSITIONS):
-        raise ValueError(f"need users ≥ 1, repetitions ≥ 1 and positions in 1..{len(POSITIONS)}; "
+        raise ValueError(f"need users ≥ 1, repetitions ≥ 1 and positions in "
+                         f"1..{len(POSITIONS)}; "
                          f"got users={users}, repetitions={repetitions}, positions={positions}")
     device = make_device(seed, n_taxels)
     samples = []
