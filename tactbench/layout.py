@@ -44,7 +44,7 @@ class TaxelLayout:
     normals: np.ndarray | None = None
     bounds: tuple[float, float, float, float] | None = None
     name: str = ""
-    _index: dict = field(default_factory=dict, repr=False, compare=False)
+    _index: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         ids = np.asarray(self.ids)
@@ -401,9 +401,10 @@ def unroll(points: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
             (a, b, c), *_ = np.linalg.lstsq(a_mat, u ** 2 + s ** 2, rcond=None)
             radius = math.sqrt(max(c + a * a + b * b, 1e-12))
             ang = np.arctan2(s - b, u - a)
-            ang = np.unwrap(ang[np.argsort(ang)])[np.argsort(np.argsort(ang))]
-            ang -= np.median(ang)
-            ang = (ang + np.pi) % (2 * np.pi) - np.pi
+            # measure angles from the patch's circular mean, so the seam (±π) falls
+            # on the far side of the cylinder, away from the taxels
+            mean = math.atan2(np.sin(ang).mean(), np.cos(ang).mean())
+            ang = (ang - mean + np.pi) % (2 * np.pi) - np.pi
             return np.column_stack([ang * radius, h])
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     return centred @ vt[:2].T

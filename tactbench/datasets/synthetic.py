@@ -27,6 +27,7 @@ import json
 import math
 import os
 import shutil
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -524,15 +525,23 @@ class SyntheticForearm:
         return cache_dir("datasets") / f"synthetic-forearm-{self.cache_key()}"
 
     def load(self, progress: Callable[[int, int], None] | None = None) -> Dataset:
+        """The dataset: from the cache when there, else generated (and cached).
+
+        ``progress(done, total)`` is called per sample generated; without one, a
+        rich progress bar is shown on stderr when it is a terminal.
+        """
+        if self.cache:
+            folder = self.cache_path()
+            if (folder / "manifest.json").is_file():
+                try:
+                    return Dataset.load(folder)
+                except (ValueError, OSError):
+                    shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
+            elif folder.exists():  # a leftover without a manifest
+                shutil.rmtree(folder, ignore_errors=True)
+        ds = self._generate(progress)
         if not self.cache:
-            return generate(**self.options, progress=progress)
-        folder = self.cache_path()
-        if (folder / "manifest.json").is_file():
-            try:
-                return Dataset.load(folder)
-            except (ValueError, OSError):
-                shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
-        ds = generate(**self.options, progress=progress)
+            return ds
         tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=folder.parent))
         try:
             ds.save(tmp)
@@ -543,3 +552,17 @@ class SyntheticForearm:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         return ds
+
+    def _generate(self, progress: Callable[[int, int], None] | None) -> Dataset:
+        if progress is not None or not sys.stderr.isatty():
+            return generate(**self.options, progress=progress)
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+        with Progress(TextColumn("simulating synthetic-forearm"), BarColumn(),
+                      MofNCompleteColumn(), console=Console(stderr=True),
+                      transient=True) as bar:
+            task = bar.add_task("", total=None)
+            return generate(**self.options,
+                            progress=lambda done, total: bar.update(task, completed=done,
+                                                                     total=total))
