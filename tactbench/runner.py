@@ -455,10 +455,14 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
                                        "frames": int(sum(len(v) for v in vectors))})
             continue
         if images is None:
+            task = progress.add(f"tactile images at {scene.resolved_pixel_mm():g} mm",
+                                total=1) if progress else None
             t0 = time.perf_counter()
             images = plan_.dataset.images(pixel_mm=scene.resolved_pixel_mm(),
                                           method=scene.imaging)
             image_s = time.perf_counter() - t0
+            if progress:
+                progress.update(task, 1)
         from tactbench.encoding import encode_all
 
         workers = max(1, os.cpu_count() or 1)
@@ -655,11 +659,13 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         on_row: Callable[[dict[str, Any]], None] | None = None) -> RunResult:
     """Run ``scene``: plan, encode what is missing, run unfinished cells, collect rows."""
     start = time.perf_counter()
-    p = plan(scene, registry)
-    store = ResultStore(scene.out)
-    pending = [c for c in p.cells if scene.rerun or store.get(c.key) is None]
-    cache = cache or EncodingCache()
     with Progress(enabled=progress) as bars:
+        task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
+        p = plan(scene, registry)
+        bars.update(task, 1)
+        store = ResultStore(scene.out)
+        pending = [c for c in p.cells if scene.rerun or store.get(c.key) is None]
+        cache = cache or EncodingCache()
         folders = ensure_encodings(p, cache, pending, bars)
         jobs = [CellJob(cell=c, identity=p.identities[c.key],
                         encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],

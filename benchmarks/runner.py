@@ -1,0 +1,78 @@
+"""The runner's goals, measured: the study's comparison on the quick profile, twice.
+
+    python benchmarks/runner.py [--out docs/results/study-quick] [--extra ARGS...]
+
+1. From an empty cache: `tactbench run` with its defaults — the study's comparison
+   (raw vs farneback, small-cnn-lstm, L = 5, seeds 0 1 2, paper split, quick profile,
+   built-in synthetic-forearm dataset). Goal: ≤ 10 minutes on 2 CPU cores.
+2. The identical command again. Goal: ≤ 5 % of the first (nothing is recomputed).
+
+The run's reports (report.md, results.csv/json, plots) land in --out; the timings go to
+OUT/timing.json. Extra arguments are passed to `tactbench run` (e.g. `-L 1-6`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+GOAL_FIRST_S = 600.0
+GOAL_SECOND_FRACTION = 0.05
+
+
+def timed(argv: list[str], env: dict[str, str]) -> tuple[float, str]:
+    start = time.perf_counter()
+    proc = subprocess.run(argv, env=env, capture_output=True, text=True)
+    elapsed = time.perf_counter() - start
+    if proc.returncode != 0:
+        sys.exit(f"tactbench run failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+    return elapsed, proc.stdout
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="docs/results/study-quick")
+    parser.add_argument("extra", nargs="*", help="more arguments for tactbench run")
+    args = parser.parse_args()
+
+    out = Path(args.out)
+    if out.exists():
+        shutil.rmtree(out)
+    cache = Path(tempfile.mkdtemp(prefix="tactbench-bench-cache-"))
+    env = {**os.environ, "TACTBENCH_CACHE": str(cache)}
+    argv = [sys.executable, "-m", "tactbench", "run", "--out", str(out), *args.extra]
+    # The simulator's own cache is part of the first run's cost, as on a fresh install.
+    first_s, first_out = timed(argv, env)
+    second_s, _ = timed(argv, env)
+    shutil.rmtree(cache, ignore_errors=True)
+
+    doc = {
+        "benchmark": "runner",
+        "command": "tactbench run " + " ".join(["--out", str(out), *args.extra]),
+        "first_run_s": first_s, "second_run_s": second_s,
+        "second_over_first": second_s / first_s,
+        "goal_first_s": GOAL_FIRST_S, "goal_second_fraction": GOAL_SECOND_FRACTION,
+        "first_ok": first_s <= GOAL_FIRST_S,
+        "second_ok": second_s / first_s <= GOAL_SECOND_FRACTION,
+        "machine": platform.platform(), "cpus": os.cpu_count(),
+        "python": sys.version.split()[0], "date": time.strftime("%Y-%m-%d"),
+    }
+    (out / "timing.json").write_text(json.dumps(doc, indent=2))
+    print(first_out)
+    print(f"first run  {first_s:7.1f} s  (goal ≤ {GOAL_FIRST_S:.0f} s: "
+          f"{'ok' if doc['first_ok'] else 'MISSED'})")
+    print(f"second run {second_s:7.1f} s  = {100 * doc['second_over_first']:.1f} % of the "
+          f"first (goal ≤ {100 * GOAL_SECOND_FRACTION:.0f} %: "
+          f"{'ok' if doc['second_ok'] else 'MISSED'})")
+
+
+if __name__ == "__main__":
+    main()
