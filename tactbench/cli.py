@@ -26,6 +26,9 @@ BUILTIN_COMMANDS: dict[str, str] = {
     "layout": "tactbench.commands.layout:layout_group",
     "run": "tactbench.commands.run:run_cmd",
     "cache": "tactbench.commands.cache:cache_group",
+    "encode": "tactbench.commands.encode:encode_cmd",
+    "flowbench": "tactbench.commands.flowbench:flowbench_cmd",
+    "stability": "tactbench.commands.stability:stability_cmd",
 }
 
 DEBUG_ENV = "TACTBENCH_DEBUG"
