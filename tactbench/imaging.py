@@ -10,19 +10,25 @@ Grid
     ``y_min + (i + ½)·pixel_mm``. The generated forearm gives 357 × 334 at
     1 mm, 90 × 84 at 4 mm and 72 × 67 at 5 mm.
 
+Spacing
+    A taxel's *local spacing* is the distance to its 3rd-nearest neighbour (on
+    a lattice: the pitch, even where the pitch differs by direction or the
+    taxel borders a hole). Rules below use it rather than one median, because
+    flattened maps are denser at their edges than in their middle.
+
 Methods
     ``"linear"``: piecewise-linear interpolation over a Delaunay triangulation
     of the taxels (as ``scipy.interpolate.griddata(method="linear")``), with
-    triangles that have an edge longer than ``max_edge`` (default 2.5 × the
-    median taxel spacing) removed so that holes and concave edges of the skin
-    are not bridged. ``"gaussian"``: a normalised Gaussian splat (each pixel is
-    the Gaussian-weighted mean of the taxels within 3σ, σ = ``sigma`` or half
-    the median spacing); a pixel counts as skin when a taxel lies within
-    one median spacing of it.
+    triangles removed whose longest edge exceeds 2.5 × the mean local
+    spacing of their corners (or ``max_edge`` mm when given), so that holes and
+    concave edges of the skin are not bridged. ``"gaussian"``: a normalised
+    Gaussian splat: each pixel is the weighted mean of the taxels within 3σ,
+    σ = half the taxel's local spacing (or ``sigma`` mm); a pixel counts as
+    skin when its nearest taxel is within 2σ of it.
 
 Off the skin
-    Pixels outside the triangulation (linear) or farther than one spacing
-    from every taxel (gaussian) are exactly 0, never NaN.
+    Pixels outside the kept triangles (linear) or farther than 2σ from their
+    nearest taxel (gaussian) are exactly 0, never NaN.
 
 Coarse pixels
     When a pixel is larger than a quarter of the taxel spacing, each pixel is
@@ -34,7 +40,8 @@ Coarse pixels
 Missing taxels (NaN or ±Inf readings)
     A non-finite reading is treated as *missing* and replaced, before
     imaging, by the mean of the finite readings of its neighbours (taxels
-    within 1.5 × the median spacing) in the same frame; a missing taxel with no
+    within 1.5 × the larger of the two local spacings) in the same frame; a
+    missing taxel with no
     finite neighbour reads 0. So a missing taxel is filled from its
     neighbours and never propagates.
 
@@ -69,9 +76,11 @@ class Imager:
     method
         ``"linear"`` or ``"gaussian"`` (see the module docstring).
     max_edge
-        Linear only: longest triangle edge kept, mm (default 2.5 × spacing).
+        Linear only: longest triangle edge kept, mm (default: 2.5 × the local
+        spacing, see the module docstring).
     sigma
-        Gaussian only: splat width σ in mm (default half the median spacing).
+        Gaussian only: splat width σ in mm for every taxel (default: half of
+        each taxel's local spacing).
     supersample
         Sub-samples per pixel side; ``None`` chooses (see the module docstring).
 
@@ -114,16 +123,20 @@ class Imager:
         sub = (np.arange(s) + 0.5) / s
         ys = y0 + (np.arange(h)[:, None] + sub[None, :]).ravel() * pixel_mm
         xs = x0 + (np.arange(w)[:, None] + sub[None, :]).ravel() * pixel_mm
+        # each taxel's own spacing: flattened maps are denser at their edges than
+        # in the middle, so one median would cut holes where taxels are sparse
+        local = local_spacing(layout.positions, fallback=spacing)
+        self._local_spacing = local
         if method == "linear":
-            rows, cols, vals = _linear_weights(layout.positions, xs, ys,
-                                               max_edge if max_edge is not None
-                                               else 2.5 * spacing)
+            rows, cols, vals = _linear_weights(layout.positions, xs, ys, max_edge,
+                                               2.5 * local)
         else:
+            if sigma is not None and not sigma > 0:
+                raise ValueError(f"sigma must be > 0, got {sigma}")
             gy, gx = np.meshgrid(ys, xs, indexing="ij")  # (h*s, w*s)
             pts = np.column_stack([gx.ravel(), gy.ravel()])
-            rows, cols, vals = _gaussian_weights(layout.positions, pts,
-                                                 sigma if sigma is not None else spacing / 2,
-                                                 1.0 * spacing)
+            sig = np.full(layout.n_taxels, float(sigma)) if sigma is not None else local / 2
+            rows, cols, vals = _gaussian_weights(layout.positions, pts, sig, 2.0 * sig)
         # map each sub-sample row to its pixel, and average
         sub_r, sub_c = np.divmod(rows, w * s)
         pix = (sub_r // s) * w + (sub_c // s)
@@ -140,13 +153,18 @@ class Imager:
         self._neighbours = None  # built on first missing reading
 
     def _neighbour_matrix(self):
-        """Sparse ``(N, N)`` 0/1 matrix: taxels within 1.5 × spacing of each other."""
+        """Sparse ``(N, N)`` 0/1 matrix: taxels within 1.5 × local spacing of each other."""
         if self._neighbours is None:
             from scipy import sparse
             from scipy.spatial import cKDTree
 
-            pairs = cKDTree(self.layout.positions).query_pairs(1.5 * self.spacing,
-                                                               output_type="ndarray")
+            pos, local = self.layout.positions, self._local_spacing
+            pairs = cKDTree(pos).query_pairs(1.5 * float(local.max()), output_type="ndarray")
+            if len(pairs):
+                dist = np.linalg.norm(pos[pairs[:, 0]] - pos[pairs[:, 1]], axis=1)
+                near = dist <= 1.5 * np.maximum(local[pairs[:, 0]], local[pairs[:, 1]])
+                pairs = pairs[near]
+            pairs = pairs.reshape(-1, 2)
             n = self.n_taxels
             rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
             cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
@@ -207,9 +225,25 @@ class Imager:
                 f"{self.method}, supersample {self.supersample})")
 
 
-def _linear_weights(taxels: np.ndarray, xs: np.ndarray, ys: np.ndarray, max_edge: float):
+def local_spacing(positions: np.ndarray, *, k: int = 3, fallback: float = 1.0) -> np.ndarray:
+    """Each taxel's local spacing, mm ``(N,)``: the distance to its ``k``-th nearest
+    neighbour (the 3rd by default: on a lattice this is the pitch, also where the
+    spacing differs by direction, and also for a taxel on the edge of a hole)."""
+    n = len(positions)
+    if n < 2:
+        return np.full(n, float(fallback))
+    from scipy.spatial import cKDTree
+
+    k = min(k, n - 1)
+    dist, _ = cKDTree(positions).query(positions, k=k + 1)
+    return np.maximum(dist[:, k], 1e-9)
+
+
+def _linear_weights(taxels: np.ndarray, xs: np.ndarray, ys: np.ndarray,
+                    max_edge: float | None, local_max: np.ndarray):
     """Barycentric weights of the grid points ``ys × xs`` (row-major) in the Delaunay
-    triangles of the taxels; triangles with an edge longer than ``max_edge`` dropped.
+    triangles of the taxels. A triangle is dropped when its longest edge exceeds
+    ``max_edge`` or, when that is ``None``, the mean ``local_max`` of its corners.
 
     Triangles are rasterised directly (each one visits the grid points in its
     bounding box) rather than located with ``Delaunay.find_simplex``, whose walk
@@ -231,7 +265,8 @@ def _linear_weights(taxels: np.ndarray, xs: np.ndarray, ys: np.ndarray, max_edge
     e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
     area_ok = np.abs(det) > 1e-9 * np.maximum(edges.max(axis=1), 1e-12) ** 2
-    good = np.nonzero((edges.max(axis=1) <= max_edge) & area_ok)[0]
+    limit = local_max[tri.simplices].mean(axis=1) if max_edge is None else max_edge
+    good = np.nonzero((edges.max(axis=1) <= limit) & area_ok)[0]
     corners, simplices = corners[good], tri.simplices[good]
     e1, e2, det = e1[good], e2[good], det[good]
     inv = np.stack([np.stack([e2[:, 1], -e2[:, 0]], axis=1),
@@ -266,21 +301,26 @@ def _linear_weights(taxels: np.ndarray, xs: np.ndarray, ys: np.ndarray, max_edge
     return rows, cols, bary.ravel()
 
 
-def _gaussian_weights(taxels: np.ndarray, pts: np.ndarray, sigma: float, support: float):
-    """Normalised Gaussian weights of the taxels within 3σ of each point on the skin."""
+def _gaussian_weights(taxels: np.ndarray, pts: np.ndarray, sigma: np.ndarray,
+                      support: np.ndarray):
+    """Normalised Gaussian weights (σ per taxel) of the taxels within 3σ of each point,
+    for the points whose nearest taxel ``j`` is within ``support[j]``; others get none."""
     from scipy.spatial import cKDTree
 
-    if not sigma > 0:
-        raise ValueError(f"sigma must be > 0, got {sigma}")
     tree = cKDTree(taxels)
-    nearest, _ = tree.query(pts, k=1, distance_upper_bound=support)
-    on_skin = np.nonzero(np.isfinite(nearest))[0]
-    radius = 3.0 * sigma
-    neigh = tree.query_ball_point(pts[on_skin], r=radius, return_sorted=False)
+    nearest, which = tree.query(pts, k=1, distance_upper_bound=float(support.max()))
+    found = np.isfinite(nearest)
+    on_skin = np.nonzero(found)[0]
+    on_skin = on_skin[nearest[on_skin] <= support[which[on_skin]]]
+    neigh = tree.query_ball_point(pts[on_skin], r=3.0 * float(sigma.max()),
+                                  return_sorted=False)
     counts = np.fromiter((len(nb) for nb in neigh), dtype=np.int64, count=len(neigh))
     rows = np.repeat(on_skin, counts)
     cols = np.fromiter((j for nb in neigh for j in nb), dtype=np.int64, count=int(counts.sum()))
     d2 = ((pts[rows] - taxels[cols]) ** 2).sum(axis=1)
-    w = np.exp(-0.5 * d2 / sigma ** 2)
+    s2 = sigma[cols] ** 2
+    keep = d2 <= 9.0 * s2
+    rows, cols, d2, s2 = rows[keep], cols[keep], d2[keep], s2[keep]
+    w = np.exp(-0.5 * d2 / s2)
     total = np.bincount(rows, weights=w, minlength=len(pts))
     return rows, cols, w / total[rows]

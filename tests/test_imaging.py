@@ -77,9 +77,10 @@ def test_holes_wider_than_max_edge_are_not_bridged():
     im = Imager(lay, pixel_mm=1.0)
     x0 = lay.bounds[0]
     assert np.all(im.apply(np.ones(18))[:, int(16 - x0):int(54 - x0)] == 0)
-    # the Gaussian splat reaches one spacing (7.5 mm) beyond the outer taxels
+    # the Gaussian splat reaches one local spacing (here 7.5 √2 mm at the corners)
+    # beyond the outer taxels
     gauss = Imager(lay, pixel_mm=1.0, method="gaussian").apply(np.ones(18))
-    assert np.all(gauss[:, int(24 - x0):int(46 - x0)] == 0)
+    assert np.all(gauss[:, int(27 - x0):int(43 - x0)] == 0)
     assert np.all(gauss[:, int(20 - x0)] > 0)
 
 
@@ -158,3 +159,30 @@ def test_coarse_images_keep_where_the_pressure_is(forearm, pixel_mm):
     cx = (img * (x0 + (jj + 0.5) * pixel_mm)).sum() / img.sum()
     cy = (img * (y0 + (ii + 0.5) * pixel_mm)).sum() / img.sum()
     assert np.hypot(cx - centre[0], cy - centre[1]) < 1.5
+
+
+@pytest.mark.parametrize("method", ["linear", "gaussian"])
+def test_no_holes_where_taxels_are_sparser_than_the_median(method):
+    # dense at the edges, twice as sparse in the middle (as flattened maps are)
+    ticks = np.array([0, 4, 8, 16, 24, 32, 40, 44, 48], dtype=float)
+    yy, xx = np.meshgrid(ticks, ticks, indexing="ij")
+    lay = TaxelLayout(ids=np.arange(81), positions=np.column_stack([xx.ravel(), yy.ravel()]),
+                      bounds=(0, 0, 48, 48))
+    assert lay.median_spacing() == pytest.approx(4.0)
+    im = Imager(lay, pixel_mm=1.0, method=method)
+    assert np.all(im.coverage[1:-1, 1:-1] > 0)
+
+
+@pytest.mark.parametrize("name", ["ur10e_link1_patch1_flatmap.json",
+                                  "ur10e_link2_patch1_flatmap.json", "ur10e_link1_patch1.json"])
+@pytest.mark.parametrize("method", ["linear", "gaussian"])
+def test_real_layouts_image_without_holes(shared_data, name, method):
+    """Flattened maps are denser at their edges: the middle must not fall through."""
+    from tactbench.layout import load_layout
+
+    lay = load_layout(shared_data / "cyskin-layouts" / name)
+    im = Imager(lay, pixel_mm=1.0, method=method)
+    h, w = im.shape
+    centre = im.coverage[h // 10:h - h // 10, w // 10:w - w // 10]
+    assert np.all(centre > 0)
+    assert (im.coverage > 0).mean() > 0.8
