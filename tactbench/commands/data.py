@@ -87,10 +87,13 @@ def info_cmd(path: str, as_json: bool) -> None:
 @data_group.command("synth")
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False),
               help="Folder to write the dataset to.")
-@click.option("--users", default=38, show_default=True, type=click.IntRange(1))
-@click.option("--seed", default=0, show_default=True, type=int)
-@click.option("--repetitions", default=5, show_default=True, type=click.IntRange(1))
-@click.option("--positions", default=2, show_default=True, type=click.IntRange(1, 2))
+@click.option("--users", default=38, show_default=True, type=click.IntRange(1),
+              help="Simulated users.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
+@click.option("--repetitions", default=5, show_default=True, type=click.IntRange(1),
+              help="Repetitions of each gesture per position.")
+@click.option("--positions", default=2, show_default=True, type=click.IntRange(1, 2),
+              help="Positions (1: front only, 2: front and side).")
 def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int) -> None:
     """Generate the synthetic-forearm gesture dataset into a folder."""
     from tactbench.datasets.synthetic import generate
@@ -129,10 +132,12 @@ def _to_rgb(encoded, encoder):
               help="PNG file to write.")
 @click.option("--encoder", default=None,
               help="Show this encoder's channels as RGB (e.g. farneback).")
-@click.option("--pixel-mm", default=4.0, show_default=True, type=float)
+@click.option("--pixel-mm", default=4.0, show_default=True, type=float,
+              help="Image pixel size in mm (taxels are ~7.5 mm apart).")
 @click.option("--method", default="linear", show_default=True,
-              type=click.Choice(["linear", "gaussian"]))
-@click.option("--max-frames", default=16, show_default=True, type=click.IntRange(1))
+              type=click.Choice(["linear", "gaussian"]), help="Imaging method.")
+@click.option("--max-frames", default=16, show_default=True, type=click.IntRange(1),
+              help="Show at most this many frames.")
 def preview_cmd(path: str, index: int, out: str, encoder: str | None, pixel_mm: float,
                 method: str, max_frames: int) -> None:
     """A strip of one sample's tactile images (or encoded channels) as a PNG.
