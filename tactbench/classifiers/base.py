@@ -205,7 +205,8 @@ class FrameBank:
     def batch(self, idx: np.ndarray):
         import torch
 
-        sel = torch.as_tensor(idx, dtype=torch.int64, device=self.index.device)
+        sel = torch.as_tensor(np.ascontiguousarray(idx), dtype=torch.int64,
+                              device=self.index.device)
         return self.frames[self.index[sel]], self.labels[sel]
 
 
