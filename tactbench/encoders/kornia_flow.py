@@ -61,7 +61,7 @@ class KorniaFlow(FlowEncoder):
     version = "1"
     min_size = 4
 
-    def __init__(self, *, levels: int = 4, warps: int = 4, window: float = 2.0,
+    def __init__(self, *, levels: int = 4, warps: int = 2, window: float = 3.0,
                  reg: float = 1e-5, device: str = "auto", batch: int = 64,
                  max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:

@@ -3,14 +3,21 @@
 Of the three dense Lucas–Kanade routes available here this one was chosen by
 measurement (benchmarks/encoders.py, docs/encoders.md, "Choosing lucas-kanade"):
 
-- ``cv2.optflow.calcOpticalFlowSparseToDense`` returns NaN on tactile frames
-  (flat zero background) and raises on an all-zero frame, which every
+- ``cv2.optflow.calcOpticalFlowSparseToDense`` returned NaN on tactile frames
+  (flat zero background) and raised on an all-zero frame, which every
   sequence starts with (``I_{-1} = 0``): unusable without repairs.
-- scikit-image's ``optical_flow_ilk`` has no pyramid, so it misses motions of
-  several pixels, and was the slowest (≈ 15 ms per 64 × 64 pair).
-- ``cv2.calcOpticalFlowPyrLK`` started from every pixel (or every ``step``-th
-  pixel, then interpolated) had the lowest endpoint error of the three on the
-  tactile scenes and ran 2–6× faster than ``optical_flow_ilk``.
+- scikit-image's ``optical_flow_ilk`` (radius 7 / 4) has no pyramid: on the
+  64 px scenes its endpoint error was 1.36 / 1.16 px at ≈ 15 ms per pair; at
+  357 × 334 it was the most accurate LK (0.76 px) but took ≈ 1–1.4 s per pair.
+- ``cv2.calcOpticalFlowPyrLK`` started from every ``step``-th pixel and
+  interpolated: 0.95 px at 64 px in ≈ 4–5 ms per pair (window 21, step 2,
+  10 iterations), 1.09 px at 357 × 334 in ≈ 80 ms (step 4). Tracking every
+  pixel (step 1) was no more accurate and 4–10× slower.
+
+The pyramidal route is the default's choice: the most accurate at the default
+resolution and 3–15× faster everywhere (numbers from a loaded 2-core VM,
+2026-11-21, ±40 %). At full resolution ``downscale=2`` or ``step=4`` is the
+practical setting.
 
 Points whose window has no texture (OpenCV's status 0: minimum eigenvalue of
 the structure tensor below ``min_eigen``) get zero flow: nothing can be seen
@@ -51,8 +58,8 @@ class LucasKanade(FlowEncoder):
     version = "1"
     min_size = 2
 
-    def __init__(self, *, winsize: int = 15, levels: int = 3, iterations: int = 30,
-                 step: int = 1, min_eigen: float = 1e-4, max_flow: float = DEFAULT_MAX_FLOW,
+    def __init__(self, *, winsize: int = 21, levels: int = 3, iterations: int = 10,
+                 step: int = 2, min_eigen: float = 1e-4, max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
         for key, value, low in (("winsize", winsize, 3), ("levels", levels, 0),
