@@ -14,7 +14,7 @@ Documented expectations (flow encoders are those with ``magnitude`` and
 ``direction`` channels; ``pressure`` channels must equal the input):
 
 ================  ==============================================================
-all-zero          every channel 0
+all-zero          every frame the same; pressure, magnitude, direction 0
 constant / 1.0    frames after the first: no motion (magnitude, direction 0)
 hot pixel         frames after the first: no motion (the pixel does not move)
 checkerboard      only the generic conditions (aliased, no true flow exists)
@@ -77,8 +77,15 @@ def _channel(encoder: Any, out: np.ndarray, name: str) -> np.ndarray | None:
 
 
 def _all_zero(encoder: Any, seq: Any, out: np.ndarray) -> str | None:
-    top = float(np.abs(out).max())
-    return None if top == 0.0 else f"expected all channels 0, got values up to {top:.3g}"
+    spread = float(np.abs(out - out[:1]).max())
+    if spread > 0:
+        return f"every pair is (0, 0), yet frames differ by up to {spread:.3g}"
+    if is_flow_encoder(encoder):
+        for name in ("magnitude", "direction"):
+            top = float(np.abs(_channel(encoder, out, name)).max())
+            if top > 0:
+                return f"expected {name} 0 for blank input, got up to {top:.3g}"
+    return None
 
 
 def _still_after_first(encoder: Any, seq: Any, out: np.ndarray) -> str | None:

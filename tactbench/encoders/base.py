@@ -45,7 +45,9 @@ def check_sequence(seq: Any) -> np.ndarray:
                          f"pass unsigned integers or floats in [0, 1]")
     if not np.issubdtype(arr.dtype, np.floating):
         raise ValueError(f"expected a numeric array, got dtype {arr.dtype}")
-    arr = arr.astype(np.float32, copy=False)
+    # Check in the input's own precision, then cast: a finite float64 such as
+    # 1e39 must be reported as out of range, not overflow to Inf in float32
+    # and be called non-finite (found by the hypothesis tests).
     finite = np.isfinite(arr)
     if not finite.all():
         bad = np.argwhere(~finite)
@@ -56,6 +58,7 @@ def check_sequence(seq: Any) -> np.ndarray:
     if lo < -RANGE_TOLERANCE or hi > 1.0 + RANGE_TOLERANCE:
         raise ValueError(f"values must lie in [0, 1]; found range [{lo:.6g}, {hi:.6g}]. "
                          f"Normalise the pressure images first")
+    arr = arr.astype(np.float32, copy=False)
     if lo < 0.0 or hi > 1.0:
         arr = np.clip(arr, 0.0, 1.0)
     return np.ascontiguousarray(arr)
