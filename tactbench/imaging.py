@@ -308,12 +308,16 @@ def _gaussian_weights(taxels: np.ndarray, pts: np.ndarray, sigma: np.ndarray,
     from scipy.spatial import cKDTree
 
     tree = cKDTree(taxels)
-    nearest, which = tree.query(pts, k=1, distance_upper_bound=float(support.max()))
-    found = np.isfinite(nearest)
+    k = min(3, len(taxels))
+    dist, which = tree.query(pts, k=k, distance_upper_bound=float(support.max()))
+    dist, which = dist.reshape(len(pts), k), which.reshape(len(pts), k)
+    found = np.isfinite(dist[:, 0])
     on_skin = np.nonzero(found)[0]
-    on_skin = on_skin[nearest[on_skin] <= support[which[on_skin]]]
-    neigh = tree.query_ball_point(pts[on_skin], r=3.0 * float(sigma.max()),
-                                  return_sorted=False)
+    on_skin = on_skin[dist[on_skin, 0] <= support[which[on_skin, 0]]]
+    # search each point as far as 3σ of the widest of its nearest taxels
+    near = np.where(np.isfinite(dist[on_skin]), which[on_skin], which[on_skin, :1])
+    radius = 3.0 * sigma[near].max(axis=1)
+    neigh = tree.query_ball_point(pts[on_skin], r=radius, return_sorted=False)
     counts = np.fromiter((len(nb) for nb in neigh), dtype=np.int64, count=len(neigh))
     rows = np.repeat(on_skin, counts)
     cols = np.fromiter((j for nb in neigh for j in nb), dtype=np.int64, count=int(counts.sum()))
