@@ -14,8 +14,8 @@ pattern, so the ground truth is exact:
     expansion about the contact's centre: ``x ↦ c + s (x - c)`` with ``s`` chosen
     so a point at 2σ moves ``speed`` px/frame.
 ``pull``
-    elongated contacts slip by ``speed`` px/frame along the x axis while a palm
-    contact stays still (a motion boundary).
+    elongated contacts slip by ``speed`` px/frame along −x, away from a palm
+    contact that stays still (a motion boundary).
 ``pressure``
     pressure grows by 25 % per frame at fixed position: the true flow is zero,
     so anything a method reports is error from brightness change.
@@ -152,9 +152,9 @@ def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], 
         contacts.append(_Contact(cx0, cy0, sigma * 1.6, sigma * 1.2, rng.uniform(0, math.pi),
                                  0.8))
         scale = 1.0 + speed / (2.0 * sigma * 1.6)
-    else:  # pull: elongated fingers slip along x, the palm stays
+    else:  # pull: elongated fingers slip along -x, away from the palm, which stays
         for j in (-1, 1):
-            contacts.append(_Contact(cx0 - 0.12 * side, cy0 + j * 0.18 * side, sigma * 2.0,
+            contacts.append(_Contact(cx0 - 0.05 * side, cy0 + j * 0.18 * side, sigma * 2.0,
                                      sigma * 0.8, 0.0, rng.uniform(0.6, 0.9)))
         contacts.append(_Contact(cx0 + 0.25 * side, cy0, sigma, sigma * 1.5, 0.0, 0.7,
                                  moving=False))
@@ -173,7 +173,7 @@ def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], 
                 s = scale ** -k
                 return c.cx + s * (x - c.cx), c.cy + s * (y - c.cy)
             if motion == "pull" and c.moving:
-                return x - k * speed, y
+                return x + k * speed, y
             return x, y
         return inverse
 
@@ -198,7 +198,7 @@ def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], 
             u, v = (scale - 1.0) * (xs - c.cx), (scale - 1.0) * (ys - c.cy)
         elif motion == "pull":
             moving = np.array([c.moving for c in contacts])[owners[k]]
-            u, v = np.where(moving, speed, 0.0), np.zeros_like(xs)
+            u, v = np.where(moving, -speed, 0.0), np.zeros_like(xs)
         else:
             u, v = np.zeros_like(xs), np.zeros_like(xs)
         flows.append(np.stack([u, v], axis=-1))
