@@ -603,22 +603,29 @@ def git_revision() -> str | None:
 
 
 class Progress:
-    """A thin wrapper over rich's progress bars on stderr (silent when disabled)."""
+    """Progress bars on stderr with rich; plain start/finish lines when stderr is not a
+    terminal (CI logs, pipes); nothing when disabled."""
 
     def __init__(self, enabled: bool = True) -> None:
         self.enabled = enabled
         self._progress = None
+        self._console = None
+        self._plain: dict[int, tuple[str, float, int | None]] = {}
 
     def __enter__(self) -> "Progress":
-        if self.enabled:
-            from rich.console import Console
+        if not self.enabled:
+            return self
+        from rich.console import Console
+
+        self._console = Console(stderr=True)
+        if self._console.is_terminal:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress as RichProgress,
                                        TextColumn, TimeElapsedColumn, TimeRemainingColumn)
 
             self._progress = RichProgress(
                 TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                 TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[info]}"),
-                console=Console(stderr=True), transient=False)
+                console=self._console, transient=False)
             self._progress.__enter__()
         return self
 
@@ -627,21 +634,33 @@ class Progress:
             self._progress.__exit__(*exc)
 
     def add(self, description: str, total: int | None) -> Any:
-        if self._progress is None:
+        if self._progress is not None:
+            return self._progress.add_task(description, total=total, info="")
+        if self._console is None:
             return None
-        return self._progress.add_task(description, total=total, info="")
+        task = len(self._plain)
+        self._plain[task] = (description, time.perf_counter(), total)
+        self._console.print(f"… {description}", highlight=False)
+        return task
 
     def update(self, task: Any, completed: int, total: int | None = None, info: str = "",
                ) -> None:
-        if self._progress is not None and task is not None:
+        if task is None:
+            return
+        if self._progress is not None:
             kwargs: dict[str, Any] = {"completed": completed, "info": info}
             if total is not None:
                 kwargs["total"] = total
             self._progress.update(task, **kwargs)
-
-    def log(self, message: str) -> None:
-        if self._progress is not None:
-            self._progress.console.print(message)
+            return
+        if self._console is None or task not in self._plain:
+            return
+        description, started, known_total = self._plain[task]
+        total = total if total is not None else known_total
+        if total is not None and completed >= total:
+            del self._plain[task]
+            self._console.print(f"✓ {description}: {completed}/{total} in "
+                                f"{time.perf_counter() - started:.1f} s {info}", highlight=False)
 
 
 @dataclass
