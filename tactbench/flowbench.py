@@ -21,7 +21,8 @@ pattern, so the ground truth is exact:
     so anything a method reports is error from brightness change.
 
 Contact sizes are fractions of the image's shorter side (``small`` σ = 3 %,
-``large`` σ = 8 %: 1.9 and 5.1 px at 64 px, 10 and 27 px at 334 px), speeds are in
+``large`` σ = 8 %: 2.0 and 5.4 px at the default 72 × 67, 10 and 27 px at
+357 × 334), speeds are in
 pixels per frame of the image (0.25 – 8). The natural-image sanity check warps
 scikit-image's ``camera`` by a smooth sinusoidal field (up to 2 px/frame).
 
@@ -49,7 +50,8 @@ SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 SIZES = {"small": 0.03, "large": 0.08}
 #: The encoders compared when none are named.
 DEFAULT_ENCODERS = ("farneback", "lucas-kanade", "kornia-flow", "dis", "tvl1")
-DEFAULT_SHAPE = (64, 64)
+#: The runner's quick profile: the 357 × 334 mm forearm at 5 mm pixels.
+DEFAULT_SHAPE = (72, 67)
 FULL_SHAPE = (357, 334)
 MASK_THRESHOLD = 0.1
 

@@ -53,6 +53,12 @@ class KorniaFlow(FlowEncoder):
         Where the tensors live; ``auto`` picks CUDA when torch sees a GPU.
     batch : int ≥ 1
         Frame pairs per batch (bounds memory on large images).
+    threads : int ≥ 0
+        torch CPU threads while encoding (restored afterwards); 0 keeps torch's
+        setting. The default 1 was measured best on the 2-core VM: the batched
+        ops on tactile-sized images are too small to split, and with 2 threads
+        the encoder ran 3–25× slower whenever other processes shared the cores
+        (benchmarks/encoders.py, section kornia).
     max_flow, min_magnitude, downscale
         Shared flow options, see :mod:`tactbench.encoders.flow`.
     """
@@ -62,7 +68,7 @@ class KorniaFlow(FlowEncoder):
     min_size = 4
 
     def __init__(self, *, levels: int = 4, warps: int = 2, window: float = 3.0,
-                 reg: float = 1e-5, device: str = "auto", batch: int = 64,
+                 reg: float = 1e-5, device: str = "auto", batch: int = 64, threads: int = 1,
                  max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
@@ -73,6 +79,9 @@ class KorniaFlow(FlowEncoder):
             raise ValueError(f"window must be a positive σ in pixels, got {window!r}")
         if not (isinstance(reg, (int, float)) and math.isfinite(reg) and reg >= 0):
             raise ValueError(f"reg must be ≥ 0, got {reg!r}")
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
+            raise ValueError(f"threads must be an integer ≥ 0 (0: torch's setting), "
+                             f"got {threads!r}")
         if device not in ("auto", "cpu", "cuda"):
             raise ValueError(f"device must be 'auto', 'cpu' or 'cuda', got {device!r}")
         self.levels = levels
@@ -81,6 +90,7 @@ class KorniaFlow(FlowEncoder):
         self.reg = float(reg)
         self.device = device
         self.batch = batch
+        self.threads = threads
 
     def torch_device(self):
         import torch
@@ -96,6 +106,19 @@ class KorniaFlow(FlowEncoder):
 
         dev = self.torch_device()
         out = np.empty((*prev.shape, 2), dtype=np.float32)
+        old_threads = torch.get_num_threads()
+        if self.threads and dev.type == "cpu" and self.threads != old_threads:
+            torch.set_num_threads(self.threads)
+        try:
+            self._run(prev, curr, out, dev)
+        finally:
+            if torch.get_num_threads() != old_threads:
+                torch.set_num_threads(old_threads)
+        return out
+
+    def _run(self, prev: np.ndarray, curr: np.ndarray, out: np.ndarray, dev) -> None:
+        import torch
+
         with torch.inference_mode():
             for start in range(0, prev.shape[0], self.batch):
                 stop = min(start + self.batch, prev.shape[0])
@@ -104,7 +127,6 @@ class KorniaFlow(FlowEncoder):
                 flow = dense_lk(p, c, levels=self.levels, warps=self.warps,
                                 window=self.window, reg=self.reg)
                 out[start:stop] = flow.permute(0, 2, 3, 1).cpu().numpy()
-        return out
 
 
 def dense_lk(prev, curr, *, levels: int, warps: int, window: float, reg: float):
