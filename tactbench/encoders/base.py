@@ -48,8 +48,12 @@ def check_sequence(seq: Any) -> np.ndarray:
     # Check in the input's own precision, then cast: a finite float64 such as
     # 1e39 must be reported as out of range, not overflow to Inf in float32
     # and be called non-finite (found by the hypothesis tests).
-    finite = np.isfinite(arr)
-    if not finite.all():
+    # A sum is one pass without a temporary: NaN/Inf propagate into it. Only when
+    # it is not finite (bad values, or huge finite ones overflowing) look closer.
+    with np.errstate(over="ignore", invalid="ignore"):  # float16 sums overflow harmlessly
+        total = np.add.reduce(arr, axis=None)
+    finite = True if np.isfinite(total) else np.isfinite(arr)
+    if finite is not True and not finite.all():
         bad = np.argwhere(~finite)
         first = tuple(int(i) for i in bad[0])
         raise ValueError(f"sequence has {len(bad)} non-finite value(s) (NaN or Inf); "

@@ -77,15 +77,19 @@ class Farneback(FlowEncoder):
             pads = np.ones(prev.shape[0], dtype=bool)
         else:
             pads = np.maximum(_border_max(prev), _border_max(curr)) >= BORDER_LEVEL
-        for i in range(prev.shape[0]):
+        for i, pad in enumerate(pads.tolist()):
             a, b = prev[i], curr[i]
-            pad = pads[i]
             if pad:
                 a, b = np.pad(a, m, mode="edge"), np.pad(b, m, mode="edge")
-            f = cv2.calcOpticalFlowFarneback(
-                a, b, None, self.pyr_scale, self.levels, self.winsize,
-                self.iterations, self.poly_n, self.poly_sigma, flags)
-            out[i] = f[m:-m, m:-m] if pad else f
+            if pad:
+                f = cv2.calcOpticalFlowFarneback(
+                    a, b, None, self.pyr_scale, self.levels, self.winsize,
+                    self.iterations, self.poly_n, self.poly_sigma, flags)
+                out[i] = f[m:-m, m:-m]
+            else:  # written in place: no per-pair copy
+                cv2.calcOpticalFlowFarneback(
+                    a, b, out[i], self.pyr_scale, self.levels, self.winsize,
+                    self.iterations, self.poly_n, self.poly_sigma, flags)
         return out
 
 

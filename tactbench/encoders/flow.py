@@ -76,21 +76,35 @@ def flow_to_channels(seq: np.ndarray, flow: np.ndarray, *, max_flow: float,
     t, h, w = seq.shape
     out = np.empty((t, 3, h, w), dtype=np.float32)
     out[:, 0] = seq
-    # OpenCV's SIMD polar conversion: ~8× faster than numpy's hypot/arctan2 at
-    # 357 × 334, angles within 3e-5 of arctan2 (in [0, 1) units). It matters:
-    # numpy's version cost 12 % of a Farnebäck encode.
-    fx = np.ascontiguousarray(flow[..., 0], dtype=np.float32).reshape(t * h, w)
-    fy = np.ascontiguousarray(flow[..., 1], dtype=np.float32).reshape(t * h, w)
-    mag, angle = cv2.cartToPolar(fx, fy)  # angle in [0, 2π]
-    mag = mag.reshape(t, h, w)
-    magnitude = out[:, 1]
-    np.multiply(mag, np.float32(1.0 / max_flow), out=magnitude)
-    np.minimum(magnitude, np.float32(1.0), out=magnitude)
-    direction = out[:, 2]
-    np.multiply(angle.reshape(t, h, w), np.float32(1.0 / (2.0 * math.pi)), out=direction)
-    # An angle of (or rounding to) 2π is the same direction as 0.
-    direction[(direction >= 1.0) | (mag < min_magnitude)] = 0.0
+    scale = np.float32(1.0 / max_flow)
+    turn = np.float32(1.0 / (2.0 * math.pi))
+    flow = np.asarray(flow, dtype=np.float32)
+    # In chunks of frames of ~256 k pixels: few calls on small images, and no
+    # full-size temporaries on large ones (on a VM each fresh large array costs
+    # page faults, ~5 % of a Farnebäck encode at 357 × 334). OpenCV's polar
+    # conversion is SIMD, ~8× faster than numpy's hypot/arctan2; its angles are
+    # within 3e-5 turn of arctan2.
+    step = max(1, CHUNK_PIXELS // (h * w))
+    for k0 in range(0, t, step):
+        k1 = min(t, k0 + step)
+        n = k1 - k0
+        fx = np.ascontiguousarray(flow[k0:k1, ..., 0]).reshape(n * h, w)
+        fy = np.ascontiguousarray(flow[k0:k1, ..., 1]).reshape(n * h, w)
+        mag, angle = cv2.cartToPolar(fx, fy)  # angle in [0, 2π]
+        mag, angle = mag.reshape(n, h, w), angle.reshape(n, h, w)
+        magnitude, direction = out[k0:k1, 1], out[k0:k1, 2]
+        np.multiply(mag, scale, out=magnitude)
+        np.minimum(magnitude, np.float32(1.0), out=magnitude)
+        np.multiply(angle, turn, out=direction)
+        # An angle of (or rounding to) 2π is the same direction as 0.
+        still = mag < min_magnitude
+        still |= direction >= 1.0
+        direction[still] = 0.0
     return out
+
+
+#: Pixels per chunk in :func:`flow_to_channels`.
+CHUNK_PIXELS = 1 << 18
 
 
 def resize_stack(images: np.ndarray, size: tuple[int, int], *, area: bool) -> np.ndarray:
@@ -203,7 +217,9 @@ class FlowEncoder(Encoder):
             f = resize_stack(np.ascontiguousarray(f), (h, w), area=False)
             f[..., 0] *= w / ws
             f[..., 1] *= h / hs
-        if not np.isfinite(f).all():
+        # One pass, no temporary: NaN and ±Inf propagate into the sum (flow values
+        # are bounded by the image size, so a finite field cannot overflow it).
+        if not np.isfinite(np.add.reduce(f, axis=None)):
             raise FloatingPointError(f"{self.name or type(self).__name__}: the flow "
                                      f"estimator returned non-finite values")
         return f
