@@ -398,6 +398,7 @@ def plot(results: Sequence[EncoderResult], path: Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib import ticker
 
     resolutions = list(dict.fromkeys(r.resolution for r in results))
     fig, axes = plt.subplots(1, len(resolutions), figsize=(5.5 * len(resolutions), 4.2),
@@ -416,6 +417,8 @@ def plot(results: Sequence[EncoderResult], path: Path) -> Path:
                     color="tab:red", alpha=0.5, label="Pareto front")
             ax.legend(loc="upper right", fontsize=8)
         ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _pos: f"{v:g}"))
+        ax.xaxis.set_minor_formatter(ticker.NullFormatter())
         ax.set_xlabel("ms per frame pair (median, 1 process)")
         ax.set_ylabel("mean endpoint error on tactile scenes (px)")
         ax.set_title(f"{res} px")
