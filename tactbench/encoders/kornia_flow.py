@@ -57,7 +57,7 @@ class KorniaFlow(FlowEncoder):
         torch CPU threads while encoding (restored afterwards); 0 keeps torch's
         setting. The default 1 was measured best on the 2-core VM: the batched
         ops on tactile-sized images are too small to split, and with 2 threads
-        the encoder ran 3–25× slower whenever other processes shared the cores
+        the encoder ran 3–10× slower whenever other processes shared the cores
         (benchmarks/encoders.py, section kornia).
     max_flow, min_magnitude, downscale
         Shared flow options, see :mod:`tactbench.encoders.flow`.
