@@ -40,7 +40,8 @@ def _parse_size(text: str) -> tuple[int, int]:
               help="Flow encoder (repeatable; options allowed: 'dis:preset=fast'). "
                    "Default: farneback, lucas-kanade, kornia-flow, dis, tvl1.")
 @click.option("--size", "sizes", multiple=True, metavar="HxW",
-              help="Image size (repeatable). Default: 64x64 and the full 357x334.")
+              help="Image size (repeatable). Default: 72x67 (the runner's quick profile) and "
+                   "the full 357x334.")
 @click.option("--repeats", default=5, show_default=True, type=click.IntRange(1, 100),
               help="Timed runs per encoder and size (the median is reported).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),

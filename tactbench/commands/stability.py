@@ -15,11 +15,11 @@ import click
               help="Only these cases (repeatable). Default: all; see the list in the docs.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool) -> None:
-    """Run every encoder on all-zero, constant, saturated, hot-pixel, checkerboard,
-    NaN/Inf, huge and sub-pixel motion, tiny images, T = 1 and 1000, integer and
-    float16/64 input, and values far outside [0, 1].
+    """Every encoder on stiff and extreme inputs: pass or fail, with the reason.
 
-    Each case × encoder passes (finite, in range, deterministic, the documented
+    Cases: all-zero, constant, saturated, hot pixel, checkerboard, NaN/Inf,
+    huge and sub-pixel motion, tiny images, T = 1 and 1000, integer and
+    float16/64 input, and values far outside [0, 1]. Each case × encoder passes (finite, in range, deterministic, the documented
     result) or fails with the reason. The exit status is 1 when anything failed.
     """
     from tactbench import stability as st
