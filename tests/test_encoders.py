@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest
@@ -212,3 +211,20 @@ def test_encode_command_names_the_file_and_the_problem(tmp_path, array, message)
     assert result.exit_code != 0
     assert "bad.npy" in result.output
     assert any(w in result.output for w in message.replace("\\", "").split("|"))
+
+
+def test_lucas_kanade_grid_interpolation_keeps_the_motion(registry):
+    seq = contact_sequence((48, 48), 2, shift=2.0, angle=0.5 * np.pi, sigma=5.0)
+    mask = np.minimum(seq[0], seq[1]) > 0.3
+    for step in (1, 3):
+        flow = registry.build("encoder", f"lucas-kanade:step={step}").flow(seq[:1], seq[1:])
+        assert np.median(flow[0, ..., 1][mask]) == pytest.approx(2.0, rel=0.15)
+        assert abs(np.median(flow[0, ..., 0][mask])) < 0.2
+
+
+def test_blank_skin_has_no_flow_for_lucas_kanade(registry):
+    # textureless windows (OpenCV status 0) get zero flow, not OpenCV's guess
+    seq = np.zeros((3, 32, 32), np.float32)
+    seq[1:, 10:14, 10:14] = 0.8
+    flow = registry.build("encoder", "lucas-kanade").flow(seq[1:2], seq[2:3])
+    assert not flow.any()
