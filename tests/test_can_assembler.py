@@ -101,6 +101,21 @@ def test_late_message_for_an_emitted_sweep_is_dropped():
     assert asm.stats.late == 1
 
 
+def test_a_counter_restart_is_followed():
+    values, msgs = sweeps(6)
+    restarted = [encode_sweep(values[k], TAXELS, k - 3, timestamp=0.1 * k) for k in range(3, 6)]
+    asm = SweepAssembler(TAXELS)
+    out = list(asm.feed_all([m for b in msgs[:3] + restarted for m in b]))
+    # Sweeps 0-2; the restarted counter's first sweep is noticed only at its last
+    # message, so it comes out incomplete; then the next sweeps are whole again.
+    assert [s.sequence for s in out] == [0, 1, 2, 3, 4, 5]
+    assert not out[3].complete
+    np.testing.assert_array_equal(out[4].values, values[4])
+    np.testing.assert_array_equal(out[5].values, values[5])
+    assert asm.stats.resyncs == 1
+    assert asm.stats.late + asm.stats.duplicates == TAXELS.n_messages - 1
+
+
 def test_malformed_traffic_is_counted_by_reason():
     good = encode_sweep(np.ones(IDS.size), TAXELS, 0)
     junk = [

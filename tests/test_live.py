@@ -161,3 +161,86 @@ def test_model_without_live_metadata_is_refused(trained, tmp_path):
         LiveClassifier(model).push(np.zeros(60))
     with pytest.raises(TactbenchError, match="classifier expects frames"):
         LiveModel.from_file(path, registry=REGISTRY, encoder="raw")
+
+
+# ------------------------------------------------------------- the command line
+
+def test_live_command_on_a_can_log(trained, tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from tactbench.can.codec import TaxelMap
+    from tactbench.can.logs import write_log
+    from tactbench.can.simulate import as_sim_sample, schedule_messages, traffic
+    from tactbench.cli import cli
+
+    dataset, _, path = trained
+    picked = [dataset.samples[i] for i in (0, 1)]
+    log = tmp_path / "two.blf"
+    write_log(log, schedule_messages(traffic([as_sim_sample(s, classes=dataset.classes)
+                                              for s in picked], TaxelMap(dataset.taxel_ids))))
+    res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor", "replay", str(log),
+                                   "--json"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    n = sum(s.recording.n_frames for s in picked)
+    assert doc["summary"]["sweeps"] == n
+    # The window rolls across the two samples: one prediction per sweep after the first L - 1.
+    assert doc["summary"]["predictions"] == n - 2
+    assert [p["marker"] for p in doc["predictions"]][-1] == dataset.classes[picked[1].label]
+    assert all(abs(sum(p["probabilities"].values()) - 1) < 1e-4 for p in doc["predictions"])
+    # Human output: one line per prediction on stdout.
+    res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor", "replay", str(log),
+                                   "--max-sweeps", "4"], catch_exceptions=False)
+    assert res.exit_code == 0 and len(res.stdout.strip().splitlines()) == 2
+
+
+def test_live_command_on_the_virtual_bus(trained):
+    import json
+
+    import can
+    from click.testing import CliRunner
+
+    from tactbench.can.codec import TaxelMap
+    from tactbench.can.simulate import as_sim_sample, play, traffic
+    from tactbench.cli import cli
+
+    dataset, _, path = trained
+    channel = f"cli-{uuid.uuid4().hex[:8]}"
+    sample = dataset.samples[4]
+
+    done = threading.Event()
+
+    def send():  # the sample over and over until the command has had its sweeps
+        with can.Bus(interface="virtual", channel=channel) as bus:
+            while not done.is_set():
+                play(bus, traffic([as_sim_sample(sample, classes=dataset.classes)],
+                                  TaxelMap(dataset.taxel_ids)), speed=20,
+                     should_stop=done.is_set)
+
+    sender = threading.Thread(target=send, daemon=True)
+    sender.start()
+    try:
+        res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor",
+                                       "cyskin-can:idle_timeout=5", "--channel", channel,
+                                       "--max-sweeps", "8", "--jsonl"], catch_exceptions=False)
+    finally:
+        done.set()
+        sender.join()
+    assert res.exit_code == 0, res.output
+    rows = [json.loads(line) for line in res.stdout.splitlines()]
+    assert len(rows) == 8 - 2
+    assert {r.get("marker") for r in rows} <= {dataset.classes[sample.label], None}
+    assert all(r["latency_ms"] > 0 for r in rows)
+
+
+def test_live_command_refuses_source_for_a_bus_sensor(trained):
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    _, _, path = trained
+    res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor", "cyskin-can",
+                                   "some.blf"])
+    assert res.exit_code != 0 and "SOURCE is only for '--sensor replay'" in res.output

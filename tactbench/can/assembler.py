@@ -11,7 +11,12 @@ emitted
   are open (the oldest goes), or on :meth:`SweepAssembler.flush` (end of the
   stream or a receive timeout).
 
-Sweeps always come out in sequence order. Missing taxels (their message was
+Sweeps always come out in sequence order. A sensor that restarts its counter
+(a reset) first looks like a run of late or duplicate messages; after one
+sweep's worth of them in a row the assembler resynchronises on the new
+counter (counted in ``resyncs``; the sweep during which it notices comes out
+incomplete).
+Missing taxels (their message was
 lost) follow the ``missing`` rule:
 
 ``"hold"`` (default)
@@ -93,6 +98,7 @@ class AssemblerStats:
     incomplete_sweeps: int = 0
     lost_messages: int = 0  # expected messages missing from emitted sweeps
     lost_sweeps: int = 0  # sequence numbers never seen at all
+    resyncs: int = 0  # counter restarts followed
     rejected: Counter = field(default_factory=Counter)
 
     def to_dict(self) -> dict[str, Any]:
@@ -144,6 +150,9 @@ class SweepAssembler:
         self._recent: dict[int, np.ndarray] = {}  # emitted seq → chunks received
         self._held = np.full(taxels.n_taxels, np.nan, dtype=np.float32)
         self._n_chunks = taxels.n_messages
+        self._base = 0  # public sequence = internal sequence + base (changes on resync)
+        self._late_run = 0  # late or duplicate messages in a row
+        self._resync_after = max(2, self._n_chunks)
 
     # ------------------------------------------------------------------ input
     def feed(self, msg: Any) -> list[Sweep]:
@@ -180,16 +189,11 @@ class SweepAssembler:
         out: list[Sweep] = []
         if self._emitted is not None and seq <= self._emitted:
             recent = self._recent.get(seq)
-            if recent is not None and recent[d.chunk]:
-                self.stats.duplicates += 1
-            else:
-                self.stats.late += 1
-            return out
+            return self._stale(d, timestamp, recent is not None and bool(recent[d.chunk]))
         sweep = self._open.get(seq)
         if sweep is None:
             if self._newest is not None and seq <= self._newest - self.window:
-                self.stats.late += 1
-                return out
+                return self._stale(d, timestamp, False)
             sweep = self._open[seq] = _Open(self.taxels.n_taxels, self._n_chunks, timestamp)
             if self._newest is None or seq > self._newest:
                 self._newest = seq
@@ -202,6 +206,7 @@ class SweepAssembler:
         if seq < self._newest:
             self.stats.out_of_order += 1
         self.stats.accepted += 1
+        self._late_run = 0
         sweep.counts[self.taxels.chunk_taxels(d.chunk)] = d.values
         sweep.received[d.chunk] = True
         sweep.n_received += 1
@@ -213,6 +218,30 @@ class SweepAssembler:
                 out.append(self._emit(older))
             out.append(self._emit(seq))
         return out
+
+    def _stale(self, d: Decoded, timestamp: float, duplicate: bool) -> list[Sweep]:
+        """A message for a sweep already emitted (a duplicate) or too old to keep (late)."""
+        if duplicate:
+            self.stats.duplicates += 1
+        else:
+            self.stats.late += 1
+        self._late_run += 1
+        if self._late_run < self._resync_after:
+            return []
+        # A sweep's worth of late messages in a row: the counter restarted.
+        out = self.flush()
+        last = (self._emitted + self._base) if self._emitted is not None else -1
+        self._open.clear()
+        self._recent.clear()
+        self._newest = self._emitted = None
+        self._base = last + 1 - d.counter
+        self._late_run = 0
+        self.stats.resyncs += 1
+        if duplicate:  # this message starts the new count instead
+            self.stats.duplicates -= 1
+        else:
+            self.stats.late -= 1
+        return out + self._take(d, timestamp)
 
     def _emit(self, seq: int) -> Sweep:
         sweep = self._open.pop(seq)
@@ -244,7 +273,7 @@ class SweepAssembler:
             self._held[:] = values
             stats.complete_sweeps += 1
         stats.sweeps += 1
-        return Sweep(timestamp=sweep.last, values=values, sequence=seq,
+        return Sweep(timestamp=sweep.last, values=values, sequence=seq + self._base,
                      counter=seq % COUNTER_MODULO, missing=n_missing,
                      first_timestamp=sweep.first)
 
