@@ -27,8 +27,16 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
     from tactbench.commands.flowbench import progress_bar
 
     registry = get_registry(warn=not as_json)
+    explicit = bool(specs)
     specs = specs or tuple(registry.names("encoder"))
-    encoders = [(spec, registry.build("encoder", spec)) for spec in specs]
+    encoders, unbuildable = [], {}
+    for spec in specs:
+        try:
+            encoders.append((spec, registry.build("encoder", spec)))
+        except Exception as exc:  # a plugin that cannot be built fails every case
+            if explicit:
+                raise
+            unbuildable[spec] = f"cannot build: {type(exc).__name__}: {exc}"
     all_cases = st.default_cases()
     if cases:
         known = {c.name: c for c in all_cases}
@@ -41,6 +49,8 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
     with bar:
         outcomes = st.run_stability(encoders, all_cases,
                                     progress=lambda done, total, _label: update(done, total))
+    outcomes += [st.Outcome(case.name, spec, False, reason, 0.0)
+                 for spec, reason in unbuildable.items() for case in all_cases]
     failed = [o for o in outcomes if not o.passed]
     if as_json:
         click.echo(json.dumps({
@@ -54,7 +64,7 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
 
         console = Console()
         table = Table(title="stability: case × encoder", title_justify="left")
-        table.add_column("case")
+        table.add_column("case", no_wrap=True)
         for spec in specs:
             table.add_column(spec, justify="center")
         by = {(o.case, o.encoder): o for o in outcomes}
