@@ -66,6 +66,7 @@ class KorniaFlow(FlowEncoder):
     name = "kornia-flow"
     version = "1"
     min_size = 4
+    batched = True
 
     def __init__(self, *, levels: int = 4, warps: int = 2, window: float = 3.0,
                  reg: float = 1e-5, device: str = "auto", batch: int = 64, threads: int = 1,
