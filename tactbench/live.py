@@ -9,7 +9,11 @@ The pipeline per sweep (raw taxel values ``(N,)``):
    so frame ``k`` of the full sequence equals frame 1 of the pair
    ``[I_{k-1}, I_k]`` (a test checks this for every registered encoder);
 4. keep the last ``L`` encoded frames and ask the classifier for
-   ``predict_proba`` on that window ``(1, L, C, H, W)``.
+   ``predict_proba`` on that window ``(1, L, C, H, W)``. For the built-in torch
+   classifiers (per-frame CNN → LSTM) each frame's CNN features are also kept,
+   so a prediction runs the CNN on the new frame only and the LSTM over the
+   window — used only when a check at start shows it gives the same
+   probabilities as ``predict_proba``.
 
 Classifiers on taxel vectors (``frame_rank == 1``) skip steps 2–3 and see the
 normalised vectors ``(L, N)`` (missing readings as 0, as in training).
@@ -232,6 +236,75 @@ def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
     return meta
 
 
+# ------------------------------------------------------------------ cached features
+class _FeatureWindow:
+    """Per-frame CNN features kept across predictions (each frame goes through the CNN once).
+
+    The built-in torch classifiers are "frame encoder → LSTM over the window → head"
+    (:class:`tactbench.classifiers.nets.SequenceNet`): only the LSTM and head need the
+    whole window. This is used only after :meth:`check` has shown, on the loaded model,
+    that it gives the same probabilities as ``predict_proba``; otherwise the live loop
+    calls ``predict_proba`` on the whole window.
+    """
+
+    def __init__(self, clf: Any, length: int) -> None:
+        self.clf = clf
+        self.net = clf.net
+        self.net.eval()  # a live model only predicts (batch norm, dropout in eval mode)
+        self.feats: deque[Any] = deque(maxlen=length)
+        self.length = length
+
+    @staticmethod
+    def supported(clf: Any) -> bool:
+        net = getattr(clf, "net", None)
+        return all(hasattr(net, a) for a in ("prepare", "normalize", "encoder", "lstm", "head"))
+
+    def features(self, frame: np.ndarray) -> Any:
+        import torch
+
+        x = torch.from_numpy(np.ascontiguousarray(frame, dtype=np.float32))[None]
+        dev = getattr(self.clf, "_device", None)
+        if dev is not None:
+            x = x.to(dev)
+        net = self.net
+        with torch.inference_mode():
+            return net.encoder(net.normalize(net.prepare(x)))[0]
+
+    def push(self, frame: np.ndarray) -> None:
+        self.feats.append(self.features(frame))
+
+    def clear(self) -> None:
+        self.feats.clear()
+
+    def proba(self, padded_blank: Any = None) -> np.ndarray:
+        """Probabilities for the window (padded with blank-frame features to L)."""
+        import torch
+
+        feats = list(self.feats)
+        if len(feats) < self.length:
+            feats += [padded_blank] * (self.length - len(feats))
+        net = self.net
+        with torch.inference_mode():
+            out, _ = net.lstm(torch.stack(feats)[None])
+            logits = net.head(out[:, -1])
+            return torch.softmax(logits.float(), dim=1)[0].cpu().numpy()
+
+    def check(self, frame_shape: tuple[int, ...], seed: int = 0) -> bool:
+        """Whether this path matches ``predict_proba`` on a random window (then use it)."""
+        rng = np.random.default_rng(seed)
+        window = rng.random((self.length, *frame_shape), dtype=np.float32)
+        try:
+            for f in window:
+                self.push(f)
+            ours = self.proba()
+            theirs = np.asarray(self.clf.predict_proba(window[None]))[0]
+        except Exception:
+            return False
+        finally:
+            self.clear()
+        return ours.shape == theirs.shape and bool(np.allclose(ours, theirs, atol=1e-5))
+
+
 # ------------------------------------------------------------------ the loop
 @dataclass(frozen=True)
 class Prediction:
@@ -244,6 +317,7 @@ class Prediction:
     frames: int  # sweeps seen so far
     latency_ms: float  # from receiving the sweep to the prediction, in this process
     missing: int = 0  # taxels missing from this sweep
+    frame_ms: float = 0.0  # of latency_ms: normalising, imaging and encoding the sweep
 
     def to_dict(self, classes: list[str]) -> dict[str, Any]:
         return {"timestamp": self.timestamp, "label": self.label,
@@ -251,7 +325,7 @@ class Prediction:
                 "probabilities": {c: round(float(p), 6)
                                   for c, p in zip(classes, self.probabilities)},
                 "frames": self.frames, "latency_ms": round(self.latency_ms, 3),
-                "missing": self.missing}
+                "frame_ms": round(self.frame_ms, 3), "missing": self.missing}
 
 
 class LiveClassifier:
@@ -266,7 +340,8 @@ class LiveClassifier:
         the study's test windows are).
     """
 
-    def __init__(self, model: LiveModel, *, warmup: str = "wait") -> None:
+    def __init__(self, model: LiveModel, *, warmup: str = "wait",
+                 cache_features: bool = True) -> None:
         if warmup not in ("wait", "pad"):
             raise ValueError(f"warmup must be 'wait' or 'pad', got {warmup!r}")
         self.model = model
@@ -274,11 +349,26 @@ class LiveClassifier:
         self.encoder = IncrementalEncoder(model.encoder) if model.uses_images else None
         self.window: deque[np.ndarray] = deque(maxlen=model.length)
         self.frames = 0
+        self._features: _FeatureWindow | None = None
+        self._blank: Any = None
+        if cache_features and _FeatureWindow.supported(model.clf):
+            shape = getattr(model.clf, "frame_shape", None)
+            fw = _FeatureWindow(model.clf, model.length)
+            if shape is not None and fw.check(tuple(shape)):
+                self._features = fw
+                self._blank = fw.features(np.zeros(shape, np.float32))
+
+    @property
+    def caches_features(self) -> bool:
+        """Whether each frame's CNN features are computed once and kept (see ``_FeatureWindow``)."""
+        return self._features is not None
 
     def reset(self) -> None:
         self.window.clear()
         if self.encoder is not None:
             self.encoder.reset()
+        if self._features is not None:
+            self._features.clear()
         self.frames = 0
 
     def frame(self, values: np.ndarray) -> np.ndarray:
@@ -303,19 +393,28 @@ class LiveClassifier:
         (default: now); the prediction's ``latency_ms`` counts from there.
         """
         received = time.perf_counter() if received is None else received
-        self.window.append(self.frame(values))
+        t0 = time.perf_counter()
+        frame = self.frame(values)
+        self.window.append(frame)
+        frame_ms = 1e3 * (time.perf_counter() - t0)
+        if self._features is not None:
+            self._features.push(frame)
         self.frames += 1
         L = self.model.length
         if len(self.window) < L and self.warmup == "wait":
             return None
-        batch = np.zeros((1, L, *self.window[0].shape), dtype=np.float32)
-        batch[0, :len(self.window)] = np.stack(self.window)
-        probs = np.asarray(self.model.clf.predict_proba(batch))[0]
+        if self._features is not None:
+            probs = self._features.proba(self._blank)
+        else:
+            batch = np.zeros((1, L, *self.window[0].shape), dtype=np.float32)
+            batch[0, :len(self.window)] = np.stack(self.window)
+            probs = np.asarray(self.model.clf.predict_proba(batch))[0]
         k = int(np.argmax(probs))
         return Prediction(timestamp=float(timestamp), label=self.model.classes[k],
                           confidence=float(probs[k]), probabilities=probs,
                           frames=self.frames,
-                          latency_ms=1e3 * (time.perf_counter() - received), missing=missing)
+                          latency_ms=1e3 * (time.perf_counter() - received), missing=missing,
+                          frame_ms=frame_ms)
 
     def run(self, frames: Iterable[Any], *,
             on_prediction: Callable[[Prediction], None] | None = None) -> Iterator[Prediction]:

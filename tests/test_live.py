@@ -110,6 +110,18 @@ def test_live_predictions_equal_offline_predictions(trained):
     assert set(p.to_dict(model.classes)["probabilities"]) == {"right", "left"}
 
 
+def test_cached_frame_features_give_the_same_predictions(trained):
+    dataset, _, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    cached, plain = LiveClassifier(model), LiveClassifier(model, cache_features=False)
+    assert cached.caches_features and not plain.caches_features
+    for v in dataset.samples[7].recording.values:
+        a, b = cached.push(v), plain.push(v)
+        assert (a is None) == (b is None)
+        if a is not None:
+            np.testing.assert_allclose(a.probabilities, b.probabilities, atol=1e-5)
+
+
 def test_pad_warmup_predicts_from_the_first_sweep(trained):
     dataset, encoded, path = trained
     live = LiveClassifier(LiveModel.from_file(path, registry=REGISTRY), warmup="pad")
