@@ -90,7 +90,9 @@ class _Frame:
 @click.option("--warmup", type=click.Choice(["wait", "pad"]), default="wait", show_default=True,
               help="Before L sweeps: predict nothing, or pad with blank frames.")
 @click.option("--max-sweeps", type=int, default=None, help="Stop after N sweeps.")
-@click.option("--threads", type=int, default=None, help="torch threads (default: torch's).")
+@click.option("--threads", type=int, default=1, show_default=True,
+              help="torch threads: one window at a time gains nothing from more, and the "
+                   "bus reader needs a core.")
 @click.option("--jsonl", is_flag=True, help="One JSON object per prediction, as they come.")
 @click.option("--json", "as_json", is_flag=True,
               help="One JSON document at the end: every prediction and the latency summary.")
@@ -99,13 +101,28 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
              interface: str | None, channel: str | None, bitrate: int | None,
              format_spec: str | None, layout: str | None, encoder: str | None,
              length: int | None, pixel_mm: float | None, warmup: str, max_sweeps: int | None,
-             threads: int | None, jsonl: bool, as_json: bool) -> None:
+             threads: int, jsonl: bool, as_json: bool) -> None:
     """Classify gestures live: each sweep is encoded once and the last L frames classified.
 
     Examples: 'tactbench live --model m.safetensors --sensor cyskin-can --channel vcan0
     --interface socketcan', or 'tactbench live --model m.safetensors --sensor replay
     run.blf' (a CAN log, a dataset or a CySkin text file).
     """
+    if jsonl and as_json:
+        raise click.UsageError("--json and --jsonl are exclusive")
+    import torch
+
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(max(1, threads))
+    try:
+        _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
+              layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json)
+    finally:  # the command may run inside another program (tests, notebooks)
+        torch.set_num_threads(previous_threads)
+
+
+def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
+          layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
     import itertools
 
     import numpy as np
@@ -113,12 +130,6 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
     from tactbench.cli import get_registry
     from tactbench.live import LiveClassifier, LiveModel
 
-    if jsonl and as_json:
-        raise click.UsageError("--json and --jsonl are exclusive")
-    if threads is not None:
-        import torch
-
-        torch.set_num_threads(max(1, threads))
     registry = get_registry(ctx, warn=not (as_json or jsonl))
     model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
                                 pixel_mm=pixel_mm, registry=registry)
