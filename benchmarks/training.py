@@ -145,7 +145,7 @@ def bare_loop(clf, train, *, steps: int, seed: int) -> float:
     return time.perf_counter() - start
 
 
-def measure_overhead(train, *, steps: dict[str, int], repeats: int) -> list[dict]:
+def measure_overhead(cases: list[tuple[str, object, int]], *, repeats: int) -> list[dict]:
     """Bare loop and ``fit`` alternately, ``repeats`` times each; the fastest of each
     counts (other jobs share the cores, and only ever slow a run down)."""
     import warnings
@@ -155,7 +155,7 @@ def measure_overhead(train, *, steps: dict[str, int], repeats: int) -> list[dict
 
     reg = load_registry()
     rows = []
-    for name, n_steps in steps.items():
+    for name, train, n_steps in cases:
         opts = profile_options("quick", name)
         opts.update(epochs=1, windows_per_epoch=n_steps * opts.get("batch_size", 64),
                     schedule="constant")
@@ -171,7 +171,8 @@ def measure_overhead(train, *, steps: dict[str, int], repeats: int) -> list[dict
             loop.append(rep["train_seconds"])
         windows = n_steps * clf.batch_size
         bare_s, fit_s, loop_s = min(bare), min(fit), min(loop)
-        row = {"classifier": name, "input_size": clf.input_size, "batch_size": clf.batch_size,
+        row = {"classifier": name, "input_size": getattr(clf, "input_size", None),
+               "frame_shape": list(train.frame_shape), "batch_size": clf.batch_size,
                "steps": n_steps, "repeats": repeats,
                "bare_windows_per_s": windows / bare_s, "fit_windows_per_s": windows / fit_s,
                "loop_windows_per_s": windows / loop_s,
@@ -179,12 +180,36 @@ def measure_overhead(train, *, steps: dict[str, int], repeats: int) -> list[dict
                "overhead_loop": loop_s / bare_s - 1.0, "overhead_total": fit_s / bare_s - 1.0,
                "bare_seconds": bare, "fit_seconds": fit}
         rows.append(row)
-        print(f"{name:15s} {clf.input_size:3d}px  bare {row['bare_windows_per_s']:6.0f} win/s  "
+        print(f"{name:15s} {str(train.frame_shape):15s} bare {row['bare_windows_per_s']:6.0f} win/s  "
               f"fit loop {row['loop_windows_per_s']:6.0f} win/s ({100 * row['overhead_loop']:+.1f} %)"
               f"  fit with set-up {row['fit_windows_per_s']:6.0f} win/s "
               f"({100 * row['overhead_total']:+.1f} %, set-up {row['setup_seconds']:.1f} s)",
               flush=True)
     return rows
+
+
+def taxel_windows(windows):
+    """The same windows as taxel vectors ``(T, N)``: every 5th pixel of the first channel
+    (a ~5 px taxel pitch, like CySkin's 7.5 mm at 1.5 mm/px)."""
+    from tactbench.windows import Windows
+
+    seqs = [np.ascontiguousarray(s[:, 0, ::5, ::5].reshape(s.shape[0], -1))
+            for s in windows.sequences]
+    return Windows(seqs, windows.seq_index, windows.starts, windows.labels, windows.length)
+
+
+def measure_logreg(train) -> dict:
+    from tactbench.plugins import load_registry
+
+    clf = load_registry().build("classifier", "logreg")
+    start = time.perf_counter()
+    rep = clf.fit(train, None, seed=0)
+    fit_s = time.perf_counter() - start
+    row = {"classifier": "logreg", "train_windows": len(train), "fit_seconds": fit_s,
+           "fit_windows_per_s": len(train) / fit_s, "steps": rep["steps"]}
+    print(f"logreg          {str(train.frame_shape):15s} fit {len(train)} windows in "
+          f"{fit_s:.1f} s ({row['fit_windows_per_s']:.0f} win/s)", flush=True)
+    return row
 
 
 def measure_quick(n_sequences: int, seeds, channels_list) -> list[dict]:
@@ -267,8 +292,11 @@ def main(argv=None) -> int:
         seqs, labels = synthetic_sequences(300, channels=3, seed=2)
         small = training_windows(seqs, labels, 5)
     if "overhead" not in args.skip:
-        steps = {"small-cnn-lstm": args.steps, "cnn-lstm": max(1, args.steps // 5)}
-        result["overhead"] = measure_overhead(small, steps=steps, repeats=args.repeats)
+        vectors = taxel_windows(small)
+        cases = [("small-cnn-lstm", small, args.steps), ("taxel-lstm", vectors, args.steps),
+                 ("cnn-lstm", small, max(1, args.steps // 5))]
+        result["overhead"] = measure_overhead(cases, repeats=args.repeats)
+        result["logreg"] = measure_logreg(small)
     if "quick" not in args.skip:
         result["quick"] = measure_quick(args.sequences, args.seeds, args.channels)
     if "paper-epoch" not in args.skip:
