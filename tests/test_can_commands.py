@@ -80,6 +80,7 @@ def test_record_writes_the_bus_with_label_markers(tmp_path, dataset):
     assert result.exit_code == 0, result.output
     doc = json.loads(result.stdout)
     assert doc["messages"] > 0 and doc["label"] == "Twist"
+    assert 0 < doc["bus_load_measured"] < 1
     log = read_log(out)
     assert log.taxel_source == "announced"
     [seg] = log.labelled

@@ -220,6 +220,7 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     Stops at --duration, --idle-timeout, --max-messages or Ctrl-C. The log reads
     back with 'tactbench can info', 'tactbench data info' and the replay sensor.
     """
+    from tactbench.can.busload import frame_bits
     from tactbench.can.logs import open_writer
     from tactbench.can.meta import marker_messages, taxel_map_messages
     from tactbench.sensors.cyskin_can import resolve_taxel_ids
@@ -232,6 +233,7 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     bus = _open_bus(interface, channel, bitrate, data_bitrate, fmt.fd)
     info = {"label": label, **({"user": user} if user else {})} if label else None
     n = meta = 0
+    bits = 0.0  # nominal bit times of the data frames received (for the measured load)
     t_start = time.time()
     try:
         if ids is not None:
@@ -257,6 +259,10 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
             last = time.monotonic()
             writer.on_message_received(msg)
             n += 1
+            if not msg.is_error_frame:
+                bits += frame_bits(min(len(msg.data), 64 if msg.is_fd else 8),
+                                   extended=msg.is_extended_id, fd=msg.is_fd,
+                                   bitrate=bitrate, data_bitrate=data_bitrate)
     except KeyboardInterrupt:
         _err("tactbench can record: stopped")
     finally:
@@ -266,12 +272,16 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
                 meta += 1
         writer.stop()
         bus.shutdown()
-    result = {"out": str(out), "messages": n, "meta_messages": meta,
-              "seconds": time.time() - t_start, "label": label}
+    seconds = time.time() - t_start
+    result = {"out": str(out), "messages": n, "meta_messages": meta, "seconds": seconds,
+              "label": label, "bus_load_measured": bits / bitrate / seconds if seconds > 0 else None}
     if as_json:
         click.echo(json.dumps(result, indent=2))
     else:
-        _err(f"recorded {n} messages to {out} in {result['seconds']:.1f} s")
+        load = result["bus_load_measured"]
+        _err(f"recorded {n} messages to {out} in {seconds:.1f} s"
+             + (f"; bus load {100 * load:.1f} % of {bitrate / 1e6:g} Mbit/s "
+                f"(nominal frame lengths)" if load is not None else ""))
 
 
 @can_group.command("load")
