@@ -25,6 +25,9 @@ def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
             # A CAN log plays all its sweeps (every sample in it), like the live bus would.
             return LogReplay(source, realtime=bool(options.get("realtime", False)))
         options.setdefault("path", source)
+    elif name == "replay" and "path" not in options:
+        raise click.UsageError("'--sensor replay' needs the file to play: "
+                               "'--sensor replay FILE' (a CAN log, dataset or CySkin text)")
     elif source is not None:
         raise click.UsageError(f"SOURCE is only for '--sensor replay' (got sensor '{name}'); "
                                f"give the sensor's options as '{name}:key=value,...'")
