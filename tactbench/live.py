@@ -47,12 +47,16 @@ def encode_next(encoder: Any, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
     flow = getattr(encoder, "flow", None)
     if callable(flow) and hasattr(encoder, "max_flow") and hasattr(encoder, "min_magnitude"):
         from tactbench.encoders.base import check_sequence
-        from tactbench.encoders.flow import flow_to_channels
 
         pair = check_sequence(np.stack([prev, curr]))
-        f = flow(pair[:1], pair[1:])
-        return flow_to_channels(pair[1:], f, max_flow=encoder.max_flow,
-                                min_magnitude=encoder.min_magnitude)[0]
+        try:
+            from tactbench.encoders.flow import flow_to_channels
+
+            f = flow(pair[:1], pair[1:])
+            return flow_to_channels(pair[1:], f, max_flow=encoder.max_flow,
+                                    min_magnitude=encoder.min_magnitude)[0]
+        except (ImportError, TypeError, AttributeError):
+            pass  # the flow encoders' helpers changed shape: take the general path
     return encoder.encode(np.stack([prev, curr]))[1]
 
 
