@@ -273,6 +273,10 @@ class TaxelMap:
         #: For each chunk, the positions of present slots and their taxel columns.
         self._present = [np.flatnonzero(c.columns >= 0) for c in chunks]
         self._present_cols = [c.columns[p] for c, p in zip(chunks, self._present)]
+        # Decoding runs once per message: keep what it needs at hand.
+        self._n_slots = [len(c.columns) for c in chunks]
+        self._dense = [len(p) == len(c.columns) for c, p in zip(chunks, self._present)]
+        self._dtype = self.fmt.value_dtype
 
     @property
     def n_taxels(self) -> int:
@@ -362,7 +366,7 @@ class Decoded(NamedTuple):
 
     counter: int
     chunk: int
-    values: np.ndarray  # uint16, one per present slot of the chunk
+    values: np.ndarray  # 16-bit unsigned (wire byte order), one per present slot of the chunk
 
 
 #: Reasons a message is not taxel data (keys of the assembler's ``rejected`` counts).
@@ -403,12 +407,12 @@ def decode_message(msg: Any, taxels: TaxelMap) -> Decoded | str:
             return "bad_length"
         counter, offset = data[0], data[1]
         body = data[2:]
-    module = fmt.layout_module(bus)
+    module = fmt.layout_module(bus) if fmt.module_map else bus
     chunk = taxels.chunk_index.get((module, offset))
     if chunk is None:
         # Unknown module, or a slot offset that does not start a message of this layout.
         return "unknown_slots" if module in taxels.modules else "unknown_module"
-    n_slots = len(taxels.chunks[chunk].columns)
+    n_slots = taxels._n_slots[chunk]
     if len(body) % 2 and not fmt.fd:
         return "bad_length"
     n_values = len(body) // 2
@@ -416,5 +420,7 @@ def decode_message(msg: Any, taxels: TaxelMap) -> Decoded | str:
     # are FD padding or slots outside the layout, ignored — but never past slot 15.
     if n_values < n_slots or (not fmt.fd and n_values > fmt.values_per_message):
         return "bad_length"
-    vals = np.frombuffer(body, dtype=fmt.value_dtype, count=n_slots)
-    return Decoded(counter, chunk, vals[taxels._present[chunk]].astype(np.uint16))
+    vals = np.frombuffer(body, dtype=taxels._dtype, count=n_slots)
+    if not taxels._dense[chunk]:
+        vals = vals[taxels._present[chunk]]
+    return Decoded(counter, chunk, vals)
