@@ -7,17 +7,17 @@ measurement (benchmarks/encoders.py, docs/encoders.md, "Choosing lucas-kanade"):
   (flat zero background) and raised on an all-zero frame, which every
   sequence starts with (``I_{-1} = 0``): unusable without repairs.
 - scikit-image's ``optical_flow_ilk`` (radius 7 / 4) has no pyramid: on the
-  64 px scenes its endpoint error was 1.36 / 1.16 px at ≈ 15 ms per pair; at
-  357 × 334 it was the most accurate LK (0.76 px) but took ≈ 1–1.4 s per pair.
+  72 × 67 scenes its endpoint error was 1.21 / 1.18 px at ≈ 50 ms per pair; at
+  357 × 334 it was the most accurate LK (0.77 px) but took ≈ 0.8 s per pair.
 - ``cv2.calcOpticalFlowPyrLK`` started from every ``step``-th pixel and
-  interpolated: 0.95 px at 64 px in ≈ 4–5 ms per pair (window 21, step 2,
-  10 iterations), 1.09 px at 357 × 334 in ≈ 80 ms (step 4). Tracking every
-  pixel (step 1) was no more accurate and 4–10× slower.
+  interpolated: 0.86 px at 72 × 67 in ≈ 9 ms per pair (window 21, step 2,
+  10 iterations), 1.09 px at 357 × 334 in ≈ 70 ms (step 4). Tracking every
+  pixel (step 1) was no more accurate and 3–4× slower.
 
 The pyramidal route is the default's choice: the most accurate at the default
-resolution and 3–15× faster everywhere (numbers from a loaded 2-core VM,
-2026-11-21, ±40 %). At full resolution ``downscale=2`` or ``step=4`` is the
-practical setting.
+resolution and 3–11× faster everywhere (benchmarks/encoders.py, section
+lucas-kanade; a loaded 2-core VM, 2026-11-21, timings ±40 %). At full
+resolution ``step=4`` or ``downscale=2`` is the practical setting.
 
 Points whose window has no texture (OpenCV's status 0: minimum eigenvalue of
 the structure tensor below ``min_eigen``) get zero flow: nothing can be seen
