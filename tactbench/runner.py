@@ -72,6 +72,7 @@ class Scene:
     scheduler: str | None = None
     out: str = "tactbench-out"
     rerun: bool = False
+    save_models: bool = False  # OUT/models/<cell key>.safetensors, usable by `tactbench live`
 
     def resolved_pixel_mm(self) -> float:
         return float(self.pixel_mm if self.pixel_mm is not None
@@ -165,6 +166,8 @@ class CellJob:
     test_per_class: int
     device: str
     threads: int
+    model_path: str | None = None
+    model_meta: dict[str, Any] | None = None
 
 
 @dataclass
@@ -290,6 +293,14 @@ def plan(scene: Scene, registry=None) -> Plan:
                     identities[key] = identity
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 input_kind, cells, identities)
+
+
+def _model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
+    """What `tactbench live` needs to use a cell's model: classes, layout, imaging, encoder."""
+    from tactbench.live import live_metadata
+
+    return live_metadata(p.dataset, encoder=cell.encoder, length=cell.length,
+                         pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
 
 
 def _imaging_identity(scene: Scene, kind: str) -> dict[str, Any]:
@@ -518,6 +529,10 @@ def run_cell(job: CellJob, progress: Callable[..., None] | None = None) -> dict[
     t0 = time.perf_counter()
     predicted = clf.predict(test)
     infer_s = time.perf_counter() - t0
+    if job.model_path:
+        clf.save(job.model_path, {**(job.model_meta or {}), "classifier": cell.classifier,
+                                  "seed": cell.seed, "cell": cell.key,
+                                  "test_accuracy": float((predicted == test.labels).mean())})
 
     k = len(job.classes)
     truth = test.labels
@@ -683,7 +698,9 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         p = plan(scene, registry)
         bars.update(task, 1)
         store = ResultStore(scene.out)
-        pending = [c for c in p.cells if scene.rerun or store.get(c.key) is None]
+        models = Path(scene.out) / "models"
+        pending = [c for c in p.cells if scene.rerun or store.get(c.key) is None
+                   or (scene.save_models and not (models / f"{c.key}.safetensors").exists())]
         cache = cache or EncodingCache()
         folders = ensure_encodings(p, cache, pending, bars)
         jobs = [CellJob(cell=c, identity=p.identities[c.key],
@@ -692,7 +709,11 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
                         users=tuple(str(u) for u in p.dataset.users),
                         classes=tuple(p.dataset.classes), split=scene.split,
                         test_per_class=scene.test_per_class, device=scene.device,
-                        threads=scene.resolved_threads()) for c in pending]
+                        threads=scene.resolved_threads(),
+                        model_path=str(models / f"{c.key}.safetensors")
+                        if scene.save_models else None,
+                        model_meta=_model_metadata(p, c) if scene.save_models else None)
+                    for c in pending]
         run_meta = {"command": " ".join(sys.argv), "git": git_revision(),
                     "scene": asdict(scene)}
 

@@ -186,3 +186,20 @@ def test_dask_local_cluster_gives_the_same_results_as_local(tmp_path, cache):
     key = lambda r: (r["encoder"], r["L"], r["seed"])  # noqa: E731
     assert [(key(r), r["confusion"]) for r in sorted(local.rows, key=key)] == \
            [(key(r), r["confusion"]) for r in sorted(dask.rows, key=key)]
+
+
+def test_saved_models_work_with_live(tmp_path, cache):
+    from tactbench.classifiers.io import load_model
+
+    scene = tiny_scene(tmp_path, encoders=["frame-diff"], seeds=[0], save_models=True)
+    result = run(scene, progress=False, cache=cache)
+    (row,) = result.rows
+    path = tmp_path / "out" / "models" / f"{row['key']}.safetensors"
+    clf, meta = load_model(path)
+    assert meta["encoder"] == "frame-diff" and meta["length"] == 3
+    assert meta["classes"] == row["classes"] and "layout" in meta
+    assert meta["test_accuracy"] == row["accuracy"]
+    # a finished run asked for models later computes only the cells without one
+    path.unlink()
+    again = run(scene, progress=False, cache=cache)
+    assert again.computed == 1 and path.exists()

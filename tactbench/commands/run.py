@@ -39,11 +39,13 @@ from tactbench.cli import get_registry
               "--executor dask); default: a local cluster.")
 @click.option("--out", help="Output folder. [default: tactbench-out]")
 @click.option("--rerun", is_flag=True, default=None, help="Recompute finished cells.")
+@click.option("--save-models", is_flag=True, default=None,
+              help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, profile,
-            pixel_mm, device, threads, executor, workers, scheduler, out, rerun, as_json,
-            no_plots) -> None:
+            pixel_mm, device, threads, executor, workers, scheduler, out, rerun, save_models,
+            as_json, no_plots) -> None:
     """Run a benchmark grid and report accuracy beside its cost.
 
     Finished cells are kept in OUT/cells and skipped when the same command runs again;
@@ -59,7 +61,7 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
              "seeds": list(seeds) or None, "split": split, "profile": profile,
              "pixel_mm": pixel_mm, "device": device, "threads": threads,
              "executor": executor, "workers": workers, "scheduler": scheduler, "out": out,
-             "rerun": rerun}
+             "rerun": rerun, "save_models": save_models}
     fields.update({k: v for k, v in given.items() if v is not None})
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
