@@ -48,3 +48,13 @@ def test_it_encodes_contact_onsets_and_releases(installed):
         load_registry().build("encoder", "contact-events:threshold=1.5")
     with pytest.raises(ValueError, match="non-finite"):
         encoder.encode(np.full((2, 2, 2), np.nan, np.float32))
+
+
+from tactbench.testing import conformance_cases, run_check  # noqa: E402
+
+
+@pytest.mark.parametrize("encoder, check", conformance_cases(
+    ["contact-events", "contact-events:threshold=0.2"]))
+def test_conformance_suite(installed, encoder, check):
+    """The plugin passes the same conformance suite as the built-in encoders."""
+    run_check(encoder, check)
