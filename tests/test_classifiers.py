@@ -376,3 +376,16 @@ def test_mismatched_files_give_clear_errors(fitted, tmp_path):
 
     with pytest.raises(ModelFileError, match="does not match classifier 'logreg'"):
         load_model(_rewrite_header(good, tmp_path / "d.safetensors", other_kind))
+
+
+def test_a_failed_fit_leaves_no_model_that_looks_fitted():
+    train, test = data_for("small-cnn-lstm")
+    clf = build("small-cnn-lstm")
+
+    def progress(done, total, **info):
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        clf.fit(train, None, seed=0, progress=progress)
+    with pytest.raises(RuntimeError, match="not fitted"):
+        clf.predict(test)

@@ -276,9 +276,6 @@ class TorchSequenceClassifier(SequenceClassifier):
         with torch.random.fork_rng(devices=forked):
             torch.manual_seed(derive_seed(seed, self.name, "init"))
             net = self._build_net(tuple(train.frame_shape), k, pretrained=True)
-            self.net = net
-            self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
-            self._device, self._precision = dev, precision
             with torch.no_grad():
                 self._set_normalization(net, train, seed)
             get_batch = self._batches(net, train, dev)
@@ -287,6 +284,9 @@ class TorchSequenceClassifier(SequenceClassifier):
                 def evaluate() -> float:
                     return float((self.predict(val) == val.labels).mean())
             net.to(dev)
+            self.net = net
+            self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+            self._device, self._precision = dev, precision
             try:
                 train_loop(net, get_batch, n_windows=len(train), report=report,
                            epochs=self.epochs, batch_size=self.batch_size,
@@ -296,6 +296,10 @@ class TorchSequenceClassifier(SequenceClassifier):
                            progress=progress, evaluate=evaluate)
             except TrainingInterrupted as exc:
                 self.fit_report = self._finish_report(exc.report)
+                raise
+            except BaseException:
+                # A failed fit leaves no half-trained model that looks fitted.
+                self.net, self.n_classes = None, None
                 raise
         self.fit_report = self._finish_report(report)
         return dict(self.fit_report)
