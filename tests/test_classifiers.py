@@ -389,3 +389,27 @@ def test_a_failed_fit_leaves_no_model_that_looks_fitted():
         clf.fit(train, None, seed=0, progress=progress)
     with pytest.raises(RuntimeError, match="not fitted"):
         clf.predict(test)
+
+
+@pytest.mark.parametrize("spec", ["logreg", "taxel-lstm:epochs=4,windows_per_epoch=0,"
+                                              "batch_size=32"])
+def test_real_cyskin_recordings_without_a_layout(shared_data, spec):
+    """The real CySkin finger-count recordings (716 taxels, no layout): trained on 9
+    recordings per class, the held-out ones are recognised."""
+    from tactbench.datasets.cyskin_text import read_cyskin_text
+
+    root = shared_data / "cyskin-fingers"
+    train_seqs, train_labels, test_seqs, test_labels = [], [], [], []
+    for k, folder in enumerate(sorted(p for p in root.iterdir() if p.is_dir())):
+        for i, path in enumerate(sorted(folder.glob("*.txt"))[:12]):
+            values = read_cyskin_text(path).values
+            # Raw counts reach ~20000; NaN marks a missing taxel.
+            seq = np.clip(np.nan_to_num(values) / 20000.0, 0, 1).astype(np.float32)
+            (test_seqs if i % 4 == 0 else train_seqs).append(seq)
+            (test_labels if i % 4 == 0 else train_labels).append(k)
+    train = training_windows(train_seqs, train_labels, 5)
+    test = test_windows(test_seqs, test_labels, 5)
+    clf = load_registry().build("classifier", spec)
+    clf.fit(train, None, seed=0)
+    assert clf.n_classes == 6 and clf.frame_shape == (716,)
+    assert (clf.predict(test) == test.labels).mean() >= 0.8
