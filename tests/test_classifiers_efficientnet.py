@@ -165,3 +165,26 @@ def test_cnn_lstm_uses_the_weights_file_and_warns_without_one(tmp_path):
     assert report["weights"]["adapted"]  # 1-channel frames
     with pytest.warns(UserWarning, match="random initialisation"):
         load_registry().build("classifier", spec).fit(train, None, seed=0)
+
+
+@pytest.mark.parametrize("size", [33, 65])
+def test_same_features_as_the_reference_efficientnet_pytorch(size):
+    """lukemelas' efficientnet_pytorch (installed with the dev extras): its real state
+    dict loads completely, and the features agree. At odd sizes before every stride-2
+    convolution (33, 65, 225 px) its TensorFlow 'same' padding is symmetric, like ours."""
+    reference = pytest.importorskip("efficientnet_pytorch")
+    torch.manual_seed(0)
+    ref = reference.EfficientNet.from_name("efficientnet-b0", image_size=size).eval()
+    with torch.no_grad():  # non-trivial BatchNorm statistics
+        for mod in ref.modules():
+            if isinstance(mod, torch.nn.BatchNorm2d):
+                mod.running_mean.uniform_(-0.1, 0.1)
+                mod.running_var.uniform_(0.5, 1.5)
+    ours = _model(seed=1)
+    report = load_weights(ours, ref.state_dict())
+    assert report.layout == "lukemelas" and not report.missing
+    assert report.unused == ["_fc.bias", "_fc.weight"]
+    x = torch.rand(2, 3, size, size)
+    with torch.no_grad():
+        expected = ref.extract_features(x).mean((2, 3))
+        assert torch.allclose(ours(x), expected, atol=1e-5)
