@@ -180,8 +180,10 @@ def measure_overhead(cases: list[tuple[str, object, int]], *, repeats: int) -> l
                "overhead_loop": loop_s / bare_s - 1.0, "overhead_total": fit_s / bare_s - 1.0,
                "bare_seconds": bare, "fit_seconds": fit}
         rows.append(row)
-        print(f"{name:15s} {str(train.frame_shape):15s} bare {row['bare_windows_per_s']:6.0f} win/s  "
-              f"fit loop {row['loop_windows_per_s']:6.0f} win/s ({100 * row['overhead_loop']:+.1f} %)"
+        print(f"{name:15s} {str(train.frame_shape):15s} "
+              f"bare {row['bare_windows_per_s']:6.0f} win/s  "
+              f"fit loop {row['loop_windows_per_s']:6.0f} win/s "
+              f"({100 * row['overhead_loop']:+.1f} %)"
               f"  fit with set-up {row['fit_windows_per_s']:6.0f} win/s "
               f"({100 * row['overhead_total']:+.1f} %, set-up {row['setup_seconds']:.1f} s)",
               flush=True)
@@ -227,18 +229,21 @@ def measure_quick(n_sequences: int, seeds, channels_list) -> list[dict]:
         train = training_windows(tr, ytr, 5)
         test = test_windows(te, yte, 5)
         for seed in seeds:
-            clf = reg.build("classifier", "small-cnn-lstm", **profile_options("quick", "small-cnn-lstm"))
+            opts = profile_options("quick", "small-cnn-lstm")
+            clf = reg.build("classifier", "small-cnn-lstm", **opts)
             start, cpu0 = time.perf_counter(), time.process_time()
             rep = clf.fit(train, None, seed=seed)
             fit_s, cpu_s = time.perf_counter() - start, time.process_time() - cpu0
             acc = float((clf.predict(test) == test.labels).mean())
             row = {"channels": channels, "seed": seed, "train_windows": len(train),
-                   "fit_seconds": fit_s, "fit_cpu_seconds": cpu_s, "loop_seconds": rep["train_seconds"],
+                   "fit_seconds": fit_s, "fit_cpu_seconds": cpu_s,
+                   "loop_seconds": rep["train_seconds"],
                    "windows_seen": rep["windows_seen"], "test_accuracy": acc,
                    "final_loss": rep["final_loss"], "data_seconds": gen_s}
             rows.append(row)
             print(f"quick small-cnn-lstm C={channels} seed={seed}: {len(train)} windows, fit "
-                  f"{fit_s:.1f} s (loop {rep['train_seconds']:.1f} s, CPU {cpu_s:.1f} s), test accuracy "
+                  f"{fit_s:.1f} s (loop {rep['train_seconds']:.1f} s, CPU {cpu_s:.1f} s), "
+                  f"test accuracy "
                   f"{acc:.3f}, final loss {rep['final_loss']:.3f}", flush=True)
     return rows
 

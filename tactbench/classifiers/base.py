@@ -71,7 +71,8 @@ class SequenceClassifier:
 
     def _check_windows(self, windows: Windows, what: str) -> None:
         if not isinstance(windows, Windows):
-            raise TypeError(f"{what} must be tactbench.windows.Windows, got {type(windows).__name__}")
+            raise TypeError(f"{what} must be tactbench.windows.Windows, "
+                            f"got {type(windows).__name__}")
         if len(windows) == 0:
             raise ValueError(f"{what} has no windows")
         shape = windows.frame_shape
@@ -285,7 +286,8 @@ class TorchSequenceClassifier(SequenceClassifier):
                     return float((self.predict(val) == val.labels).mean())
             net.to(dev)
             self.net = net
-            self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+            self.n_classes, self.frame_shape = k, tuple(train.frame_shape)
+            self.length = train.length
             self._device, self._precision = dev, precision
             try:
                 train_loop(net, get_batch, n_windows=len(train), report=report,

@@ -82,9 +82,9 @@ def read_header(path: str | os.PathLike) -> dict[str, Any]:
         header = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"{p}: the tactbench header is not valid JSON: {exc}") from exc
-    if not isinstance(header, dict) or header.get("format") != FORMAT:
-        raise ModelFileError(f"{p}: header format is {header.get('format') if isinstance(header, dict) else header!r}, "
-                             f"expected '{FORMAT}'")
+    found = header.get("format") if isinstance(header, dict) else header
+    if found != FORMAT:
+        raise ModelFileError(f"{p}: header format is {found!r}, expected '{FORMAT}'")
     version = header.get("version")
     if not isinstance(version, int) or version > FORMAT_VERSION:
         raise ModelFileError(f"{p}: model format version {version!r} is newer than this "

@@ -39,7 +39,8 @@ class Normalize(nn.Module):
         self.register_buffer("mean", torch.zeros(shape))
         self.register_buffer("std", torch.ones(shape))
 
-    def set(self, mean: Sequence[float] | torch.Tensor, std: Sequence[float] | torch.Tensor) -> None:
+    def set(self, mean: Sequence[float] | torch.Tensor,
+            std: Sequence[float] | torch.Tensor) -> None:
         mean_t = torch.as_tensor(mean, dtype=torch.float32).reshape(self.mean.shape)
         std_t = torch.as_tensor(std, dtype=torch.float32).reshape(self.std.shape)
         # A constant channel (a dead taxel, no flow at all) must not divide by zero.
@@ -74,7 +75,7 @@ class SmallCNN(nn.Module):
 
 
 class TaxelMLP(nn.Module):
-    """Per-frame encoder for taxel vectors without a layout: ``(N_frames, n)`` → ``(N_frames, out)``."""
+    """Per-frame encoder for taxel vectors without a layout: ``(F, n)`` → ``(F, out)``."""
 
     def __init__(self, n_taxels: int, width: int = 128, out_features: int = 64) -> None:
         super().__init__()
@@ -87,7 +88,7 @@ class TaxelMLP(nn.Module):
 
 
 class SequenceNet(nn.Module):
-    """Frame encoder applied to every frame → LSTM → last step → dropout → FC → ReLU → logits.
+    """Frame encoder on every frame → LSTM → last step → dropout → FC → ReLU → logits.
 
     The study: "EfficientNet-B0 → LSTM → dropout 0.3 → fully connected layer of 256 →
     classes". ``input_size`` (images only) is the square size frames are resized to
