@@ -109,7 +109,7 @@ def test_builtin_classifiers_are_registered_without_importing_torch():
 
 def test_options_come_from_the_spec_and_unknown_ones_are_refused():
     clf = load_registry().build("classifier", "small-cnn-lstm:epochs=3,input_size=32")
-    assert clf.epochs == 3 and clf.input_size == 32 and clf.width == 12
+    assert clf.epochs == 3 and clf.input_size == 32 and clf.width == 16
     with pytest.raises(ValueError, match="no option 'epoch'.*did you mean 'epochs'"):
         load_registry().build("classifier", "small-cnn-lstm:epoch=3")
 

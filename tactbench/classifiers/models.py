@@ -48,8 +48,7 @@ class SmallCnnLstm(ImageSequenceClassifier):
     """A CPU-sized CNN-LSTM: ``layers`` conv blocks of ``width`` → LSTM → FC 256 → classes."""
 
     name = "small-cnn-lstm"
-    width: int = 12
-    windows_per_epoch: int = 6000
+    width: int = 16
     layers: int = 4
 
     def _build_net(self, frame_shape, n_classes, *, pretrained):
