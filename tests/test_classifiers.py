@@ -14,6 +14,7 @@ import torch
 from tactbench.classifiers import base as base_module
 from tactbench.classifiers.base import FrameBank
 from tactbench.classifiers.io import ModelFileError, load_model, read_header
+from tactbench.classifiers.models import SmallCnnLstm
 from tactbench.plugins import load_registry
 from tactbench.training import TrainingInterrupted
 from tactbench.windows import test_windows, training_windows
@@ -413,3 +414,31 @@ def test_real_cyskin_recordings_without_a_layout(shared_data, spec):
     clf.fit(train, None, seed=0)
     assert clf.n_classes == 6 and clf.frame_shape == (716,)
     assert (clf.predict(test) == test.labels).mean() >= 0.8
+
+
+@pytest.mark.parametrize("name", list(TINY))
+def test_builtins_pass_the_conformance_checks(name):
+    from tactbench.classifiers.testing import check_classifier
+
+    check_classifier(TINY[name])
+
+
+class Unseeded(SmallCnnLstm):
+    """A broken classifier: its probabilities are not reproducible."""
+
+    name = "unseeded"
+
+    def predict_proba(self, x):
+        p = super().predict_proba(x)
+        return (p + np.random.random(p.shape).astype(np.float32)) / 2
+
+
+def test_the_conformance_checks_catch_a_broken_classifier():
+    from tactbench.classifiers.testing import check_classifier
+    from tactbench.plugins import Component, Registry
+
+    registry = Registry([Component("classifier", "unseeded", f"{__name__}:Unseeded",
+                                   "test", (), "test", "test")])
+    with pytest.raises(AssertionError, match="same seed gave different probabilities"):
+        check_classifier("unseeded:" + TINY["small-cnn-lstm"].split(":", 1)[1],
+                         registry=registry)
