@@ -106,7 +106,10 @@ def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "") -> None
                          "left")
     for row in table_rows(summaries):
         table.add_row(*row)
-    Console().print(table)
+    console = Console()
+    if not console.is_terminal:  # logs and pipes: no wrapping at 80 columns
+        console = Console(width=160)
+    console.print(table)
 
 
 def markdown_table(summaries: Sequence[dict[str, Any]]) -> str:
@@ -234,6 +237,7 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]]) -> dict[str, Pat
                     (max(cost, 1e-4), 100 * s["accuracy_mean"]), fontsize=7,
                     xytext=(4, 4), textcoords="offset points")
     ax.set_xscale("log")
+    ax.margins(x=0.35)  # room for the labels right of the points
     ax.set_xlabel("encode cost (ms per frame, one core, log scale)")
     ax.set_ylabel("test accuracy (%)")
     ax.grid(alpha=0.3)
