@@ -442,3 +442,21 @@ def test_the_conformance_checks_catch_a_broken_classifier():
     with pytest.raises(AssertionError, match="same seed gave different probabilities"):
         check_classifier("unseeded:" + TINY["small-cnn-lstm"].split(":", 1)[1],
                          registry=registry)
+
+
+def test_batchnorm_statistics_are_recalibrated_after_short_training():
+    """EfficientNet's BN momentum is 0.01: a short fit leaves running statistics near
+    their initial 0/1, which makes every test window look alike. cnn-lstm re-estimates
+    them from the final weights."""
+    def stem_var(clf):
+        bn = next(m for m in clf.net.modules() if isinstance(m, torch.nn.BatchNorm2d))
+        return bn.running_var.clone()
+
+    stale, _, _ = fit("cnn-lstm", bn_recalibration_batches=0, epochs=1, windows_per_epoch=8)
+    fresh, _, test = fit("cnn-lstm", epochs=1, windows_per_epoch=8)
+    assert fresh.bn_recalibration_batches > 0  # on by default for cnn-lstm
+    assert torch.allclose(stem_var(stale), torch.ones_like(stem_var(stale)), atol=0.1)
+    assert not torch.allclose(stem_var(fresh), torch.ones_like(stem_var(fresh)), atol=0.1)
+    # and it stays deterministic
+    again, _, _ = fit("cnn-lstm", epochs=1, windows_per_epoch=8)
+    assert np.array_equal(fresh.predict_proba(test), again.predict_proba(test))

@@ -78,6 +78,7 @@ class CnnLstm(ImageSequenceClassifier):
     weights: str | None = None
     backbone: str = "efficientnet-b0"
     drop_path: float = 0.2
+    bn_recalibration_batches: int = 50  # BN momentum 0.01: see the base class
 
     def __post_init__(self) -> None:
         super().__post_init__()
