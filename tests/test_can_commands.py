@@ -60,7 +60,8 @@ def test_record_writes_the_bus_with_label_markers(tmp_path, dataset):
     from tactbench.can.logs import read_log
     from tactbench.can.simulate import as_sim_sample, play, traffic
 
-    channel = f"rec-{uuid.uuid4().hex[:8]}"
+    # trailing digits above 65535: python-can's BLF writer cannot store such a channel
+    channel = f"rec-{uuid.uuid4().hex[:8]}-9912345"
     sample = dataset.samples[3]
     out = tmp_path / "rec.blf"
 

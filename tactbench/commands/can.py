@@ -257,6 +257,10 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
             if msg is None:
                 continue
             last = time.monotonic()
+            # A log holds one bus. python-can's BLF writer turns a channel *name* into a
+            # number from its trailing digits ("rec-912345" → 912345) and fails above
+            # 65535, so the name is not written.
+            msg.channel = None
             writer.on_message_received(msg)
             n += 1
             if not msg.is_error_frame:
