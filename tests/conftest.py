@@ -64,3 +64,15 @@ def plugin_dist(tmp_path, monkeypatch):
         return root
 
     return make
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """Tiny models gain nothing from threads, and on a busy 2-core machine two OpenMP
+    threads that wait for each other make a tiny fit ~30× slower."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

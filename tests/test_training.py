@@ -27,14 +27,7 @@ from tactbench.training import (
 BUILTIN = ("small-cnn-lstm", "cnn-lstm", "taxel-lstm", "logreg")
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """Tiny models gain nothing from threads, and on a busy 2-core machine two OpenMP
-    threads that wait for each other make a tiny fit ~30× slower."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 # ----------------------------------------------------------------------------- profiles
