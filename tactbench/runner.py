@@ -26,11 +26,10 @@ import os
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
-from tactbench.errors import TactbenchError
 from tactbench.paths import cache_dir
 
 EXECUTORS = ("local", "dask")
@@ -703,10 +702,11 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
                    or (scene.save_models and not (models / f"{c.key}.safetensors").exists())]
         cache = cache or EncodingCache()
         folders = ensure_encodings(p, cache, pending, bars)
+        labels = tuple(int(x) for x in p.dataset.labels)  # once, shared by every job
+        users = tuple(str(u) for u in p.dataset.users)
         jobs = [CellJob(cell=c, identity=p.identities[c.key],
                         encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
-                        labels=tuple(int(x) for x in p.dataset.labels),
-                        users=tuple(str(u) for u in p.dataset.users),
+                        labels=labels, users=users,
                         classes=tuple(p.dataset.classes), split=scene.split,
                         test_per_class=scene.test_per_class, device=scene.device,
                         threads=scene.resolved_threads(),
