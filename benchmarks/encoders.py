@@ -46,7 +46,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tactbench import flowbench as fb
+from tactbench.encoders import flowbench as fb
 from tactbench.encoders.flow import FlowEncoder
 from tactbench.plugins import load_registry
 
@@ -149,7 +149,7 @@ def kornia(registry, repeats: int) -> dict[str, Any]:
 
 
 def parallel(registry, repeats: int) -> dict[str, Any]:
-    from tactbench.encoding import encode_all
+    from tactbench.encoders.parallel import encode_all
 
     seqs = []
     for i in range(48):
@@ -247,7 +247,7 @@ def flowbench(registry, repeats: int, out_dir: Path) -> dict[str, Any]:
 
 
 def machine() -> str:
-    from tactbench.encoding import default_workers
+    from tactbench.encoders.parallel import default_workers
 
     return (f"{platform.machine()} VM, {default_workers()} usable cores, no GPU, "
             f"Python {platform.python_version()}; other jobs were running")

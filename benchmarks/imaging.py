@@ -65,8 +65,8 @@ def main() -> None:
 
     from scipy.interpolate import griddata
 
-    from tactbench.imaging import Imager
-    from tactbench.layout import cyskin_forearm
+    from tactbench.data.imaging import Imager
+    from tactbench.data.layout import cyskin_forearm
 
     layout = cyskin_forearm()
     rng = np.random.default_rng(0)

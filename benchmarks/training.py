@@ -120,7 +120,7 @@ def bare_loop(clf, train, *, steps: int, seed: int) -> float:
     import torch
     import torch.nn.functional as F
 
-    from tactbench.training import make_optimizer
+    from tactbench.classifiers.training import make_optimizer
 
     torch.manual_seed(seed)
     net = clf._build_net(tuple(train.frame_shape), 5, pretrained=False)
@@ -150,8 +150,8 @@ def measure_overhead(cases: list[tuple[str, object, int]], *, repeats: int) -> l
     counts (other jobs share the cores, and only ever slow a run down)."""
     import warnings
 
+    from tactbench.classifiers.training import profile_options
     from tactbench.plugins import load_registry
-    from tactbench.training import profile_options
 
     reg = load_registry()
     rows = []
@@ -193,7 +193,7 @@ def measure_overhead(cases: list[tuple[str, object, int]], *, repeats: int) -> l
 def taxel_windows(windows):
     """The same windows as taxel vectors ``(T, N)``: every 5th pixel of the first channel
     (a ~5 px taxel pitch, like CySkin's 7.5 mm at 1.5 mm/px)."""
-    from tactbench.windows import Windows
+    from tactbench.data.windows import Windows
 
     seqs = [np.ascontiguousarray(s[:, 0, ::5, ::5].reshape(s.shape[0], -1))
             for s in windows.sequences]
@@ -215,9 +215,9 @@ def measure_logreg(train) -> dict:
 
 
 def measure_quick(n_sequences: int, seeds, channels_list) -> list[dict]:
+    from tactbench.classifiers.training import profile_options
+    from tactbench.data.windows import test_windows, training_windows
     from tactbench.plugins import load_registry
-    from tactbench.training import profile_options
-    from tactbench.windows import test_windows, training_windows
 
     reg = load_registry()
     rows = []
@@ -254,8 +254,8 @@ def measure_paper_epoch(train) -> dict | None:
     if not torch.cuda.is_available():
         print("paper-epoch: no CUDA device, skipped", flush=True)
         return None
+    from tactbench.classifiers.training import profile_options
     from tactbench.plugins import load_registry
-    from tactbench.training import profile_options
 
     opts = profile_options("paper", "cnn-lstm")
     opts["epochs"] = 1
@@ -286,7 +286,7 @@ def main(argv=None) -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    from tactbench.windows import training_windows
+    from tactbench.data.windows import training_windows
 
     result: dict = {"command": "python " + " ".join(sys.argv), "threads": args.threads,
                     "machine": platform.platform(), "torch": torch.__version__,

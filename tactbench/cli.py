@@ -69,10 +69,16 @@ class TactbenchGroup(click.Group):
 
         try:
             return super().invoke(ctx)
-        except (TactbenchError, ValueError, FileNotFoundError) as exc:
+        except TactbenchError as exc:  # the user's mistake: one line, exit status 2
             if os.environ.get(DEBUG_ENV):
                 raise
-            raise click.ClickException(" ".join(str(exc).split())) from exc
+            raise UserError(" ".join(str(exc).split())) from exc
+
+
+class UserError(click.ClickException):
+    """A :class:`~tactbench.errors.TactbenchError` as the CLI shows it: ``Error: ...``."""
+
+    exit_code = 2
 
 
 def _state(ctx: click.Context) -> dict[str, Any]:
@@ -125,8 +131,23 @@ def cli() -> None:
     """
 
 
+BUG_REPORT = ("tactbench: this is a bug (in tactbench or in the plugin named in the "
+              "traceback above), not a mistake in your input; please report it with the "
+              "traceback and the command you ran. Set TACTBENCH_DEBUG=1 to see tracebacks "
+              "of user errors too.")
+
+
 def main(argv: list[str] | None = None) -> None:
-    cli.main(args=argv, prog_name="tactbench")
+    """The console script: user errors are one line (exit 2); a bug keeps its traceback
+    and says how to report it (exit 1)."""
+    try:
+        cli.main(args=argv, prog_name="tactbench")
+    except Exception:  # click has handled every user-facing error already
+        import traceback
+
+        traceback.print_exc()
+        click.echo(BUG_REPORT, err=True)
+        sys.exit(1)
 
 
 if __name__ == "__main__":  # pragma: no cover

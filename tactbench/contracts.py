@@ -1,9 +1,16 @@
-"""The component contracts, in one place.
+"""The component contracts, each written once, and the check that enforces them.
 
-These are :class:`typing.Protocol` classes: a component satisfies one by having
-the methods below, with no need to inherit. Encoders have a base class with the
-shared input policy in :mod:`tactbench.encoders.base`; the protocol here is the
-minimum the runner relies on.
+A component satisfies its contract by having the members below, with no need to
+inherit (base classes such as :class:`tactbench.encoders.base.Encoder` and
+:class:`tactbench.classifiers.base.SequenceClassifier` point here and fill in the
+optional members). :meth:`tactbench.plugins.Registry.build` calls :func:`check` on every
+component it builds, the way pluggy verifies a hook implementation when it is
+registered, so a component that misses a required member is refused with its plugin,
+name and the missing member named, before any work starts.
+
+Optional members have one documented default, here; code reads them with
+:meth:`Contract.get` (``ENCODER.get(encoder, "version")``), never with a private
+``getattr(x, "...", default)``.
 
 Shapes use ``T`` frames, ``N`` taxels, ``H × W`` pixels, ``C`` channels,
 ``B`` sequences in a batch, ``L`` frames in a window.
@@ -11,21 +18,158 @@ Shapes use ``T`` frames, ``N`` taxels, ``H × W`` pixels, ``C`` channels,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Protocol, runtime_checkable
+
+from tactbench.errors import ContractError
 
 if TYPE_CHECKING:  # numpy stays out of import time
     import numpy as np
 
+_REQUIRED = object()
+
+
+@dataclass(frozen=True)
+class Member:
+    """One member of a contract: a method (called) or an attribute (read)."""
+
+    name: str
+    method: bool
+    doc: str
+    default: Any = _REQUIRED
+    check: Callable[[Any], str | None] | None = None  # value → problem, or None
+
+    @property
+    def required(self) -> bool:
+        return self.default is _REQUIRED
+
+
+@dataclass(frozen=True)
+class Contract:
+    """What the code relies on for one kind of component."""
+
+    kind: str
+    members: tuple[Member, ...]
+
+    def member(self, name: str) -> Member:
+        for m in self.members:
+            if m.name == name:
+                return m
+        raise KeyError(f"the {self.kind} contract has no member '{name}'")
+
+    def get(self, obj: Any, name: str) -> Any:
+        """``obj.name``, or the contract's default for an optional member ``obj`` lacks.
+
+        Works on a built component and on its class (for members a class declares).
+        """
+        member = self.member(name)
+        value = getattr(obj, name, _REQUIRED)
+        if value is _REQUIRED:
+            if member.required:
+                raise ContractError(f"{self.kind} {_describe(obj)} has no '{name}'")
+            return member.default
+        return value
+
+    def problems(self, obj: Any) -> list[str]:
+        """Everything ``obj`` misses or gets wrong, one phrase each (empty when it conforms)."""
+        out = []
+        for m in self.members:
+            value = getattr(obj, m.name, _REQUIRED)
+            if value is _REQUIRED:
+                if m.required:
+                    out.append(f"no {'method' if m.method else 'attribute'} '{m.name}' "
+                               f"({m.doc})")
+                continue
+            if m.method and not callable(value):
+                out.append(f"'{m.name}' is not callable ({m.doc})")
+            elif m.check is not None:
+                problem = m.check(value)
+                if problem:
+                    out.append(f"'{m.name}' {problem}")
+        return out
+
+
+def _describe(obj: Any) -> str:
+    return type(obj).__name__ if not isinstance(obj, type) else obj.__name__
+
+
+def _channels(value: Any) -> str | None:
+    if isinstance(value, str) or not hasattr(value, "__len__") or len(value) == 0 \
+            or not all(isinstance(c, str) and c for c in value):
+        return f"must be a non-empty sequence of channel names, got {value!r}"
+    return None
+
+
+def _frame_rank(value: Any) -> str | None:
+    if value not in (1, 3, None) or isinstance(value, bool):
+        return f"must be 3 (images), 1 (taxel vectors) or None (either), got {value!r}"
+    return None
+
+
+def _ranges(value: Any) -> str | None:
+    try:
+        ok = all(len(r) == 2 and float(r[0]) <= float(r[1]) for r in value)
+    except (TypeError, ValueError):
+        ok = False
+    return None if ok else f"must be (low, high) pairs, one per channel, got {value!r}"
+
+
+ENCODER = Contract("encoder", (
+    Member("channels", False, "names of the C output channels", check=_channels),
+    Member("encode", True, "encode(seq (T, H, W) float32 in [0, 1]) → (T, C, H, W) float32"),
+    Member("version", False, "changes when the output for the same input changes; part of "
+           "cache keys", default="1"),
+    Member("ranges", False, "(low, high) per channel, checked by the conformance suite; "
+           "() means not declared", default=(), check=_ranges),
+    Member("options", True, "options() → the keyword options it was built with",
+           default=None),
+    Member("metadata", True, "metadata() → name, version, options, channels, ranges",
+           default=None),
+))
+
+CLASSIFIER = Contract("classifier", (
+    Member("fit", True, "fit(train, val, *, seed, device, progress) → JSON-ready report"),
+    Member("predict", True, "predict(batch) → class indices (B,)"),
+    Member("predict_proba", True, "predict_proba(batch) → (B, n_classes) probabilities"),
+    Member("save", True, "save(path, metadata) without pickle"),
+    Member("frame_rank", False, "3: frames are images (C, H, W); 1: taxel vectors (N,); "
+           "None: either", default=3, check=_frame_rank),
+    Member("version", False, "changes when training changes for the same options",
+           default="1"),
+    Member("profiles", False, "profile name → default options (quick, paper)", default={}),
+))
+
+SENSOR = Contract("sensor", (
+    Member("taxel_ids", False, "int (N,): the taxel each value belongs to"),
+    Member("frames", True, "frames() → Frame objects in time order"),
+    Member("close", True, "close() ends frames()"),
+))
+
+DATASET = Contract("dataset", (
+    Member("load", True, "load() → tactbench.data.recording.Dataset"),
+))
+
+CONTRACTS: dict[str, Contract] = {c.kind: c for c in (ENCODER, CLASSIFIER, SENSOR, DATASET)}
+
+
+def check(kind: str, obj: Any, *, name: str = "", plugin: str = "") -> Any:
+    """Return ``obj`` if it satisfies the ``kind`` contract, else raise :class:`ContractError`
+    naming the plugin, the component and every problem found."""
+    problems = CONTRACTS[kind].problems(obj)
+    if problems:
+        who = f"{kind} '{name}'" if name else f"{kind} {_describe(obj)}"
+        where = f" (plugin '{plugin}')" if plugin else ""
+        raise ContractError(f"{who}{where} breaks the {kind} contract: "
+                            f"{'; '.join(problems)}. See tactbench.contracts.")
+    return obj
+
+
+# ----------------------------------------------------------------------------- typing
+
 
 @runtime_checkable
 class Encoder(Protocol):
-    """Built with keyword options: ``Farneback(winsize=9, levels=2)``.
-
-    ``channels`` names the ``C`` output channels; ``encode`` maps float32
-    ``(T, H, W)`` in [0, 1] to float32 ``(T, C, H, W)``, every value finite and
-    in the channel's documented range, deterministic. ``I_{-1}`` is all zeros.
-    Bad input (wrong rank, empty, NaN/Inf, out of range) raises ``ValueError``.
-    """
+    """Static face of :data:`ENCODER` (built with keyword options)."""
 
     channels: tuple[str, ...]
 
@@ -41,12 +185,7 @@ class Frame(Protocol):
 
 @runtime_checkable
 class Sensor(Protocol):
-    """Built with keyword options (interface, channel, file, rate, ...).
-
-    ``frames()`` yields :class:`Frame` objects in time order until the source
-    ends or ``close()`` is called; ``taxel_ids`` (int, ``(N,)``) says which
-    taxel each value belongs to. Sensors are context managers.
-    """
+    """Static face of :data:`SENSOR`; sensors are also context managers."""
 
     taxel_ids: "np.ndarray"
 
@@ -56,30 +195,19 @@ class Sensor(Protocol):
 
 
 @runtime_checkable
-class DatasetSource(Protocol):
-    """A registered dataset: built with keyword options, ``load()`` returns the data.
-
-    The returned object holds labelled recordings (values ``(T, N)`` float32,
-    timestamps, label, user), the class names and, when known, the taxel layout.
-    """
-
-    def load(self) -> Any: ...
-
-
-@runtime_checkable
 class Classifier(Protocol):
-    """Built with keyword options; trained on encoded windows.
+    """Static face of :data:`CLASSIFIER`.
 
-    - ``fit(train, val, *, seed, device, progress)``: ``train``/``val`` hold
-      windows ``(B, L, C, H, W)`` (or ``(B, L, N)`` for taxel vectors) with
-      integer labels ``(B,)``; ``val`` may be ``None``; ``progress`` is a
-      callable ``progress(done, total, **info)`` or ``None``.
-    - ``predict(batch)`` → class indices ``(B,)``; ``predict_proba(batch)`` →
-      ``(B, n_classes)`` probabilities summing to 1.
-    - ``save(path)`` / ``load(path)``: state and metadata without pickle.
+    ``train``/``val`` hold windows ``(B, L, C, H, W)`` (or ``(B, L, N)`` for taxel
+    vectors) with integer labels ``(B,)``; ``val`` may be ``None``; ``progress`` is a
+    callable ``progress(done, total, **info)`` or ``None``.
     """
 
     def fit(self, train: Any, val: Any, *, seed: int, device: str,
             progress: Callable[..., None] | None) -> Any: ...
 
     def predict(self, batch: "np.ndarray") -> "np.ndarray": ...
+
+    def predict_proba(self, batch: "np.ndarray") -> "np.ndarray": ...
+
+    def save(self, path: Any, metadata: dict[str, Any] | None = None) -> Any: ...

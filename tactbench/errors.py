@@ -1,14 +1,35 @@
-"""Exceptions tactbench raises on purpose; the CLI turns them into one-line errors."""
+"""Exceptions tactbench raises on purpose, and the shared checks that raise them.
+
+A :class:`TactbenchError` is a mistake the user can fix (a bad option, file, shape or
+name); the CLI prints it as one line and exits with status 2. Any other exception is a
+bug and keeps its traceback. The user-error classes also subclass the built-in exception
+a Python caller would expect (``ValueError``, ``FileNotFoundError``, ``LookupError``), so
+``except ValueError`` keeps working.
+"""
 
 from __future__ import annotations
+
+from typing import Any
 
 
 class TactbenchError(Exception):
     """Base class: something the user can fix (bad input, bad name, broken plugin)."""
 
 
+class InputError(TactbenchError, ValueError):
+    """A value, option, shape or file content is not what tactbench accepts."""
+
+
+class MissingFileError(TactbenchError, FileNotFoundError):
+    """A file or folder the user named does not exist."""
+
+
 class PluginError(TactbenchError):
     """A plugin failed to load or registered something invalid (fatal in strict mode)."""
+
+
+class ContractError(PluginError, TypeError):
+    """A built component does not satisfy the contract of its kind (see contracts.py)."""
 
 
 class UnknownComponentError(TactbenchError, LookupError):
@@ -20,3 +41,64 @@ class UnknownComponentError(TactbenchError, LookupError):
 
 class ComponentLoadError(TactbenchError):
     """A component's target did not import, or its requirements are missing."""
+
+
+# ----------------------------------------------------------------------------- checks
+
+
+def check_positive_int(value: Any, name: str, *, minimum: int = 1) -> int:
+    """``value`` as an ``int`` ≥ ``minimum``; bools, floats with a fraction, text refused."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        if isinstance(value, numbers.Real) and not isinstance(value, bool) \
+                and float(value).is_integer():
+            value = int(value)
+        else:
+            raise InputError(f"{name} must be an integer ≥ {minimum}, got {value!r}")
+    if int(value) < minimum:
+        raise InputError(f"{name} must be ≥ {minimum}, got {value}")
+    return int(value)
+
+
+def check_positive_float(value: Any, name: str, *, allow_zero: bool = False) -> float:
+    """``value`` as a finite ``float`` > 0 (≥ 0 with ``allow_zero``)."""
+    import math
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+            or not math.isfinite(float(value)):
+        raise InputError(f"{name} must be a finite number, got {value!r}")
+    if float(value) < 0 or (float(value) == 0 and not allow_zero):
+        raise InputError(f"{name} must be {'≥' if allow_zero else '>'} 0, got {value}")
+    return float(value)
+
+
+def check_choice(value: Any, name: str, choices: "tuple[str, ...] | list[str]") -> str:
+    """``value`` if it is one of ``choices``; else an error listing them (closest first)."""
+    if value in choices:
+        return value
+    import difflib
+
+    close = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    raise InputError(f"unknown {name} {value!r}{hint} Choices: {', '.join(map(str, choices))}")
+
+
+def check_shape(arr: Any, dims: str, name: str = "array", *, dtype_kind: str | None = None,
+                **sizes: int) -> None:
+    """Check an array's rank (and named sizes) against a shape written as ``"T H W"``.
+
+    ``check_shape(x, "T C H W", "encoded", C=3)`` raises :class:`InputError` saying
+    what was expected and what came: ``encoded must be (T, C=3, H, W), got (5, 2, 8, 8)``.
+    ``dtype_kind`` (numpy kind letters, e.g. ``"fiu"``) also checks the element type.
+    """
+    names = dims.split()
+    shape = getattr(arr, "shape", None)
+    want = "(" + ", ".join(f"{d}={sizes[d]}" if d in sizes else d for d in names) + ")"
+    if shape is None:
+        raise InputError(f"{name} must be an array {want}, got {type(arr).__name__}")
+    if len(shape) != len(names) or any(shape[names.index(d)] != n for d, n in sizes.items()):
+        raise InputError(f"{name} must be {want}, got {tuple(shape)}")
+    if dtype_kind is not None and arr.dtype.kind not in dtype_kind:
+        raise InputError(f"{name} must hold numbers, got dtype {arr.dtype}")

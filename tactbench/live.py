@@ -35,6 +35,8 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
+from tactbench.errors import InputError
+
 
 # ------------------------------------------------------------------ encoding
 def encode_next(encoder: Any, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
@@ -76,7 +78,7 @@ class IncrementalEncoder:
         image = np.asarray(image, dtype=np.float32)
         prev = self._prev if self._prev is not None else np.zeros_like(image)
         if prev.shape != image.shape:
-            raise ValueError(f"image shape changed from {prev.shape} to {image.shape}")
+            raise InputError(f"image shape changed from {prev.shape} to {image.shape}")
         out = encode_next(self.encoder, prev, image)
         self._prev = image
         return out
@@ -121,7 +123,7 @@ class LiveModel:
         """Load a model file saved with :func:`live_metadata`'s metadata.
 
         Keyword arguments override what the metadata says (``layout`` is a
-        :class:`~tactbench.layout.TaxelLayout` or a layout file).
+        :class:`~tactbench.data.layout.TaxelLayout` or a layout file).
         """
         from tactbench.classifiers.io import load_model
 
@@ -174,7 +176,7 @@ class LiveModel:
         if lay is None:
             raise TactbenchError(f"{where}: an image classifier needs the taxel layout; "
                                  f"the metadata has none: give --layout")
-        from tactbench.imaging import Imager
+        from tactbench.data.imaging import Imager
 
         imaging = meta.get("imaging") or {}
         px = float(pixel_mm if pixel_mm is not None else imaging.get("pixel_mm", 1.0))
@@ -199,7 +201,7 @@ class LiveModel:
 def _layout(obj: Any, where: str) -> Any:
     if obj is None:
         return None
-    from tactbench.layout import TaxelLayout, load_layout
+    from tactbench.data.layout import TaxelLayout, load_layout
 
     if isinstance(obj, TaxelLayout):
         return obj
@@ -211,14 +213,14 @@ def _layout(obj: Any, where: str) -> Any:
                            positions=np.asarray(obj["positions"], np.float64),
                            bounds=tuple(bounds) if bounds else None,
                            name=str(obj.get("name", "")))
-    raise ValueError(f"{where}: cannot read the layout from {type(obj).__name__}")
+    raise InputError(f"{where}: cannot read the layout from {type(obj).__name__}")
 
 
 def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
                   method: str = "linear") -> dict[str, Any]:
     """The metadata to save with a model so ``tactbench live`` can use it.
 
-    ``dataset`` is the :class:`tactbench.recording.Dataset` the model was
+    ``dataset`` is the :class:`tactbench.data.recording.Dataset` the model was
     trained on (its classes, layout and normalisation are recorded).
     """
     offset, scale = dataset.normalisation_params()
@@ -347,7 +349,7 @@ class LiveClassifier:
     def __init__(self, model: LiveModel, *, warmup: str = "wait",
                  cache_features: bool = True) -> None:
         if warmup not in ("wait", "pad"):
-            raise ValueError(f"warmup must be 'wait' or 'pad', got {warmup!r}")
+            raise InputError(f"warmup must be 'wait' or 'pad', got {warmup!r}")
         self.model = model
         self.warmup = warmup
         self.encoder = IncrementalEncoder(model.encoder) if model.uses_images else None
@@ -380,7 +382,7 @@ class LiveClassifier:
         m = self.model
         values = np.asarray(values, dtype=np.float32)
         if values.shape != m.taxel_ids.shape:
-            raise ValueError(f"sweep has {values.size} values, the model {m.taxel_ids.size} "
+            raise InputError(f"sweep has {values.size} values, the model {m.taxel_ids.size} "
                              f"taxels")
         pressure = m.normalise(values)
         if not m.uses_images:

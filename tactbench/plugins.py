@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterable
 import pluggy
 
 from tactbench import __version__, hookspecs
-from tactbench.errors import ComponentLoadError, PluginError, UnknownComponentError
+from tactbench.errors import ComponentLoadError, InputError, PluginError, UnknownComponentError
 
 ENTRY_POINT_GROUP = "tactbench"
 STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
@@ -167,12 +167,14 @@ class Registry:
         comp = self.get(kind, name)
         factory = comp.load()
         _check_options(comp, factory, spec_options)
-        return factory(**spec_options)
+        from tactbench.contracts import check
+
+        return check(kind, factory(**spec_options), name=comp.name, plugin=comp.plugin)
 
 
 def _check_kind(kind: str) -> str:
     if kind not in KIND_HOOKS:
-        raise ValueError(f"unknown component kind '{kind}'; kinds: {', '.join(KINDS)}")
+        raise InputError(f"unknown component kind '{kind}'; kinds: {', '.join(KINDS)}")
     return kind
 
 
@@ -189,7 +191,7 @@ def _check_options(comp: Component, factory: Any, options: dict[str, Any]) -> No
         if key not in accepted:
             close = difflib.get_close_matches(key, accepted, n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise ValueError(
+            raise InputError(
                 f"{comp.kind} '{comp.name}' has no option '{key}'{hint} "
                 f"Options: {', '.join(accepted) or 'none'}"
             )
@@ -204,14 +206,14 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     name, _, rest = spec.partition(":")
     name = name.strip()
     if not name:
-        raise ValueError(f"empty component name in '{spec}'")
+        raise InputError(f"empty component name in '{spec}'")
     options: dict[str, Any] = {}
     if rest.strip():
         for item in rest.split(","):
             key, eq, value = item.partition("=")
             key = key.strip()
             if not eq or not key.isidentifier():
-                raise ValueError(
+                raise InputError(
                     f"bad option '{item}' in '{spec}': expected key=value, as in "
                     f"'{name}:key=value,other=value'"
                 )
@@ -407,20 +409,20 @@ def _make_register(kind: str, plugin: str, dist: str,
     def register(name: str, target: str, *, summary: str,
                  requires: Iterable[str] = ()) -> None:
         if not isinstance(name, str) or not _NAME_RE.match(name):
-            raise ValueError(f"{kind} name {name!r} is invalid: use lower-case letters, "
+            raise InputError(f"{kind} name {name!r} is invalid: use lower-case letters, "
                              f"digits, '-', '_' and '.'")
         if not isinstance(target, str) or not _TARGET_RE.match(target):
-            raise ValueError(f"{kind} '{name}': target {target!r} must look like "
+            raise InputError(f"{kind} '{name}': target {target!r} must look like "
                              f"'package.module:Attribute'")
         if not isinstance(summary, str) or not summary.strip():
-            raise ValueError(f"{kind} '{name}': summary must be a non-empty string")
+            raise InputError(f"{kind} '{name}': summary must be a non-empty string")
         if isinstance(requires, str):
             requires = (requires,)
         reqs = tuple(requires)
         if not all(isinstance(r, str) and r for r in reqs):
-            raise ValueError(f"{kind} '{name}': requires must be module names, got {reqs!r}")
+            raise InputError(f"{kind} '{name}': requires must be module names, got {reqs!r}")
         if any(c.name == name for c in sink):
-            raise ValueError(f"{kind} '{name}' registered twice by the same plugin")
+            raise InputError(f"{kind} '{name}' registered twice by the same plugin")
         sink.append(Component(kind, name, target, summary.strip(), reqs, plugin, dist))
 
     return register

@@ -49,8 +49,8 @@ def test_incremental_encoding_equals_full_encoding(name):
 
 def tiny_dataset():
     """Two classes of contacts sliding left or right over an 8 × 8 taxel patch."""
-    from tactbench.layout import TaxelLayout
-    from tactbench.recording import Dataset, Recording, Sample
+    from tactbench.data.layout import TaxelLayout
+    from tactbench.data.recording import Dataset, Recording, Sample
 
     ids = np.array([m * 16 + s for m in range(1, 7) for s in range(11)])[:64]
     gy, gx = np.divmod(np.arange(64), 8)
@@ -74,7 +74,7 @@ def tiny_dataset():
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    from tactbench.windows import training_windows
+    from tactbench.data.windows import training_windows
 
     dataset = tiny_dataset()
     encoder_spec, L, px = "frame-diff", 3, 5.0

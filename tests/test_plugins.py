@@ -6,14 +6,14 @@ import json
 import subprocess
 import sys
 import types
+from pathlib import Path
 
 import click
 import pytest
 
 from tactbench import hookimpl, hookspecs
 from tactbench.errors import ComponentLoadError, PluginError, UnknownComponentError
-from tactbench.plugins import (collect_registry, format_spec, make_plugin_manager,
-                               parse_spec)
+from tactbench.plugins import collect_registry, format_spec, make_plugin_manager, parse_spec
 
 GOOD_PLUGIN = """
     from tactbench import hookimpl
@@ -73,12 +73,15 @@ def test_hook_register_sensors():
 
 def test_hook_register_datasets():
     def register_datasets(register):
-        register("tiny", "collections:OrderedDict", summary="a dataset factory")
+        # a second name for the built-in simulator's source class
+        register("tiny", "tactbench.datasets.synthetic:SyntheticForearm",
+                 summary="a dataset factory")
 
     reg = registry_with(("p", namespace(register_datasets=register_datasets)))
     assert "tiny" in reg.names("dataset")
     built = reg.build("dataset", "tiny:users=3")
-    assert built == {"users": 3}  # the target was imported and called with the options
+    assert built.options["users"] == 3  # the target was imported and called with the options
+    assert callable(built.load)  # and it satisfies the dataset contract
 
 
 def test_hook_register_encoders(plugin_dist):
@@ -305,7 +308,7 @@ def test_plugin_commands_cannot_replace_builtin_commands():
 def test_hook_reference_documents_every_hook_with_its_signature():
     import inspect
 
-    from conftest import REPO
+    REPO = Path(__file__).resolve().parents[1]
 
     doc = (REPO / "docs" / "plugins.md").read_text()
     for name in (n for n in dir(hookspecs) if n.startswith("register_")):

@@ -41,6 +41,7 @@ from typing import Any, Iterable, Iterator
 import numpy as np
 
 from tactbench.can.codec import COUNTER_MODULO, Decoded, TaxelMap, decode_message
+from tactbench.errors import InputError
 
 MISSING_RULES = ("hold", "nan", "zero")
 
@@ -136,10 +137,10 @@ class SweepAssembler:
 
     def __init__(self, taxels: TaxelMap, *, missing: str = "hold", window: int = 2) -> None:
         if missing not in MISSING_RULES:
-            raise ValueError(f"missing must be one of {', '.join(MISSING_RULES)}, "
+            raise InputError(f"missing must be one of {', '.join(MISSING_RULES)}, "
                              f"got {missing!r}")
         if window < 1:
-            raise ValueError(f"window must be ≥ 1, got {window}")
+            raise InputError(f"window must be ≥ 1, got {window}")
         self.taxels = taxels
         self.missing = missing
         self.window = int(window)

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from tactbench.can.codec import FrameFormat, TaxelMap
+from tactbench.errors import InputError
 
 
 def frame_bits(n_bytes: int, *, extended: bool, fd: bool = False,
@@ -31,7 +32,7 @@ def frame_bits(n_bytes: int, *, extended: bool, fd: bool = False,
     """
     if not fd:
         if n_bytes > 8:
-            raise ValueError(f"classic CAN carries at most 8 bytes, got {n_bytes}")
+            raise InputError(f"classic CAN carries at most 8 bytes, got {n_bytes}")
         bits = (67 if extended else 47) + 8 * n_bytes
         if worst_case:
             bits += ((54 if extended else 34) + 8 * n_bytes - 1) // 4
@@ -101,7 +102,7 @@ def bus_load(taxels: TaxelMap, *, bitrate: float = 1_000_000, rate_hz: float = 1
         CAN FD data-phase bitrate (bit/s); defaults to ``bitrate``. Ignored for classic CAN.
     """
     if bitrate <= 0 or rate_hz <= 0:
-        raise ValueError(f"bitrate and rate must be > 0, got {bitrate} and {rate_hz}")
+        raise InputError(f"bitrate and rate must be > 0, got {bitrate} and {rate_hz}")
     fmt: FrameFormat = taxels.fmt
     if not fmt.fd:
         data_bitrate = None

@@ -27,6 +27,8 @@ from typing import Any, Iterable, NamedTuple
 
 import numpy as np
 
+from tactbench.errors import InputError
+
 SLOTS_PER_MODULE = 16
 COUNTER_MODULO = 256
 MAX_COUNT = 0xFFFF
@@ -38,13 +40,13 @@ FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 def _int(value: Any, name: str) -> int:
     """An int from an int or a string such as ``"0x1C"`` (spec strings keep hex as text)."""
     if isinstance(value, bool):
-        raise ValueError(f"frame format option '{name}' must be an integer, got {value!r}")
+        raise InputError(f"frame format option '{name}' must be an integer, got {value!r}")
     if isinstance(value, int):
         return value
     try:
         return int(str(value), 0)
     except ValueError:
-        raise ValueError(f"frame format option '{name}' must be an integer "
+        raise InputError(f"frame format option '{name}' must be an integer "
                          f"(decimal or 0x hex), got {value!r}") from None
 
 
@@ -56,7 +58,7 @@ def _bool(value: Any, name: str) -> bool:
         return True
     if text in ("0", "false", "no", "off"):
         return False
-    raise ValueError(f"frame format option '{name}' must be true or false, got {value!r}")
+    raise InputError(f"frame format option '{name}' must be true or false, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -90,18 +92,18 @@ class FrameFormat:
 
     def __post_init__(self) -> None:
         if self.ids not in ("extended", "standard"):
-            raise ValueError(f"frame format: ids must be 'extended' or 'standard', "
+            raise InputError(f"frame format: ids must be 'extended' or 'standard', "
                              f"got {self.ids!r}")
         if self.byteorder not in ("big", "little"):
-            raise ValueError(f"frame format: byteorder must be 'big' or 'little', "
+            raise InputError(f"frame format: byteorder must be 'big' or 'little', "
                              f"got {self.byteorder!r}")
         if not 0 <= self.prefix < 32:
-            raise ValueError(f"frame format: prefix must be 0..31 (5 bits), got {self.prefix}")
+            raise InputError(f"frame format: prefix must be 0..31 (5 bits), got {self.prefix}")
         if not 0 <= self.base_id <= 0x7FF:
-            raise ValueError(f"frame format: base_id must be 0..0x7FF, got {self.base_id:#x}")
+            raise InputError(f"frame format: base_id must be 0..0x7FF, got {self.base_id:#x}")
         targets = list(self.module_map.values())
         if len(set(targets)) != len(targets):
-            raise ValueError("frame format: module_map maps two bus modules to one module")
+            raise InputError("frame format: module_map maps two bus modules to one module")
 
     # ---------------------------------------------------------------- building
     @classmethod
@@ -110,7 +112,7 @@ class FrameFormat:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(options) - known)
         if unknown:
-            raise ValueError(f"unknown frame format option(s) {', '.join(unknown)}; "
+            raise InputError(f"unknown frame format option(s) {', '.join(unknown)}; "
                              f"options: {', '.join(sorted(known))}")
         kw: dict[str, Any] = {}
         for key, value in options.items():
@@ -120,7 +122,7 @@ class FrameFormat:
                 kw[key] = _bool(value, key)
             elif key == "module_map":
                 if not isinstance(value, dict):
-                    raise ValueError("frame format: module_map must be an object "
+                    raise InputError("frame format: module_map must be an object "
                                      "{bus_module: layout_module}")
                 kw[key] = {_int(k, "module_map"): _int(v, "module_map")
                            for k, v in value.items()}
@@ -141,7 +143,7 @@ class FrameFormat:
         for item in spec.replace(";", ",").split(","):
             key, eq, value = item.partition("=")
             if not eq or not key.strip():
-                raise ValueError(f"bad frame format item '{item}' in '{spec}': "
+                raise InputError(f"bad frame format item '{item}' in '{spec}': "
                                  f"expected key=value")
             options[key.strip()] = value.strip()
         return cls.from_options(options)
@@ -153,13 +155,13 @@ class FrameFormat:
         try:
             data = json.loads(path.read_text())
         except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON (line {exc.lineno}): {exc.msg}") from None
+            raise InputError(f"{path}: not valid JSON (line {exc.lineno}): {exc.msg}") from None
         if not isinstance(data, dict):
-            raise ValueError(f"{path}: expected a JSON object of frame format options")
+            raise InputError(f"{path}: expected a JSON object of frame format options")
         try:
             return cls.from_options(data)
         except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from None
+            raise InputError(f"{path}: {exc}") from None
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -233,15 +235,15 @@ class TaxelMap:
         ids = np.asarray(list(taxel_ids) if not isinstance(taxel_ids, np.ndarray)
                          else taxel_ids)
         if ids.ndim != 1 or ids.size == 0:
-            raise ValueError(f"taxel_ids must be a non-empty 1-D array, got shape {ids.shape}")
+            raise InputError(f"taxel_ids must be a non-empty 1-D array, got shape {ids.shape}")
         if not np.issubdtype(ids.dtype, np.integer):
-            raise ValueError(f"taxel_ids must be integers, got dtype {ids.dtype}")
+            raise InputError(f"taxel_ids must be integers, got dtype {ids.dtype}")
         ids = ids.astype(np.int64)
         if ids.min() < 0:
-            raise ValueError(f"taxel ids must be ≥ 0, found {int(ids.min())}")
+            raise InputError(f"taxel ids must be ≥ 0, found {int(ids.min())}")
         uniq, counts = np.unique(ids, return_counts=True)
         if (counts > 1).any():
-            raise ValueError(f"taxel ids must be unique; {int(uniq[counts > 1][0])} repeats")
+            raise InputError(f"taxel ids must be unique; {int(uniq[counts > 1][0])} repeats")
         self.taxel_ids = ids
         modules = ids // SLOTS_PER_MODULE
         slots = ids % SLOTS_PER_MODULE
@@ -249,7 +251,7 @@ class TaxelMap:
         too_big = [int(m) for m in np.unique(modules)
                    if self.fmt.bus_module(int(m)) > self.fmt.max_module]
         if too_big:
-            raise ValueError(f"module {too_big[0]} (taxel id {too_big[0] * 16}+) does not fit "
+            raise InputError(f"module {too_big[0]} (taxel id {too_big[0] * 16}+) does not fit "
                              f"the {self.fmt.ids} id scheme (bus modules 0..{self.fmt.max_module})"
                              f"; use a module_map or another id scheme")
         chunks: list[Chunk] = []
@@ -330,7 +332,7 @@ def encode_payloads(counts: np.ndarray, taxels: TaxelMap,
     """
     counts = np.asarray(counts)
     if counts.shape != (taxels.n_taxels,):
-        raise ValueError(f"expected {taxels.n_taxels} values, got shape {counts.shape}")
+        raise InputError(f"expected {taxels.n_taxels} values, got shape {counts.shape}")
     fmt = taxels.fmt
     counter %= COUNTER_MODULO
     dtype = fmt.value_dtype

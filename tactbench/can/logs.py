@@ -19,6 +19,7 @@ import numpy as np
 from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
 from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
+from tactbench.errors import InputError, MissingFileError
 
 #: Class name of the samples of a log without label markers.
 UNLABELLED = "unlabelled"
@@ -35,7 +36,7 @@ def is_can_log(path: str | Path) -> bool:
 
 def _check_suffix(path: Path) -> None:
     if path.suffix.lower() not in LOG_SUFFIXES:
-        raise ValueError(f"{path}: not a CAN log file name; use one of "
+        raise InputError(f"{path}: not a CAN log file name; use one of "
                          f"{', '.join(LOG_SUFFIXES)}")
 
 
@@ -68,18 +69,18 @@ def read_messages(path: str | Path) -> Iterator[Any]:
 
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such CAN log")
+        raise MissingFileError(f"{path}: no such CAN log")
     _check_suffix(path)
     try:
         reader = can.LogReader(str(path))
     except Exception as exc:
-        raise ValueError(f"{path}: cannot open as a CAN log: {type(exc).__name__}: {exc}") from exc
+        raise InputError(f"{path}: cannot open as a CAN log: {type(exc).__name__}: {exc}") from exc
     try:
         yield from reader
     except ValueError:
         raise
     except Exception as exc:
-        raise ValueError(f"{path}: unreadable CAN log: {type(exc).__name__}: {exc}") from exc
+        raise InputError(f"{path}: unreadable CAN log: {type(exc).__name__}: {exc}") from exc
     finally:
         stop = getattr(reader, "stop", None)
         if stop is not None:
@@ -115,7 +116,7 @@ def infer_taxel_ids(messages: Iterable[Any], fmt: FrameFormat | None = None) -> 
         module = fmt.layout_module(bus)
         ids.update(module * SLOTS_PER_MODULE + offset + i for i in range(n))
     if not ids:
-        raise ValueError("no CySkin data messages found (wrong frame format, or an empty log?)")
+        raise InputError("no CySkin data messages found (wrong frame format, or an empty log?)")
     return np.array(sorted(ids), dtype=np.int64)
 
 
@@ -184,7 +185,7 @@ class CanLog:
 
     def to_dataset(self, *, name: str | None = None, layout: Any = None,
                    normalisation: Any = "fixed") -> Any:
-        """The labelled segments as a :class:`tactbench.recording.Dataset`.
+        """The labelled segments as a :class:`tactbench.data.recording.Dataset`.
 
         Classes are the label names, in the order of the markers' ``class_index``
         when every marker has one (the simulator writes it), else sorted; marker fields ``user``, ``position``,
@@ -194,13 +195,13 @@ class CanLog:
         label markers gives one sample per unlabelled stretch, of class
         ``"unlabelled"``.
         """
-        from tactbench.recording import Dataset, Recording, Sample
+        from tactbench.data.recording import Dataset, Recording, Sample
 
         segments = self.labelled or [Segment({"label": UNLABELLED}, s.timestamps, s.values,
                                              s.missing) for s in self.segments]
         segments = [s for s in segments if len(s)]
         if not segments:
-            raise ValueError(f"{self.path}: no sweeps in the log")
+            raise InputError(f"{self.path}: no sweeps in the log")
         classes = _class_order(segments)
         samples = []
         for seg in segments:
@@ -367,7 +368,7 @@ def read_log(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None
             try:
                 ids = infer_taxel_ids(messages, fmt)
             except ValueError as exc:
-                raise ValueError(f"{path}: {exc}") from None
+                raise InputError(f"{path}: {exc}") from None
             source = "inferred"
     taxels = TaxelMap(ids, fmt)
     segments, stats, broken = segment_messages(messages, taxels, missing=missing)

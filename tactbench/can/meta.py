@@ -25,6 +25,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from tactbench.can.codec import SLOTS_PER_MODULE
+from tactbench.errors import InputError
 
 META_PREFIX = 0x1D
 LABEL_START, LABEL_END, TAXEL_MAP = 1, 2, 3
@@ -49,7 +50,7 @@ def _frames(kind: int, payload: bytes, seq: int, timestamp: float, prefix: int) 
 
     parts = [payload[i:i + 8] for i in range(0, len(payload), 8)] or [b""]
     if len(parts) > MAX_PARTS:
-        raise ValueError(f"meta message too long: {len(payload)} bytes "
+        raise InputError(f"meta message too long: {len(payload)} bytes "
                          f"(at most {8 * MAX_PARTS})")
     return [can.Message(timestamp=timestamp, is_extended_id=True, data=part,
                         arbitration_id=meta_id(kind, i, i == len(parts) - 1, seq, prefix))
@@ -60,7 +61,7 @@ def marker_messages(start: bool, info: dict[str, Any], seq: int, *, timestamp: f
                     prefix: int = META_PREFIX) -> list:
     """A label start/end marker as CAN messages; ``info`` needs at least ``"label"``."""
     if "label" not in info:
-        raise ValueError("a marker needs a 'label'")
+        raise InputError("a marker needs a 'label'")
     text = json.dumps(info, separators=(",", ":"), sort_keys=True).encode()
     return _frames(LABEL_START if start else LABEL_END, text, seq, timestamp, prefix)
 
@@ -74,7 +75,7 @@ def taxel_map_messages(taxel_ids: Iterable[int], seq: int, *, timestamp: float =
         module, slot = divmod(int(tid), SLOTS_PER_MODULE)
         masks[module] = masks.get(module, 0) | (1 << slot)
     if any(m > 0xFFFF for m in masks):
-        raise ValueError("taxel ids too large for a taxel-map announcement (module > 65535)")
+        raise InputError("taxel ids too large for a taxel-map announcement (module > 65535)")
     payload = b"".join(m.to_bytes(2, "big") + masks[m].to_bytes(2, "big") for m in sorted(masks))
     return _frames(TAXEL_MAP, payload, seq, timestamp, prefix)
 
@@ -118,7 +119,7 @@ class MetaAssembler:
         try:
             if kind == TAXEL_MAP:
                 if len(payload) % 4:
-                    raise ValueError("taxel map payload not a multiple of 4 bytes")
+                    raise InputError("taxel map payload not a multiple of 4 bytes")
                 ids = []
                 for i in range(0, len(payload), 4):
                     module = int.from_bytes(payload[i:i + 2], "big")
@@ -128,7 +129,7 @@ class MetaAssembler:
                 return MetaEvent("taxel_map", timestamp, taxel_ids=np.array(ids, np.int64))
             info = json.loads(payload.decode())
             if not isinstance(info, dict) or "label" not in info:
-                raise ValueError("marker without a label")
+                raise InputError("marker without a label")
             return MetaEvent(KINDS[kind], timestamp, info=info)
         except (ValueError, UnicodeDecodeError):
             self.broken += 1

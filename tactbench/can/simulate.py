@@ -17,6 +17,7 @@ import numpy as np
 
 from tactbench.can.codec import TaxelMap, encode_sweep
 from tactbench.can.meta import marker_messages, taxel_map_messages
+from tactbench.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -30,14 +31,14 @@ class SimSample:
 
 def as_sim_sample(sample: Any, rate_hz: float = 10.0,
                   classes: Any = None) -> SimSample:
-    """Accept a :class:`tactbench.recording.Sample`, a ``Recording``, or a ``(T, N)`` array.
+    """Accept a :class:`tactbench.data.recording.Sample`, a ``Recording``, or a ``(T, N)`` array.
 
     A sample's integer label becomes its class name when ``classes`` is given.
     """
     rec = getattr(sample, "recording", sample)
     values = np.asarray(getattr(rec, "values", rec), dtype=np.float32)
     if values.ndim != 2:
-        raise ValueError(f"a sample's values must be (T, N), got shape {values.shape}")
+        raise InputError(f"a sample's values must be (T, N), got shape {values.shape}")
     ts = getattr(rec, "timestamps", None)
     ts = (np.arange(len(values)) / rate_hz if ts is None
           else np.asarray(ts, dtype=np.float64))
@@ -75,7 +76,7 @@ def traffic(samples: Iterable[Any], taxels: TaxelMap, *, rate_hz: float = 10.0,
     for raw in samples:
         sample = raw if isinstance(raw, SimSample) else as_sim_sample(raw, rate_hz)
         if sample.values.shape[1] != taxels.n_taxels:
-            raise ValueError(f"sample has {sample.values.shape[1]} taxels, "
+            raise InputError(f"sample has {sample.values.shape[1]} taxels, "
                              f"the layout {taxels.n_taxels}")
         if markers and sample.info is not None:
             yield t, marker_messages(True, sample.info, seq)
@@ -108,7 +109,7 @@ def play(bus: Any, bursts: Iterable[tuple[float, list]], *, speed: float = 1.0,
     the wall-clock time they are sent.
     """
     if speed < 0:
-        raise ValueError(f"speed must be ≥ 0, got {speed}")
+        raise InputError(f"speed must be ≥ 0, got {speed}")
     start = time.perf_counter()
     wall0 = time.time()
     sent = 0

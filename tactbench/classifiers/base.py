@@ -8,7 +8,7 @@ A classifier is built with keyword options (every option has a default)::
     clf.predict_proba(test)  # (B, K) float32, rows sum to 1
     clf.save("model.safetensors", {"encoder": "farneback", "classes": [...]})
 
-``train``/``val``/``test`` are :class:`tactbench.windows.Windows`; ``predict``
+``train``/``val``/``test`` are :class:`tactbench.data.windows.Windows`; ``predict``
 also takes an array ``(B, L, *frame_shape)``. Frames are images ``(C, H, W)``
 or taxel vectors ``(N,)``, depending on the classifier's ``frame_rank``.
 Labels are ``0 .. K-1``; ``K`` comes from the ``classes`` option, else from
@@ -22,7 +22,7 @@ from typing import Any, ClassVar, Iterator
 
 import numpy as np
 
-from tactbench.training import (
+from tactbench.classifiers.training import (
     FitReport,
     ProgressFn,
     TrainingInterrupted,
@@ -31,7 +31,8 @@ from tactbench.training import (
     select_device,
     train_loop,
 )
-from tactbench.windows import Windows
+from tactbench.data.windows import Windows
+from tactbench.errors import InputError
 
 #: Above this size the training frames are not resized up front but per batch.
 MAX_BANK_BYTES = 2 * 1024 ** 3
@@ -71,18 +72,18 @@ class SequenceClassifier:
 
     def _check_windows(self, windows: Windows, what: str) -> None:
         if not isinstance(windows, Windows):
-            raise TypeError(f"{what} must be tactbench.windows.Windows, "
+            raise TypeError(f"{what} must be tactbench.data.windows.Windows, "
                             f"got {type(windows).__name__}")
         if len(windows) == 0:
-            raise ValueError(f"{what} has no windows")
+            raise InputError(f"{what} has no windows")
         shape = windows.frame_shape
         if self.frame_rank is None:
             if len(shape) not in (1, 3):
-                raise ValueError(f"{what} has frames of shape {shape}; expected images "
+                raise InputError(f"{what} has frames of shape {shape}; expected images "
                                  f"(C, H, W) or taxel vectors (N,)")
         elif len(shape) != self.frame_rank:
             kind = "images (C, H, W)" if self.frame_rank == 3 else "taxel vectors (N,)"
-            raise ValueError(f"{self.name} classifies {kind}; {what} has frames of shape "
+            raise InputError(f"{self.name} classifies {kind}; {what} has frames of shape "
                              f"{shape}")
 
     def _resolve_classes(self, train: Windows, val: Windows | None,
@@ -91,14 +92,14 @@ class SequenceClassifier:
         if val is not None and len(val):
             seen = max(seen, int(val.labels.max()) + 1)
         if int(train.labels.min()) < 0:
-            raise ValueError("labels must be 0 .. K-1; found a negative label")
+            raise InputError("labels must be 0 .. K-1; found a negative label")
         k = self.classes if self.classes is not None else n_classes
         if k is None:
             k = seen
         if k < 2:
-            raise ValueError(f"need at least 2 classes, got K = {k}")
+            raise InputError(f"need at least 2 classes, got K = {k}")
         if seen > k:
-            raise ValueError(f"labels go up to {seen - 1} but only {k} classes were declared")
+            raise InputError(f"labels go up to {seen - 1} but only {k} classes were declared")
         return int(k)
 
     def _check_input(self, x: Any) -> Windows | np.ndarray:
@@ -111,13 +112,13 @@ class SequenceClassifier:
         else:
             x = np.asarray(x, dtype=np.float32)
             if x.ndim != 2 + rank:
-                raise ValueError(f"expected windows (B, L, *frame) of rank {2 + rank}, "
+                raise InputError(f"expected windows (B, L, *frame) of rank {2 + rank}, "
                                  f"got shape {x.shape}")
             shape = x.shape[2:]
         # Images may come at any size (the network resizes); channels/taxels must match.
         fixed = self.frame_shape if rank == 1 else self.frame_shape[:1]
         if tuple(shape[:len(fixed)]) != tuple(fixed) or len(shape) != rank:
-            raise ValueError(f"frames of shape {tuple(shape)} do not match the trained "
+            raise InputError(f"frames of shape {tuple(shape)} do not match the trained "
                              f"frame shape {self.frame_shape}")
         return x
 
@@ -213,7 +214,7 @@ class FrameBank:
 
 @dataclass(eq=False, repr=False, kw_only=True)
 class TorchSequenceClassifier(SequenceClassifier):
-    """A torch network trained with :func:`tactbench.training.train_loop`.
+    """A torch network trained with :func:`tactbench.classifiers.training.train_loop`.
 
     Subclasses write :meth:`_build_net` (and may add options).
     """
@@ -261,9 +262,9 @@ class TorchSequenceClassifier(SequenceClassifier):
             n_classes: int | None = None) -> dict[str, Any]:
         """Train on ``train`` (optionally reporting accuracy on ``val`` every epoch).
 
-        Returns the fit report (:class:`tactbench.training.FitReport` as a dict, plus
+        Returns the fit report (:class:`tactbench.classifiers.training.FitReport` as a dict, plus
         anything the classifier adds). A keyboard interrupt raises
-        :class:`tactbench.training.TrainingInterrupted` with the model usable.
+        :class:`tactbench.classifiers.training.TrainingInterrupted` with the model usable.
         """
         import torch
 
@@ -271,7 +272,7 @@ class TorchSequenceClassifier(SequenceClassifier):
         if val is not None:
             self._check_windows(val, "val")
             if val.frame_shape[:1] != train.frame_shape[:1]:
-                raise ValueError(f"val frames {val.frame_shape} do not match train frames "
+                raise InputError(f"val frames {val.frame_shape} do not match train frames "
                                  f"{train.frame_shape}")
         k = self._resolve_classes(train, val, n_classes)
         dev = select_device(device)
@@ -420,7 +421,7 @@ class TorchSequenceClassifier(SequenceClassifier):
                       for k, v in tensors.items()
                       if k in expected and tuple(expected[k].shape) != tuple(v.shape)]
         if missing or unexpected or bad_shapes:
-            raise ValueError(f"weights do not fit a {cls.name} network with these options: "
+            raise InputError(f"weights do not fit a {cls.name} network with these options: "
                              f"missing {missing[:5]}, unexpected {unexpected[:5]}, "
                              f"other shape {bad_shapes[:5]}")
         net.load_state_dict(tensors, strict=True)

@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from tactbench.classifiers.base import FrameBank, SequenceClassifier
-from tactbench.training import FitReport, ProgressFn, TrainingInterrupted
-from tactbench.windows import Windows
+from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted
+from tactbench.data.windows import Windows
+from tactbench.errors import InputError
 
 
 def frame_features(frames, grid: int):
@@ -81,7 +82,7 @@ class PooledLogReg(SequenceClassifier):
         import torch
         import torch.nn.functional as F
 
-        from tactbench.training import select_device
+        from tactbench.classifiers.training import select_device
 
         self._check_windows(train, "train")
         select_device(device)  # validate; the solve is small and runs on the CPU
@@ -141,10 +142,10 @@ class PooledLogReg(SequenceClassifier):
         if isinstance(x, np.ndarray) and len(x) == 0:
             return np.zeros((0, self.n_classes), dtype=np.float32)
         if isinstance(x, np.ndarray) and x.shape[2:] != self.frame_shape:
-            raise ValueError(f"logreg needs frames of the trained shape {self.frame_shape}, "
+            raise InputError(f"logreg needs frames of the trained shape {self.frame_shape}, "
                              f"got {x.shape[2:]}")
         if isinstance(x, Windows) and x.frame_shape != self.frame_shape:
-            raise ValueError(f"logreg needs frames of the trained shape {self.frame_shape}, "
+            raise InputError(f"logreg needs frames of the trained shape {self.frame_shape}, "
                              f"got {x.frame_shape}")
         with torch.no_grad():
             z = (self._window_features(x) - self.feat_mean) / self.feat_std
@@ -167,11 +168,11 @@ class PooledLogReg(SequenceClassifier):
         clf.fit_report = config.get("fit_report")
         need = {"weight", "bias", "feat_mean", "feat_std"}
         if set(tensors) != need:
-            raise ValueError(f"expected tensors {sorted(need)}, found {sorted(tensors)}")
+            raise InputError(f"expected tensors {sorted(need)}, found {sorted(tensors)}")
         w = tensors["weight"]
         if w.ndim != 2 or w.shape[0] != clf.n_classes or tensors["bias"].shape != (clf.n_classes,) \
                 or tensors["feat_mean"].shape != (w.shape[1],):
-            raise ValueError(f"tensor shapes do not fit {clf.n_classes} classes: weight "
+            raise InputError(f"tensor shapes do not fit {clf.n_classes} classes: weight "
                              f"{tuple(w.shape)}, bias {tuple(tensors['bias'].shape)}")
         clf.weight, clf.bias = w.double(), tensors["bias"].double()
         clf.feat_mean, clf.feat_std = tensors["feat_mean"].double(), tensors["feat_std"].double()

@@ -41,6 +41,8 @@ from typing import Any
 import torch
 from torch import nn
 
+from tactbench.errors import InputError
+
 #: (expand ratio, kernel, stride, output channels, repeats) per stage of B0.
 B0_STAGES: tuple[tuple[int, int, int, int, int], ...] = (
     (1, 3, 1, 16, 1),
@@ -235,7 +237,7 @@ def _key_map(layout: str) -> dict[str, str]:
                 conv_bn(f"{ours}.project", f"{b}.conv_pw", f"{b}.bn2")
             se(ours, f"{b}.se.conv_reduce", f"{b}.se.conv_expand")
         else:
-            raise ValueError(f"unknown weights layout '{layout}'; layouts: {', '.join(LAYOUTS)}")
+            raise InputError(f"unknown weights layout '{layout}'; layouts: {', '.join(LAYOUTS)}")
     if layout == "lukemelas":
         conv_bn("stem", "_conv_stem", "_bn0")
         conv_bn("head", "_conv_head", "_bn1")
@@ -260,7 +262,7 @@ def detect_layout(keys) -> str:
     if "stem.conv.weight" in keys:
         return "tactbench"
     sample = ", ".join(sorted(keys)[:5])
-    raise ValueError(f"not an EfficientNet-B0 state dict of a known layout "
+    raise InputError(f"not an EfficientNet-B0 state dict of a known layout "
                      f"({', '.join(LAYOUTS)}); first keys: {sample or 'none'}")
 
 
@@ -271,7 +273,7 @@ def read_state_dict(path: str | Path) -> dict[str, torch.Tensor]:
     """
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"weights file {p} does not exist")
+        raise InputError(f"weights file {p} does not exist")
     try:
         if p.suffix == ".safetensors":
             from safetensors.torch import load_file
@@ -280,12 +282,12 @@ def read_state_dict(path: str | Path) -> dict[str, torch.Tensor]:
         else:
             state = torch.load(str(p), map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise ValueError(f"cannot read weights file {p}: {type(exc).__name__}: {exc}") from exc
+        raise InputError(f"cannot read weights file {p}: {type(exc).__name__}: {exc}") from exc
     for key in ("state_dict", "model", "model_state_dict"):
         if isinstance(state, dict) and isinstance(state.get(key), dict):
             state = state[key]
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
-        raise ValueError(f"weights file {p} does not hold a state dict of tensors")
+        raise InputError(f"weights file {p} does not hold a state dict of tensors")
     return state
 
 
@@ -343,7 +345,7 @@ def load_weights(model: EfficientNetB0, source: str | Path | dict[str, torch.Ten
     report.unused = sorted(set(state) - used)
     report.loaded = len(new)
     if not new:
-        raise ValueError(f"no weights from {name} matched EfficientNet-B0 (layout {found})")
+        raise InputError(f"no weights from {name} matched EfficientNet-B0 (layout {found})")
     model.load_state_dict(new, strict=False)
     if report.missing or report.shape_mismatch:
         warnings.warn(f"EfficientNet-B0 weights from {name} ({found} layout): "

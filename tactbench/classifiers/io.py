@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from tactbench import __version__
-from tactbench.errors import TactbenchError
+from tactbench.errors import InputError, TactbenchError
 
 FORMAT = "tactbench-model"
 FORMAT_VERSION = 1
@@ -51,7 +51,7 @@ def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = N
     try:
         text = json.dumps(header)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"model metadata must be JSON-serialisable: {exc}") from exc
+        raise InputError(f"model metadata must be JSON-serialisable: {exc}") from exc
     # safetensors refuses tensors that share memory or are not contiguous.
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in tensors.items()}
     dest = Path(path)

@@ -1,7 +1,7 @@
 """The built-in torch classifiers: ``cnn-lstm``, ``small-cnn-lstm``, ``taxel-lstm``.
 
 Options are keyword arguments (dataclass fields), each with a default; the
-defaults are the ``quick`` profile's (see :mod:`tactbench.training`).
+defaults are the ``quick`` profile's (see :mod:`tactbench.classifiers.training`).
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tactbench.classifiers.base import TorchSequenceClassifier, n_params
+from tactbench.errors import InputError
 
 
 @dataclass(eq=False, repr=False, kw_only=True)
@@ -26,11 +27,11 @@ class ImageSequenceClassifier(TorchSequenceClassifier):
         from tactbench.classifiers.nets import IMAGENET_MEAN, IMAGENET_STD, SequenceNet
 
         if self.input_size < 8:
-            raise ValueError(f"input_size must be ≥ 8, got {self.input_size}")
+            raise InputError(f"input_size must be ≥ 8, got {self.input_size}")
         if self.normalize not in ("data", "imagenet", "none"):
-            raise ValueError(f"normalize must be data, imagenet or none, got '{self.normalize}'")
+            raise InputError(f"normalize must be data, imagenet or none, got '{self.normalize}'")
         if self.normalize == "imagenet" and frame_shape[0] != 3:
-            raise ValueError(f"normalize=imagenet needs 3 channels; frames have {frame_shape[0]}")
+            raise InputError(f"normalize=imagenet needs 3 channels; frames have {frame_shape[0]}")
         net = SequenceNet(encoder, frame_shape=frame_shape, n_classes=n_classes,
                           hidden=self.hidden, fc=self.fc, dropout=self.dropout,
                           input_size=self.input_size)
@@ -101,7 +102,7 @@ class CnnLstm(ImageSequenceClassifier):
                                   stacklevel=3)
                     self.weights_report = {"source": None, "loaded": 0}
         else:
-            raise ValueError(f"unknown backbone '{self.backbone}': use efficientnet-b0 or "
+            raise InputError(f"unknown backbone '{self.backbone}': use efficientnet-b0 or "
                              f"timm:<name>")
         return self._wrap(encoder, frame_shape, n_classes)
 
@@ -109,7 +110,7 @@ class CnnLstm(ImageSequenceClassifier):
         import importlib.util
 
         if importlib.util.find_spec("timm") is None:
-            raise ValueError(f"backbone 'timm:{model_name}' needs timm, which is not "
+            raise InputError(f"backbone 'timm:{model_name}' needs timm, which is not "
                              f"installed; use backbone=efficientnet-b0")
         import timm
         from torch import nn

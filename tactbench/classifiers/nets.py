@@ -1,7 +1,7 @@
 """Torch modules of the sequence classifiers: per-frame encoder → LSTM → head.
 
 Every network maps a batch of windows ``(B, L, *frame_shape)`` (float32, as
-:meth:`tactbench.windows.Windows.batch` gives them) to class logits ``(B, K)``.
+:meth:`tactbench.data.windows.Windows.batch` gives them) to class logits ``(B, K)``.
 Resizing and normalisation are part of the network, so a saved model carries
 them and accepts frames at any size.
 """

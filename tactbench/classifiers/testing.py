@@ -31,8 +31,8 @@ import numpy as np
 
 
 def tiny_windows(frame_rank: int | None, *, n: int = 18, length: int = 3, seed: int = 0):
-    """Training and test :class:`~tactbench.windows.Windows` of an easy 3-class task."""
-    from tactbench.windows import test_windows, training_windows
+    """Training and test :class:`~tactbench.data.windows.Windows` of an easy 3-class task."""
+    from tactbench.data.windows import test_windows, training_windows
 
     rng = np.random.default_rng(seed)
     seqs, labels = [], []

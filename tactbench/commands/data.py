@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from tactbench.errors import InputError
+
 
 @click.group("data")
 def data_group() -> None:
@@ -17,8 +19,13 @@ def data_group() -> None:
 def _progress(description: str):
     """A rich progress bar on stderr; returns (context manager, callback)."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, \
-        TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
 
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                         TimeRemainingColumn(), console=Console(stderr=True), transient=True)
@@ -151,12 +158,12 @@ def preview_cmd(path: str, index: int, out: str, encoder: str | None, pixel_mm: 
 
     ds = _load(path)
     if index >= len(ds):
-        raise ValueError(f"--sample {index} is out of range: {path} has {len(ds)} samples")
+        raise InputError(f"--sample {index} is out of range: {path} has {len(ds)} samples")
     sample = ds[index]
     label = ds.classes[sample.label]
     if ds.layout is None:
         if encoder:
-            raise ValueError(f"dataset {ds.name!r} has no taxel layout, so it has no images "
+            raise InputError(f"dataset {ds.name!r} has no taxel layout, so it has no images "
                              f"for encoder {encoder!r}; preview without --encoder shows its "
                              f"taxel values")
         vec = np.nan_to_num(ds.normalise(sample.recording.values), nan=0.0)

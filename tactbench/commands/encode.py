@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from tactbench.errors import InputError, MissingFileError
+
 
 @click.command("encode")
 @click.option("--encoder", "-e", "spec", required=True,
@@ -32,19 +34,19 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 
     src = Path(input_path)
     if not src.is_file():
-        raise FileNotFoundError(f"{src}: no such file")
+        raise MissingFileError(f"{src}: no such file")
     try:
         seq = np.load(src, allow_pickle=False)
     except Exception as exc:  # numpy raises several types for a bad file
-        raise ValueError(f"{src}: not a readable .npy array ({type(exc).__name__}: {exc})")
+        raise InputError(f"{src}: not a readable .npy array ({type(exc).__name__}: {exc})")
     if not isinstance(seq, np.ndarray):
-        raise ValueError(f"{src}: holds several arrays (.npz); give one (T, H, W) .npy array")
+        raise InputError(f"{src}: holds several arrays (.npz); give one (T, H, W) .npy array")
     encoder = get_registry(warn=not as_json).build("encoder", spec)
     t0 = time.perf_counter()
     try:
         out = encoder.encode(seq)
     except ValueError as exc:
-        raise ValueError(f"{src}: {exc}") from exc
+        raise InputError(f"{src}: {exc}") from exc
     seconds = time.perf_counter() - t0
     dst = Path(out_path)
     dst.parent.mkdir(parents=True, exist_ok=True)

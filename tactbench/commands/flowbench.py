@@ -12,8 +12,7 @@ import click
 def progress_bar(description: str):
     """A rich progress bar on stderr: ``(context manager, update(done, total))``."""
     from rich.console import Console
-    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                               TimeElapsedColumn)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                    TimeElapsedColumn(), console=Console(stderr=True), transient=True)
@@ -57,8 +56,8 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     by a smooth flow. Errors are averaged over the tactile scenes; the Pareto
     front (no encoder both faster and more accurate) is marked.
     """
-    from tactbench import flowbench as fb
     from tactbench.cli import get_registry
+    from tactbench.encoders import flowbench as fb
     registry = get_registry(warn=not as_json)
     specs = specs or fb.DEFAULT_ENCODERS
     encoders = [(spec, registry.build("encoder", spec)) for spec in specs]
@@ -95,6 +94,6 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
 
 
 def _cores() -> int:
-    from tactbench.encoding import default_workers
+    from tactbench.encoders.parallel import default_workers
 
     return default_workers()

@@ -22,7 +22,7 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
     """Taxel count, extent in mm, median spacing of a layout (.json or .csv)."""
     import math
 
-    from tactbench.layout import load_layout
+    from tactbench.data.layout import load_layout
 
     layout = load_layout(file)
     summary = layout.summary()
@@ -53,7 +53,7 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
 @click.option("--seed", default=0, show_default=True, type=int)
 def generate_cmd(out: str, taxels: int, seed: int) -> None:
     """Write the generated CySkin-like forearm layout as CSV."""
-    from tactbench.layout import cyskin_forearm
+    from tactbench.data.layout import cyskin_forearm
 
     layout = cyskin_forearm(taxels, seed=seed)
     layout.to_csv(out)

@@ -51,8 +51,8 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
     Finished cells are kept in OUT/cells and skipped when the same command runs again;
     encodings are cached (see `tactbench cache ls`).
     """
-    from tactbench.reports import print_table, summarise, write_reports
     from tactbench.runner import Scene, load_scene_file, parse_lengths, run
+    from tactbench.runner.reports import print_table, summarise, write_reports
 
     fields = load_scene_file(scene_file) if scene_file else {}
     given = {"dataset": dataset, "encoders": list(encoders) or None,

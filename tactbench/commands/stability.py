@@ -7,6 +7,8 @@ import sys
 
 import click
 
+from tactbench.errors import InputError
+
 
 @click.command("stability")
 @click.option("--encoder", "-e", "specs", multiple=True,
@@ -22,9 +24,9 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
     float16/64 input, and values far outside [0, 1]. Each case × encoder passes (finite, in range, deterministic, the documented
     result) or fails with the reason. The exit status is 1 when anything failed.
     """
-    from tactbench import stability as st
     from tactbench.cli import get_registry
     from tactbench.commands.flowbench import progress_bar
+    from tactbench.encoders import stability as st
 
     registry = get_registry(warn=not as_json)
     explicit = bool(specs)
@@ -42,7 +44,7 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
         known = {c.name: c for c in all_cases}
         unknown = [c for c in cases if c not in known]
         if unknown:
-            raise ValueError(f"unknown case(s) {', '.join(unknown)}; cases: "
+            raise InputError(f"unknown case(s) {', '.join(unknown)}; cases: "
                              f"{', '.join(known)}")
         all_cases = [known[c] for c in cases]
     bar, update = progress_bar("stability")

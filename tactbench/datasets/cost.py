@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tactbench.layout import TaxelLayout
-from tactbench.recording import Dataset, Recording, Sample
+from tactbench.data.layout import TaxelLayout
+from tactbench.data.recording import Dataset, Recording, Sample
+from tactbench.errors import InputError, MissingFileError
 
 RATE_HZ = 135.0
 GRID = 8
@@ -49,17 +50,17 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
     """Read a CoST CSV file (see the module docstring); errors name the line."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
+        raise MissingFileError(f"{path}: no such file")
     with path.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     lineno0 = 1
     if not rows or not any(c.strip() for c in rows[0]):
-        raise ValueError(f"{path}: empty file (expected CoST rows: {', '.join(COLUMNS[:5])}, "
+        raise InputError(f"{path}: empty file (expected CoST rows: {', '.join(COLUMNS[:5])}, "
                          f"…, ch64)")
     first = [c.strip().lower() for c in rows[0]]
     if first and not _is_number(first[3] if len(first) > 3 else ""):
         if first != COLUMNS:
-            raise ValueError(f"{path}, line 1: header must be {','.join(COLUMNS[:5])},…,ch64 "
+            raise InputError(f"{path}, line 1: header must be {','.join(COLUMNS[:5])},…,ch64 "
                              f"({len(COLUMNS)} columns); got {len(first)} columns starting "
                              f"{','.join(first[:5])!r}")
         rows = rows[1:]
@@ -71,25 +72,25 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) != len(COLUMNS):
-            raise ValueError(f"{path}, line {lineno}: expected {len(COLUMNS)} columns "
+            raise InputError(f"{path}, line {lineno}: expected {len(COLUMNS)} columns "
                              f"(subject, variant, gesture, frame, ch1..ch64), got {len(row)}"
                              f"{' (truncated?)' if len(row) < len(COLUMNS) else ''}")
         subject, variant, gesture = (c.strip() for c in row[:3])
         if not subject or not gesture:
-            raise ValueError(f"{path}, line {lineno}: empty subject or gesture")
+            raise InputError(f"{path}, line {lineno}: empty subject or gesture")
         try:
             frame = int(float(row[3]))
         except ValueError:
-            raise ValueError(f"{path}, line {lineno}: frame {row[3]!r} is not a number") from None
+            raise InputError(f"{path}, line {lineno}: frame {row[3]!r} is not a number") from None
         try:
             vals = np.array([float(c) for c in row[4:]], dtype=np.float64)
         except ValueError:
             bad = next(i for i, c in enumerate(row[4:]) if not _is_number(c))
-            raise ValueError(f"{path}, line {lineno}: ch{bad + 1} value {row[4 + bad]!r} is "
+            raise InputError(f"{path}, line {lineno}: ch{bad + 1} value {row[4 + bad]!r} is "
                              f"not a number") from None
         if not np.all(np.isfinite(vals)):
             bad = int(np.nonzero(~np.isfinite(vals))[0][0])
-            raise ValueError(f"{path}, line {lineno}: ch{bad + 1} is {row[4 + bad].strip()} "
+            raise InputError(f"{path}, line {lineno}: ch{bad + 1} is {row[4 + bad].strip()} "
                              f"(readings must be finite)")
         key = (subject, variant, gesture)
         if key != prev_key or prev_frame is None or frame <= prev_frame:
@@ -98,7 +99,7 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
         captures[-1][2].append(vals)
         prev_key, prev_frame = key, frame
     if not captures:
-        raise ValueError(f"{path}: no frames")
+        raise InputError(f"{path}: no frames")
     classes = sorted({key[2] for key, _, _ in captures}, key=_natural)
     layout = cost_layout(pitch_mm)
     samples, counter = [], {}
@@ -117,7 +118,7 @@ def write_cost_csv(dataset: Dataset, path: str | Path) -> None:
     """Write a 64-taxel dataset in the CoST CSV format (with a header)."""
     path = Path(path)
     if dataset.n_taxels != GRID * GRID:
-        raise ValueError(f"CoST files hold 64 channels; dataset {dataset.name!r} has "
+        raise InputError(f"CoST files hold 64 channels; dataset {dataset.name!r} has "
                          f"{dataset.n_taxels} taxels")
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)

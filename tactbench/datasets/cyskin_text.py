@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tactbench.recording import Dataset, Recording, Sample
+from tactbench.data.recording import Dataset, Recording, Sample
+from tactbench.errors import InputError, MissingFileError
 
 SUFFIX = ".txt"
 #: CySkin text values are baseline-removed raw counts, non-negative; the scale
@@ -35,65 +36,65 @@ def read_cyskin_text(path: str | Path) -> Recording:
     """Read one recording (see the module docstring for the format and errors)."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
+        raise MissingFileError(f"{path}: no such file")
     try:
         text = path.read_text(encoding="ascii")
     except UnicodeDecodeError as exc:
-        raise ValueError(f"{path}: not a CySkin text file (non-ASCII byte at offset "
+        raise InputError(f"{path}: not a CySkin text file (non-ASCII byte at offset "
                          f"{exc.start})") from None
     lines = text.splitlines()
     while lines and not lines[-1].strip():
         lines.pop()
     if not lines:
-        raise ValueError(f"{path}: empty file (expected a line of taxel ids, then frames)")
+        raise InputError(f"{path}: empty file (expected a line of taxel ids, then frames)")
     header = lines[0].split()
     if not header:
-        raise ValueError(f"{path}, line 1: empty header (expected the taxel ids)")
+        raise InputError(f"{path}, line 1: empty header (expected the taxel ids)")
     try:
         ids = np.array([int(tok) for tok in header], dtype=np.int64)
     except ValueError:
         bad = next(tok for tok in header if not _is_int(tok))
-        raise ValueError(f"{path}, line 1: the header must list integer taxel ids, found "
+        raise InputError(f"{path}, line 1: the header must list integer taxel ids, found "
                          f"{bad!r}") from None
     uniq, counts = np.unique(ids, return_counts=True)
     if uniq.size != ids.size:
         dup = uniq[counts > 1]
-        raise ValueError(f"{path}, line 1: duplicate taxel id(s) "
+        raise InputError(f"{path}, line 1: duplicate taxel id(s) "
                          f"{', '.join(map(str, dup[:8]))}")
     n = ids.size
     if len(lines) < 2:
-        raise ValueError(f"{path}: no frames after the header")
+        raise InputError(f"{path}: no frames after the header")
     rows = np.empty((len(lines) - 1, n + 2), dtype=np.float64)
     for k, line in enumerate(lines[1:]):
         lineno = k + 2
         toks = line.split()
         if len(toks) != n + 2:
             what = "truncated or ragged row" if len(toks) < n + 2 else "too many values"
-            raise ValueError(f"{path}, line {lineno}: {what}: expected {n + 2} fields "
+            raise InputError(f"{path}, line {lineno}: {what}: expected {n + 2} fields "
                              f"(frame index, timestamp, {n} values), got {len(toks)}")
         try:
             rows[k] = np.array(toks, dtype=np.float64)
         except ValueError:
             col = next(i for i, tok in enumerate(toks) if not _is_float(tok))
-            raise ValueError(f"{path}, line {lineno}, field {col + 1}: {toks[col]!r} is not "
+            raise InputError(f"{path}, line {lineno}, field {col + 1}: {toks[col]!r} is not "
                              f"a number") from None
     index, ts, values = rows[:, 0], rows[:, 1], rows[:, 2:]
     if not np.all(np.isfinite(index)) or not np.all(index == np.round(index)):
         k = int(np.nonzero(~np.isfinite(index) | (index != np.round(index)))[0][0])
-        raise ValueError(f"{path}, line {k + 2}: frame index {lines[k + 1].split()[0]!r} is "
+        raise InputError(f"{path}, line {k + 2}: frame index {lines[k + 1].split()[0]!r} is "
                          f"not an integer")
     if not np.all(np.isfinite(ts)):
         k = int(np.nonzero(~np.isfinite(ts))[0][0])
-        raise ValueError(f"{path}, line {k + 2}: timestamp is not finite")
+        raise InputError(f"{path}, line {k + 2}: timestamp is not finite")
     back = np.nonzero(np.diff(ts) < 0)[0]
     if back.size:
         k = int(back[0]) + 1
-        raise ValueError(f"{path}, line {k + 2}: timestamp {ts[k]:.6f} s goes backwards "
+        raise InputError(f"{path}, line {k + 2}: timestamp {ts[k]:.6f} s goes backwards "
                          f"(previous {ts[k - 1]:.6f} s)")
     inf = np.argwhere(np.isinf(values))
     if inf.size:
         k, col = inf[0]
-        raise ValueError(f"{path}, line {k + 2}: taxel {ids[col]} reads "
+        raise InputError(f"{path}, line {k + 2}: taxel {ids[col]} reads "
                          f"{lines[k + 1].split()[col + 2]!r}; infinite values are not "
                          f"allowed (write nan for a missing reading)")
     return Recording(values.astype(np.float32), ts, ids)
@@ -164,9 +165,9 @@ def read_cyskin_folder(path: str | Path, *, name: str | None = None,
         files = sorted(p for p in path.rglob(f"*{SUFFIX}") if p.is_file())
         root = path
         if not files:
-            raise ValueError(f"{path}: no CySkin text files (*{SUFFIX}) in this folder")
+            raise InputError(f"{path}: no CySkin text files (*{SUFFIX}) in this folder")
     else:
-        raise FileNotFoundError(f"{path}: no such file or folder")
+        raise MissingFileError(f"{path}: no such file or folder")
     class_of = [f.parent.name if f.parent != root or path.is_file() else root.name
                 for f in files]
     classes = sorted(set(class_of))
@@ -175,7 +176,7 @@ def read_cyskin_folder(path: str | Path, *, name: str | None = None,
     for k, (f, cls) in enumerate(zip(files, class_of)):
         rec = read_cyskin_text(f)
         if samples and not np.array_equal(rec.taxel_ids, samples[0].recording.taxel_ids):
-            raise ValueError(f"{f}: its taxel ids differ from those of {files[0]} "
+            raise InputError(f"{f}: its taxel ids differ from those of {files[0]} "
                              f"({rec.n_taxels} vs {samples[0].recording.n_taxels} taxels); "
                              f"all files of a dataset must list the same taxels")
         counter[cls] = counter.get(cls, 0) + 1

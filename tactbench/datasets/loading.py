@@ -9,7 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from tactbench.recording import MANIFEST, Dataset
+from tactbench.data.recording import MANIFEST, Dataset
+from tactbench.errors import InputError, MissingFileError
 
 #: CAN log suffixes read through :mod:`tactbench.can.logs` (python-can's ``.csv``
 #: is not among them: ``.csv`` means CoST here).
@@ -23,7 +24,7 @@ def detect_format(path: Path) -> str:
             return "dataset"
         if any(p.is_file() for p in path.rglob("*.txt")):
             return "cyskin-text"
-        raise ValueError(f"{path}: neither a tactbench dataset folder (no {MANIFEST}) nor a "
+        raise InputError(f"{path}: neither a tactbench dataset folder (no {MANIFEST}) nor a "
                          f"folder of CySkin text files (*.txt)")
     suffix = path.suffix.lower()
     if suffix in CAN_LOG_SUFFIXES:
@@ -34,7 +35,7 @@ def detect_format(path: Path) -> str:
         return "cost"
     if path.name == MANIFEST:
         return "dataset"
-    raise ValueError(f"{path}: unknown data format {suffix or '(no suffix)'!r}; expected a "
+    raise InputError(f"{path}: unknown data format {suffix or '(no suffix)'!r}; expected a "
                      f"dataset folder, CySkin text (.txt, or a folder of them), CoST (.csv) "
                      f"or a CAN log ({', '.join(CAN_LOG_SUFFIXES)})")
 
@@ -43,7 +44,7 @@ def load_path(path: str | Path) -> Dataset:
     """Load a dataset folder, a CySkin text file or folder, a CoST CSV file or a CAN log."""
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file or folder")
+        raise MissingFileError(f"{path}: no such file or folder")
     kind = detect_format(path)
     if kind == "dataset":
         return Dataset.load(path if path.is_dir() else path.parent)
@@ -79,7 +80,7 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None) -> Dataset:
     if path.exists():
         return load_path(path)
     if isinstance(spec_or_path, Path) or _looks_like_path(text) and ":" not in text.split("/")[0]:
-        raise FileNotFoundError(f"{text}: no such file or folder (and not a dataset name)")
+        raise MissingFileError(f"{text}: no such file or folder (and not a dataset name)")
     if registry is None:
         from tactbench.plugins import load_registry
 
@@ -88,5 +89,5 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None) -> Dataset:
     dataset = source.load()
     if not isinstance(dataset, Dataset):
         raise TypeError(f"dataset {text!r}: load() returned {type(dataset).__name__}, "
-                        f"expected a tactbench.recording.Dataset")
+                        f"expected a tactbench.data.recording.Dataset")
     return dataset

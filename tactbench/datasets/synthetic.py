@@ -2,7 +2,7 @@
 
 Five gestures of the study (Grasp, 2hGrasp, Twist, Push, Pull) performed by
 simulated users on the generated 1558-taxel CySkin forearm
-(:func:`tactbench.layout.cyskin_forearm`), read by a simulated capacitive
+(:func:`tactbench.data.layout.cyskin_forearm`), read by a simulated capacitive
 sensor at 10 Hz. Default: 38 users × 5 gestures × 2 positions × 5 repetitions
 = 1900 samples of 5–27 frames. The model and its parameters are documented in
 ``docs/simulator.md``; the numbers live in the constants below.
@@ -35,8 +35,9 @@ from typing import Callable
 
 import numpy as np
 
-from tactbench.layout import SLOTS_PER_ID, TaxelLayout, cyskin_forearm
-from tactbench.recording import Dataset, Recording, Sample
+from tactbench.data.layout import SLOTS_PER_ID, TaxelLayout, cyskin_forearm
+from tactbench.data.recording import Dataset, Recording, Sample
+from tactbench.errors import InputError
 
 #: Bump when the model changes: it keys the cache.
 GENERATOR_VERSION = 1
@@ -360,7 +361,7 @@ def simulate_pressure(gesture: str, user: User, position: str, r: np.random.Gene
         _push(p, user, r, t, TOP_X + (user.x_side if side else 0.0) + r.normal(0, 15),
               y0, force, length)
     else:
-        raise ValueError(f"unknown gesture {gesture!r}; known: {', '.join(CLASSES)}")
+        raise InputError(f"unknown gesture {gesture!r}; known: {', '.join(CLASSES)}")
     return p.pressure(xy)
 
 
@@ -470,7 +471,7 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
              progress: Callable[[int, int], None] | None = None) -> Dataset:
     """Generate the dataset (no cache); see :class:`SyntheticForearm`."""
     if users < 1 or repetitions < 1 or not 1 <= positions <= len(POSITIONS):
-        raise ValueError(f"need users ≥ 1, repetitions ≥ 1 and positions in "
+        raise InputError(f"need users ≥ 1, repetitions ≥ 1 and positions in "
                          f"1..{len(POSITIONS)}; "
                          f"got users={users}, repetitions={repetitions}, positions={positions}")
     device = make_device(seed, n_taxels)
@@ -500,7 +501,7 @@ class SyntheticForearm:
     Options: ``users`` (38), ``positions`` (2: front, side), ``repetitions``
     (5), ``seed`` (0), ``n_taxels`` (1558), ``cache`` (True: keep generated
     sets under ``cache_dir("datasets")``). ``load()`` returns the
-    :class:`~tactbench.recording.Dataset`.
+    :class:`~tactbench.data.recording.Dataset`.
     """
 
     def __init__(self, users: int = 38, positions: int = 2, repetitions: int = 5,
@@ -509,7 +510,7 @@ class SyntheticForearm:
                             ("repetitions", repetitions), ("seed", seed),
                             ("n_taxels", n_taxels)):
             if isinstance(value, bool) or not isinstance(value, int):
-                raise ValueError(f"synthetic-forearm option {name} must be an integer, "
+                raise InputError(f"synthetic-forearm option {name} must be an integer, "
                                  f"got {value!r}")
         self.options = {"users": users, "positions": positions, "repetitions": repetitions,
                         "seed": seed, "n_taxels": n_taxels}

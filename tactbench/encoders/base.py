@@ -25,6 +25,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from tactbench.errors import InputError
+
 #: Values this far outside [0, 1] are rounding noise and are clipped.
 RANGE_TOLERANCE = 1e-6
 
@@ -33,18 +35,18 @@ def check_sequence(seq: Any) -> np.ndarray:
     """Validate and convert ``seq`` to float32 ``(T, H, W)`` in [0, 1] (see module doc)."""
     arr = np.asarray(seq)
     if arr.ndim != 3:
-        raise ValueError(f"expected a sequence of shape (T, H, W), got shape {arr.shape}")
+        raise InputError(f"expected a sequence of shape (T, H, W), got shape {arr.shape}")
     if 0 in arr.shape:
-        raise ValueError(f"sequence is empty: shape {arr.shape} (T, H and W must be ≥ 1)")
+        raise InputError(f"sequence is empty: shape {arr.shape} (T, H and W must be ≥ 1)")
     if arr.dtype == np.bool_:
         return arr.astype(np.float32)
     if np.issubdtype(arr.dtype, np.unsignedinteger):
         return (arr.astype(np.float64) / np.iinfo(arr.dtype).max).astype(np.float32)
     if np.issubdtype(arr.dtype, np.signedinteger):
-        raise ValueError(f"signed integer input ({arr.dtype}) has no defined pressure scale; "
+        raise InputError(f"signed integer input ({arr.dtype}) has no defined pressure scale; "
                          f"pass unsigned integers or floats in [0, 1]")
     if not np.issubdtype(arr.dtype, np.floating):
-        raise ValueError(f"expected a numeric array, got dtype {arr.dtype}")
+        raise InputError(f"expected a numeric array, got dtype {arr.dtype}")
     # Check in the input's own precision, then cast: a finite float64 such as
     # 1e39 must be reported as out of range, not overflow to Inf in float32
     # and be called non-finite (found by the hypothesis tests).
@@ -56,11 +58,11 @@ def check_sequence(seq: Any) -> np.ndarray:
     if finite is not True and not finite.all():
         bad = np.argwhere(~finite)
         first = tuple(int(i) for i in bad[0])
-        raise ValueError(f"sequence has {len(bad)} non-finite value(s) (NaN or Inf); "
+        raise InputError(f"sequence has {len(bad)} non-finite value(s) (NaN or Inf); "
                          f"first at (t, y, x) = {first}")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < -RANGE_TOLERANCE or hi > 1.0 + RANGE_TOLERANCE:
-        raise ValueError(f"values must lie in [0, 1]; found range [{lo:.6g}, {hi:.6g}]. "
+        raise InputError(f"values must lie in [0, 1]; found range [{lo:.6g}, {hi:.6g}]. "
                          f"Normalise the pressure images first")
     arr = arr.astype(np.float32, copy=False)
     if lo < 0.0 or hi > 1.0:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
+from tactbench.errors import InputError
 
 
 class Farneback(FlowEncoder):
@@ -42,15 +43,15 @@ class Farneback(FlowEncoder):
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
         if not 0 < pyr_scale < 1:
-            raise ValueError(f"pyr_scale must lie in (0, 1), got {pyr_scale!r}")
+            raise InputError(f"pyr_scale must lie in (0, 1), got {pyr_scale!r}")
         for key, value, low in (("levels", levels, 0), ("winsize", winsize, 1),
                                 ("iterations", iterations, 1)):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{key} must be an integer ≥ {low}, got {value!r}")
+                raise InputError(f"{key} must be an integer ≥ {low}, got {value!r}")
         if poly_n not in (5, 7):
-            raise ValueError(f"poly_n must be 5 or 7, got {poly_n!r}")
+            raise InputError(f"poly_n must be 5 or 7, got {poly_n!r}")
         if not poly_sigma > 0:
-            raise ValueError(f"poly_sigma must be > 0, got {poly_sigma!r}")
+            raise InputError(f"poly_sigma must be > 0, got {poly_sigma!r}")
         self.pyr_scale = float(pyr_scale)
         self.levels = levels
         self.winsize = winsize
@@ -58,7 +59,7 @@ class Farneback(FlowEncoder):
         self.poly_n = poly_n
         self.poly_sigma = float(poly_sigma)
         if isinstance(margin, bool) or not isinstance(margin, int) or margin < 0:
-            raise ValueError(f"margin must be an integer ≥ 0, got {margin!r}")
+            raise InputError(f"margin must be an integer ≥ 0, got {margin!r}")
         self.gaussian = bool(gaussian)
         self.margin = margin
 

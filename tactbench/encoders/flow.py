@@ -51,6 +51,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from tactbench.encoders.base import Encoder
+from tactbench.errors import InputError
 
 #: Default magnitude normalisation: pixels per frame mapped to magnitude 1.
 DEFAULT_MAX_FLOW = 8.0
@@ -160,13 +161,13 @@ class FlowEncoder(Encoder):
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         if not (isinstance(max_flow, (int, float)) and math.isfinite(max_flow)
                 and max_flow > 0):
-            raise ValueError(f"max_flow must be a positive number of pixels per frame, "
+            raise InputError(f"max_flow must be a positive number of pixels per frame, "
                              f"got {max_flow!r}")
         if not (isinstance(min_magnitude, (int, float)) and math.isfinite(min_magnitude)
                 and min_magnitude >= 0):
-            raise ValueError(f"min_magnitude must be ≥ 0 pixels per frame, got {min_magnitude!r}")
+            raise InputError(f"min_magnitude must be ≥ 0 pixels per frame, got {min_magnitude!r}")
         if isinstance(downscale, bool) or not isinstance(downscale, int) or downscale < 1:
-            raise ValueError(f"downscale must be an integer ≥ 1, got {downscale!r}")
+            raise InputError(f"downscale must be an integer ≥ 1, got {downscale!r}")
         self.max_flow = float(max_flow)
         self.min_magnitude = float(min_magnitude)
         self.downscale = downscale
@@ -182,7 +183,7 @@ class FlowEncoder(Encoder):
         """
         prev, curr = np.asarray(prev), np.asarray(curr)
         if prev.shape != curr.shape or prev.ndim != 3:
-            raise ValueError(f"prev and curr must both be (N, H, W); got {prev.shape} "
+            raise InputError(f"prev and curr must both be (N, H, W); got {prev.shape} "
                              f"and {curr.shape}")
         if prev.shape[0] == 0:
             return np.zeros((*prev.shape, 2), dtype=np.float32)
@@ -268,3 +269,20 @@ class FlowEncoder(Encoder):
     def _flow(self, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
         """Flow for prepared ``(N, h, w)`` pairs at the working size: ``(N, h, w, 2)``."""
         raise NotImplementedError
+
+
+def is_flow_encoder(encoder: Any) -> bool:
+    """Whether ``encoder`` is a dense-flow encoder, the one definition tactbench uses.
+
+    A flow encoder has ``magnitude`` and ``direction`` channels, a public
+    ``flow(prev, curr) → (N, H, W, 2)`` in px/frame, and the scales ``max_flow`` and
+    ``min_magnitude`` that turn that flow into channels (:func:`flow_to_channels`).
+    Every :class:`FlowEncoder` is one; a plugin is one when it has all of these.
+    """
+    if isinstance(encoder, FlowEncoder):
+        return True
+    channels = tuple(getattr(encoder, "channels", ()) or ())
+    return ("magnitude" in channels and "direction" in channels
+            and callable(getattr(encoder, "flow", None))
+            and all(isinstance(getattr(encoder, a, None), (int, float))
+                    for a in ("max_flow", "min_magnitude")))

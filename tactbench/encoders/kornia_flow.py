@@ -31,8 +31,7 @@ import math
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
-
-
+from tactbench.errors import InputError
 
 
 class KorniaFlow(FlowEncoder):
@@ -78,16 +77,16 @@ class KorniaFlow(FlowEncoder):
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
         for key, value in (("levels", levels), ("warps", warps), ("batch", batch)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{key} must be an integer ≥ 1, got {value!r}")
+                raise InputError(f"{key} must be an integer ≥ 1, got {value!r}")
         if not (isinstance(window, (int, float)) and math.isfinite(window) and window > 0):
-            raise ValueError(f"window must be a positive σ in pixels, got {window!r}")
+            raise InputError(f"window must be a positive σ in pixels, got {window!r}")
         if not (isinstance(reg, (int, float)) and math.isfinite(reg) and reg >= 0):
-            raise ValueError(f"reg must be ≥ 0, got {reg!r}")
+            raise InputError(f"reg must be ≥ 0, got {reg!r}")
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
-            raise ValueError(f"threads must be an integer ≥ 0 (0: torch's setting), "
+            raise InputError(f"threads must be an integer ≥ 0 (0: torch's setting), "
                              f"got {threads!r}")
         if device not in ("auto", "cpu", "cuda"):
-            raise ValueError(f"device must be 'auto', 'cpu' or 'cuda', got {device!r}")
+            raise InputError(f"device must be 'auto', 'cpu' or 'cuda', got {device!r}")
         self.levels = levels
         self.warps = warps
         self.window = float(window)
@@ -102,7 +101,7 @@ class KorniaFlow(FlowEncoder):
         if self.device == "auto":
             return torch.device("cuda" if torch.cuda.is_available() else "cpu")
         if self.device == "cuda" and not torch.cuda.is_available():
-            raise ValueError("kornia-flow: device='cuda' but torch sees no CUDA GPU")
+            raise InputError("kornia-flow: device='cuda' but torch sees no CUDA GPU")
         return torch.device(self.device)
 
     def _flow(self, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 
 from tactbench.encoders.dis import to_uint8
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
+from tactbench.errors import InputError
 
 
 class LucasKanade(FlowEncoder):
@@ -65,9 +66,9 @@ class LucasKanade(FlowEncoder):
         for key, value, low in (("winsize", winsize, 3), ("levels", levels, 0),
                                 ("iterations", iterations, 1), ("step", step, 1)):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{key} must be an integer ≥ {low}, got {value!r}")
+                raise InputError(f"{key} must be an integer ≥ {low}, got {value!r}")
         if not (isinstance(min_eigen, (int, float)) and min_eigen > 0):
-            raise ValueError(f"min_eigen must be > 0, got {min_eigen!r}")
+            raise InputError(f"min_eigen must be > 0, got {min_eigen!r}")
         self.winsize = winsize
         self.levels = levels
         self.iterations = iterations

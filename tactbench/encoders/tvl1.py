@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
+from tactbench.errors import InputError
 
 
 class TVL1(FlowEncoder):
@@ -32,12 +33,12 @@ class TVL1(FlowEncoder):
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
         for key, value in (("tau", tau), ("lam", lam), ("theta", theta), ("epsilon", epsilon)):
             if not (isinstance(value, (int, float)) and value > 0):
-                raise ValueError(f"{key} must be > 0, got {value!r}")
+                raise InputError(f"{key} must be > 0, got {value!r}")
         for key, value, low in (("scales", scales, 1), ("warps", warps, 1),
                                 ("iterations", iterations, 1),
                                 ("inner_iterations", inner_iterations, 1), ("median", median, 0)):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{key} must be an integer ≥ {low}, got {value!r}")
+                raise InputError(f"{key} must be an integer ≥ {low}, got {value!r}")
         self.tau = float(tau)
         self.lam = float(lam)
         self.theta = float(theta)

@@ -19,6 +19,7 @@ from tactbench.can.assembler import SweepAssembler
 from tactbench.can.busload import BusLoad, bus_load
 from tactbench.can.codec import FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, is_meta
+from tactbench.errors import InputError
 
 
 def parse_taxel_ids(spec: Any) -> np.ndarray:
@@ -35,19 +36,19 @@ def parse_taxel_ids(spec: Any) -> np.ndarray:
         try:
             ids += list(range(int(lo), int(hi) + 1)) if dash else [int(lo)]
         except ValueError:
-            raise ValueError(f"bad taxel id item '{item}' in '{spec}': expected N or N-M") from None
+            raise InputError(f"bad taxel id item '{item}' in '{spec}': expected N or N-M") from None
     return np.asarray(ids, dtype=np.int64)
 
 
 def resolve_taxel_ids(taxel_ids: Any = None, layout: Any = None) -> np.ndarray:
     """Ids from ``taxel_ids`` or a layout (a file path or an object with ``.ids``)."""
     if (taxel_ids is None) == (layout is None):
-        raise ValueError("cyskin-can needs exactly one of taxel_ids (\"0-10,16-26\") or "
+        raise InputError("cyskin-can needs exactly one of taxel_ids (\"0-10,16-26\") or "
                          "layout (a layout file)")
     if taxel_ids is not None:
         return parse_taxel_ids(taxel_ids)
     if isinstance(layout, (str, Path)):
-        from tactbench.layout import load_layout
+        from tactbench.data.layout import load_layout
 
         layout = load_layout(layout)
     return np.asarray(layout.ids, dtype=np.int64)
@@ -123,7 +124,7 @@ class CySkinCAN:
         try:
             self.bus = can.Bus(can_filters=filters, **kwargs)
         except Exception as exc:
-            raise ValueError(f"cyskin-can: cannot open {interface} channel '{channel}': "
+            raise InputError(f"cyskin-can: cannot open {interface} channel '{channel}': "
                              f"{type(exc).__name__}: {exc}") from exc
 
     # ------------------------------------------------------------------ info

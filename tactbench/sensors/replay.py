@@ -3,7 +3,7 @@
 ``path`` is anything :func:`tactbench.datasets.loading.load_dataset` reads (a
 dataset folder, a CySkin text file or folder, a CoST CSV, or a registered
 dataset spec such as ``synthetic-forearm:users=2``); ``sample`` picks the
-recording. Frames come as :class:`tactbench.recording.Frame`
+recording. Frames come as :class:`tactbench.data.recording.Frame`
 ``(timestamp, values)`` with timestamps as recorded, values float32 ``(N,)``
 in raw sensor units (NaN = missing reading). With ``realtime=True`` each frame
 is released at its recorded time after the first (``time.monotonic`` pacing);
@@ -17,7 +17,8 @@ from typing import Iterator
 
 import numpy as np
 
-from tactbench.recording import Frame, Recording
+from tactbench.data.recording import Frame, Recording
+from tactbench.errors import InputError
 
 
 class Replay:
@@ -42,7 +43,7 @@ class Replay:
         dataset = load_dataset(path)
         if isinstance(sample, bool) or not isinstance(sample, int) \
                 or not 0 <= sample < len(dataset):
-            raise ValueError(f"sample {sample!r} is out of range: {path} has {len(dataset)} "
+            raise InputError(f"sample {sample!r} is out of range: {path} has {len(dataset)} "
                              f"samples (0..{len(dataset) - 1})")
         self.dataset = dataset
         self.sample = dataset[sample]

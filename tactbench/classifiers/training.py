@@ -1,0 +1,351 @@
+"""Training: profiles, seeds, devices, and the loop every torch classifier shares.
+
+Profiles
+--------
+A *profile* is a named set of classifier options (:func:`profile_options`):
+
+``quick`` (the default)
+    sized so that one training of ``small-cnn-lstm`` on ~30 000 windows of
+    5 frames takes under a minute on 2 CPU threads: 32 px input, width 16,
+    Adam (lr 3e-3) with a cosine schedule, 4 epochs of 8000 windows sampled
+    without replacement. This is *not* the paper's optimiser: plain SGD at 1e-3
+    does not learn in that budget.
+``paper``
+    the study's protocol: SGD, learning rate 1e-3, 100 epochs over every
+    training window, batch 16 (the batch size is not stated in the paper),
+    and for ``cnn-lstm`` EfficientNet-B0 at 224 px. A GPU workload.
+
+Options given by the user override the profile's.
+
+Seeds
+-----
+:func:`derive_seed` hashes its parts with SHA-256 (never ``hash()``, which is
+salted per process). The loop draws window order from ``numpy`` with the seed
+and seeds torch inside :func:`torch.random.fork_rng`, so the caller's global
+random state is left as it was. On the CPU the same seed gives the same model.
+
+Devices
+-------
+``"cpu"`` (default), ``"cuda"``/``"cuda:N"`` (an error when CUDA is absent), or
+``"auto"`` (CUDA when available). Mixed precision (``amp``) defaults to on for
+CUDA (float16 autocast with a gradient scaler) and off on the CPU; asking for
+it on the CPU uses bfloat16 autocast, which is how the tests exercise that path.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+
+from tactbench.errors import InputError
+
+if TYPE_CHECKING:  # torch stays out of import time
+    import torch
+
+PROFILE_NAMES: tuple[str, ...] = ("quick", "paper")
+DEFAULT_PROFILE = "quick"
+
+#: The paper's training protocol, shared by every torch classifier in ``paper``.
+_PAPER_TRAINING: dict[str, Any] = {
+    "epochs": 100,
+    "optimizer": "sgd",
+    "lr": 1e-3,
+    "momentum": 0.0,
+    "schedule": "constant",
+    "batch_size": 16,
+    "windows_per_epoch": 0,  # 0: every training window, every epoch
+}
+
+#: profile → classifier name → options. Values not listed keep the class defaults.
+PROFILES: dict[str, dict[str, dict[str, Any]]] = {
+    "quick": {
+        # 4 epochs × 8000 sampled windows = 32 000 windows ≈ one pass over the
+        # ~30 000 windows of the study's data at L = 5 (see docs/classifiers.md).
+        "small-cnn-lstm": {
+            "epochs": 4, "windows_per_epoch": 8000, "batch_size": 64, "width": 16,
+            "optimizer": "adam", "lr": 3e-3, "schedule": "cosine", "input_size": 32,
+        },
+        # EfficientNet-B0 is ~10x slower per window than the small CNN at the same
+        # size on a CPU: the quick profile only makes it runnable, not good.
+        "cnn-lstm": {
+            "epochs": 2, "windows_per_epoch": 1500, "batch_size": 32,
+            "optimizer": "adam", "lr": 1e-3, "schedule": "cosine", "input_size": 32,
+        },
+        "taxel-lstm": {
+            "epochs": 4, "windows_per_epoch": 8000, "batch_size": 64,
+            "optimizer": "adam", "lr": 3e-3, "schedule": "cosine",
+        },
+        "logreg": {},
+    },
+    "paper": {
+        "small-cnn-lstm": dict(_PAPER_TRAINING, input_size=64),
+        "cnn-lstm": dict(_PAPER_TRAINING, input_size=224),
+        "taxel-lstm": dict(_PAPER_TRAINING),
+        "logreg": {},
+    },
+}
+
+
+def profile_options(profile: str = DEFAULT_PROFILE, classifier: str = "small-cnn-lstm") -> dict:
+    """The options ``profile`` gives ``classifier`` (a fresh dict; user options override).
+
+    A classifier from a plugin may declare its own ``profiles`` class attribute
+    (``{"quick": {...}, "paper": {...}}``); one that declares none gets ``{}``
+    (its own defaults) in every profile.
+    """
+    if profile not in PROFILE_NAMES:
+        raise InputError(f"unknown profile '{profile}'; profiles: {', '.join(PROFILE_NAMES)}")
+    table = PROFILES[profile]
+    if classifier in table:
+        return dict(table[classifier])
+    from tactbench.plugins import load_registry
+
+    component = load_registry().get("classifier", classifier)
+    declared = getattr(component.load(), "profiles", None) or {}
+    return dict(declared.get(profile, {}))
+
+
+# --------------------------------------------------------------------------- seeds
+
+
+def derive_seed(*parts: Any) -> int:
+    """A seed in ``[0, 2**63)`` from ``parts`` (run seed, cell identity, ...), via SHA-256.
+
+    Stable across processes and Python versions, unlike ``hash()``.
+    """
+    text = "\x1f".join(repr(p) for p in parts)
+    return int.from_bytes(hashlib.sha256(text.encode("utf-8")).digest()[:8], "big") >> 1
+
+
+# --------------------------------------------------------------------------- devices
+
+
+def select_device(device: str | None = "cpu") -> "torch.device":
+    """``"cpu"``, ``"cuda"``, ``"cuda:N"`` or ``"auto"`` → a :class:`torch.device`.
+
+    Asking for CUDA where there is none is an error, not a silent fallback.
+    """
+    import torch
+
+    name = (device or "cpu").strip().lower()
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        dev = torch.device(name)
+    except RuntimeError as exc:
+        raise InputError(f"unknown device '{device}': use cpu, cuda, cuda:N or auto") from exc
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise InputError(f"device '{device}' was asked for but CUDA is not available "
+                             f"(torch {torch.__version__}); use device='cpu' or 'auto'")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise InputError(f"device '{device}': only {torch.cuda.device_count()} CUDA "
+                             f"device(s) present")
+    elif dev.type != "cpu":
+        raise InputError(f"device type '{dev.type}' is not supported: use cpu or cuda")
+    return dev
+
+
+@dataclass(frozen=True)
+class Precision:
+    """How the forward pass runs: autocast on/off, its dtype, and whether grads are scaled."""
+
+    enabled: bool
+    dtype: "torch.dtype | None"
+    scale_gradients: bool
+
+    def autocast(self, device: "torch.device"):
+        import torch
+
+        if not self.enabled:
+            return torch.autocast(device_type=device.type, enabled=False)
+        return torch.autocast(device_type=device.type, dtype=self.dtype)
+
+    def scaler(self, device: "torch.device"):
+        import torch
+
+        return torch.amp.GradScaler(device.type, enabled=self.scale_gradients)
+
+
+def precision_for(device: "torch.device", amp: bool | None) -> Precision:
+    """Mixed precision for ``device``: float16 + gradient scaling on CUDA (default there),
+    bfloat16 autocast on the CPU when ``amp`` is true (off by default: slower on most CPUs)."""
+    import torch
+
+    enabled = (device.type == "cuda") if amp is None else bool(amp)
+    if not enabled:
+        return Precision(False, None, False)
+    if device.type == "cuda":
+        return Precision(True, torch.float16, True)
+    return Precision(True, torch.bfloat16, False)
+
+
+# --------------------------------------------------------------------------- the loop
+
+
+@dataclass
+class FitReport:
+    """What a training run did; ``as_dict()`` is JSON-ready."""
+
+    classifier: str
+    seed: int
+    device: str
+    amp: bool
+    epochs: int = 0  # epochs completed
+    steps: int = 0  # optimizer steps taken
+    windows_seen: int = 0
+    train_windows: int = 0
+    train_seconds: float = 0.0
+    windows_per_second: float = 0.0
+    final_loss: float = float("nan")
+    epoch_losses: list[float] = field(default_factory=list)
+    val_accuracy: list[float] = field(default_factory=list)
+    interrupted: bool = False
+    n_classes: int = 0
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        for key in ("final_loss",):
+            if isinstance(out[key], float) and not math.isfinite(out[key]):
+                out[key] = None
+        return out
+
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`train_loop`: the model holds the last completed step's
+    weights and is in eval mode; ``report`` says how far training got."""
+
+    def __init__(self, report: FitReport) -> None:
+        super().__init__(f"training interrupted after {report.steps} steps "
+                         f"({report.epochs} full epochs)")
+        self.report = report
+
+
+ProgressFn = Callable[..., Any]
+
+
+def epoch_order(rng: np.random.Generator, n: int, per_epoch: int) -> np.ndarray:
+    """Window indices for one epoch: a permutation of ``n``, cut to (or repeated up to)
+    ``per_epoch`` when ``per_epoch > 0``."""
+    if n <= 0:
+        raise InputError("no training windows")
+    if per_epoch <= 0 or per_epoch == n:
+        return rng.permutation(n)
+    reps = -(-per_epoch // n)
+    return np.concatenate([rng.permutation(n) for _ in range(reps)])[:per_epoch]
+
+
+def make_optimizer(name: str, params, *, lr: float, momentum: float, weight_decay: float):
+    import torch
+
+    key = name.lower()
+    if key == "sgd":
+        return torch.optim.SGD(params, lr=lr, momentum=momentum, weight_decay=weight_decay)
+    if key == "adam":
+        return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay)
+    if key == "adamw":
+        return torch.optim.AdamW(params, lr=lr, weight_decay=weight_decay)
+    raise InputError(f"unknown optimizer '{name}': use sgd, adam or adamw")
+
+
+def train_loop(
+    model: "torch.nn.Module",
+    get_batch: Callable[[np.ndarray], "tuple[torch.Tensor, torch.Tensor]"],
+    *,
+    n_windows: int,
+    report: FitReport,
+    epochs: int,
+    batch_size: int,
+    windows_per_epoch: int,
+    optimizer: str,
+    lr: float,
+    momentum: float = 0.0,
+    weight_decay: float = 0.0,
+    schedule: str = "constant",
+    device: "torch.device",
+    precision: Precision,
+    progress: ProgressFn | None = None,
+    evaluate: Callable[[], float] | None = None,
+) -> FitReport:
+    """Train ``model`` with cross-entropy and fill ``report``.
+
+    ``get_batch(indices)`` returns ``(x, y)`` on ``device`` for those training
+    windows. ``progress(done, total, **info)`` is called after every step
+    (``info``: ``epoch``, ``epochs``, ``loss``) and after each epoch's
+    evaluation (``val_accuracy``). ``evaluate()`` (optional) returns the
+    validation accuracy after each epoch. Random order comes from
+    ``report.seed``; the caller seeds torch.
+    """
+    import torch
+    import torch.nn.functional as F
+
+    if epochs < 0 or batch_size < 1:
+        raise InputError(f"epochs must be ≥ 0 and batch_size ≥ 1 (got {epochs}, {batch_size})")
+    if schedule not in ("constant", "cosine"):
+        raise InputError(f"unknown schedule '{schedule}': use constant or cosine")
+    rng = np.random.default_rng(report.seed)
+    per_epoch = windows_per_epoch if windows_per_epoch > 0 else n_windows
+    # A trailing batch of one window breaks BatchNorm in training mode: drop it.
+    steps_per_epoch = per_epoch // batch_size + (1 if per_epoch % batch_size > 1 else 0)
+    total = epochs * steps_per_epoch
+    opt = make_optimizer(optimizer, model.parameters(), lr=lr, momentum=momentum,
+                         weight_decay=weight_decay)
+    sched = (torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(total, 1))
+             if schedule == "cosine" else None)
+    scaler = precision.scaler(device)
+    report.train_windows = n_windows
+    start = time.perf_counter()
+    done = 0
+    try:
+        for epoch in range(epochs):
+            model.train()
+            order = epoch_order(rng, n_windows, windows_per_epoch)
+            loss_sum, count = 0.0, 0
+            for s in range(steps_per_epoch):
+                idx = order[s * batch_size:(s + 1) * batch_size]
+                x, y = get_batch(idx)
+                opt.zero_grad(set_to_none=True)
+                with precision.autocast(device):
+                    loss = F.cross_entropy(model(x), y)
+                scaler.scale(loss).backward()
+                scaler.step(opt)
+                scaler.update()
+                if sched is not None:
+                    sched.step()
+                value = float(loss.detach())
+                loss_sum += value * len(idx)
+                count += len(idx)
+                done += 1
+                report.steps = done
+                report.windows_seen += len(idx)
+                if progress is not None:
+                    progress(done, total, epoch=epoch + 1, epochs=epochs, loss=value)
+            report.epoch_losses.append(loss_sum / max(count, 1))
+            report.final_loss = report.epoch_losses[-1]
+            report.epochs = epoch + 1
+            if evaluate is not None:
+                acc = float(evaluate())
+                report.val_accuracy.append(acc)
+                if progress is not None:
+                    progress(done, total, epoch=epoch + 1, epochs=epochs,
+                             loss=report.final_loss, val_accuracy=acc)
+    except KeyboardInterrupt:
+        model.eval()
+        report.interrupted = True
+        _finish(report, start)
+        raise TrainingInterrupted(report) from None
+    model.eval()
+    _finish(report, start)
+    return report
+
+
+def _finish(report: FitReport, start: float) -> None:
+    report.train_seconds = time.perf_counter() - start
+    report.windows_per_second = (report.windows_seen / report.train_seconds
+                                 if report.train_seconds > 0 else 0.0)

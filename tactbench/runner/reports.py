@@ -1,0 +1,273 @@
+"""Reports from result rows: summary over seeds, tables, CSV/JSON/Markdown, plots.
+
+Every accuracy is reported beside what it cost (encode ms per frame, train seconds,
+inference ms per sequence, peak memory): users choose on both.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import statistics
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
+
+
+def _mean_std(values: Sequence[float]) -> tuple[float, float]:
+    vals = [v for v in values if v is not None and not math.isnan(v)]
+    if not vals:
+        return float("nan"), float("nan")
+    if len(vals) == 1:
+        return vals[0], 0.0
+    return statistics.fmean(vals), statistics.stdev(vals)
+
+
+def short_name(spec: str) -> str:
+    """``small-cnn-lstm:epochs=4,...`` → ``small-cnn-lstm``."""
+    return spec.split(":", 1)[0]
+
+
+def summarise(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One summary per (dataset, split, encoder, classifier, L), over seeds.
+
+    Accuracy and costs as mean and sample standard deviation; per-class accuracy as
+    means; the confusion matrix row-normalised per seed, then averaged.
+    """
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(tuple(row[k] for k in GROUP_KEYS), []).append(row)
+    out = []
+    for key, members in groups.items():
+        members.sort(key=lambda r: r["seed"])
+        classes = members[0]["classes"]
+        acc_mean, acc_std = _mean_std([r["accuracy"] for r in members])
+        per_class = {c: _mean_std([r["per_class_accuracy"].get(c) for r in members])[0]
+                     for c in classes}
+        k = len(classes)
+        confusion = [[0.0] * k for _ in range(k)]
+        for r in members:
+            for i, line in enumerate(r["confusion"]):
+                total = sum(line) or 1
+                for j, v in enumerate(line):
+                    confusion[i][j] += v / total / len(members)
+        summary = dict(zip(GROUP_KEYS, key))
+        summary.update({
+            "seeds": [r["seed"] for r in members],
+            "accuracy_mean": acc_mean, "accuracy_std": acc_std,
+            "per_class_accuracy": per_class,
+            "confusion_normalised": confusion,
+            "classes": classes,
+        })
+        for cost in ("encode_ms_per_frame", "train_s", "inference_ms_per_sequence",
+                     "peak_rss_mb"):
+            summary[cost + "_mean"], summary[cost + "_std"] = _mean_std(
+                [r.get(cost) for r in members])
+        out.append(summary)
+    out.sort(key=lambda s: (s["dataset"], s["split"], s["L"], short_name(s["classifier"]),
+                            s["encoder"]))
+    return out
+
+
+def _pct(mean: float, std: float) -> str:
+    if math.isnan(mean):
+        return "-"
+    return f"{100 * mean:.1f} ± {100 * std:.1f}"
+
+
+def table_rows(summaries: Sequence[dict[str, Any]]) -> list[list[str]]:
+    rows = []
+    for s in summaries:
+        rows.append([
+            s["encoder"], short_name(s["classifier"]), str(s["L"]),
+            _pct(s["accuracy_mean"], s["accuracy_std"]), str(len(s["seeds"])),
+            f"{s['encode_ms_per_frame_mean']:.3f}",
+            f"{s['train_s_mean']:.1f}",
+            f"{s['inference_ms_per_sequence_mean']:.2f}",
+            f"{s['peak_rss_mb_mean']:.0f}",
+        ])
+    return rows
+
+
+TABLE_HEADER = ["encoder", "classifier", "L", "accuracy %", "seeds", "encode ms/frame",
+                "train s", "infer ms/seq", "peak MB"]
+
+
+def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "") -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title or None, title_justify="left")
+    for col in TABLE_HEADER:
+        table.add_column(col, justify="right" if col not in ("encoder", "classifier") else
+                         "left")
+    for row in table_rows(summaries):
+        table.add_row(*row)
+    console = Console()
+    if not console.is_terminal:  # logs and pipes: no wrapping at 80 columns
+        console = Console(width=160)
+    console.print(table)
+
+
+def markdown_table(summaries: Sequence[dict[str, Any]]) -> str:
+    lines = ["| " + " | ".join(TABLE_HEADER) + " |",
+             "|" + "---|" * len(TABLE_HEADER)]
+    lines += ["| " + " | ".join(r) + " |" for r in table_rows(summaries)]
+    return "\n".join(lines)
+
+
+def per_class_markdown(summaries: Sequence[dict[str, Any]]) -> str:
+    if not summaries:
+        return ""
+    classes = summaries[0]["classes"]
+    lines = ["| encoder | classifier | L | " + " | ".join(classes) + " |",
+             "|" + "---|" * (3 + len(classes))]
+    for s in summaries:
+        cells = [f"{100 * s['per_class_accuracy'][c]:.1f}"
+                 if s["per_class_accuracy"][c] is not None
+                 and not math.isnan(s["per_class_accuracy"][c]) else "-" for c in classes]
+        lines.append(f"| {s['encoder']} | {short_name(s['classifier'])} | {s['L']} | "
+                     + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
+    """Flat CSV: one line per cell, per-class accuracies as ``acc_<class>`` columns."""
+    classes: list[str] = []
+    for r in rows:
+        for c in r["classes"]:
+            if c not in classes:
+                classes.append(c)
+    columns = ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
+               "classifier", "profile", "L", "seed", "accuracy", *[f"acc_{c}" for c in classes],
+               "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
+               "n_train_windows", "n_test", "device", "threads", "finished", "key"]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore")
+    writer.writeheader()
+    for r in rows:
+        flat = dict(r)
+        for c in classes:
+            flat[f"acc_{c}"] = r["per_class_accuracy"].get(c)
+        writer.writerow(flat)
+    return buf.getvalue()
+
+
+def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
+                  meta: dict[str, Any] | None = None, plots: bool = True) -> dict[str, Path]:
+    """Write results.json, results.csv, report.md and the plots into ``out``."""
+    from tactbench.runner import atomic_write_text
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summaries = summarise(rows)
+    paths = {"json": out / "results.json", "csv": out / "results.csv",
+             "markdown": out / "report.md"}
+    atomic_write_text(paths["json"], json.dumps(
+        {"meta": meta or {}, "summary": summaries, "rows": list(rows)}, indent=2))
+    atomic_write_text(paths["csv"], rows_csv(rows))
+    figures: dict[str, Path] = {}
+    if plots and rows:
+        figures = write_plots(out, summaries)
+        paths.update(figures)
+    atomic_write_text(paths["markdown"], markdown_report(summaries, rows, meta or {},
+                                                         figures))
+    return paths
+
+
+def markdown_report(summaries, rows, meta, figures) -> str:
+    first = rows[0] if rows else {}
+    lines = [
+        "# tactbench report", "",
+        f"- dataset: `{first.get('dataset', '?')}` (content hash "
+        f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
+        f"- split: `{first.get('split', '?')}`; profile: `{first.get('profile', '?')}`; "
+        f"device: `{first.get('device', '?')}`",
+        f"- cells: {len(rows)}; command: `{meta.get('command', '')}`",
+        f"- git: `{meta.get('git')}`; versions: "
+        + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
+        "",
+        "Accuracy is mean ± standard deviation over seeds (test set: "
+        f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "
+        "core; train seconds are wall time; inference is per test sequence, batched.",
+        "", markdown_table(summaries), "", "## Per-class accuracy (%, mean over seeds)", "",
+        per_class_markdown(summaries), "",
+    ]
+    for name, path in figures.items():
+        lines += [f"![{name}]({path.name})", ""]
+    return "\n".join(lines)
+
+
+def write_plots(out: Path, summaries: Sequence[dict[str, Any]]) -> dict[str, Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures: dict[str, Path] = {}
+    # accuracy against L, one line per encoder × classifier
+    fig, ax = plt.subplots(figsize=(6, 4))
+    lines: dict[tuple[str, str], list[dict]] = {}
+    for s in summaries:
+        lines.setdefault((s["encoder"], short_name(s["classifier"])), []).append(s)
+    for (enc, clf), pts in sorted(lines.items()):
+        pts.sort(key=lambda s: s["L"])
+        ax.errorbar([s["L"] for s in pts], [100 * s["accuracy_mean"] for s in pts],
+                    yerr=[100 * s["accuracy_std"] for s in pts], marker="o", capsize=3,
+                    label=f"{enc} / {clf}")
+    ax.set_xlabel("window length L (frames)")
+    ax.set_ylabel("test accuracy (%)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    figures["accuracy_vs_L"] = out / "accuracy_vs_L.png"
+    fig.savefig(figures["accuracy_vs_L"], dpi=120)
+    plt.close(fig)
+
+    # cost against accuracy
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for s in summaries:
+        cost = s["encode_ms_per_frame_mean"]
+        ax.errorbar([max(cost, 1e-4)], [100 * s["accuracy_mean"]],
+                    yerr=[100 * s["accuracy_std"]], marker="o", capsize=3)
+        ax.annotate(f"{s['encoder']} / {short_name(s['classifier'])} L={s['L']}",
+                    (max(cost, 1e-4), 100 * s["accuracy_mean"]), fontsize=7,
+                    xytext=(4, 4), textcoords="offset points")
+    ax.set_xscale("log")
+    ax.margins(x=0.35)  # room for the labels right of the points
+    ax.set_xlabel("encode cost (ms per frame, one core, log scale)")
+    ax.set_ylabel("test accuracy (%)")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    figures["cost_vs_accuracy"] = out / "cost_vs_accuracy.png"
+    fig.savefig(figures["cost_vs_accuracy"], dpi=120)
+    plt.close(fig)
+
+    # normalised confusion matrices averaged over seeds
+    for s in summaries:
+        classes = s["classes"]
+        matrix = s["confusion_normalised"]
+        fig, ax = plt.subplots(figsize=(1.0 + 0.8 * len(classes), 0.8 + 0.8 * len(classes)))
+        ax.imshow(matrix, vmin=0, vmax=1, cmap="Blues")
+        for i, line in enumerate(matrix):
+            for j, v in enumerate(line):
+                ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=8,
+                        color="white" if v > 0.5 else "black")
+        ax.set_xticks(range(len(classes)), classes, rotation=45, ha="right", fontsize=8)
+        ax.set_yticks(range(len(classes)), classes, fontsize=8)
+        ax.set_xlabel("predicted")
+        ax.set_ylabel("true")
+        ax.set_title(f"{s['encoder']} / {short_name(s['classifier'])}, L={s['L']}", fontsize=9)
+        fig.tight_layout()
+        name = f"confusion_{_slug(s['encoder'])}_{_slug(short_name(s['classifier']))}_L{s['L']}"
+        figures[name] = out / f"{name}.png"
+        fig.savefig(figures[name], dpi=110)
+        plt.close(fig)
+    return figures
+
+
+def _slug(text: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "-" for ch in text).strip("-")

@@ -1,0 +1,195 @@
+"""CAN logs: simulated samples written to .blf/.asc and read back exactly, with labels."""
+
+from __future__ import annotations
+
+import can
+import numpy as np
+import pytest
+
+from tactbench.can.codec import FrameFormat, TaxelMap, encode_sweep
+from tactbench.can.logs import (
+    infer_taxel_ids,
+    is_can_log,
+    read_log,
+    read_messages,
+    write_log,
+)
+from tactbench.can.meta import MetaAssembler, is_meta, marker_messages, taxel_map_messages
+from tactbench.can.simulate import SimSample, schedule_messages, traffic
+
+# Two modules with a gap (slot 2 of module 0 absent), like a real patch with a dead taxel.
+IDS = np.array([0, 1, 3, 4, 5, 16, 17, 18, 19, 20, 21])
+
+
+def samples(seed: int = 0) -> list[SimSample]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, (label, n) in enumerate([("Grasp", 7), ("Pull", 5), ("Grasp", 6)]):
+        values = rng.integers(0, 65536, (n, IDS.size)).astype(np.float32)
+        out.append(SimSample(values, 0.1 * np.arange(n) + 3.0 * i,
+                             {"label": label, "user": i % 2, "repetition": i}))
+    return out
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc"])
+def test_simulated_samples_read_back_equal(tmp_path, suffix):
+    path = tmp_path / f"run{suffix}"
+    taxels = TaxelMap(IDS)
+    originals = samples()
+    write_log(path, schedule_messages(traffic(originals, taxels), t0=1.7e9))
+    log = read_log(path)
+    assert log.taxel_source == "announced"
+    np.testing.assert_array_equal(log.taxel_ids, IDS)
+    assert [s.label for s in log.segments] == ["Grasp", "Pull", "Grasp"]
+    for seg, orig in zip(log.segments, originals):
+        np.testing.assert_array_equal(seg.values, orig.values)
+        assert seg.values.dtype == np.float32
+        np.testing.assert_allclose(seg.timestamps - seg.timestamps[0],
+                                   orig.timestamps - orig.timestamps[0], atol=2e-6)
+        assert seg.info == orig.info
+        assert not seg.missing.any()
+    summary = log.summary()
+    assert summary["samples_per_class"] == {"Grasp": 2, "Pull": 1}
+    assert summary["frames_per_sample"] == {"min": 5, "median": 6.0, "max": 7}
+    assert summary["assembler"]["lost_messages"] == 0
+
+
+def test_without_announcement_taxels_are_inferred_from_the_traffic(tmp_path):
+    path = tmp_path / "bare.asc"
+    taxels = TaxelMap(IDS)
+    write_log(path, schedule_messages(traffic(samples(), taxels, announce=False)))
+    log = read_log(path)
+    assert log.taxel_source == "inferred"
+    # The absent slot 2 travels inside a message as 0, so it shows up as a taxel.
+    assert log.taxel_ids.tolist() == [0, 1, 2, 3, 4, 5, 16, 17, 18, 19, 20, 21]
+    assert (log.segments[0].values[:, 2] == 0).all()
+    exact = read_log(path, taxel_ids=IDS)
+    assert exact.taxel_source == "given"
+    np.testing.assert_array_equal(exact.segments[1].values, samples()[1].values)
+
+
+def test_unmarked_traffic_is_one_unlabelled_segment(tmp_path):
+    path = tmp_path / "plain.blf"
+    taxels = TaxelMap(IDS)
+    values = np.arange(3 * IDS.size, dtype=np.float32).reshape(3, IDS.size)
+    msgs = [m for k in range(3) for m in encode_sweep(values[k], taxels, k, timestamp=k * 0.1)]
+    write_log(path, msgs)
+    log = read_log(path, taxel_ids=IDS)
+    [seg] = log.segments
+    assert seg.label is None and len(seg) == 3 and log.labelled == []
+    np.testing.assert_array_equal(log.sweeps()[1], values)
+
+
+def test_other_traffic_in_the_log_is_ignored_and_counted(tmp_path):
+    path = tmp_path / "busy.asc"
+    taxels = TaxelMap(IDS)
+    msgs = list(schedule_messages(traffic(samples()[:1], taxels)))
+    noise = [can.Message(arbitration_id=0x7E0, is_extended_id=False, data=b"\x02\x01\x0c",
+                         timestamp=0.05),
+             can.Message(is_error_frame=True, timestamp=0.06)]
+    write_log(path, msgs[:5] + noise + msgs[5:])
+    log = read_log(path)
+    np.testing.assert_array_equal(log.segments[0].values, samples()[0].values)
+    assert log.stats.rejected["foreign_id"] == 1 and log.stats.rejected["error_frame"] == 1
+
+
+def test_fd_frames_survive_both_log_formats(tmp_path):
+    fmt = FrameFormat(fd=True)
+    taxels = TaxelMap(IDS, fmt)
+    for suffix in (".blf", ".asc"):
+        path = tmp_path / f"fd{suffix}"
+        write_log(path, schedule_messages(traffic(samples(), taxels)))
+        log = read_log(path, fmt=fmt)
+        np.testing.assert_array_equal(log.segments[2].values, samples()[2].values)
+
+
+def test_bad_paths_give_clear_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such CAN log"):
+        read_log(tmp_path / "nope.blf")
+    odd = tmp_path / "x.txt"
+    odd.write_text("hello")
+    with pytest.raises(ValueError, match="not a CAN log file name"):
+        read_log(odd)
+    empty = tmp_path / "empty.asc"
+    write_log(empty, [])
+    with pytest.raises(ValueError, match="no CySkin data messages"):
+        read_log(empty)
+    assert is_can_log("a.BLF") and not is_can_log("a.npz")
+
+
+def test_log_messages_keep_ids_and_payloads(tmp_path):
+    msgs = encode_sweep(np.arange(IDS.size) * 999, TaxelMap(IDS), 5)
+    write_log(tmp_path / "m.blf", msgs)
+    back = list(read_messages(tmp_path / "m.blf"))
+    assert [(m.arbitration_id, bytes(m.data)) for m in back] == \
+        [(m.arbitration_id, bytes(m.data)) for m in msgs]
+    np.testing.assert_array_equal(infer_taxel_ids(back), [0, 1, 2, 3, 4, 5, 16, 17, 18, 19,
+                                                           20, 21])
+
+
+# ----------------------------------------------------------------- meta frames
+
+def test_markers_and_taxel_maps_reassemble_from_parts():
+    info = {"label": "2hGrasp", "user": "participant-with-a-long-name", "repetition": 4}
+    msgs = marker_messages(True, info, seq=7, timestamp=2.0)
+    assert len(msgs) > 1 and all(is_meta(m) and m.dlc <= 8 for m in msgs)
+    meta = MetaAssembler()
+    events = [meta.feed(m) for m in msgs]
+    assert events[:-1] == [None] * (len(msgs) - 1)
+    assert events[-1].kind == "label_start" and events[-1].info == info
+    ids = np.array([3, 17, 4095 * 16 + 15])
+    [*_, last] = [meta.feed(m) for m in taxel_map_messages(ids, seq=8)]
+    np.testing.assert_array_equal(last.taxel_ids, ids)
+
+
+def test_a_marker_with_a_lost_part_is_counted_not_raised():
+    msgs = marker_messages(False, {"label": "Twist" * 5}, seq=1)
+    meta = MetaAssembler()
+    assert [meta.feed(m) for m in msgs[1:]] == [None] * (len(msgs) - 1)
+    assert meta.broken == 1
+    with pytest.raises(ValueError, match="needs a 'label'"):
+        marker_messages(True, {}, seq=0)
+
+
+def test_a_log_becomes_a_dataset(tmp_path):
+    recording = pytest.importorskip("tactbench.data.recording")
+    path = tmp_path / "run.blf"
+    write_log(path, schedule_messages(traffic(samples(), TaxelMap(IDS)), t0=5.0))
+    dataset = read_log(path).to_dataset(name="run")
+    assert isinstance(dataset, recording.Dataset)
+    assert dataset.classes == ("Grasp", "Pull")
+    assert dataset.labels.tolist() == [0, 1, 0]
+    assert dataset.users == ["0", "1", "0"]
+    for sample, orig in zip(dataset.samples, samples()):
+        np.testing.assert_array_equal(sample.recording.values, orig.values)
+        np.testing.assert_allclose(sample.recording.timestamps,
+                                   orig.timestamps - orig.timestamps[0], atol=2e-6)
+        np.testing.assert_array_equal(sample.recording.taxel_ids, IDS)
+
+
+def test_unmarked_log_becomes_an_unlabelled_dataset(tmp_path):
+    pytest.importorskip("tactbench.data.recording")
+    path = tmp_path / "plain.asc"
+    taxels = TaxelMap(IDS)
+    write_log(path, [m for k in range(4) for m in encode_sweep(np.full(IDS.size, k), taxels, k,
+                                                                timestamp=10 + 0.1 * k)])
+    dataset = read_log(path, taxel_ids=IDS).to_dataset()
+    assert dataset.classes == ("unlabelled",) and len(dataset) == 1
+    np.testing.assert_array_equal(dataset.samples[0].recording.values[:, 0], [0, 1, 2, 3])
+
+
+def test_log_replay_sensor_plays_every_sweep_in_order(tmp_path):
+    from tactbench.can.logs import LogReplay
+    from tactbench.contracts import Sensor
+
+    path = tmp_path / "run.blf"
+    originals = samples()
+    write_log(path, schedule_messages(traffic(originals, TaxelMap(IDS))))
+    with LogReplay(path) as sensor:
+        assert isinstance(sensor, Sensor)
+        frames = list(sensor.frames())
+    np.testing.assert_array_equal(np.stack([f.values for f in frames]),
+                                  np.concatenate([s.values for s in originals]))
+    assert [f.label for f in frames] == [s.info["label"] for s in originals
+                                         for _ in range(len(s.values))]
+    assert all(np.diff([f.timestamp for f in frames]) > 0)

@@ -1,0 +1,58 @@
+"""Splits: the study's per-class split and leave-users-out."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactbench.classifiers.training import derive_seed
+from tactbench.data.splits import make_split, paper_split, users_split
+
+LABELS = np.repeat(np.arange(5), 76)  # 5 classes × 38 users × 2 positions
+USERS = np.tile(np.repeat([f"u{i:02d}" for i in range(38)], 2), 5)
+
+
+def test_paper_split_takes_30_per_class_and_is_disjoint():
+    s = paper_split(LABELS, seed=0)
+    assert len(s.test) == 150 and len(np.intersect1d(s.train, s.test)) == 0
+    assert len(s.train) + len(s.test) == len(LABELS)
+    np.testing.assert_array_equal(np.bincount(LABELS[s.test]), [30] * 5)
+
+
+def test_split_depends_on_the_seed_only():
+    a, b, c = (paper_split(LABELS, seed=s) for s in (0, 0, 1))
+    np.testing.assert_array_equal(a.test, b.test)
+    assert not np.array_equal(a.test, c.test)
+
+
+def test_small_classes_keep_training_samples():
+    s = paper_split([0, 0, 0, 1, 1], seed=3)
+    assert set(np.asarray([0, 0, 0, 1, 1])[s.train]) == {0, 1}
+
+
+def test_users_split_shares_no_user():
+    s = users_split(USERS, LABELS, seed=2)
+    train_users, test_users = set(USERS[s.train]), set(USERS[s.test])
+    assert not train_users & test_users and test_users == set(s.test_users)
+    assert len(test_users) == round(0.2 * 38)
+
+
+def test_bad_splits_are_named():
+    with pytest.raises(ValueError, match="unknown split 'random'"):
+        make_split("random", labels=LABELS, users=USERS, seed=0)
+    with pytest.raises(ValueError, match="≥ 2 users"):
+        users_split(["a"] * 4, [0, 1, 0, 1], seed=0)
+    with pytest.raises(ValueError, match="1 sample"):
+        paper_split([0, 1, 1], seed=0)
+
+
+def test_derived_seeds_are_stable_and_distinct():
+    assert derive_seed(0, "farneback", 5) == derive_seed(0, "farneback", 5)
+    assert derive_seed(0, "farneback", 5) != derive_seed(1, "farneback", 5)
+    import subprocess
+    import sys
+
+    code = "from tactbench.classifiers.training import derive_seed; print(derive_seed(0, 'farneback', 5))"
+    other = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           env={"PYTHONHASHSEED": "12345", "PATH": ""}, check=True)
+    assert int(other.stdout) == derive_seed(0, "farneback", 5)  # not salted per process

@@ -1,0 +1,55 @@
+"""Training and test windows of L frames (the study's protocol)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactbench.data.windows import Windows, test_windows, training_windows
+
+
+def seqs():
+    # sequence i has T = 3 + i frames; frame t of sequence i is filled with 10*i + t + 1
+    return [np.stack([np.full((2, 2), 10 * i + t + 1, np.float32) for t in range(3 + i)])
+            for i in range(3)]
+
+
+def test_training_windows_are_every_window_of_L():
+    w = training_windows(seqs(), [0, 1, 2], 3)
+    assert len(w) == 1 + 2 + 3
+    x, y = w.arrays()
+    assert x.shape == (6, 3, 2, 2) and x.dtype == np.float32
+    np.testing.assert_array_equal(y, [0, 1, 1, 2, 2, 2])
+    np.testing.assert_array_equal(x[2, :, 0, 0], [12, 13, 14])  # second window of seq 1
+
+
+def test_short_sequence_gives_one_padded_window():
+    w = training_windows(seqs(), [0, 1, 2], 5)
+    assert len(w) == 3
+    x = w.batch([0])
+    np.testing.assert_array_equal(x[0, :, 0, 0], [1, 2, 3, 0, 0])  # blank frames appended
+
+
+def test_test_windows_take_the_first_L_frames():
+    w = test_windows(seqs(), [4, 5, 6], 4)
+    x, y = w.arrays()
+    np.testing.assert_array_equal(y, [4, 5, 6])
+    np.testing.assert_array_equal(x[:, :, 0, 0], [[1, 2, 3, 0], [11, 12, 13, 14],
+                                                  [21, 22, 23, 24]])
+
+
+def test_taxel_vectors_work_too():
+    w = training_windows([np.ones((4, 7), np.float32)], [1], 2)
+    assert w.frame_shape == (7,) and w.batch(slice(None)).shape == (3, 2, 7)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: training_windows(seqs(), [0, 1], 2), "3 sequences but 2 labels"),
+    (lambda: training_windows(seqs(), [0, 1, 2], 0), "L must be ≥ 1"),
+    (lambda: training_windows([np.zeros((0, 2), np.float32)], [0], 2), "T ≥ 1"),
+    (lambda: Windows([np.zeros((2, 2)), np.zeros((2, 3))], np.zeros(0, int),
+                     np.zeros(0, int), np.zeros(0, int), 1), "different frame shapes"),
+])
+def test_bad_input_is_named(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()
