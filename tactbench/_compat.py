@@ -1,17 +1,22 @@
 """Old import paths kept working for one release after the package was reorganised.
 
-Each old module (``tactbench/recording.py``, ...) is a two-line file that calls
-:func:`moved`, which warns once and makes the old name *the same module object* as
-the new one, so attributes, monkeypatching and ``isinstance`` checks behave alike.
+``import tactbench.recording`` (an old path) gives *the same module object* as
+``tactbench.data.recording`` (its new home), with a :class:`DeprecationWarning`, so
+attributes, monkeypatching and ``isinstance`` checks behave alike. No file is left at the
+old place: a finder on :data:`sys.meta_path` (installed by ``import tactbench``) answers
+for the old names.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.machinery
 import sys
 import warnings
+from types import ModuleType
 
-#: old module → its new home; removed in tactbench 0.3.
+#: old module → its new home; the old names go in tactbench 0.3.
 MOVED_MODULES: dict[str, str] = {
     "tactbench.recording": "tactbench.data.recording",
     "tactbench.layout": "tactbench.data.layout",
@@ -26,9 +31,32 @@ MOVED_MODULES: dict[str, str] = {
 }
 
 
-def moved(old: str) -> None:
-    """Alias module ``old`` to its new home (called from the old module's body)."""
-    new = MOVED_MODULES[old]
-    warnings.warn(f"{old} moved to {new}; the old name goes in tactbench 0.3",
-                  DeprecationWarning, stacklevel=3)
-    sys.modules[old] = importlib.import_module(new)
+class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Finds the old names and loads them as the new modules."""
+
+    def __init__(self) -> None:
+        self._specs: dict[str, importlib.machinery.ModuleSpec] = {}
+
+    def find_spec(self, fullname: str, path=None, target=None):
+        if fullname not in MOVED_MODULES:
+            return None
+        return importlib.machinery.ModuleSpec(fullname, self)
+
+    def create_module(self, spec) -> ModuleType:
+        new = MOVED_MODULES[spec.name]
+        warnings.warn(f"{spec.name} moved to {new}; the old name goes in tactbench 0.3",
+                      DeprecationWarning, stacklevel=2)
+        module = importlib.import_module(new)
+        self._specs[new] = module.__spec__
+        return module
+
+    def exec_module(self, module: ModuleType) -> None:
+        """Nothing to run: the new module is already imported. The import system has just
+        set ``module.__spec__`` to the old name's spec: give the module its own back."""
+        module.__spec__ = self._specs[module.__name__]
+
+
+def install() -> None:
+    """Put the finder on :data:`sys.meta_path` once."""
+    if not any(isinstance(f, _MovedModules) for f in sys.meta_path):
+        sys.meta_path.append(_MovedModules())

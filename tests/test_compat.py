@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -18,18 +19,27 @@ def test_old_path_is_the_new_module_and_warns(old):
     code = (f"import warnings; warnings.simplefilter('error')\n"
             f"try:\n    import {old}\nexcept DeprecationWarning as w:\n    print('warned', w)\n"
             f"warnings.simplefilter('ignore')\n"
-            f"import {old} as a, {new} as b\nprint('same', a is b)\n")
+            f"import {old} as a, {new} as b\nprint('same', a is b)\n"
+            f"print('spec', b.__spec__.name, b.__name__)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert f"warned {old} moved to {new}" in out
     assert "same True" in out
+    assert f"spec {new} {new}" in out  # the module keeps its own identity
 
 
-def test_every_alias_file_points_where_the_table_says():
+def test_every_new_home_exists_and_no_file_is_left_at_the_old_place():
+    import tactbench
+
+    root = Path(tactbench.__file__).parent
     for old, new in MOVED_MODULES.items():
         assert importlib.util.find_spec(new) is not None, new
-        spec = importlib.util.find_spec(old)
-        assert spec is not None and spec.origin.endswith(old.split(".")[-1] + ".py")
+        assert not (root / (old.split(".")[-1] + ".py")).exists(), old
+
+
+def test_unknown_names_are_not_answered_by_the_alias_finder():
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("tactbench.no_such_module")
 
 
 def test_testing_face_exposes_both_conformance_suites():

@@ -1,5 +1,0 @@
-"""Moved to :mod:`tactbench.data.layout` (this alias goes in tactbench 0.3)."""
-
-from tactbench._compat import moved
-
-moved(__name__)
