@@ -12,17 +12,14 @@ A :class:`TaxelLayout` holds, for ``N`` taxels:
   that images cover (by default the taxels' bounding box grown by half the
   median taxel spacing on each side).
 
-Loaders: :meth:`TaxelLayout.from_json` (CySkin calibration files in all three
-forms: 3-D ``skin.taxels``, 2-D ``tactile_maps`` as an object or as a list of
-maps), :meth:`TaxelLayout.from_csv` (``id,x_mm,y_mm[,z_mm]``) and
-:func:`load_layout` (by file suffix). :func:`cyskin_forearm` generates the
-CySkin-like forearm of the study.
+:func:`unroll` flattens 3-D positions. Files and the dict format are in
+:mod:`tactbench.data.layout_io` (``TaxelLayout.from_json``/``from_csv``/``to_csv``
+delegate to it); the generated CySkin-like forearm is
+:func:`tactbench.datasets.forearm.cyskin_forearm`.
 """
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from tactbench.errors import InputError, MissingFileError
+from tactbench.errors import InputError, check_shape
 
 #: CySkin taxel ids: ``module_id * SLOTS_PER_ID + slot``.
 SLOTS_PER_ID = 16
@@ -118,7 +115,7 @@ class TaxelLayout:
     def indices_of(self, taxel_ids: Any, *, what: str = "recording") -> np.ndarray:
         """Row index in this layout of each id in ``taxel_ids`` (int64 ``(M,)``).
 
-        Raises ``ValueError`` naming the ids the layout lacks.
+        Raises :class:`~tactbench.errors.InputError` naming the ids the layout lacks.
         """
         ids = np.asarray(taxel_ids, dtype=np.int64).ravel()
         out = np.empty(ids.size, dtype=np.int64)
@@ -159,220 +156,44 @@ class TaxelLayout:
             "modules": int(np.unique(self.ids // SLOTS_PER_ID).size),
         }
 
-    # ------------------------------------------------------------------ writers
+    # ---------------------------------------------------------------- files
 
     def to_csv(self, path: str | Path) -> None:
-        """Write ``id,x_mm,y_mm`` (the 2-D positions), after a comment line
-        ``# bounds_mm=x_min,y_min,x_max,y_max`` that :meth:`from_csv` reads back.
+        """Write ``id,x_mm,y_mm`` (see :func:`tactbench.data.layout_io.write_layout_csv`)."""
+        from tactbench.data.layout_io import write_layout_csv
 
-        Floats are written with ``repr`` so reading back is exact.
-        """
-        path = Path(path)
-        with path.open("w", newline="") as fh:
-            fh.write("# bounds_mm=" + ",".join(repr(float(b)) for b in self.bounds) + "\n")
-            writer = csv.writer(fh)
-            writer.writerow(["id", "x_mm", "y_mm"])
-            for k in range(self.n_taxels):
-                writer.writerow([int(self.ids[k]), repr(float(self.positions[k, 0])),
-                                 repr(float(self.positions[k, 1]))])
-
-    # ------------------------------------------------------------------ loaders
+        write_layout_csv(self, path)
 
     @classmethod
     def from_csv(cls, path: str | Path) -> "TaxelLayout":
-        """Read a CSV with header ``id,x_mm,y_mm`` and optionally ``z_mm``.
+        """Read ``id,x_mm,y_mm[,z_mm]`` (see :func:`tactbench.data.layout_io.read_layout_csv`)."""
+        from tactbench.data.layout_io import read_layout_csv
 
-        ``x_mm, y_mm`` are the 2-D positions; with ``z_mm`` the 3-D positions
-        are ``(x, y, z)``. Lines starting with ``#`` before the header are
-        comments; ``# bounds_mm=x_min,y_min,x_max,y_max`` sets the image bounds.
-        Bad rows raise ``ValueError`` naming the line.
-        """
-        path = Path(path)
-        text = _read_text(path)
-        lines = text.splitlines()
-        bounds = None
-        first = 0
-        while first < len(lines) and lines[first].lstrip().startswith("#"):
-            comment = lines[first].lstrip("# \t")
-            if comment.startswith("bounds_mm="):
-                try:
-                    bounds = tuple(float(v) for v in comment[len("bounds_mm="):].split(","))
-                except ValueError:
-                    raise InputError(f"{path}, line {first + 1}: bounds_mm must be four "
-                                     f"numbers x_min,y_min,x_max,y_max") from None
-                if len(bounds) != 4:
-                    raise InputError(f"{path}, line {first + 1}: bounds_mm must be four "
-                                     f"numbers x_min,y_min,x_max,y_max")
-            first += 1
-        rows = list(csv.reader(lines[first:]))
-        if not rows or not any(cell.strip() for cell in rows[0]):
-            raise InputError(f"{path}: empty layout file (expected a header id,x_mm,y_mm)")
-        header = [c.strip().lower() for c in rows[0]]
-        if header[:3] != ["id", "x_mm", "y_mm"] or len(header) > 4 or \
-                (len(header) == 4 and header[3] != "z_mm"):
-            raise InputError(f"{path}, line {first + 1}: header must be 'id,x_mm,y_mm' or "
-                             f"'id,x_mm,y_mm,z_mm', got {','.join(rows[0])!r}")
-        ncol = len(header)
-        ids, xyz = [], []
-        for lineno, row in enumerate(rows[1:], start=first + 2):
-            if not row or all(not c.strip() for c in row):
-                continue
-            if len(row) != ncol:
-                raise InputError(f"{path}, line {lineno}: expected {ncol} columns, "
-                                 f"got {len(row)}")
-            try:
-                tid = int(row[0])
-            except ValueError:
-                raise InputError(f"{path}, line {lineno}: taxel id {row[0]!r} is not an "
-                                 f"integer") from None
-            vals = []
-            for name, cell in zip(header[1:], row[1:]):
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise InputError(f"{path}, line {lineno}: {name} {cell!r} is not a "
-                                     f"number") from None
-                if not math.isfinite(v):
-                    raise InputError(f"{path}, line {lineno}: {name} is {cell.strip()} "
-                                     f"(positions must be finite)")
-                vals.append(v)
-            ids.append(tid)
-            xyz.append(vals)
-        if not ids:
-            raise InputError(f"{path}: no taxels after the header")
-        arr = np.asarray(xyz, dtype=np.float64)
-        p3 = arr if ncol == 4 else None
-        return _build(cls, ids, arr[:, :2], p3, None, path, bounds)
+        return read_layout_csv(path)
 
     @classmethod
     def from_json(cls, path: str | Path, *, map_index: int = 0) -> "TaxelLayout":
-        """Read a CySkin calibration JSON (positions in metres, converted to mm).
+        """Read a CySkin calibration JSON (see
+        :func:`tactbench.data.layout_io.read_layout_json`)."""
+        from tactbench.data.layout_io import read_layout_json
 
-        Forms accepted (as in the ``cyskin-layouts`` files):
-
-        - ``{"tactile_maps": {...taxels: [{id, x: [x, y]}]}}``: a 2-D map;
-        - ``{"tactile_maps": [map, ...]}``: a list of maps; ``map_index`` picks one;
-        - ``{"skin": {"taxels": [{id, x: [x, y, z], n: [...]}]}}``: 3-D only, flattened
-          by :func:`unroll` (a cylinder unwrap when the normals say the patch is
-          curved, else the best-fitting plane);
-        - both ``skin`` and ``tactile_maps``: 2-D from the map, 3-D and normals from
-          ``skin`` (matched by id).
-        """
-        path = Path(path)
-        text = _read_text(path)
-        try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}, line {exc.lineno}: not valid JSON: {exc.msg}") from None
-        if not isinstance(doc, dict) or not ("skin" in doc or "tactile_maps" in doc):
-            raise InputError(f"{path}: not a CySkin calibration file (expected a top-level "
-                             f"'skin' or 'tactile_maps' object)")
-        skin = None
-        if "skin" in doc:
-            skin = _json_taxels(doc["skin"], path, "skin", dims=3)
-        if "tactile_maps" in doc:
-            maps = doc["tactile_maps"]
-            if isinstance(maps, list):
-                if not maps:
-                    raise InputError(f"{path}: 'tactile_maps' is an empty list")
-                if not 0 <= map_index < len(maps):
-                    raise InputError(f"{path}: map_index {map_index} out of range; the file "
-                                     f"has {len(maps)} tactile map(s)")
-                tmap, where = maps[map_index], f"tactile_maps[{map_index}]"
-            else:
-                tmap, where = maps, "tactile_maps"
-            ids, pos2, _ = _json_taxels(tmap, path, where, dims=2)
-            p3 = nrm = None
-            if skin is not None:
-                sids, sx, sn = skin
-                lookup = {t: i for i, t in enumerate(sids)}
-                try:
-                    order = [lookup[t] for t in ids]
-                except KeyError as exc:
-                    raise InputError(f"{path}: taxel {exc.args[0]} of {where} is missing "
-                                     f"from 'skin.taxels'") from None
-                p3, nrm = sx[order], (None if sn is None else sn[order])
-            return _build(cls, ids, pos2, p3, nrm, path)
-        ids, x3, n3 = skin
-        return _build(cls, ids, unroll(x3, n3), x3, n3, path)
-
-
-def load_layout(path: str | Path) -> TaxelLayout:
-    """Load a layout from ``.json`` (CySkin calibration) or ``.csv``."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".json":
-        return TaxelLayout.from_json(path)
-    if suffix == ".csv":
-        return TaxelLayout.from_csv(path)
-    raise InputError(f"{path}: unknown layout format {suffix or '(no suffix)'!r}; "
-                     f"expected a CySkin calibration .json or a .csv (id,x_mm,y_mm)")
+        return read_layout_json(path, map_index=map_index)
 
 
 # ---------------------------------------------------------------------- helpers
 
 
-def _read_text(path: Path) -> str:
-    if not path.exists():
-        raise MissingFileError(f"{path}: no such file")
-    try:
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
-
-
 def _check_points(arr: Any, n: int, dims: int, what: str, name: str) -> np.ndarray:
-    a = np.asarray(arr, dtype=np.float64)
-    if a.shape != (n, dims):
-        raise InputError(f"layout {name!r}: {what} must have shape ({n}, {dims}), "
-                         f"got {a.shape}")
+    """``arr`` as float64 ``(n, dims)``, finite."""
+    try:
+        a = np.asarray(arr, dtype=np.float64)
+    except (TypeError, ValueError):  # text, ragged lists
+        raise InputError(f"layout {name!r}: {what} must be numbers (N, {dims}), got "
+                         f"{type(arr).__name__}") from None
+    check_shape(a, "N D", f"layout {name!r}: {what}", N=n, D=dims)
     if not np.all(np.isfinite(a)):
         raise InputError(f"layout {name!r}: {what} contain NaN or Inf")
     return a
-
-
-def _build(cls, ids, pos2, p3, nrm, path: Path, bounds=None) -> TaxelLayout:
-    try:
-        return cls(ids=np.asarray(ids, dtype=np.int64), positions=pos2, positions_3d=p3,
-                   normals=nrm, bounds=bounds, name=path.stem)
-    except ValueError as exc:
-        raise InputError(f"{path}: {exc}") from None
-
-
-def _json_taxels(obj: Any, path: Path, where: str, *, dims: int):
-    """ids, positions (mm) and normals (or None) of a CySkin JSON taxel list."""
-    if not isinstance(obj, dict) or not isinstance(obj.get("taxels"), list):
-        raise InputError(f"{path}: '{where}' has no 'taxels' list")
-    taxels = obj["taxels"]
-    if not taxels:
-        raise InputError(f"{path}: '{where}.taxels' is empty")
-    ids, xs, ns = [], [], []
-    for k, tax in enumerate(taxels):
-        loc = f"{path}: {where}.taxels[{k}]"
-        if not isinstance(tax, dict) or "id" not in tax or "x" not in tax:
-            raise InputError(f"{loc}: each taxel needs 'id' and 'x'")
-        tid = tax["id"]
-        if isinstance(tid, bool) or not isinstance(tid, int):
-            raise InputError(f"{loc}: id {tid!r} is not an integer")
-        x = tax["x"]
-        if not isinstance(x, list) or len(x) < dims or \
-                not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in x):
-            raise InputError(f"{loc}: 'x' must be a list of {dims} numbers, got {x!r}")
-        ids.append(tid)
-        xs.append([float(v) * 1000.0 for v in x[:dims]])  # metres → mm
-        if dims == 3 and "n" in tax:
-            n = tax["n"]
-            if not isinstance(n, list) or len(n) != 3:
-                raise InputError(f"{loc}: 'n' must be a 3-vector, got {n!r}")
-            ns.append([float(v) for v in n])
-    pos = np.asarray(xs, dtype=np.float64)
-    if not np.all(np.isfinite(pos)):
-        raise InputError(f"{path}: '{where}' has non-finite taxel positions")
-    normals = np.asarray(ns, dtype=np.float64) if len(ns) == len(ids) and ns else None
-    if normals is not None:
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
-    return ids, pos, normals
 
 
 def unroll(points: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
@@ -412,89 +233,17 @@ def unroll(points: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
     return centred @ vt[:2].T
 
 
-# ---------------------------------------------------------------- the forearm
-
-#: Slot positions of a CySkin-like triangular module in lattice coordinates
-#: (i, j): the 12 points on the perimeter of a triangle 4 pitches (30 mm) a side.
-_MODULE_SLOTS = [(i, j) for j in range(5) for i in range(5 - j)
-                 if i == 0 or j == 0 or i + j == 4]
-#: The slot that carries no taxel (CySkin modules: 12 slots, up to 11 taxels).
-_EMPTY_SLOT = 11
+# Names that moved out of this module in the restructuring (issue 10); kept importable
+# from here. Looked up on first use: their modules import this one.
+_MOVED = {
+    "load_layout": "tactbench.data.layout_io",
+    "cyskin_forearm": "tactbench.datasets.forearm",
+}
 
 
-def cyskin_forearm(n_taxels: int = 1558, *, circumference_mm: float = 334.0,
-                   length_mm: float = 357.0, pitch_mm: float = 7.5,
-                   module_side_mm: float = 44.0, seed: int = 0) -> TaxelLayout:
-    """A CySkin-like forearm: triangular modules on a cylinder, unrolled.
+def __getattr__(name: str) -> Any:
+    if name in _MOVED:
+        import importlib
 
-    The cylinder's circumference (``x``) and length (``y``) give the sheet
-    ``bounds = (0, 0, circumference_mm, length_mm)``; with the defaults the image
-    at 1 mm per pixel is 357 × 334 (rows × columns), as in the study.
-
-    Modules are triangles (alternately pointing up and down) laid in rows
-    along the axis; each has 12 slots on a triangular lattice of ``pitch_mm``
-    (the perimeter of a triangle 4 pitches a side) of which 11 carry taxels
-    (slot 11 is empty, as a temperature sensor's would be). With the default
-    ``module_side_mm`` neighbouring modules continue the same lattice, so the
-    skin has no gaps wider than two pitches apart from the underside strip. Module
-    rows and columns are spread evenly over the sheet (nominal triangle side
-    ``module_side_mm``); the columns wrap around the cylinder. When fewer
-    taxels are asked for than modules hold, the modules farthest from the top
-    of the arm (``x = circumference / 2``, so starting on the underside, where
-    a cable channel would run) are left out, then the remaining surplus
-    taxels (4 for the default 1558) are dropped at random (``seed``), like the
-    unpopulated slots of a real skin.
-
-    Ids are ``module_id * 16 + slot`` with module ids from 1. ``positions_3d``
-    and ``normals`` describe the cylinder (axis along ``y``).
-    """
-    if n_taxels < 1:
-        raise InputError(f"n_taxels must be ≥ 1, got {n_taxels}")
-    per_module = len(_MODULE_SLOTS) - 1
-    row_h = module_side_mm * math.sqrt(3) / 2
-    n_rows = max(1, round(length_mm / row_h))
-    n_cols = max(2, 2 * round(circumference_mm / module_side_mm))
-    step_x = circumference_mm / n_cols  # half a triangle side
-    step_y = length_mm / n_rows
-    n_modules = math.ceil(n_taxels / per_module)
-    if n_modules > n_rows * n_cols:
-        raise InputError(f"{n_taxels} taxels need {n_modules} modules, but a "
-                         f"{circumference_mm} x {length_mm} mm sheet holds {n_rows * n_cols}")
-    # module centres and orientation (up/down alternate along a row and between rows)
-    rr, cc = np.meshgrid(np.arange(n_rows), np.arange(n_cols), indexing="ij")
-    rr, cc = rr.ravel(), cc.ravel()
-    up = (rr + cc) % 2 == 0
-    cx = (cc + 0.5) * step_x
-    cy = (rr + 0.5) * step_y + np.where(up, -1.0, 1.0) * step_y / 6  # centroids
-    # keep the modules nearest the top of the arm (x = C/2), row by row outwards
-    around = np.abs(cx - circumference_mm / 2)
-    order = np.lexsort((np.abs(cy - length_mm / 2), around))
-    keep = np.sort(order[:n_modules])
-    # slot offsets from a module's centroid (pointing up; flip y for down)
-    lat = np.array([(i + j / 2, j * math.sqrt(3) / 2) for i, j in _MODULE_SLOTS]) * pitch_mm
-    lat -= np.array([2.0, 2 / math.sqrt(3)]) * pitch_mm  # centroid of the 4-pitch triangle
-    slots = np.array([s for s in range(len(_MODULE_SLOTS)) if s != _EMPTY_SLOT])
-    ids, xs, ys = [], [], []
-    for module_id, m in enumerate(keep, start=1):
-        off = lat[slots].copy()
-        if not up[m]:
-            off[:, 1] *= -1
-        ids.append(module_id * SLOTS_PER_ID + slots)
-        xs.append(cx[m] + off[:, 0])
-        ys.append(cy[m] + off[:, 1])
-    ids_a = np.concatenate(ids)
-    pos = np.column_stack([np.concatenate(xs) % circumference_mm, np.concatenate(ys)])
-    surplus = ids_a.size - n_taxels
-    if surplus > 0:
-        rng = np.random.default_rng(seed)
-        drop = rng.choice(ids_a.size, size=surplus, replace=False)
-        mask = np.ones(ids_a.size, dtype=bool)
-        mask[drop] = False
-        ids_a, pos = ids_a[mask], pos[mask]
-    radius = circumference_mm / (2 * math.pi)
-    theta = pos[:, 0] / radius
-    normals = np.column_stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)])
-    p3 = np.column_stack([radius * normals[:, 0], radius * normals[:, 1], pos[:, 1]])
-    return TaxelLayout(ids=ids_a, positions=pos, positions_3d=p3, normals=normals,
-                       bounds=(0.0, 0.0, float(circumference_mm), float(length_mm)),
-                       name=f"cyskin-forearm-{n_taxels}")
+        return getattr(importlib.import_module(_MOVED[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
