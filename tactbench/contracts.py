@@ -97,6 +97,8 @@ def _channels(value: Any) -> str | None:
     if isinstance(value, str) or not hasattr(value, "__len__") or len(value) == 0 \
             or not all(isinstance(c, str) and c for c in value):
         return f"must be a non-empty sequence of channel names, got {value!r}"
+    if len(set(value)) != len(value):
+        return f"names a channel twice: {value!r}"
     return None
 
 
@@ -114,19 +116,50 @@ def _ranges(value: Any) -> str | None:
     return None if ok else f"must be (low, high) pairs, one per channel, got {value!r}"
 
 
+def _text(value: Any) -> str | None:
+    # Versions go into cache keys as text; a number is accepted (str(2) is stable).
+    if isinstance(value, bool) or not isinstance(value, (str, int)) or value == "":
+        return f"must be a non-empty string, got {value!r}"
+    return None
+
+
+def _profiles(value: Any) -> str | None:
+    if not isinstance(value, dict) or not all(isinstance(k, str) and isinstance(v, dict)
+                                              for k, v in value.items()):
+        return f"must map profile names to option dicts, got {value!r}"
+    return None
+
+
+def _taxel_ids(value: Any) -> str | None:
+    kind = getattr(getattr(value, "dtype", None), "kind", None)
+    if getattr(value, "ndim", None) != 1 or kind not in ("i", "u"):
+        shape = getattr(value, "shape", None)
+        return (f"must be an integer array (N,), got {type(value).__name__}"
+                + (f" of shape {shape} and dtype {value.dtype}" if shape is not None else ""))
+    return None
+
+
+#: Encoders: ``(T, H, W)`` float32 in [0, 1] → ``(T, C, H, W)`` float32.
+#: A plugin needs only ``channels`` and ``encode``; :class:`tactbench.encoders.base.Encoder`
+#: fills in the rest (and the shared input checks). Flow encoders add ``flow``,
+#: ``max_flow`` and ``min_magnitude``: see :func:`tactbench.encoders.flow.is_flow_encoder`.
 ENCODER = Contract("encoder", (
     Member("channels", False, "names of the C output channels", check=_channels),
     Member("encode", True, "encode(seq (T, H, W) float32 in [0, 1]) → (T, C, H, W) float32"),
+    Member("name", False, "a label for messages and metadata; '' means use the registered "
+           "name or the class name", default=""),
     Member("version", False, "changes when the output for the same input changes; part of "
-           "cache keys", default="1"),
+           "cache keys", default="1", check=_text),
     Member("ranges", False, "(low, high) per channel, checked by the conformance suite; "
            "() means not declared", default=(), check=_ranges),
-    Member("options", True, "options() → the keyword options it was built with",
-           default=None),
-    Member("metadata", True, "metadata() → name, version, options, channels, ranges",
-           default=None),
+    Member("options", True, "options() → the keyword options it was built with "
+           "(None: not known)", default=None),
+    Member("metadata", True, "metadata() → name, version, options, channels, ranges "
+           "(None: built from channels)", default=None),
 ))
 
+#: Classifiers: ``fit`` on windows ``(B, L, C, H, W)`` or ``(B, L, N)``, then ``predict``.
+#: ``frame_shape`` and ``length`` are state a fitted (or loaded) classifier knows.
 CLASSIFIER = Contract("classifier", (
     Member("fit", True, "fit(train, val, *, seed, device, progress) → JSON-ready report"),
     Member("predict", True, "predict(batch) → class indices (B,)"),
@@ -135,16 +168,32 @@ CLASSIFIER = Contract("classifier", (
     Member("frame_rank", False, "3: frames are images (C, H, W); 1: taxel vectors (N,); "
            "None: either", default=3, check=_frame_rank),
     Member("version", False, "changes when training changes for the same options",
-           default="1"),
-    Member("profiles", False, "profile name → default options (quick, paper)", default={}),
+           default="1", check=_text),
+    Member("profiles", False, "profile name → default options (quick, paper)", default={},
+           check=_profiles),
+    Member("frame_shape", False, "the frame shape it was fitted on, (C, H, W) or (N,); "
+           "None before fit", default=None),
+    Member("length", False, "the window length L it was fitted on; None before fit",
+           default=None),
 ))
 
+#: Sensors: live sources of frames, used as context managers (``with sensor:``).
+#: ``taxel_ids`` is known when the sensor is built: the replay sensor reads it from the
+#: recording, ``cyskin-can`` from its ``taxel_ids`` or ``layout`` option.
 SENSOR = Contract("sensor", (
-    Member("taxel_ids", False, "int (N,): the taxel each value belongs to"),
+    Member("taxel_ids", False, "int (N,): the taxel each value belongs to", check=_taxel_ids),
     Member("frames", True, "frames() → Frame objects in time order"),
     Member("close", True, "close() ends frames()"),
+    Member("__enter__", True, "sensors are context managers: __enter__() → the sensor"),
+    Member("__exit__", True, "__exit__(*exc) closes the sensor"),
+    Member("layout", False, "the TaxelLayout when the sensor knows it", default=None),
+    Member("stats", False, "counters of what was received and lost (with to_dict()); None "
+           "when the sensor keeps none", default=None),
+    Member("bus_load", True, "bus_load() → the expected load of the bus it reads (with "
+           "describe()); None for sensors without a bus", default=None),
 ))
 
+#: Datasets: built with keyword options (``path=...``), loaded on demand.
 DATASET = Contract("dataset", (
     Member("load", True, "load() → tactbench.data.recording.Dataset"),
 ))

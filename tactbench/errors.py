@@ -81,7 +81,7 @@ def check_choice(value: Any, name: str, choices: "tuple[str, ...] | list[str]") 
     import difflib
 
     close = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
-    hint = f"; did you mean '{close[0]}'?" if close else ""
+    hint = f"; did you mean '{close[0]}'?" if close else "."
     raise InputError(f"unknown {name} {value!r}{hint} Choices: {', '.join(map(str, choices))}")
 
 

@@ -28,7 +28,13 @@ from typing import Any, Callable, Iterable
 import pluggy
 
 from tactbench import __version__, hookspecs
-from tactbench.errors import ComponentLoadError, InputError, PluginError, UnknownComponentError
+from tactbench.errors import (
+    ComponentLoadError,
+    InputError,
+    PluginError,
+    TactbenchError,
+    UnknownComponentError,
+)
 
 ENTRY_POINT_GROUP = "tactbench"
 STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
@@ -159,8 +165,12 @@ class Registry:
     def build(self, kind: str, spec: str, **options: Any) -> Any:
         """Build a component from ``"name"`` or ``"name:key=value,..."``.
 
-        Keyword ``options`` override those in ``spec``. Unknown option names
-        raise ``ValueError`` listing the accepted ones.
+        Keyword ``options`` override those in ``spec``. An unknown option name raises
+        :class:`~tactbench.errors.InputError` listing the accepted ones; a bad option value
+        raises what the component raises (an ``InputError`` for a user's mistake), with
+        the component's name put in front of the message. The built object is checked
+        against its kind's contract (:func:`tactbench.contracts.check`):
+        :class:`~tactbench.errors.ContractError` names what it misses.
         """
         name, spec_options = parse_spec(spec)
         spec_options.update(options)
@@ -169,7 +179,16 @@ class Registry:
         _check_options(comp, factory, spec_options)
         from tactbench.contracts import check
 
-        return check(kind, factory(**spec_options), name=comp.name, plugin=comp.plugin)
+        try:
+            obj = factory(**spec_options)
+        except TactbenchError as exc:
+            # Keep the type (MissingFileError stays a FileNotFoundError) and traceback;
+            # only say which component refused the option.
+            who = f"{kind} '{comp.name}'"
+            if exc.args and isinstance(exc.args[0], str) and who not in exc.args[0]:
+                exc.args = (f"{who}: {exc.args[0]}", *exc.args[1:])
+            raise
+        return check(kind, obj, name=comp.name, plugin=comp.plugin)
 
 
 def _check_kind(kind: str) -> str:

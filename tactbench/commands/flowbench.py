@@ -9,21 +9,6 @@ from pathlib import Path
 import click
 
 
-def progress_bar(description: str):
-    """A rich progress bar on stderr: ``(context manager, update(done, total))``."""
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                   TimeElapsedColumn(), console=Console(stderr=True), transient=True)
-    task = bar.add_task(description, total=None)
-
-    def update(done: int, total: int) -> None:
-        bar.update(task, completed=done, total=total)
-
-    return bar, update
-
-
 def _parse_size(text: str) -> tuple[int, int]:
     try:
         h, w = (int(v) for v in text.lower().split("x"))
@@ -58,14 +43,15 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     """
     from tactbench.cli import get_registry
     from tactbench.encoders import flowbench as fb
+    from tactbench.ui import Progress
+
     registry = get_registry(warn=not as_json)
     specs = specs or fb.DEFAULT_ENCODERS
     encoders = [(spec, registry.build("encoder", spec)) for spec in specs]
     shapes = [_parse_size(s) for s in sizes] or [fb.DEFAULT_SHAPE, fb.FULL_SHAPE]
-    bar, update = progress_bar("flowbench")
-    with bar:
+    with Progress() as bars:
         results = fb.run_flowbench(encoders, shapes, repeats=repeats,
-                                   progress=lambda done, total, _label: update(done, total))
+                                   progress=bars.callback("flowbench"))
     meta = {"command": "tactbench flowbench " + " ".join(f"--encoder {s}" for s in specs),
             "sizes": [fb.resolution_label(s) for s in shapes], "repeats": repeats,
             "machine": f"{platform.machine()}, {_cores()} usable cores, "

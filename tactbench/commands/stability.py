@@ -25,8 +25,8 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
     result) or fails with the reason. The exit status is 1 when anything failed.
     """
     from tactbench.cli import get_registry
-    from tactbench.commands.flowbench import progress_bar
     from tactbench.encoders import stability as st
+    from tactbench.ui import Progress
 
     registry = get_registry(warn=not as_json)
     explicit = bool(specs)
@@ -47,10 +47,8 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
             raise InputError(f"unknown case(s) {', '.join(unknown)}; cases: "
                              f"{', '.join(known)}")
         all_cases = [known[c] for c in cases]
-    bar, update = progress_bar("stability")
-    with bar:
-        outcomes = st.run_stability(encoders, all_cases,
-                                    progress=lambda done, total, _label: update(done, total))
+    with Progress() as bars:
+        outcomes = st.run_stability(encoders, all_cases, progress=bars.callback("stability"))
     outcomes += [st.Outcome(case.name, spec, False, reason, 0.0)
                  for spec, reason in unbuildable.items() for case in all_cases]
     failed = [o for o in outcomes if not o.passed]

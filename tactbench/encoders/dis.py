@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
-from tactbench.errors import InputError
+from tactbench.errors import check_choice, check_positive_int
 
 PRESETS = {"ultrafast": 0, "fast": 1, "medium": 2}
 
@@ -30,17 +30,12 @@ class DIS(FlowEncoder):
                  max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
-        if preset not in PRESETS:
-            raise InputError(f"preset must be one of {', '.join(PRESETS)}, got {preset!r}")
-        if patch_size is not None and (not isinstance(patch_size, int) or patch_size < 2):
-            raise InputError(f"patch_size must be an integer ≥ 2, got {patch_size!r}")
-        if variational_iterations is not None and (
-                not isinstance(variational_iterations, int) or variational_iterations < 0):
-            raise InputError(f"variational_iterations must be an integer ≥ 0, "
-                             f"got {variational_iterations!r}")
-        self.preset = preset
-        self.patch_size = patch_size
-        self.variational_iterations = variational_iterations
+        self.preset = check_choice(preset, "preset", list(PRESETS))
+        self.patch_size = (None if patch_size is None
+                           else check_positive_int(patch_size, "patch_size", minimum=2))
+        self.variational_iterations = (
+            None if variational_iterations is None
+            else check_positive_int(variational_iterations, "variational_iterations", minimum=0))
 
     def _make(self):
         import cv2

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_positive_float, check_positive_int
 
 
 class Farneback(FlowEncoder):
@@ -42,26 +42,18 @@ class Farneback(FlowEncoder):
                  gaussian: bool = False, margin: int = 8, max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
-        if not 0 < pyr_scale < 1:
+        self.pyr_scale = check_positive_float(pyr_scale, "pyr_scale")
+        if self.pyr_scale >= 1:
             raise InputError(f"pyr_scale must lie in (0, 1), got {pyr_scale!r}")
-        for key, value, low in (("levels", levels, 0), ("winsize", winsize, 1),
-                                ("iterations", iterations, 1)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise InputError(f"{key} must be an integer ≥ {low}, got {value!r}")
+        self.levels = check_positive_int(levels, "levels", minimum=0)
+        self.winsize = check_positive_int(winsize, "winsize")
+        self.iterations = check_positive_int(iterations, "iterations")
         if poly_n not in (5, 7):
             raise InputError(f"poly_n must be 5 or 7, got {poly_n!r}")
-        if not poly_sigma > 0:
-            raise InputError(f"poly_sigma must be > 0, got {poly_sigma!r}")
-        self.pyr_scale = float(pyr_scale)
-        self.levels = levels
-        self.winsize = winsize
-        self.iterations = iterations
         self.poly_n = poly_n
-        self.poly_sigma = float(poly_sigma)
-        if isinstance(margin, bool) or not isinstance(margin, int) or margin < 0:
-            raise InputError(f"margin must be an integer ≥ 0, got {margin!r}")
+        self.poly_sigma = check_positive_float(poly_sigma, "poly_sigma")
         self.gaussian = bool(gaussian)
-        self.margin = margin
+        self.margin = check_positive_int(margin, "margin", minimum=0)
 
     def _prepare(self, images: np.ndarray) -> np.ndarray:
         return images * np.float32(255.0)

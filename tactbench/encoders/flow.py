@@ -51,7 +51,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from tactbench.encoders.base import Encoder
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_positive_float, check_positive_int
 
 #: Default magnitude normalisation: pixels per frame mapped to magnitude 1.
 DEFAULT_MAX_FLOW = 8.0
@@ -159,18 +159,10 @@ class FlowEncoder(Encoder):
 
     def __init__(self, *, max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
-        if not (isinstance(max_flow, (int, float)) and math.isfinite(max_flow)
-                and max_flow > 0):
-            raise InputError(f"max_flow must be a positive number of pixels per frame, "
-                             f"got {max_flow!r}")
-        if not (isinstance(min_magnitude, (int, float)) and math.isfinite(min_magnitude)
-                and min_magnitude >= 0):
-            raise InputError(f"min_magnitude must be ≥ 0 pixels per frame, got {min_magnitude!r}")
-        if isinstance(downscale, bool) or not isinstance(downscale, int) or downscale < 1:
-            raise InputError(f"downscale must be an integer ≥ 1, got {downscale!r}")
-        self.max_flow = float(max_flow)
-        self.min_magnitude = float(min_magnitude)
-        self.downscale = downscale
+        self.max_flow = check_positive_float(max_flow, "max_flow (px/frame)")
+        self.min_magnitude = check_positive_float(min_magnitude, "min_magnitude (px/frame)",
+                                                  allow_zero=True)
+        self.downscale = check_positive_int(downscale, "downscale")
 
     # ------------------------------------------------------------------ public
 
@@ -189,12 +181,6 @@ class FlowEncoder(Encoder):
             return np.zeros((*prev.shape, 2), dtype=np.float32)
         size = prev.shape[1:]
         return self._finish(self._flow(self._to_grid(prev), self._to_grid(curr)), size)
-
-    def sequence_flow(self, seq: np.ndarray) -> np.ndarray:
-        """``flow(previous_frames(seq), seq)``, preparing each frame only once."""
-        stack = np.concatenate([np.zeros_like(seq[:1]), seq])
-        grid = self._to_grid(stack)
-        return self._finish(self._flow(grid[:-1], grid[1:]), seq.shape[1:])
 
     def metadata(self) -> dict[str, Any]:
         """What a reader of the encoded array needs: channels, ranges, scales, conventions."""

@@ -45,6 +45,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from tactbench.encoders.flow import is_flow_encoder
 from tactbench.errors import InputError
 
 MOTIONS = ("translate", "twist", "push", "pull", "pressure")
@@ -59,8 +60,9 @@ MASK_THRESHOLD = 0.1
 
 
 @dataclass
-class Scene:
-    """Frame pairs with their true forward flow.
+class FlowScene:
+    """Frame pairs with their true forward flow (not the runner's run configuration,
+    :class:`tactbench.runner.Scene`).
 
     ``prev``, ``curr``: float32 ``(P, H, W)`` in [0, 1]; ``flow``: float32
     ``(P, H, W, 2)`` px/frame with ``curr(x + flow) = prev(x)``; ``mask``:
@@ -123,7 +125,7 @@ def _render(contacts: Sequence[_Contact], grid: tuple[np.ndarray, np.ndarray],
 
 
 def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], *,
-                  pairs: int = 2, seed: int = 0) -> Scene:
+                  pairs: int = 2, seed: int = 0) -> FlowScene:
     """One tactile scene: ``pairs`` consecutive frame pairs under ``motion``."""
     if motion not in MOTIONS:
         raise InputError(f"unknown motion '{motion}'; motions: {', '.join(MOTIONS)}")
@@ -211,11 +213,11 @@ def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], 
     prev, curr = stack[:-1], stack[1:]
     mask = np.maximum(prev, curr) >= MASK_THRESHOLD
     label = f"{motion}/{size}" + ("" if motion == "pressure" else f"/{speed:g}px")
-    return Scene(label, motion, speed if motion != "pressure" else 0.0, size, prev,
+    return FlowScene(label, motion, speed if motion != "pressure" else 0.0, size, prev,
                  np.ascontiguousarray(curr), np.asarray(flows, dtype=np.float32), mask)
 
 
-def natural_scene(shape: tuple[int, int], *, amplitude: float = 2.0) -> Scene:
+def natural_scene(shape: tuple[int, int], *, amplitude: float = 2.0) -> FlowScene:
     """scikit-image's ``camera`` warped by a smooth sinusoidal flow (≤ ``amplitude`` px)."""
     import cv2
     from skimage import data
@@ -235,12 +237,13 @@ def natural_scene(shape: tuple[int, int], *, amplitude: float = 2.0) -> Scene:
     mask = np.zeros((h, w), dtype=bool)
     b = min(4, h // 4, w // 4)
     mask[b:h - b, b:w - b] = True
-    return Scene("natural/camera", "natural", float(amplitude), "-", prev[None],
+    return FlowScene("natural/camera", "natural", float(amplitude), "-", prev[None],
                  img[None], np.stack([u, v], axis=-1)[None].astype(np.float32), mask[None],
                  tactile=False)
 
 
-def default_scenes(shape: tuple[int, int], *, full: bool = False, seed: int = 0) -> list[Scene]:
+def default_scenes(shape: tuple[int, int], *, full: bool = False,
+                   seed: int = 0) -> list[FlowScene]:
     """The benchmark's scenes at ``shape``: every motion × speed × size, then the natural one.
 
     ``full=True`` (for large images) keeps fewer speeds and one pair per scene,
@@ -281,11 +284,6 @@ def angular_error(flow: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(num / den, -1.0, 1.0)))
 
 
-def has_flow(encoder: Any) -> bool:
-    """Whether ``encoder`` exposes ``flow(prev, curr)`` (every :class:`FlowEncoder` does)."""
-    return callable(getattr(encoder, "flow", None))
-
-
 # ----------------------------------------------------------------------------- running
 
 
@@ -321,7 +319,7 @@ def time_encoder(encoder: Any, seq: np.ndarray, *, repeats: int = 5) -> float:
     return 1000.0 * statistics.median(times) / seq.shape[0]
 
 
-def evaluate(encoder: Any, scenes: Iterable[Scene]) -> list[dict[str, Any]]:
+def evaluate(encoder: Any, scenes: Iterable[FlowScene]) -> list[dict[str, Any]]:
     """EPE and angular error of ``encoder.flow`` on each scene (one row per scene)."""
     rows = []
     for scene in scenes:
@@ -351,9 +349,13 @@ def resolution_label(shape: tuple[int, int]) -> str:
 def run_flowbench(encoders: Sequence[tuple[str, Any]],
                   shapes: Sequence[tuple[int, int]] = (DEFAULT_SHAPE, FULL_SHAPE), *,
                   repeats: int = 5,
-                  progress: Callable[[int, int, str], None] | None = None
-                  ) -> list[EncoderResult]:
-    """Measure every ``(spec, encoder)`` at every shape; Pareto front marked per shape."""
+                  progress: Callable[..., None] | None = None) -> list[EncoderResult]:
+    """Measure every ``(spec, encoder)`` at every shape; Pareto front marked per shape.
+
+    ``progress(done, total, item=...)`` is called before each encoder × shape (``item``
+    names it) and once at the end. Every encoder must be a flow encoder
+    (:func:`tactbench.encoders.flow.is_flow_encoder`), else :class:`InputError`.
+    """
     plans = []
     for shape in shapes:
         full = shape[0] * shape[1] > 128 * 128
@@ -365,10 +367,11 @@ def run_flowbench(encoders: Sequence[tuple[str, Any]],
         group = []
         for spec, enc in encoders:
             if progress:
-                progress(done, total, f"{spec} @ {resolution_label(shape)}")
-            if not has_flow(enc):
-                raise InputError(f"encoder '{spec}' has no flow(prev, curr) method; "
-                                 f"flowbench compares flow encoders only")
+                progress(done, total, item=f"{spec} @ {resolution_label(shape)}")
+            if not is_flow_encoder(enc):
+                raise InputError(f"encoder '{spec}' is not a flow encoder (it needs magnitude "
+                                 f"and direction channels, flow(prev, curr), max_flow and "
+                                 f"min_magnitude); flowbench compares flow encoders only")
             rows = evaluate(enc, scenes)
             tactile = [r for r in rows if r["tactile"]]
             natural = [r for r in rows if not r["tactile"]]
@@ -387,7 +390,7 @@ def run_flowbench(encoders: Sequence[tuple[str, Any]],
             res.pareto = flag
         results.extend(group)
     if progress:
-        progress(total, total, "done")
+        progress(total, total, item="done")
     return results
 
 

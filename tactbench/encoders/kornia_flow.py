@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 
 
 class KorniaFlow(FlowEncoder):
@@ -75,25 +75,13 @@ class KorniaFlow(FlowEncoder):
                  max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
-        for key, value in (("levels", levels), ("warps", warps), ("batch", batch)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise InputError(f"{key} must be an integer ≥ 1, got {value!r}")
-        if not (isinstance(window, (int, float)) and math.isfinite(window) and window > 0):
-            raise InputError(f"window must be a positive σ in pixels, got {window!r}")
-        if not (isinstance(reg, (int, float)) and math.isfinite(reg) and reg >= 0):
-            raise InputError(f"reg must be ≥ 0, got {reg!r}")
-        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
-            raise InputError(f"threads must be an integer ≥ 0 (0: torch's setting), "
-                             f"got {threads!r}")
-        if device not in ("auto", "cpu", "cuda"):
-            raise InputError(f"device must be 'auto', 'cpu' or 'cuda', got {device!r}")
-        self.levels = levels
-        self.warps = warps
-        self.window = float(window)
-        self.reg = float(reg)
-        self.device = device
-        self.batch = batch
-        self.threads = threads
+        self.levels = check_positive_int(levels, "levels")
+        self.warps = check_positive_int(warps, "warps")
+        self.window = check_positive_float(window, "window (Gaussian σ, px)")
+        self.reg = check_positive_float(reg, "reg", allow_zero=True)
+        self.device = check_choice(device, "device", ["auto", "cpu", "cuda"])
+        self.batch = check_positive_int(batch, "batch")
+        self.threads = check_positive_int(threads, "threads (0: torch's setting)", minimum=0)
 
     def torch_device(self):
         import torch

@@ -30,7 +30,7 @@ import numpy as np
 
 from tactbench.encoders.dis import to_uint8
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
-from tactbench.errors import InputError
+from tactbench.errors import check_positive_float, check_positive_int
 
 
 class LucasKanade(FlowEncoder):
@@ -63,17 +63,11 @@ class LucasKanade(FlowEncoder):
                  step: int = 2, min_eigen: float = 1e-4, max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
-        for key, value, low in (("winsize", winsize, 3), ("levels", levels, 0),
-                                ("iterations", iterations, 1), ("step", step, 1)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise InputError(f"{key} must be an integer ≥ {low}, got {value!r}")
-        if not (isinstance(min_eigen, (int, float)) and min_eigen > 0):
-            raise InputError(f"min_eigen must be > 0, got {min_eigen!r}")
-        self.winsize = winsize
-        self.levels = levels
-        self.iterations = iterations
-        self.step = step
-        self.min_eigen = float(min_eigen)
+        self.winsize = check_positive_int(winsize, "winsize", minimum=3)
+        self.levels = check_positive_int(levels, "levels", minimum=0)
+        self.iterations = check_positive_int(iterations, "iterations")
+        self.step = check_positive_int(step, "step")
+        self.min_eigen = check_positive_float(min_eigen, "min_eigen")
 
     def _prepare(self, images: np.ndarray) -> np.ndarray:
         return to_uint8(images)

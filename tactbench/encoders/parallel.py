@@ -91,8 +91,8 @@ def encode_all(encoder: Any, sequences: Sequence[np.ndarray], *, workers: int | 
     mode : ``"threads"`` (default), ``"processes"`` (the encoder must pickle)
         or ``"serial"``
 
-    Errors (such as ``ValueError`` for a bad sequence) propagate with the index
-    of the sequence that caused them.
+    A bad sequence raises :class:`~tactbench.errors.InputError` naming its index; any
+    other error (a bug in the encoder) keeps its type, with the index in a note.
     """
     if mode not in MODES:
         raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
@@ -147,7 +147,12 @@ def encode_all(encoder: Any, sequences: Sequence[np.ndarray], *, workers: int | 
 
 
 def _checked(fn: Callable[..., np.ndarray], arg: Any, index: int) -> np.ndarray:
+    """``fn(arg)`` (or ``fn()``), with the index of the sequence added to any error."""
     try:
         return fn(arg) if arg is not None else fn()
-    except ValueError as exc:
+    except InputError as exc:  # the user's bad sequence: one line that says which
         raise InputError(f"sequence {index}: {exc}") from exc
+    except Exception as exc:  # a bug keeps its type and traceback, with a note
+        if hasattr(exc, "add_note"):  # Python ≥ 3.11
+            exc.add_note(f"while encoding sequence {index}")
+        raise

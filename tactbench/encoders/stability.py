@@ -10,8 +10,8 @@ result *passes* when the output
 - is bit-identical when encoded a second time (deterministic),
 - meets the case's documented expectation (below), where it has one.
 
-Documented expectations (flow encoders are those with ``magnitude`` and
-``direction`` channels; ``pressure`` channels must equal the input):
+Documented expectations (flow encoders as :func:`tactbench.encoders.flow.is_flow_encoder`
+defines them; ``pressure`` channels must equal the input):
 
 ================  ==============================================================
 all-zero          every frame the same; pressure, magnitude, direction 0
@@ -36,7 +36,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from tactbench.encoders.testing import contact_sequence, is_flow_encoder, magnitude_scale
+from tactbench.contracts import ENCODER
+from tactbench.encoders.flow import is_flow_encoder
+from tactbench.encoders.testing import contact_sequence
 
 RANGE_ATOL = 1e-6
 
@@ -71,9 +73,9 @@ class Outcome:
 # ----------------------------------------------------------------------------- expectations
 
 
-def _channel(encoder: Any, out: np.ndarray, name: str) -> np.ndarray | None:
-    channels = list(getattr(encoder, "channels", ()))
-    return out[:, channels.index(name)] if name in channels else None
+def _channel(encoder: Any, out: np.ndarray, name: str) -> np.ndarray:
+    """Channel ``name`` of ``out`` ``(T, C, H, W)``: ``(T, H, W)``."""
+    return out[:, list(encoder.channels).index(name)]
 
 
 def _all_zero(encoder: Any, seq: Any, out: np.ndarray) -> str | None:
@@ -93,7 +95,7 @@ def _still_after_first(encoder: Any, seq: Any, out: np.ndarray) -> str | None:
         return None
     mag = _channel(encoder, out, "magnitude")[1:]
     direction = _channel(encoder, out, "direction")[1:]
-    scale = magnitude_scale(encoder) or 1.0
+    scale = encoder.max_flow  # px/frame at magnitude 1
     if mag.size and mag.max() * scale > 0.02:
         return f"no motion expected after frame 0, magnitude reached {mag.max() * scale:.3g} px/frame"
     if direction.size and np.abs(direction).max() > 0:
@@ -111,8 +113,7 @@ def _saturates(encoder: Any, seq: Any, out: np.ndarray) -> str | None:
 def _sub_pixel(encoder: Any, seq: Any, out: np.ndarray) -> str | None:
     if not is_flow_encoder(encoder):
         return None
-    scale = magnitude_scale(encoder) or 1.0
-    mag = _channel(encoder, out, "magnitude")[1:] * scale
+    mag = _channel(encoder, out, "magnitude")[1:] * encoder.max_flow
     return None if mag.max() < 0.25 else (
         f"a 0.01 px/frame move was measured at up to {mag.max():.3g} px/frame")
 
@@ -215,7 +216,7 @@ def default_cases() -> list[Case]:
 
 def run_case(encoder: Any, case: Case, label: str = "") -> Outcome:
     """Run one case on one encoder; never raises for the encoder's failures."""
-    label = label or getattr(encoder, "name", "") or type(encoder).__name__
+    label = label or ENCODER.get(encoder, "name") or type(encoder).__name__
     seq = case.make()
     t0 = time.perf_counter()
     try:
@@ -256,7 +257,7 @@ def run_case(encoder: Any, case: Case, label: str = "") -> Outcome:
 
 def _generic_problem(encoder: Any, seq: Any, out: Any) -> str | None:
     arr = np.asarray(seq)
-    channels = list(getattr(encoder, "channels", ()))
+    channels = list(encoder.channels)
     expected = (arr.shape[0], len(channels), *arr.shape[1:])
     if not isinstance(out, np.ndarray) or out.shape != expected:
         return f"output shape {getattr(out, 'shape', None)}, expected {expected}"
@@ -266,7 +267,7 @@ def _generic_problem(encoder: Any, seq: Any, out: Any) -> str | None:
         bad = np.argwhere(~np.isfinite(out))[0]
         return (f"{int((~np.isfinite(out)).sum())} non-finite output value(s), first in "
                 f"channel '{channels[bad[1]]}' at frame {bad[0]}")
-    for i, (name, (lo, hi)) in enumerate(zip(channels, getattr(encoder, "ranges", ()))):
+    for i, (name, (lo, hi)) in enumerate(zip(channels, ENCODER.get(encoder, "ranges"))):
         v = out[:, i]
         if v.min() < lo - RANGE_ATOL or v.max() > hi + RANGE_ATOL:
             return f"channel '{name}' spans [{v.min():.6g}, {v.max():.6g}], declared [{lo}, {hi}]"
@@ -278,16 +279,20 @@ def _generic_problem(encoder: Any, seq: Any, out: Any) -> str | None:
 
 
 def run_stability(encoders: Sequence[tuple[str, Any]], cases: Sequence[Case] | None = None, *,
-                  progress: Callable[[int, int, str], None] | None = None) -> list[Outcome]:
-    """Every case on every ``(label, encoder)``; one :class:`Outcome` each."""
+                  progress: Callable[..., None] | None = None) -> list[Outcome]:
+    """Every case on every ``(label, encoder)``; one :class:`Outcome` each.
+
+    ``progress(done, total, item=...)`` is called before each case (``item`` names the
+    encoder and case) and once at the end.
+    """
     cases = list(default_cases() if cases is None else cases)
     total = len(cases) * len(encoders)
     outcomes = []
     for j, (label, enc) in enumerate(encoders):
         for i, case in enumerate(cases):
             if progress:
-                progress(j * len(cases) + i, total, f"{label}: {case.name}")
+                progress(j * len(cases) + i, total, item=f"{label}: {case.name}")
             outcomes.append(run_case(enc, case, label))
     if progress:
-        progress(total, total, "done")
+        progress(total, total, item="done")
     return outcomes

@@ -15,16 +15,17 @@ or, in a plugin's test suite, one pytest test per check::
     def test_conformance(encoder, check):
         run_check(encoder, check)
 
-The checks (see :data:`CHECKS`) follow the encoder contract of
+The checks (see :data:`CHECKS`) follow the encoder contract
+(:data:`tactbench.contracts.ENCODER`) and the input policy of
 :mod:`tactbench.encoders.base`: float32 ``(T, H, W)`` in [0, 1] → float32
 ``(T, C, H, W)``, finite, each channel in its declared range, deterministic,
 frame ``k`` computed from ``I_k`` and ``I_{k-1}`` only with ``I_{-1} = 0``, bad
-input rejected with ``ValueError``. Encoders whose channels include
-``magnitude`` and ``direction`` are *flow encoders* and must also give zero
-flow between identical frames and recover a known translation (direction
-within 0.05 of a turn, speed within 35 % when the encoder says its magnitude
-scale through ``max_flow``). Checks that do not apply are skipped, with the
-reason. Images are small (≤ 48 × 48) so the whole suite takes seconds.
+input rejected with ``ValueError``. *Flow encoders*
+(:func:`tactbench.encoders.flow.is_flow_encoder`) must also give zero flow
+between identical frames and recover a known translation (direction within
+0.05 of a turn, speed within 35 % through their ``max_flow`` scale). Checks that
+do not apply are skipped, with the reason. Images are small (≤ 48 × 48) so the
+whole suite takes seconds.
 """
 
 from __future__ import annotations
@@ -37,12 +38,19 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from tactbench.contracts import ENCODER
+from tactbench.encoders.flow import is_flow_encoder  # noqa: F401  (also importable from here)
 from tactbench.errors import InputError
 
 #: Tolerance for comparing outputs computed in different batches (float32 noise).
 BATCH_ATOL = 1e-4
 #: Tolerance on declared channel ranges.
 RANGE_ATOL = 1e-6
+
+
+#: Why the flow checks are skipped for an encoder that is not a flow encoder.
+NOT_FLOW = ("not a flow encoder (tactbench.encoders.flow.is_flow_encoder: magnitude and "
+            "direction channels, flow(prev, curr), max_flow and min_magnitude)")
 
 
 class NotApplicable(Exception):
@@ -89,20 +97,6 @@ def contact_sequence(shape: tuple[int, int] = (32, 32), frames: int = 4, *,
     return out
 
 
-def is_flow_encoder(encoder: Any) -> bool:
-    """Whether ``encoder`` has ``magnitude`` and ``direction`` channels."""
-    channels = tuple(getattr(encoder, "channels", ()))
-    return "magnitude" in channels and "direction" in channels
-
-
-def magnitude_scale(encoder: Any) -> float | None:
-    """Pixels per frame that map to magnitude 1, when the encoder says (``max_flow``)."""
-    scale = getattr(encoder, "max_flow", None)
-    if scale is None and callable(getattr(encoder, "options", None)):
-        scale = encoder.options().get("max_flow")
-    return float(scale) if scale is not None else None
-
-
 # ----------------------------------------------------------------------------- checks
 
 
@@ -113,28 +107,27 @@ def _encode(encoder: Any, seq: np.ndarray) -> np.ndarray:
 
 
 def check_contract(encoder: Any) -> None:
-    """``channels`` names the channels; ``ranges`` (if any) match; options are JSON."""
-    channels = getattr(encoder, "channels", None)
-    assert isinstance(channels, (tuple, list)) and channels, \
-        f"channels must be a non-empty tuple of names, got {channels!r}"
-    assert all(isinstance(c, str) and c for c in channels), f"channel names: {channels!r}"
-    assert len(set(channels)) == len(channels), f"duplicate channel names: {channels!r}"
-    ranges = getattr(encoder, "ranges", None)
-    if ranges is not None:
+    """The encoder contract (:data:`tactbench.contracts.ENCODER`) holds; declared ranges
+    are finite, one per channel; ``options()`` is JSON; ``version`` is a string."""
+    problems = ENCODER.problems(encoder)
+    assert not problems, "breaks the encoder contract: " + "; ".join(problems)
+    channels = encoder.channels
+    ranges = ENCODER.get(encoder, "ranges")
+    if ranges:
         assert len(ranges) == len(channels), \
             f"{len(ranges)} ranges for {len(channels)} channels"
         for name, rng in zip(channels, ranges):
             lo, hi = rng
             assert math.isfinite(lo) and math.isfinite(hi) and lo <= hi, \
                 f"channel '{name}' has range {rng!r}"
-    if callable(getattr(encoder, "options", None)):
+    options = ENCODER.get(encoder, "options")
+    if options is not None:
         try:
-            json.dumps(encoder.options())
+            json.dumps(options())
         except TypeError as exc:
             raise AssertionError(f"options() must be JSON-serialisable (cache keys): {exc}")
-    version = getattr(encoder, "version", None)
-    if version is not None:
-        assert isinstance(version, str) and version, f"version must be a string, got {version!r}"
+    version = ENCODER.get(encoder, "version")
+    assert isinstance(version, str) and version, f"version must be a string, got {version!r}"
 
 
 def check_shape_dtype(encoder: Any) -> None:
@@ -150,7 +143,7 @@ def check_shape_dtype(encoder: Any) -> None:
 
 def check_finite_in_range(encoder: Any) -> None:
     """Every value finite and inside its channel's declared range."""
-    ranges = getattr(encoder, "ranges", None)
+    ranges = ENCODER.get(encoder, "ranges")
     for seed, shift in ((0, 0.7), (1, 3.0), (2, -2.0)):
         seq = contact_sequence((32, 32), 5, shift=shift, angle=1.0 + seed, seed=seed)
         out = _encode(encoder, seq)
@@ -216,8 +209,7 @@ def check_identical_frames(encoder: Any) -> None:
         ch = list(encoder.channels)
         mag = out[1:, ch.index("magnitude")].max()
         direction = np.abs(out[1:, ch.index("direction")]).max()
-        scale = magnitude_scale(encoder)
-        limit = 0.02 / scale if scale else 1e-3  # 0.02 px/frame
+        limit = 0.02 / encoder.max_flow  # 0.02 px/frame
         assert mag <= limit, f"identical frames gave magnitude up to {mag:.3g} (limit {limit:.3g})"
         assert direction == 0.0, f"identical frames gave a direction of up to {direction:.3g}"
 
@@ -225,9 +217,8 @@ def check_identical_frames(encoder: Any) -> None:
 def check_translation(encoder: Any) -> None:
     """A contact moving 2 px/frame is seen moving that way, about that fast."""
     if not is_flow_encoder(encoder):
-        raise NotApplicable("not a flow encoder (no magnitude/direction channels)")
+        raise NotApplicable(NOT_FLOW)
     ch = list(encoder.channels)
-    scale = magnitude_scale(encoder)
     speed = 2.0
     for angle in (0.0, 0.5 * math.pi, 1.25 * math.pi):
         seq = contact_sequence((48, 48), 3, shift=speed, angle=angle, sigma=4.0)
@@ -239,13 +230,9 @@ def check_translation(encoder: Any) -> None:
         err = float(np.median(turn))
         assert err <= 0.05, (f"a move at {expected:.3f} turn was seen at a median distance "
                              f"of {err:.3f} turn")
-        magnitude = float(np.median(out[2, ch.index("magnitude")][mask]))
-        if scale:
-            seen = magnitude * scale
-            assert abs(seen - speed) <= 0.35 * speed, \
-                f"a {speed} px/frame move was measured at {seen:.2f} px/frame (median)"
-        else:
-            assert magnitude > 0, "a 2 px/frame move gave zero magnitude"
+        seen = float(np.median(out[2, ch.index("magnitude")][mask])) * encoder.max_flow
+        assert abs(seen - speed) <= 0.35 * speed, \
+            f"a {speed} px/frame move was measured at {seen:.2f} px/frame (median)"
 
 
 def check_bad_input(encoder: Any) -> None:
@@ -377,7 +364,14 @@ def conformance_cases(encoders: Iterable[Any], checks: Iterable[str] | None = No
     names = list(CHECKS) if checks is None else list(checks)
     params = []
     for enc in encoders:
-        label = enc if isinstance(enc, str) else getattr(enc, "name", "") or type(enc).__name__
+        label = enc if isinstance(enc, str) else ENCODER.get(enc, "name") or _class_name(enc)
         for name in names:
             params.append(pytest.param(enc, name, id=f"{label}-{name}"))
     return params
+
+
+def _class_name(encoder: Any) -> str:
+    """A label for an encoder instance (its class), class or factory (its name)."""
+    if isinstance(encoder, type) or not hasattr(encoder, "encode"):
+        return getattr(encoder, "__name__", type(encoder).__name__)
+    return type(encoder).__name__

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, FlowEncoder
-from tactbench.errors import InputError
+from tactbench.errors import check_positive_float, check_positive_int
 
 
 class TVL1(FlowEncoder):
@@ -31,23 +31,15 @@ class TVL1(FlowEncoder):
                  max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
-        for key, value in (("tau", tau), ("lam", lam), ("theta", theta), ("epsilon", epsilon)):
-            if not (isinstance(value, (int, float)) and value > 0):
-                raise InputError(f"{key} must be > 0, got {value!r}")
-        for key, value, low in (("scales", scales, 1), ("warps", warps, 1),
-                                ("iterations", iterations, 1),
-                                ("inner_iterations", inner_iterations, 1), ("median", median, 0)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise InputError(f"{key} must be an integer ≥ {low}, got {value!r}")
-        self.tau = float(tau)
-        self.lam = float(lam)
-        self.theta = float(theta)
-        self.scales = scales
-        self.warps = warps
-        self.epsilon = float(epsilon)
-        self.iterations = iterations
-        self.inner_iterations = inner_iterations
-        self.median = median
+        self.tau = check_positive_float(tau, "tau")
+        self.lam = check_positive_float(lam, "lam")
+        self.theta = check_positive_float(theta, "theta")
+        self.scales = check_positive_int(scales, "scales")
+        self.warps = check_positive_int(warps, "warps")
+        self.epsilon = check_positive_float(epsilon, "epsilon")
+        self.iterations = check_positive_int(iterations, "iterations")
+        self.inner_iterations = check_positive_int(inner_iterations, "inner_iterations")
+        self.median = check_positive_int(median, "median", minimum=0)
 
     def _prepare(self, images: np.ndarray) -> np.ndarray:
         return images * np.float32(255.0)
