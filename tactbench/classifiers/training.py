@@ -1,21 +1,8 @@
-"""Training: profiles, seeds, devices, and the loop every torch classifier shares.
+"""Training: seeds, devices, and the loop every torch classifier shares.
 
-Profiles
---------
-A *profile* is a named set of classifier options (:func:`profile_options`):
-
-``quick`` (the default)
-    sized so that one training of ``small-cnn-lstm`` on ~30 000 windows of
-    5 frames takes under a minute on 2 CPU threads: 32 px input, width 16,
-    Adam (lr 3e-3) with a cosine schedule, 4 epochs of 8000 windows sampled
-    without replacement. This is *not* the paper's optimiser: plain SGD at 1e-3
-    does not learn in that budget.
-``paper``
-    the study's protocol: SGD, learning rate 1e-3, 100 epochs over every
-    training window, batch 16 (the batch size is not stated in the paper),
-    and for ``cnn-lstm`` EfficientNet-B0 at 224 px. A GPU workload.
-
-Options given by the user override the profile's.
+Profiles (named sets of classifier options, ``quick`` and ``paper``) are defined in
+:mod:`tactbench.profiles`; :func:`profile_options` is re-exported here, where it lived
+before.
 
 Seeds
 -----
@@ -43,72 +30,16 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from tactbench.errors import InputError
+from tactbench.profiles import DEFAULT_PROFILE, PROFILE_NAMES, profile_options
 
 if TYPE_CHECKING:  # torch stays out of import time
     import torch
 
-PROFILE_NAMES: tuple[str, ...] = ("quick", "paper")
-DEFAULT_PROFILE = "quick"
-
-#: The paper's training protocol, shared by every torch classifier in ``paper``.
-_PAPER_TRAINING: dict[str, Any] = {
-    "epochs": 100,
-    "optimizer": "sgd",
-    "lr": 1e-3,
-    "momentum": 0.0,
-    "schedule": "constant",
-    "batch_size": 16,
-    "windows_per_epoch": 0,  # 0: every training window, every epoch
-}
-
-#: profile → classifier name → options. Values not listed keep the class defaults.
-PROFILES: dict[str, dict[str, dict[str, Any]]] = {
-    "quick": {
-        # 4 epochs × 8000 sampled windows = 32 000 windows ≈ one pass over the
-        # ~30 000 windows of the study's data at L = 5 (see docs/classifiers.md).
-        "small-cnn-lstm": {
-            "epochs": 4, "windows_per_epoch": 8000, "batch_size": 64, "width": 16,
-            "optimizer": "adam", "lr": 3e-3, "schedule": "cosine", "input_size": 32,
-        },
-        # EfficientNet-B0 is ~10x slower per window than the small CNN at the same
-        # size on a CPU: the quick profile only makes it runnable, not good.
-        "cnn-lstm": {
-            "epochs": 2, "windows_per_epoch": 1500, "batch_size": 32,
-            "optimizer": "adam", "lr": 1e-3, "schedule": "cosine", "input_size": 32,
-        },
-        "taxel-lstm": {
-            "epochs": 4, "windows_per_epoch": 8000, "batch_size": 64,
-            "optimizer": "adam", "lr": 3e-3, "schedule": "cosine",
-        },
-        "logreg": {},
-    },
-    "paper": {
-        "small-cnn-lstm": dict(_PAPER_TRAINING, input_size=64),
-        "cnn-lstm": dict(_PAPER_TRAINING, input_size=224),
-        "taxel-lstm": dict(_PAPER_TRAINING),
-        "logreg": {},
-    },
-}
-
-
-def profile_options(profile: str = DEFAULT_PROFILE, classifier: str = "small-cnn-lstm") -> dict:
-    """The options ``profile`` gives ``classifier`` (a fresh dict; user options override).
-
-    A classifier from a plugin may declare its own ``profiles`` class attribute
-    (``{"quick": {...}, "paper": {...}}``); one that declares none gets ``{}``
-    (its own defaults) in every profile.
-    """
-    if profile not in PROFILE_NAMES:
-        raise InputError(f"unknown profile '{profile}'; profiles: {', '.join(PROFILE_NAMES)}")
-    table = PROFILES[profile]
-    if classifier in table:
-        return dict(table[classifier])
-    from tactbench.plugins import load_registry
-
-    component = load_registry().get("classifier", classifier)
-    declared = getattr(component.load(), "profiles", None) or {}
-    return dict(declared.get(profile, {}))
-
+__all__ = [  # the profile names are re-exported from tactbench.profiles, their home
+    "DEFAULT_PROFILE", "PROFILE_NAMES", "profile_options", "derive_seed", "select_device",
+    "Precision", "precision_for", "FitReport", "TrainingInterrupted", "ProgressFn",
+    "epoch_order", "make_optimizer", "train_loop",
+]
 
 # --------------------------------------------------------------------------- seeds
 

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 import click
 
 from tactbench.cli import get_registry
+from tactbench.profiles import PROFILE_NAMES
 
 
 @click.command("run")
@@ -27,7 +29,7 @@ from tactbench.cli import get_registry
 @click.option("--split", type=click.Choice(["paper", "users"]),
               help="paper: 30 random test samples per class (the study's); users: "
                    "leave-users-out. [default: paper]")
-@click.option("--profile", type=click.Choice(["quick", "paper"]),
+@click.option("--profile", type=click.Choice(PROFILE_NAMES),
               help="quick: CPU-sized (default); paper: the study's settings (a GPU job).")
 @click.option("--pixel-mm", type=float, help="Tactile-image pixel size in mm "
               "[default: the profile's: quick 5, paper 1].")
@@ -49,10 +51,12 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
     """Run a benchmark grid and report accuracy beside its cost.
 
     Finished cells are kept in OUT/cells and skipped when the same command runs again;
-    encodings are cached (see `tactbench cache ls`).
+    encodings are cached (see `tactbench cache ls`). A cell that fails is recorded and the
+    others go on; the command then exits with status 1, and running it again retries
+    the failed cells.
     """
     from tactbench.runner import Scene, load_scene_file, parse_lengths, run
-    from tactbench.runner.reports import print_table, summarise, write_reports
+    from tactbench.runner.reports import failed_cells, print_table, summarise, write_reports
 
     fields = load_scene_file(scene_file) if scene_file else {}
     given = {"dataset": dataset, "encoders": list(encoders) or None,
@@ -74,12 +78,21 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
             "seconds": result.seconds}
     paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots)
     summaries = summarise(result.rows)
+    failed = failed_cells(result.rows)
     if as_json:
-        click.echo(json.dumps({"meta": meta, "summary": summaries,
+        click.echo(json.dumps({"meta": meta, "summary": summaries, "failed": failed,
                                "files": {k: str(v) for k, v in paths.items()}}, indent=2))
-        return
-    print_table(summaries, title=f"{scene.dataset} · split {scene.split} · profile "
-                                 f"{scene.profile}")
-    click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
-               f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, results.csv, "
-               f"results.json, plots)")
+    else:
+        print_table(summaries, title=f"{scene.dataset} · split {scene.split} · profile "
+                                     f"{scene.profile}")
+        click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
+                   f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
+                   f"results.csv, results.json, plots)")
+    if failed:
+        cells = Path(scene.out) / "cells"
+        for f in failed:
+            click.echo(f"failed: {f['encoder']} × {f['classifier']} L={f['L']} "
+                       f"seed={f['seed']}: {f['error']} ({cells / f['key']}.json)", err=True)
+        click.echo(f"{len(failed)} cell(s) failed; their rows are in {cells}/ and running "
+                   f"the same command again retries them", err=True)
+        click.get_current_context().exit(1)

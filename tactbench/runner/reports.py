@@ -2,6 +2,9 @@
 
 Every accuracy is reported beside what it cost (encode ms per frame, train seconds,
 inference ms per sequence, peak memory): users choose on both.
+
+Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.store`) are left
+out of every accuracy table and plot, and listed on their own with their error.
 """
 
 from __future__ import annotations
@@ -13,6 +16,9 @@ import math
 import statistics
 from pathlib import Path
 from typing import Any, Iterable, Sequence
+
+from tactbench.paths import atomic_write_text
+from tactbench.runner.store import failed_rows, ok_rows, row_status
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
 
@@ -35,10 +41,11 @@ def summarise(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """One summary per (dataset, split, encoder, classifier, L), over seeds.
 
     Accuracy and costs as mean and sample standard deviation; per-class accuracy as
-    means; the confusion matrix row-normalised per seed, then averaged.
+    means; the confusion matrix row-normalised per seed, then averaged. Failed cells
+    are left out (:func:`failed_cells_markdown` lists them).
     """
     groups: dict[tuple, list[dict[str, Any]]] = {}
-    for row in rows:
+    for row in ok_rows(rows):
         groups.setdefault(tuple(row[k] for k in GROUP_KEYS), []).append(row)
     out = []
     for key, members in groups.items():
@@ -134,33 +141,68 @@ def per_class_markdown(summaries: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def failed_cells(rows: Iterable[dict[str, Any]]) -> list[dict[str, str]]:
+    """One line per failed cell: ``encoder``, ``classifier`` (short), ``L``, ``seed``,
+    ``error`` (``Type: message``, first line) and ``key``."""
+    out = []
+    for r in failed_rows(rows):
+        error = r.get("error", {})
+        message = str(error.get("message", "")).strip().splitlines()
+        out.append({"encoder": r["encoder"], "classifier": short_name(r["classifier"]),
+                    "L": str(r["L"]), "seed": str(r["seed"]), "key": r["key"],
+                    "error": f"{error.get('type', 'Error')}: {message[0] if message else ''}"})
+    return out
+
+
+def failed_cells_markdown(rows: Iterable[dict[str, Any]]) -> str:
+    """A Markdown table of the failed cells ("" when none failed)."""
+    failed = failed_cells(rows)
+    if not failed:
+        return ""
+    lines = ["| encoder | classifier | L | seed | error | row |", "|---|---|---|---|---|---|"]
+    for f in failed:
+        error = f["error"].replace("|", "\\|")
+        lines.append(f"| {f['encoder']} | {f['classifier']} | {f['L']} | {f['seed']} | "
+                     f"{error} | `cells/{f['key']}.json` |")
+    return "\n".join(lines)
+
+
 def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
-    """Flat CSV: one line per cell, per-class accuracies as ``acc_<class>`` columns."""
+    """Flat CSV: one line per cell, per-class accuracies as ``acc_<class>`` columns.
+
+    A failed cell's line has ``status`` ``failed``, its error in ``error`` and no
+    accuracy or costs.
+    """
     classes: list[str] = []
     for r in rows:
         for c in r["classes"]:
             if c not in classes:
                 classes.append(c)
     columns = ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
-               "classifier", "profile", "L", "seed", "accuracy", *[f"acc_{c}" for c in classes],
+               "classifier", "profile", "L", "seed", "status", "accuracy",
+               *[f"acc_{c}" for c in classes],
                "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
-               "n_train_windows", "n_test", "device", "threads", "finished", "key"]
+               "n_train_windows", "n_test", "device", "threads", "finished", "key", "error"]
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
     for r in rows:
-        flat = dict(r)
+        flat = {**r, "status": row_status(r)}
         for c in classes:
-            flat[f"acc_{c}"] = r["per_class_accuracy"].get(c)
+            flat[f"acc_{c}"] = r.get("per_class_accuracy", {}).get(c)
+        if "error" in r:
+            flat["error"] = f"{r['error'].get('type')}: {r['error'].get('message')}"
         writer.writerow(flat)
     return buf.getvalue()
 
 
 def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
                   meta: dict[str, Any] | None = None, plots: bool = True) -> dict[str, Path]:
-    """Write results.json, results.csv, report.md and the plots into ``out``."""
-    from tactbench.runner import atomic_write_text
+    """Write results.json, results.csv, report.md and the plots into ``out``.
 
+    ``rows``: every row of the run, ok and failed (failed cells are listed in report.md,
+    kept in the JSON and CSV, and left out of summaries and plots).
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summaries = summarise(rows)
@@ -170,7 +212,7 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
         {"meta": meta or {}, "summary": summaries, "rows": list(rows)}, indent=2))
     atomic_write_text(paths["csv"], rows_csv(rows))
     figures: dict[str, Path] = {}
-    if plots and rows:
+    if plots and summaries:
         figures = write_plots(out, summaries)
         paths.update(figures)
     atomic_write_text(paths["markdown"], markdown_report(summaries, rows, meta or {},
@@ -179,14 +221,20 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
 
 
 def markdown_report(summaries, rows, meta, figures) -> str:
-    first = rows[0] if rows else {}
+    """report.md: run facts, the accuracy/cost table, per-class accuracy, failed cells,
+    figures."""
+    done = ok_rows(rows)
+    failed = failed_cells_markdown(rows)
+    first = done[0] if done else (rows[0] if rows else {})
+    n_failed = len(rows) - len(done)
     lines = [
         "# tactbench report", "",
         f"- dataset: `{first.get('dataset', '?')}` (content hash "
         f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
         f"- split: `{first.get('split', '?')}`; profile: `{first.get('profile', '?')}`; "
         f"device: `{first.get('device', '?')}`",
-        f"- cells: {len(rows)}; command: `{meta.get('command', '')}`",
+        f"- cells: {len(rows)}" + (f" ({n_failed} failed, listed below)" if n_failed else "")
+        + f"; command: `{meta.get('command', '')}`",
         f"- git: `{meta.get('git')}`; versions: "
         + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
         "",
@@ -196,6 +244,11 @@ def markdown_report(summaries, rows, meta, figures) -> str:
         "", markdown_table(summaries), "", "## Per-class accuracy (%, mean over seeds)", "",
         per_class_markdown(summaries), "",
     ]
+    if failed:
+        lines += ["## Failed cells", "",
+                  f"{n_failed} cell(s) raised; their rows (with the traceback's last frames) "
+                  "are in `cells/`, and the next run of the same command retries them.", "",
+                  failed, ""]
     for name, path in figures.items():
         lines += [f"![{name}]({path.name})", ""]
     return "\n".join(lines)

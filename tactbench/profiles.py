@@ -1,0 +1,110 @@
+"""Run profiles, defined once: a profile names the imaging and training defaults of a run.
+
+``quick`` (the default)
+    CPU-sized. Tactile images at 5 mm per pixel (taxels are 7.5 mm apart, so little is
+    lost, and flow is ~25× cheaper than on the study's 1 mm grid). Training sized so that
+    one ``small-cnn-lstm`` fit on ~30 000 windows of 5 frames takes under a minute on 2
+    CPU threads: 32 px input, width 16, Adam (lr 3e-3) with a cosine schedule, 4 epochs
+    of 8000 windows sampled without replacement. This is *not* the paper's optimiser:
+    plain SGD at 1e-3 does not learn in that budget.
+``paper``
+    The study's protocol, a GPU workload: images at 1 mm per pixel; SGD, learning rate
+    1e-3, 100 epochs over every training window, batch 16 (the batch size is not stated
+    in the paper), and for ``cnn-lstm`` EfficientNet-B0 at 224 px.
+
+A profile is a set of defaults: a pixel size given to the run and options given with a
+classifier (``small-cnn-lstm:epochs=8``) override the profile's. A classifier from a
+plugin may declare its own ``profiles`` class attribute (``{"quick": {...}, "paper":
+{...}}``, see :data:`tactbench.contracts.CLASSIFIER`); one that declares none gets ``{}``
+(its own defaults) in every profile.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from tactbench.errors import InputError
+
+
+@dataclass(frozen=True)
+class Profile:
+    """One named set of run defaults."""
+
+    name: str
+    pixel_mm: float  # tactile-image pixel size, mm (> 0)
+    #: classifier name → options; a classifier not listed keeps its class defaults
+    classifiers: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+
+#: The paper's training protocol, shared by every torch classifier in ``paper``.
+_PAPER_TRAINING: dict[str, Any] = {
+    "epochs": 100,
+    "optimizer": "sgd",
+    "lr": 1e-3,
+    "momentum": 0.0,
+    "schedule": "constant",
+    "batch_size": 16,
+    "windows_per_epoch": 0,  # 0: every training window, every epoch
+}
+
+PROFILES: dict[str, Profile] = {
+    "quick": Profile("quick", pixel_mm=5.0, classifiers={
+        # 4 epochs × 8000 sampled windows = 32 000 windows ≈ one pass over the
+        # ~30 000 windows of the study's data at L = 5 (see docs/classifiers.md).
+        "small-cnn-lstm": {
+            "epochs": 4, "windows_per_epoch": 8000, "batch_size": 64, "width": 16,
+            "optimizer": "adam", "lr": 3e-3, "schedule": "cosine", "input_size": 32,
+        },
+        # EfficientNet-B0 is ~10x slower per window than the small CNN at the same
+        # size on a CPU: the quick profile only makes it runnable, not good.
+        "cnn-lstm": {
+            "epochs": 2, "windows_per_epoch": 1500, "batch_size": 32,
+            "optimizer": "adam", "lr": 1e-3, "schedule": "cosine", "input_size": 32,
+        },
+        "taxel-lstm": {
+            "epochs": 4, "windows_per_epoch": 8000, "batch_size": 64,
+            "optimizer": "adam", "lr": 3e-3, "schedule": "cosine",
+        },
+        "logreg": {},
+    }),
+    "paper": Profile("paper", pixel_mm=1.0, classifiers={
+        "small-cnn-lstm": dict(_PAPER_TRAINING, input_size=64),
+        "cnn-lstm": dict(_PAPER_TRAINING, input_size=224),
+        "taxel-lstm": dict(_PAPER_TRAINING),
+        "logreg": {},
+    }),
+}
+
+PROFILE_NAMES: tuple[str, ...] = tuple(PROFILES)
+DEFAULT_PROFILE = "quick"
+
+
+def get_profile(name: str) -> Profile:
+    """The profile called ``name``; an unknown name is an :class:`InputError` listing them."""
+    try:
+        return PROFILES[name]
+    except (KeyError, TypeError):
+        raise InputError(f"unknown profile '{name}'; profiles: "
+                         f"{', '.join(PROFILE_NAMES)}") from None
+
+
+def profile_options(profile: str = DEFAULT_PROFILE, classifier: str = "small-cnn-lstm", *,
+                    registry=None) -> dict[str, Any]:
+    """The options ``profile`` gives ``classifier`` (a fresh dict; user options override).
+
+    A classifier the profile does not list is looked up in ``registry`` (default: every
+    installed plugin) and its declared ``profiles`` are read; an unknown classifier is an
+    :class:`~tactbench.errors.UnknownComponentError`.
+    """
+    table = get_profile(profile).classifiers
+    if classifier in table:
+        return dict(table[classifier])
+    from tactbench.contracts import CLASSIFIER
+
+    if registry is None:
+        from tactbench.plugins import load_registry
+
+        registry = load_registry()
+    declared = CLASSIFIER.get(registry.get("classifier", classifier).load(), "profiles")
+    return dict((declared or {}).get(profile, {}))

@@ -1,0 +1,182 @@
+"""One cell: train a classifier on the cached encoding, test it, return its result row.
+
+:func:`run_cell` runs in any process (this one, a worker process, a dask worker): a
+:class:`CellJob` carries everything it needs, the classifier's registered
+:class:`~tactbench.plugins.Component` included, so a cell builds its classifier from the
+plugins the run was planned with, not from whatever is installed where it runs.
+
+A cell that raises (a bug in a plugin, a classifier that fails in ``fit``, out of memory)
+returns a *failed* row instead (see :mod:`tactbench.runner.store`): no exception object
+crosses a process boundary, and the rest of the grid goes on. Ctrl-C
+(``KeyboardInterrupt``) is not a failure: it stops the run.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from tactbench.runner.planning import Cell, Plan
+from tactbench.runner.store import FAILED, OK
+from tactbench.runner.system import host, now, peak_rss_mb, versions
+
+#: How many of the innermost traceback frames a failed row keeps.
+TRACEBACK_FRAMES = 5
+
+
+@dataclass(frozen=True)
+class CellJob:
+    """Everything a worker needs to run a cell, picklable and small."""
+
+    cell: Cell
+    identity: dict[str, Any]
+    classifier: Any  # tactbench.plugins.Component of the cell's classifier (picklable)
+    encoding_dir: str
+    labels: tuple[int, ...]  # class index of every sample of the dataset
+    users: tuple[str, ...]  # user of every sample
+    classes: tuple[str, ...]
+    split: str
+    test_per_class: int
+    device: str
+    threads: int  # torch threads
+    model_path: str | None = None
+    model_meta: dict[str, Any] | None = None
+
+
+def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
+              models: Path | None = None) -> list[CellJob]:
+    """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.cache.ensure_encodings`;
+    with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
+    scene = p.scene
+    labels = tuple(int(x) for x in p.dataset.labels)  # once, shared by every job
+    users = tuple(str(u) for u in p.dataset.users)
+    return [CellJob(cell=c, identity=p.identities[c.key],
+                    classifier=p.classifier_component(c.classifier),
+                    encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
+                    labels=labels, users=users, classes=tuple(p.dataset.classes),
+                    split=scene.split, test_per_class=scene.test_per_class,
+                    device=scene.device, threads=scene.resolved_threads(),
+                    model_path=str(models / f"{c.key}.safetensors") if models else None,
+                    model_meta=model_metadata(p, c) if models else None)
+            for c in cells]
+
+
+def model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
+    """What `tactbench live` needs to use a cell's model: classes, layout, imaging, encoder."""
+    from tactbench.classifiers.io import live_metadata
+
+    return live_metadata(p.dataset, encoder=cell.encoder, length=cell.length,
+                         pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
+
+
+def run_cell(job: CellJob, progress: Callable[..., None] | None = None) -> dict[str, Any]:
+    """Train and test one cell; its ``ok`` row, or a ``failed`` row if anything raised.
+
+    ``progress(done, total, **info)`` follows training (see
+    :func:`tactbench.classifiers.training.train_loop`).
+    """
+    try:
+        return train_and_test(job, progress)
+    except Exception as exc:  # noqa: BLE001 — any failure is this cell's, recorded in its row
+        return failed_row(job, exc)
+
+
+def failed_row(job: CellJob, exc: BaseException) -> dict[str, Any]:
+    """The row of a cell that raised ``exc``: identity, error type, message, last frames."""
+    frames = traceback.format_exception(type(exc), exc, exc.__traceback__,
+                                        limit=-TRACEBACK_FRAMES, chain=False)
+    return {
+        "key": job.cell.key,
+        **job.identity,
+        "status": FAILED,
+        "error": {"type": type(exc).__name__, "message": str(exc) or repr(exc),
+                  "traceback": "".join(frames)},
+        "classes": list(job.classes),
+        "device": job.device,
+        "threads": job.threads,
+        "peak_rss_mb": peak_rss_mb(),
+        "versions": versions(),
+        "host": host(),
+        "finished": now(),
+    }
+
+
+def train_and_test(job: CellJob, progress: Callable[..., None] | None = None
+                   ) -> dict[str, Any]:
+    """Train and test one cell and return its ``ok`` row; raises what the cell raises."""
+    import numpy as np
+    import torch
+
+    from tactbench.classifiers.training import derive_seed
+    from tactbench.data.splits import make_split
+    from tactbench.data.windows import test_windows, training_windows
+    from tactbench.plugins import Registry
+    from tactbench.runner.cache import load_encoding
+
+    torch.set_num_threads(job.threads)
+    cell = job.cell
+    sequences, meta = load_encoding(job.encoding_dir)
+    labels = np.asarray(job.labels, dtype=np.int64)
+    split = make_split(job.split, labels=labels, users=job.users, seed=cell.seed,
+                       test_per_class=job.test_per_class)
+    train = training_windows([sequences[i] for i in split.train], labels[split.train],
+                             cell.length)
+    test = test_windows([sequences[i] for i in split.test], labels[split.test], cell.length)
+
+    # The planned component, not a fresh plugin lookup: see the module docstring.
+    clf = Registry([job.classifier]).build("classifier", cell.classifier,
+                                           classes=len(job.classes))
+    seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length)
+    rss0 = peak_rss_mb()
+    t0 = time.perf_counter()
+    fit_report = clf.fit(train, None, seed=seed, device=job.device, progress=progress)
+    train_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    predicted = clf.predict(test)
+    infer_s = time.perf_counter() - t0
+    if job.model_path:
+        clf.save(job.model_path, {**(job.model_meta or {}), "classifier": cell.classifier,
+                                  "seed": cell.seed, "cell": cell.key,
+                                  "test_accuracy": float((predicted == test.labels).mean())})
+
+    k = len(job.classes)
+    truth = test.labels
+    confusion = np.zeros((k, k), dtype=np.int64)
+    np.add.at(confusion, (truth, predicted), 1)
+    support = confusion.sum(axis=1)
+    per_class = {job.classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
+                 for i in range(k)}
+    frames = max(1, int(meta.get("frames", 1)))
+    return {
+        "key": cell.key,
+        **job.identity,
+        "status": OK,
+        **split.describe(),
+        "classes": list(job.classes),
+        "accuracy": float((predicted == truth).mean()),
+        "per_class_accuracy": per_class,
+        "confusion": confusion.tolist(),
+        # cost on one core: wall time × workers that shared the encoding, per frame
+        "encode_ms_per_frame": 1e3 * float(meta.get("encode_seconds", 0.0))
+        * int(meta.get("workers", 1)) / frames,
+        "train_s": train_s,
+        "inference_ms_per_sequence": 1e3 * infer_s / max(1, len(test)),
+        "peak_rss_mb": peak_rss_mb(),
+        "rss_before_fit_mb": rss0,
+        "n_train_windows": len(train),
+        "n_test": len(test),
+        "fit": _jsonable(fit_report),
+        "device": job.device,
+        "threads": job.threads,
+        "versions": versions(),
+        "host": host(),
+        "finished": now(),
+    }
+
+
+def _jsonable(obj: Any) -> Any:
+    return json.loads(json.dumps(obj, default=str))

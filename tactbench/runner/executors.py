@@ -1,0 +1,95 @@
+"""Where cells run: in turn in this process, in local worker processes, or on dask.
+
+Each executor calls ``finish(row)`` in this process as soon as a cell's row is back, in
+the order cells finish. A cell never raises here (:func:`~tactbench.runner.cell.run_cell`
+returns a failed row instead); when a worker itself dies (killed for memory, a crashed
+interpreter), its cell gets a failed row too. Ctrl-C stops at once: cells not started are
+dropped, finished ones were already handed to ``finish``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Callable, Iterable
+
+from tactbench.runner.cell import CellJob, failed_row, run_cell
+
+if TYPE_CHECKING:
+    from tactbench.runner.scene import Scene
+    from tactbench.ui import Progress
+
+Finish = Callable[[dict[str, Any]], None]
+
+
+def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress") -> None:
+    """Run ``jobs`` on the scene's executor, with an overall bar in ``bars``."""
+    overall = bars.add("cells", total=len(jobs))
+    done = 0
+
+    def finished(row: dict[str, Any]) -> None:
+        nonlocal done
+        finish(row)
+        done += 1
+        bars.update(overall, done)
+
+    if scene.executor == "local" and scene.workers == 1:
+        run_serial(jobs, finished, bars)
+    elif scene.executor == "local":
+        run_processes(jobs, finished, workers=scene.workers)
+    else:
+        run_dask(jobs, finished, workers=scene.workers, scheduler=scene.scheduler)
+
+
+def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress") -> None:
+    """One cell after another in this process, each with its training bar."""
+    for job in jobs:
+        finish(run_cell(job, bars.callback(f"train {job.cell.label()}")))
+
+
+def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
+    """``workers`` cells at once in local processes (spawned: torch and fork do not mix)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pool = ProcessPoolExecutor(max_workers=workers,
+                               mp_context=multiprocessing.get_context("spawn"))
+    try:
+        futures = {pool.submit(run_cell, job): job for job in jobs}
+        for fut in as_completed(futures):
+            finish(_row(fut, futures[fut]))
+    except BaseException:  # Ctrl-C or a failing finish(): do not wait for the queue
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def run_dask(jobs: list[CellJob], finish: Finish, *, workers: int,
+             scheduler: str | None) -> None:
+    """Cells on a dask cluster: the one at ``scheduler``, else a local one of ``workers``
+    single-threaded processes bound to 127.0.0.1."""
+    from distributed import Client, LocalCluster
+    from distributed import as_completed as dask_completed
+
+    if scheduler:
+        client = Client(scheduler)
+        cluster = None
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = client.map(run_cell, jobs, pure=False)
+        by_key = {fut.key: job for fut, job in zip(futures, jobs)}
+        for fut in dask_completed(futures):
+            finish(_row(fut, by_key[fut.key]))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _row(future: Any, job: CellJob) -> dict[str, Any]:
+    """The future's row; a failed row when the worker could not return one."""
+    try:
+        return future.result()
+    except Exception as exc:  # noqa: BLE001 — the worker died (BrokenProcessPool, KilledWorker)
+        return failed_row(job, exc)
