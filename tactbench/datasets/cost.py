@@ -19,14 +19,16 @@ The real corpus is not shipped here; the tests write files in this format.
 from __future__ import annotations
 
 import csv
+import io
 import re
 from pathlib import Path
 
 import numpy as np
 
+from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
-from tactbench.data.recording import Dataset, Recording, Sample
-from tactbench.errors import InputError, MissingFileError
+from tactbench.data.recording import Recording, Sample
+from tactbench.errors import InputError, MissingFileError, check_positive_float
 
 RATE_HZ = 135.0
 GRID = 8
@@ -36,6 +38,7 @@ NORMALISATION = "fixed:scale=1023"
 
 def cost_layout(pitch_mm: float = 10.0) -> TaxelLayout:
     """The 8 × 8 grid: id ``k - 1`` for ``ch{k}``, row-major, ``pitch_mm`` apart."""
+    pitch_mm = check_positive_float(pitch_mm, "pitch_mm")
     k = np.arange(GRID * GRID)
     pos = np.column_stack([(k % GRID) * pitch_mm, (k // GRID) * pitch_mm]).astype(float)
     return TaxelLayout(ids=k.astype(np.int64), positions=pos, name="cost-8x8")
@@ -115,19 +118,22 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
 
 
 def write_cost_csv(dataset: Dataset, path: str | Path) -> None:
-    """Write a 64-taxel dataset in the CoST CSV format (with a header)."""
-    path = Path(path)
+    """Write a 64-taxel dataset in the CoST CSV format (with a header); the file is
+    replaced atomically."""
+    from tactbench.paths import atomic_write_text
+
     if dataset.n_taxels != GRID * GRID:
         raise InputError(f"CoST files hold 64 channels; dataset {dataset.name!r} has "
                          f"{dataset.n_taxels} taxels")
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(COLUMNS)
-        for s in dataset:
-            rec = s.recording
-            for k in range(rec.n_frames):
-                w.writerow([s.user, s.position, dataset.classes[s.label], k]
-                           + [_fmt(v) for v in rec.values[k].tolist()])
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(COLUMNS)
+    for s in dataset:
+        rec = s.recording
+        for k in range(rec.n_frames):
+            w.writerow([s.user, s.position, dataset.classes[s.label], k]
+                       + [_fmt(v) for v in rec.values[k].tolist()])
+    atomic_write_text(path, buf.getvalue())
 
 
 def _fmt(v: float) -> str:
@@ -146,7 +152,8 @@ class CoST:
     """Registered dataset ``cost``: ``cost:path=FILE.csv[,pitch_mm=10]``."""
 
     def __init__(self, path: str, pitch_mm: float = 10.0, name: str | None = None) -> None:
-        self.path, self.pitch_mm, self.name = path, float(pitch_mm), name
+        self.path, self.name = path, name
+        self.pitch_mm = check_positive_float(pitch_mm, "cost option pitch_mm")
 
     def load(self) -> Dataset:
         return read_cost_csv(self.path, pitch_mm=self.pitch_mm, name=self.name)

@@ -12,7 +12,8 @@ file is a one-sample dataset whose class is its folder's name.
 
 Reading is strict: an empty file, a bad header, ragged or truncated rows,
 non-numeric values, infinite values, duplicate taxel ids and timestamps that go
-backwards each raise ``ValueError`` naming the file, the line and the problem.
+backwards each raise :class:`~tactbench.errors.InputError` naming the file, the line
+and the problem.
 ``nan`` in a reading marks a missing taxel: kept as NaN (counted by
 ``tactbench data info``), not an error. Writing and reading back is exact.
 """
@@ -20,10 +21,12 @@ backwards each raise ``ValueError`` naming the file, the line and the problem.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from tactbench.data.recording import Dataset, Recording, Sample
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
 
 SUFFIX = ".txt"
@@ -106,9 +109,10 @@ def write_cyskin_text(recording: Recording, path: str | Path, *,
 
     Whole-number values are written as integers; others, and timestamps,
     with the shortest text that reads back to the same float. Frame indices
-    default to 0, 1, 2, …
+    default to 0, 1, 2, … The file is replaced atomically.
     """
-    path = Path(path)
+    from tactbench.paths import atomic_write_text
+
     idx = np.arange(recording.n_frames) if frame_indices is None else frame_indices
     lines = [" ".join(str(int(t)) for t in recording.taxel_ids)]
     for k in range(recording.n_frames):
@@ -116,7 +120,7 @@ def write_cyskin_text(recording: Recording, path: str | Path, *,
         parts = [str(int(idx[k])), _fmt(float(recording.timestamps[k]))]
         parts.extend(_fmt32(v) for v in vals.tolist())
         lines.append(" ".join(parts))
-    path.write_text("\n".join(lines) + "\n", encoding="ascii")
+    atomic_write_text(path, "\n".join(lines) + "\n")  # ASCII: ids and numbers only
 
 
 def _fmt(x: float) -> str:
@@ -148,7 +152,7 @@ def _is_float(tok: str) -> bool:
 
 
 def read_cyskin_folder(path: str | Path, *, name: str | None = None,
-                       progress=None) -> Dataset:
+                       progress: Callable[[int, int], None] | None = None) -> Dataset:
     """A dataset from a CySkin text file, or a folder of class folders of them.
 
     The class of a file is the name of the folder it is in (classes sorted
@@ -197,5 +201,6 @@ class CySkinText:
         self.path = path
         self.name = name
 
-    def load(self) -> Dataset:
-        return read_cyskin_folder(self.path, name=self.name)
+    def load(self, progress: Callable[[int, int], None] | None = None) -> Dataset:
+        """The dataset; ``progress(done, total)`` after each file read."""
+        return read_cyskin_folder(self.path, name=self.name, progress=progress)

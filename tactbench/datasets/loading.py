@@ -6,11 +6,13 @@
 
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
-from tactbench.data.recording import MANIFEST, Dataset
-from tactbench.errors import InputError, MissingFileError
+from tactbench.data.dataset import Dataset
+from tactbench.data.store import MANIFEST
+from tactbench.errors import ContractError, InputError, MissingFileError
 
 #: CAN log suffixes read through :mod:`tactbench.can.logs` (python-can's ``.csv``
 #: is not among them: ``.csv`` means CoST here).
@@ -66,7 +68,8 @@ def _looks_like_path(text: str) -> bool:
             or Path(text).suffix.lower() in (".txt", ".csv", ".json"))
 
 
-def load_dataset(spec_or_path: str | Path, registry: Any = None) -> Dataset:
+def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
+                 progress: Callable[..., None] | None = None) -> Dataset:
     """A :class:`Dataset` from a path or a registered dataset spec.
 
     An existing path is read by :func:`load_path`. Anything else is a spec
@@ -74,6 +77,10 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None) -> Dataset:
     (``registry.build("dataset", spec).load()``; the installed registry when
     ``registry`` is ``None``). A spec that names no registered dataset and
     looks like a path reports the missing path.
+
+    ``progress(done, total)`` is handed to the dataset's ``load`` when that takes a
+    ``progress`` argument (the contract's ``load()`` need not: see
+    :data:`tactbench.contracts.DATASET`), e.g. ``synthetic-forearm`` generating samples.
     """
     text = str(spec_or_path)
     path = Path(text).expanduser()
@@ -86,8 +93,19 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None) -> Dataset:
 
         registry = load_registry()
     source = registry.build("dataset", text)
-    dataset = source.load()
+    if progress is not None and _takes_progress(source.load):
+        dataset = source.load(progress=progress)
+    else:
+        dataset = source.load()
     if not isinstance(dataset, Dataset):
-        raise TypeError(f"dataset {text!r}: load() returned {type(dataset).__name__}, "
-                        f"expected a tactbench.data.recording.Dataset")
+        raise ContractError(f"dataset {text!r}: load() returned {type(dataset).__name__}, "
+                            f"expected a tactbench.data.dataset.Dataset")
     return dataset
+
+
+def _takes_progress(load: Callable[..., Any]) -> bool:
+    try:
+        params = inspect.signature(load).parameters
+    except (TypeError, ValueError):  # a builtin or C callable: call it plainly
+        return False
+    return "progress" in params or any(p.kind is p.VAR_KEYWORD for p in params.values())

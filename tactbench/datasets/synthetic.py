@@ -2,7 +2,7 @@
 
 Five gestures of the study (Grasp, 2hGrasp, Twist, Push, Pull) performed by
 simulated users on the generated 1558-taxel CySkin forearm
-(:func:`tactbench.data.layout.cyskin_forearm`), read by a simulated capacitive
+(:func:`tactbench.datasets.forearm.cyskin_forearm`), read by a simulated capacitive
 sensor at 10 Hz. Default: 38 users × 5 gestures × 2 positions × 5 repetitions
 = 1900 samples of 5–27 frames. The model and its parameters are documented in
 ``docs/simulator.md``; the numbers live in the constants below.
@@ -25,19 +25,18 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import shutil
-import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
-from tactbench.data.layout import SLOTS_PER_ID, TaxelLayout, cyskin_forearm
-from tactbench.data.recording import Dataset, Recording, Sample
-from tactbench.errors import InputError
+from tactbench.data.dataset import Dataset
+from tactbench.data.layout import SLOTS_PER_ID, TaxelLayout
+from tactbench.data.recording import Recording, Sample
+from tactbench.datasets.forearm import cyskin_forearm
+from tactbench.errors import InputError, check_positive_int
 
 #: Bump when the model changes: it keys the cache.
 GENERATOR_VERSION = 1
@@ -466,14 +465,26 @@ def simulate_sample(device: Device, user: User, gesture: str, position: str,
 # ------------------------------------------------------------- the dataset
 
 
+def check_options(**options: Any) -> dict[str, int]:
+    """The generator's options (``users``, ``positions``, ``repetitions``, ``seed``,
+    ``n_taxels``) checked and as ints; errors name the option."""
+    minimum = {"users": 1, "positions": 1, "repetitions": 1, "seed": 0, "n_taxels": 1}
+    out = {name: check_positive_int(value, f"synthetic-forearm option {name}",
+                                    minimum=minimum[name])
+           for name, value in options.items()}
+    if out.get("positions", 1) > len(POSITIONS):
+        raise InputError(f"synthetic-forearm option positions must be in 1..{len(POSITIONS)} "
+                         f"({', '.join(POSITIONS)}), got {out['positions']}")
+    return out
+
+
 def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: int = 0,
              n_taxels: int = 1558,
              progress: Callable[[int, int], None] | None = None) -> Dataset:
     """Generate the dataset (no cache); see :class:`SyntheticForearm`."""
-    if users < 1 or repetitions < 1 or not 1 <= positions <= len(POSITIONS):
-        raise InputError(f"need users ≥ 1, repetitions ≥ 1 and positions in "
-                         f"1..{len(POSITIONS)}; "
-                         f"got users={users}, repetitions={repetitions}, positions={positions}")
+    opts = check_options(users=users, positions=positions, repetitions=repetitions, seed=seed,
+                         n_taxels=n_taxels)
+    users, positions, repetitions = opts["users"], opts["positions"], opts["repetitions"]
     device = make_device(seed, n_taxels)
     samples = []
     total = users * len(CLASSES) * positions * repetitions
@@ -506,14 +517,8 @@ class SyntheticForearm:
 
     def __init__(self, users: int = 38, positions: int = 2, repetitions: int = 5,
                  seed: int = 0, n_taxels: int = 1558, cache: bool = True) -> None:
-        for name, value in (("users", users), ("positions", positions),
-                            ("repetitions", repetitions), ("seed", seed),
-                            ("n_taxels", n_taxels)):
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise InputError(f"synthetic-forearm option {name} must be an integer, "
-                                 f"got {value!r}")
-        self.options = {"users": users, "positions": positions, "repetitions": repetitions,
-                        "seed": seed, "n_taxels": n_taxels}
+        self.options = check_options(users=users, positions=positions,
+                                     repetitions=repetitions, seed=seed, n_taxels=n_taxels)
         self.cache = bool(cache)
 
     def cache_key(self) -> str:
@@ -528,8 +533,8 @@ class SyntheticForearm:
     def load(self, progress: Callable[[int, int], None] | None = None) -> Dataset:
         """The dataset: from the cache when there, else generated (and cached).
 
-        ``progress(done, total)`` is called per sample generated; without one, a
-        rich progress bar is shown on stderr when it is a terminal.
+        ``progress(done, total)`` is called per sample generated (not when the cache
+        answers).
         """
         if self.cache:
             folder = self.cache_path()
@@ -540,30 +545,10 @@ class SyntheticForearm:
                     shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
             elif folder.exists():  # a leftover without a manifest
                 shutil.rmtree(folder, ignore_errors=True)
-        ds = self._generate(progress)
-        if not self.cache:
-            return ds
-        tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=folder.parent))
-        try:
-            ds.save(tmp)
-            try:
-                os.rename(tmp, folder)  # atomic; another process may have won the race
-            except OSError:
-                pass
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+        ds = generate(**self.options, progress=progress)
+        if self.cache:
+            from tactbench.data.store import atomic_folder
+
+            with atomic_folder(folder) as tmp:  # another process may win the race: fine
+                ds.save(tmp)
         return ds
-
-    def _generate(self, progress: Callable[[int, int], None] | None) -> Dataset:
-        if progress is not None or not sys.stderr.isatty():
-            return generate(**self.options, progress=progress)
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
-        with Progress(TextColumn("simulating synthetic-forearm"), BarColumn(),
-                      MofNCompleteColumn(), console=Console(stderr=True),
-                      transient=True) as bar:
-            task = bar.add_task("", total=None)
-            return generate(**self.options,
-                            progress=lambda done, total: bar.update(task, completed=done,
-                                                                     total=total))

@@ -82,7 +82,8 @@ def test_bad_files(tmp_path, lines, message):
 
 
 def test_writer_needs_64_taxels(tmp_path):
-    from tactbench.data.recording import Dataset, Recording, Sample
+    from tactbench.data.dataset import Dataset
+    from tactbench.data.recording import Recording, Sample
 
     ds = Dataset("d", [Sample(Recording(np.zeros((2, 3)), [0, 1], [1, 2, 3]), 0)], ("a",))
     with pytest.raises(ValueError, match="CoST files hold 64 channels"):

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactbench.data.recording import Dataset, Recording, Sample
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Recording, Sample
 from tactbench.datasets.loading import detect_format, load_dataset
 from tactbench.errors import UnknownComponentError
 from tactbench.plugins import load_registry
@@ -81,3 +82,61 @@ def test_a_can_log_of_cyskin_traffic(tmp_path):
     ds = load_dataset(tmp_path / "s.asc")
     assert ds.classes == ("a", "b") and len(ds) == 2
     assert np.array_equal(ds[1].recording.values, samples[1].recording.values)
+
+
+PLAIN_PLUGIN = '''
+import numpy as np
+from tactbench import hookimpl
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Recording, Sample
+
+class Plain:
+    """A dataset written against the documented contract: load() takes nothing."""
+    def load(self):
+        rec = Recording(np.ones((2, 3)), [0.0, 0.1], [1, 2, 3])
+        return Dataset("plain", [Sample(rec, 0)], ("a",))
+
+class NotData:
+    def load(self):
+        return [1, 2, 3]
+
+@hookimpl
+def register_datasets(register):
+    register("plain", "tb_c2_datasets:Plain", summary="load() without progress")
+    register("not-data", "tb_c2_datasets:NotData", summary="load() returns a list")
+'''
+
+
+@pytest.fixture
+def plugin_registry(tmp_path, monkeypatch):
+    import importlib
+
+    from tactbench.plugins import collect_registry, make_plugin_manager
+
+    (tmp_path / "tb_c2_datasets.py").write_text(PLAIN_PLUGIN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    module = importlib.import_module("tb_c2_datasets")
+    return collect_registry(make_plugin_manager(entry_points=False,
+                                                extra=[("tb_c2_datasets", module)]))
+
+
+def test_progress_reaches_datasets_whose_load_takes_it(tmp_path, monkeypatch, registry):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path))
+    calls = []
+    ds = load_dataset("synthetic-forearm:users=1,repetitions=1,positions=1", registry=registry,
+                      progress=lambda done, total, **info: calls.append((done, total)))
+    assert len(ds) == 5 and calls[-1] == (5, 5)
+
+
+def test_progress_is_not_forced_on_a_plain_load(plugin_registry):
+    calls = []
+    ds = load_dataset("plain", registry=plugin_registry,
+                      progress=lambda done, total, **info: calls.append(done))
+    assert ds.name == "plain" and calls == []
+
+
+def test_a_load_that_returns_no_dataset_breaks_the_contract(plugin_registry):
+    from tactbench.errors import ContractError
+
+    with pytest.raises(ContractError, match="dataset 'not-data': load.. returned list"):
+        load_dataset("not-data", registry=plugin_registry)

@@ -87,8 +87,10 @@ def test_options_are_checked():
         SyntheticForearm(users="many")
     with pytest.raises(ValueError, match="has no option 'user'; did you mean 'users'"):
         load_registry().build("dataset", "synthetic-forearm:user=2")
-    with pytest.raises(ValueError, match="positions in 1..2"):
+    with pytest.raises(ValueError, match=r"option positions must be in 1..2 \(front, side\)"):
         generate(users=1, positions=3)
+    with pytest.raises(ValueError, match="option seed must be ≥ 0"):
+        SyntheticForearm(seed=-1)
 
 
 def test_sensor_model_has_dead_taxels_and_varied_baselines(device):
@@ -200,3 +202,18 @@ def test_no_class_is_given_away_by_one_trivial_cue():
             ll = -0.5 * ((x[test, None] - mu) / sd) ** 2 - np.log(sd)
             accs.append((ll.argmax(1) == y[test]).mean())
         assert np.mean(accs) < 0.6, f"{name} alone classifies {np.mean(accs):.0%} of samples"
+
+
+def test_load_reports_progress_through_its_callback_and_never_draws(tmp_path, monkeypatch,
+                                                                    capfd):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path))
+    calls = []
+    source = SyntheticForearm(users=1, repetitions=1, positions=1)
+    source.load(progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(k, 5) for k in range(1, 6)]
+    calls.clear()
+    source.load(progress=lambda done, total: calls.append((done, total)))
+    assert calls == []  # the cache answered
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+    assert [p.name for p in (tmp_path / "datasets").iterdir()] == [source.cache_path().name]

@@ -1,0 +1,92 @@
+"""Normalisation: raw sensor values → pressure in [0, 1], as a spec string.
+
+``clip((v - offset) / scale, 0, 1)`` with ``offset`` and ``scale`` fixed in advance
+(``"fixed"``) or estimated from a dataset's samples (``"baseline"``); see
+:class:`Normalisation`. :class:`tactbench.data.dataset.Dataset` applies it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from tactbench.data.recording import UINT16_MAX, Sample
+from tactbench.errors import InputError, check_choice
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """Raw sensor values → pressure in [0, 1]: ``clip((v - offset) / scale, 0, 1)``.
+
+    Kinds (written as a spec string, e.g. ``"baseline:high=99.9"``):
+
+    ``fixed`` (options ``offset=0``, ``scale=65535``)
+        The same offset and scale for every taxel: the full 16-bit range by
+        default. For data whose range is known in advance.
+    ``baseline`` (options ``low=5``, ``high=99.9``)
+        Estimated from the dataset: each taxel's offset is the ``low``-th
+        percentile of its readings over all frames of all samples (a taxel is
+        untouched most of the time, so this is its rest value); the scale is
+        the ``high``-th percentile of all baseline-removed readings (one scale
+        for all taxels, so their relative sensitivity is kept). Values above
+        the scale clip to 1.
+
+    Missing readings (NaN) stay NaN here; :meth:`Dataset.vectors` reads them
+    as 0 and :meth:`Dataset.images` fills them from neighbouring taxels.
+    """
+
+    kind: str = "fixed"
+    options: tuple[tuple[str, float], ...] = ()
+
+    KINDS = {"fixed": {"offset": 0.0, "scale": float(UINT16_MAX)},
+             "baseline": {"low": 5.0, "high": 99.9}}
+
+    @classmethod
+    def parse(cls, spec: "str | Normalisation") -> "Normalisation":
+        if isinstance(spec, Normalisation):
+            return spec
+        from tactbench.plugins import parse_spec
+
+        kind, opts = parse_spec(str(spec))
+        check_choice(kind, "normalisation", tuple(cls.KINDS))
+        allowed = cls.KINDS[kind]
+        for key, value in opts.items():
+            if key not in allowed:
+                raise InputError(f"normalisation {kind!r} has no option {key!r}; options: "
+                                 f"{', '.join(allowed)}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise InputError(f"normalisation option {key}={value!r} must be a number")
+        merged = {**allowed, **{k: float(v) for k, v in opts.items()}}
+        if kind == "fixed" and not merged["scale"] > 0:
+            raise InputError("normalisation 'fixed' needs scale > 0")
+        if kind == "baseline" and not 0 <= merged["low"] < merged["high"] <= 100:
+            raise InputError("normalisation 'baseline' needs 0 ≤ low < high ≤ 100")
+        return cls(kind, tuple(sorted(merged.items())))
+
+    @property
+    def spec(self) -> str:
+        from tactbench.plugins import format_spec
+
+        return format_spec(self.kind, {k: (int(v) if float(v).is_integer() else v)
+                                       for k, v in self.options})
+
+    def fit(self, samples: Sequence[Sample]) -> tuple[np.ndarray | float, float]:
+        """Offset (scalar or ``(N,)``) and scale for these samples."""
+        opts = dict(self.options)
+        if self.kind == "fixed":
+            return opts["offset"], opts["scale"]
+        stacked = np.concatenate([s.recording.values for s in samples], axis=0)
+        with np.errstate(all="ignore"):
+            if np.isnan(stacked).any():  # nanpercentile is much slower: only when needed
+                offset = np.nanpercentile(stacked, opts["low"], axis=0)
+            else:
+                offset = np.percentile(stacked, opts["low"], axis=0)
+        offset = np.nan_to_num(offset, nan=0.0).astype(np.float32)
+        rest = stacked - offset
+        rest = rest[np.isfinite(rest)]
+        scale = float(np.percentile(rest, opts["high"])) if rest.size else 1.0
+        return offset, max(scale, 1.0)

@@ -1,0 +1,265 @@
+"""The dataset store: a :class:`~tactbench.data.dataset.Dataset` as a folder on disk.
+
+A dataset folder holds
+
+- ``manifest.json``: format name (:data:`FORMAT_NAME`), :data:`SCHEMA_VERSION`, the
+  dataset's name, description, classes and normalisation spec, counts, per-sample
+  users, positions and sources, the layout's name and the content hash;
+- ``arrays.npz``: all numbers, read with ``allow_pickle=False``: ``values``
+  ``(F, N)`` (uint16 when every reading is a whole number in [0, 65535], else float32;
+  ``F`` frames of all samples stacked), ``timestamps`` ``(F,)`` s, ``offsets``
+  ``(S + 1,)`` (sample ``k`` is frames ``offsets[k]:offsets[k+1]``), ``taxel_ids``
+  ``(N,)``, ``labels`` and ``repetitions`` ``(S,)``, and the layout as ``layout_<key>``
+  arrays of :func:`tactbench.data.layout_io.layout_to_dict` (``layout_ids``,
+  ``layout_positions``, ``layout_bounds``, optionally ``layout_positions_3d`` and
+  ``layout_normals``).
+
+:func:`write_dataset` writes each file atomically, manifest last; :func:`read_dataset`
+validates everything and raises :class:`~tactbench.errors.InputError` naming the file
+and the problem; nothing is half-loaded. :func:`atomic_folder` builds a whole folder
+under a temporary name and renames it into place (the synthetic dataset's cache).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import shutil
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from tactbench.data.dataset import Dataset
+from tactbench.data.layout_io import layout_from_dict, layout_to_dict
+from tactbench.data.recording import UINT16_MAX, Recording, Sample
+from tactbench.errors import InputError, MissingFileError
+from tactbench.paths import atomic_write_bytes, atomic_write_text
+
+FORMAT_NAME = "tactbench-dataset"
+SCHEMA_VERSION = 1
+MANIFEST = "manifest.json"
+ARRAYS = "arrays.npz"
+#: The layout's arrays in ``arrays.npz`` are its dict format's keys with this prefix.
+_LAYOUT_PREFIX = "layout_"
+_LAYOUT_DTYPES = {"ids": np.int64, "positions": np.float64, "bounds": np.float64,
+                  "positions_3d": np.float64, "normals": np.float64}
+
+
+# ----------------------------------------------------------------------------- write
+
+
+def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
+    """Write ``manifest.json`` and ``arrays.npz`` of ``dataset`` into ``folder`` (created).
+
+    Values are stored as uint16 when they are all whole numbers in [0, 65535] (raw
+    sensor counts: half the size, exact), else float32. Each file is replaced
+    atomically and the manifest is written last, so a crash never leaves a half-written
+    file; new arrays beside an old manifest fail the content-hash check on load.
+    Returns ``folder`` as a :class:`~pathlib.Path`.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    samples = dataset.samples
+    values = np.concatenate([s.recording.values for s in samples], axis=0)
+    stored = values
+    if np.all(np.isfinite(values)) and values.min() >= 0 and values.max() <= UINT16_MAX \
+            and np.array_equal(values, np.round(values)):
+        stored = values.astype(np.uint16)
+    lengths = dataset.lengths()
+    arrays: dict[str, np.ndarray] = {
+        "values": stored,
+        "timestamps": np.concatenate([s.recording.timestamps for s in samples]),
+        "offsets": np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64),
+        "taxel_ids": dataset.taxel_ids,
+        "labels": dataset.labels,
+        "repetitions": dataset.repetitions,
+    }
+    layout = dataset.layout
+    if layout is not None:
+        for key, value in layout_to_dict(layout).items():
+            if key != "name":  # the name goes into the manifest
+                arrays[_LAYOUT_PREFIX + key] = np.asarray(value, dtype=_LAYOUT_DTYPES[key])
+    manifest = {
+        "format": FORMAT_NAME,
+        "schema_version": SCHEMA_VERSION,
+        "name": dataset.name,
+        "description": dataset.description,
+        "classes": list(dataset.classes),
+        "normalisation": dataset.normalisation.spec,
+        "n_samples": len(dataset),
+        "n_taxels": dataset.n_taxels,
+        "n_frames": int(lengths.sum()),
+        "values_dtype": str(stored.dtype),
+        "layout": None if layout is None else {"name": layout.name},
+        "users": dataset.users,
+        "positions": dataset.positions,
+        "sources": dataset.sources,
+        "content_hash": dataset.content_hash(),
+    }
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write_bytes(folder / ARRAYS, buf.getbuffer())
+    atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+    return folder
+
+
+@contextmanager
+def atomic_folder(folder: str | Path) -> Iterator[Path]:
+    """Build a folder under a temporary name beside ``folder``; rename it to ``folder``
+    when the block ends without an error (else remove it).
+
+    Readers see no folder or the complete one. When ``folder`` already exists (another
+    process finished first), theirs is kept and the new one is dropped.
+    """
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.tmp-", dir=folder.parent))
+    try:
+        yield tmp
+        try:
+            os.rename(tmp, folder)
+        except OSError:  # a non-empty folder is there: another writer won the race
+            pass
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+# ------------------------------------------------------------------------------ read
+
+
+def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
+    """Read a dataset folder written by :func:`write_dataset`, validating it.
+
+    ``verify`` recomputes the content hash and compares it with the manifest's
+    (detects edited or corrupted arrays).
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise MissingFileError(f"{folder}: no such dataset folder")
+    mpath, apath = folder / MANIFEST, folder / ARRAYS
+    if not mpath.is_file():
+        raise InputError(f"{folder}: not a tactbench dataset folder (no {MANIFEST})")
+    try:
+        manifest = json.loads(mpath.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{mpath}: not valid JSON: {exc}") from None
+    _check_manifest(manifest, mpath)
+    if not apath.is_file():
+        raise InputError(f"{folder}: {ARRAYS} is missing (the manifest names "
+                         f"{manifest['n_samples']} samples)")
+    ds = _dataset_from(manifest, _read_npz(apath), mpath, apath)
+    if verify and ds.content_hash() != manifest["content_hash"]:
+        raise InputError(f"{apath}: content hash {ds.content_hash()[:12]}… does not "
+                         f"match the manifest's {str(manifest['content_hash'])[:12]}…: "
+                         f"the files were modified or are corrupted")
+    return ds
+
+
+_MANIFEST_FIELDS = {
+    "format": str, "schema_version": int, "name": str, "classes": list,
+    "normalisation": str, "n_samples": int, "n_taxels": int, "n_frames": int,
+    "users": list, "positions": list, "sources": list, "content_hash": str,
+}
+
+
+def _check_manifest(m: Any, path: Path) -> None:
+    if not isinstance(m, dict):
+        raise InputError(f"{path}: the manifest must be a JSON object")
+    if m.get("format") != FORMAT_NAME:
+        raise InputError(f"{path}: 'format' is {m.get('format')!r}, expected {FORMAT_NAME!r}")
+    version = m.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise InputError(f"{path}: schema_version {version!r} is not supported (this "
+                         f"tactbench reads version {SCHEMA_VERSION})")
+    for key, typ in _MANIFEST_FIELDS.items():
+        if key not in m:
+            raise InputError(f"{path}: missing field {key!r}")
+        if not isinstance(m[key], typ) or (typ is int and isinstance(m[key], bool)):
+            raise InputError(f"{path}: field {key!r} must be a {typ.__name__}, got "
+                             f"{type(m[key]).__name__}")
+    n = m["n_samples"]
+    for key in ("users", "positions", "sources"):
+        if len(m[key]) != n or not all(isinstance(v, str) for v in m[key]):
+            raise InputError(f"{path}: {key!r} must list {n} strings, got {len(m[key])} items")
+    if not all(isinstance(c, str) for c in m["classes"]):
+        raise InputError(f"{path}: 'classes' must be strings")
+    if not re.fullmatch(r"[0-9a-f]{64}", m["content_hash"]):
+        raise InputError(f"{path}: 'content_hash' is not a SHA-256 hex digest")
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    import zipfile
+
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, EOFError, OSError) as exc:
+        raise InputError(f"{path}: cannot read the arrays (truncated or not an .npz "
+                         f"file): {exc}") from None
+    except ValueError as exc:  # object arrays need pickle: refused
+        raise InputError(f"{path}: {exc}") from None
+
+
+def _need(arrays: dict, key: str, path: Path, ndim: int, kinds: str) -> np.ndarray:
+    if key not in arrays:
+        raise InputError(f"{path}: array {key!r} is missing")
+    arr = arrays[key]
+    if arr.ndim != ndim or arr.dtype.kind not in kinds:
+        raise InputError(f"{path}: array {key!r} has shape {arr.shape} and dtype "
+                         f"{arr.dtype}; expected {ndim} dimension(s) of kind {kinds!r}")
+    return arr
+
+
+def _dataset_from(m: dict, arrays: dict, mpath: Path, apath: Path) -> Dataset:
+    n, n_tax, n_frames = m["n_samples"], m["n_taxels"], m["n_frames"]
+    values = _need(arrays, "values", apath, 2, "fu")
+    timestamps = _need(arrays, "timestamps", apath, 1, "f")
+    offsets = _need(arrays, "offsets", apath, 1, "iu").astype(np.int64)
+    taxel_ids = _need(arrays, "taxel_ids", apath, 1, "iu")
+    labels = _need(arrays, "labels", apath, 1, "iu").astype(np.int64)
+    reps = _need(arrays, "repetitions", apath, 1, "iu").astype(np.int64)
+    if values.shape != (n_frames, n_tax):
+        raise InputError(f"{apath}: 'values' has shape {values.shape}, the manifest says "
+                         f"({n_frames}, {n_tax})")
+    if timestamps.shape != (n_frames,):
+        raise InputError(f"{apath}: 'timestamps' has {timestamps.size} entries, expected "
+                         f"{n_frames}")
+    if taxel_ids.shape != (n_tax,):
+        raise InputError(f"{apath}: 'taxel_ids' has {taxel_ids.size} entries, expected {n_tax}")
+    if labels.shape != (n,) or reps.shape != (n,):
+        raise InputError(f"{apath}: 'labels'/'repetitions' must have {n} entries")
+    if offsets.shape != (n + 1,) or offsets[0] != 0 or offsets[-1] != n_frames \
+            or np.any(np.diff(offsets) < 1):
+        raise InputError(f"{apath}: 'offsets' must rise strictly from 0 to {n_frames} in "
+                         f"{n + 1} entries")
+    classes = m["classes"]
+    bad = np.nonzero((labels < 0) | (labels >= len(classes)))[0]
+    if bad.size:
+        raise InputError(f"{apath}: sample {bad[0]} has label {labels[bad[0]]}, but there "
+                         f"are {len(classes)} classes")
+    layout = None
+    if "layout_ids" in arrays:
+        fields = {key[len(_LAYOUT_PREFIX):]: value for key, value in arrays.items()
+                  if key.startswith(_LAYOUT_PREFIX)}
+        layout = layout_from_dict({**fields, "name": (m.get("layout") or {}).get("name", "")},
+                                  f"{apath}: layout")
+    vals32 = values.astype(np.float32, copy=False)
+    samples = []
+    for k in range(n):
+        a, b = offsets[k], offsets[k + 1]
+        try:
+            rec = Recording(vals32[a:b], timestamps[a:b], taxel_ids)
+        except InputError as exc:
+            raise InputError(f"{apath}: sample {k}: {exc}") from None
+        samples.append(Sample(rec, int(labels[k]), m["users"][k], m["positions"][k],
+                              int(reps[k]), m["sources"][k]))
+    try:
+        return Dataset(m["name"], samples, classes, layout, m["normalisation"],
+                       description=str(m.get("description", "")))
+    except InputError as exc:
+        raise InputError(f"{mpath}: {exc}") from None
