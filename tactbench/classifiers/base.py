@@ -1,6 +1,9 @@
-"""The classifier contract and the torch machinery the built-in classifiers share.
+"""The base of the built-in classifiers and the torch machinery they share.
 
-A classifier is built with keyword options (every option has a default)::
+The classifier contract (what the runner, ``live`` and the model files rely on, which
+members are optional and their defaults) is :data:`tactbench.contracts.CLASSIFIER`;
+:meth:`tactbench.plugins.Registry.build` checks it. In short, a classifier is built
+with keyword options (every option has a default)::
 
     clf = registry.build("classifier", "small-cnn-lstm:epochs=3,input_size=32")
     report = clf.fit(train, val, seed=0, device="cpu", progress=None)   # → dict
@@ -32,25 +35,36 @@ from tactbench.classifiers.training import (
     train_loop,
 )
 from tactbench.data.windows import Windows
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 
 #: Above this size the training frames are not resized up front but per batch.
 MAX_BANK_BYTES = 2 * 1024 ** 3
 #: Frames sampled to estimate the normalisation statistics.
 NORM_SAMPLE_FRAMES = 4096
+#: The ``optimizer`` and ``schedule`` options :func:`.training.train_loop` accepts.
+OPTIMIZERS = ("adam", "adamw", "sgd")
+SCHEDULES = ("cosine", "constant")
 
 
 @dataclass(eq=False, repr=False, kw_only=True)
 class SequenceClassifier:
-    """Base of every built-in classifier: options are the dataclass fields."""
+    """Base of every built-in classifier: options are the dataclass fields.
+
+    Fills in the members of :data:`tactbench.contracts.CLASSIFIER` (``predict`` from
+    ``predict_proba``, ``save`` through :mod:`tactbench.classifiers.io`) and checks
+    the options when the classifier is built, so a bad value is refused before any
+    data is encoded.
+    """
 
     name: ClassVar[str] = ""
-    #: 3 for image frames ``(C, H, W)``, 1 for taxel vectors ``(N,)``, None for either.
+    #: See ``frame_rank`` in :data:`tactbench.contracts.CLASSIFIER`.
     frame_rank: ClassVar[int | None] = 3
 
     classes: int | None = None  # number of classes K; None: from fit
 
     def __post_init__(self) -> None:
+        if self.classes is not None:
+            check_positive_int(self.classes, "classes", minimum=2)
         self.n_classes: int | None = None
         self.frame_shape: tuple[int, ...] | None = None
         self.length: int | None = None
@@ -240,6 +254,25 @@ class TorchSequenceClassifier(SequenceClassifier):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        # Checked, not converted: options() goes into cache keys and result rows as given.
+        check_positive_int(self.epochs, "epochs", minimum=0)
+        check_positive_int(self.batch_size, "batch_size")
+        check_positive_int(self.windows_per_epoch, "windows_per_epoch (0: every window)",
+                           minimum=0)
+        check_choice(str(self.optimizer).lower(), "optimizer", OPTIMIZERS)
+        check_positive_float(self.lr, "lr")
+        check_positive_float(self.momentum, "momentum", allow_zero=True)
+        check_positive_float(self.weight_decay, "weight_decay", allow_zero=True)
+        check_choice(self.schedule, "schedule", SCHEDULES)
+        check_positive_int(self.hidden, "hidden")
+        check_positive_int(self.fc, "fc")
+        if check_positive_float(self.dropout, "dropout", allow_zero=True) >= 1:
+            raise InputError(f"dropout must lie in [0, 1), got {self.dropout}")
+        if self.amp is not None and not isinstance(self.amp, bool):
+            raise InputError(f"amp must be true, false or none, got {self.amp!r}")
+        check_positive_int(self.eval_batch_size, "eval_batch_size")
+        check_positive_int(self.bn_recalibration_batches, "bn_recalibration_batches (0: off)",
+                           minimum=0)
         self.net = None
         self._device = None
         self._precision = None

@@ -21,7 +21,7 @@ import numpy as np
 from tactbench.classifiers.base import FrameBank, SequenceClassifier
 from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted
 from tactbench.data.windows import Windows
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_positive_float, check_positive_int
 
 
 def frame_features(frames, grid: int):
@@ -55,6 +55,9 @@ class PooledLogReg(SequenceClassifier):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        check_positive_int(self.grid, "grid")
+        check_positive_float(self.l2, "l2", allow_zero=True)
+        check_positive_int(self.max_iter, "max_iter")
         self.weight = None  # (K, D) float64 torch tensor
         self.bias = None
         self.feat_mean = None

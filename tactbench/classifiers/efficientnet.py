@@ -356,12 +356,6 @@ def load_weights(model: EfficientNetB0, source: str | Path | dict[str, torch.Ten
     return report
 
 
-def expected_keys(layout: str) -> list[str]:
-    """Every key ``layout`` has for the B0 backbone (without its ImageNet classifier)."""
-    return sorted(_key_map(layout).values())
-
-
-
 def export_state_dict(model: EfficientNetB0, layout: str) -> dict[str, torch.Tensor]:
     """``model``'s weights under the key names of ``layout`` (the inverse of
     :func:`load_weights`; without an ImageNet classifier)."""

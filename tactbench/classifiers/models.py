@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tactbench.classifiers.base import TorchSequenceClassifier, n_params
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 
 
 @dataclass(eq=False, repr=False, kw_only=True)
@@ -21,15 +21,16 @@ class ImageSequenceClassifier(TorchSequenceClassifier):
     input_size: int = 32  # frames are resized to input_size × input_size
     normalize: str = "data"  # data (training statistics), imagenet (3 channels) or none
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_positive_int(self.input_size, "input_size (px)", minimum=8)
+        check_choice(self.normalize, "normalize", ["data", "imagenet", "none"])
+
     def _wrap(self, encoder, frame_shape, n_classes):
         import torch
 
         from tactbench.classifiers.nets import IMAGENET_MEAN, IMAGENET_STD, SequenceNet
 
-        if self.input_size < 8:
-            raise InputError(f"input_size must be ≥ 8, got {self.input_size}")
-        if self.normalize not in ("data", "imagenet", "none"):
-            raise InputError(f"normalize must be data, imagenet or none, got '{self.normalize}'")
         if self.normalize == "imagenet" and frame_shape[0] != 3:
             raise InputError(f"normalize=imagenet needs 3 channels; frames have {frame_shape[0]}")
         net = SequenceNet(encoder, frame_shape=frame_shape, n_classes=n_classes,
@@ -51,6 +52,11 @@ class SmallCnnLstm(ImageSequenceClassifier):
     name = "small-cnn-lstm"
     width: int = 16
     layers: int = 4
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_positive_int(self.width, "width")
+        check_positive_int(self.layers, "layers")
 
     def _build_net(self, frame_shape, n_classes, *, pretrained):
         from tactbench.classifiers.nets import SmallCNN
@@ -83,6 +89,10 @@ class CnnLstm(ImageSequenceClassifier):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.backbone != "efficientnet-b0" and not str(self.backbone).startswith("timm:"):
+            raise InputError(f"unknown backbone '{self.backbone}': use efficientnet-b0 or "
+                             f"timm:<name>")
+        check_positive_float(self.drop_path, "drop_path", allow_zero=True)
         self.weights_report: dict[str, Any] | None = None
 
     def _build_net(self, frame_shape, n_classes, *, pretrained):
@@ -101,9 +111,8 @@ class CnnLstm(ImageSequenceClassifier):
                                   "EfficientNet-B0 backbone starts from random initialisation",
                                   stacklevel=3)
                     self.weights_report = {"source": None, "loaded": 0}
-        else:
-            raise InputError(f"unknown backbone '{self.backbone}': use efficientnet-b0 or "
-                             f"timm:<name>")
+        else:  # __post_init__ refused any other name
+            raise AssertionError(f"unchecked backbone {self.backbone!r}")
         return self._wrap(encoder, frame_shape, n_classes)
 
     def _timm_backbone(self, model_name: str, channels: int, pretrained: bool):
@@ -151,6 +160,11 @@ class TaxelLstm(TorchSequenceClassifier):
     frame_rank = 1
     width: int = 128  # hidden units of the per-frame MLP
     features: int = 64  # per-frame features fed to the LSTM
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_positive_int(self.width, "width")
+        check_positive_int(self.features, "features")
 
     def _build_net(self, frame_shape, n_classes, *, pretrained):
         from tactbench.classifiers.nets import SequenceNet, TaxelMLP

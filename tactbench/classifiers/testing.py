@@ -7,8 +7,8 @@
 
 Pass a spec with cheap options: the checks fit the classifier three times on a
 few dozen tiny windows (12 × 12 images, or 20-taxel vectors for a classifier
-whose ``frame_rank`` is 1). What is checked, after the contract in
-:mod:`tactbench.classifiers.base`:
+whose ``frame_rank`` is 1). What is checked, after the contract
+(:data:`tactbench.contracts.CLASSIFIER`, checked when the registry builds it):
 
 - ``fit`` returns a JSON-ready dict with ``epochs``, ``train_seconds`` and
   ``final_loss``; ``n_classes`` from ``fit(n_classes=K)`` is honoured;
@@ -53,12 +53,13 @@ def tiny_windows(frame_rank: int | None, *, n: int = 18, length: int = 3, seed: 
 def check_classifier(spec: str, *, registry: Any = None) -> None:
     """Run every check on the classifier ``spec``; ``AssertionError`` lists the failures."""
     from tactbench.classifiers.io import load_model
+    from tactbench.contracts import CLASSIFIER
     from tactbench.plugins import load_registry
 
     registry = registry or load_registry()
     build = lambda: registry.build("classifier", spec)  # noqa: E731
     clf = build()
-    train, test = tiny_windows(getattr(clf, "frame_rank", 3))
+    train, test = tiny_windows(CLASSIFIER.get(clf, "frame_rank"))
     failures: list[str] = []
 
     def expect(ok: bool, message: str) -> None:

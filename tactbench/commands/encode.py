@@ -31,6 +31,8 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     import numpy as np
 
     from tactbench.cli import get_registry
+    from tactbench.contracts import ENCODER
+    from tactbench.paths import atomic_write_text
 
     src = Path(input_path)
     if not src.is_file():
@@ -45,21 +47,21 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     t0 = time.perf_counter()
     try:
         out = encoder.encode(seq)
-    except ValueError as exc:
+    except InputError as exc:  # the file's content is refused; any other error is a bug
         raise InputError(f"{src}: {exc}") from exc
     seconds = time.perf_counter() - t0
     dst = Path(out_path)
     dst.parent.mkdir(parents=True, exist_ok=True)
     np.save(dst, out)
-    meta_fn = getattr(encoder, "metadata", None)
-    meta = meta_fn() if callable(meta_fn) else {
-        "encoder": spec, "channels": list(getattr(encoder, "channels", ()))}
+    metadata = ENCODER.get(encoder, "metadata")
+    meta = metadata() if metadata is not None else {
+        "encoder": spec, "channels": list(encoder.channels)}
     meta = {**meta, "spec": spec, "input": str(src), "input_shape": list(seq.shape),
             "input_dtype": str(seq.dtype), "output": str(dst), "output_shape": list(out.shape),
             "seconds": round(seconds, 4),
             "ms_per_frame": round(1000 * seconds / max(1, out.shape[0]), 4)}
     meta_path = dst.with_suffix(".json")
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+    atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
     if as_json:
         click.echo(json.dumps({**meta, "metadata": str(meta_path)}, indent=2))
         return
