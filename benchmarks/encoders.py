@@ -237,7 +237,7 @@ def flowbench(registry, repeats: int, out_dir: Path) -> dict[str, Any]:
     encoders = [(spec, registry.build("encoder", spec)) for spec in fb.DEFAULT_ENCODERS]
     results = fb.run_flowbench(
         encoders, repeats=repeats // 2 or 1,
-        progress=lambda d, t, label: log(f"flowbench {d}/{t} {label}"))
+        progress=lambda d, t, item="": log(f"flowbench {d}/{t} {item}"))
     meta = {"command": "python benchmarks/encoders.py (section flowbench) = "
                        "tactbench flowbench --out " + str(out_dir),
             "machine": machine(), "date": str(date.today())}

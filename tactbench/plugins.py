@@ -157,7 +157,7 @@ class Registry:
             return table[name]
         known = sorted(table)
         close = difflib.get_close_matches(name, known, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
+        hint = f"; did you mean '{close[0]}'?" if close else "."
         raise UnknownComponentError(
             f"unknown {kind} '{name}'{hint} Known {kind}s: {', '.join(known) or 'none'}"
         )
@@ -209,7 +209,7 @@ def _check_options(comp: Component, factory: Any, options: dict[str, Any]) -> No
     for key in options:
         if key not in accepted:
             close = difflib.get_close_matches(key, accepted, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = f"; did you mean '{close[0]}'?" if close else "."
             raise InputError(
                 f"{comp.kind} '{comp.name}' has no option '{key}'{hint} "
                 f"Options: {', '.join(accepted) or 'none'}"
@@ -308,7 +308,7 @@ class PluginManager(pluggy.PluginManager):
         for caller in callers:
             if not caller.has_spec():
                 close = difflib.get_close_matches(caller.name, _hook_names(), n=1)
-                hint = f"; did you mean '{close[0]}'?" if close else ""
+                hint = f"; did you mean '{close[0]}'?" if close else "."
                 self.report(name, distribution,
                             f"implements unknown hook '{caller.name}'{hint} "
                             f"(known hooks: {', '.join(_hook_names())})")

@@ -10,7 +10,7 @@ the step from an empty skin to the first contact.
 
 Input policy (the same for every encoder, see :func:`check_sequence`):
 
-- rank must be 3 and every axis non-empty, else ``ValueError``;
+- rank must be 3 and every axis non-empty, else ``InputError`` (a ``ValueError``);
 - integer input is scaled by its dtype's maximum (``uint8 / 255``,
   ``uint16 / 65535``); bool becomes 0/1; float16/float64 are cast to float32;
 - NaN or ±Inf anywhere → ``ValueError`` naming how many and where the first is;
@@ -81,10 +81,10 @@ def previous_frames(seq: np.ndarray) -> np.ndarray:
 class Encoder:
     """Base class for encoders. Subclasses set ``channels``/``ranges`` and write ``_encode``.
 
-    ``channels`` names each output channel; ``ranges`` gives each channel's
-    ``(low, high)`` bounds, which the conformance suite checks. ``version``
-    changes whenever the output for the same input and options changes, so
-    cached encodings are recomputed.
+    The members and their meaning are the encoder contract,
+    :data:`tactbench.contracts.ENCODER` (checked when the registry builds an encoder);
+    this class adds the shared input policy (:func:`check_sequence`), the output
+    check, and ``options()``/``metadata()`` from the constructor's keyword options.
     """
 
     name: ClassVar[str] = ""

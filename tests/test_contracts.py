@@ -1,0 +1,210 @@
+"""Contracts: written once, checked when a component is built, optional members keep their
+documented defaults, and every built-in component satisfies its kind's contract."""
+
+from __future__ import annotations
+
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from tactbench import contracts, hookimpl
+from tactbench.contracts import CLASSIFIER, CONTRACTS, ENCODER, SENSOR
+from tactbench.errors import ContractError, PluginError
+from tactbench.plugins import KINDS, collect_registry, make_plugin_manager
+
+MODULE = "tb_contract_plugins"  # where the tiny plugin classes below are importable from
+TINY_SYNTHETIC = "synthetic-forearm:users=1,repetitions=1,positions=1"
+
+
+# ----------------------------------------------------------------------------- tiny plugins
+# Written against the documented protocol only: no tactbench base class.
+
+
+class MinimalEncoder:
+    """An encoder with only ``channels`` and ``encode``."""
+
+    channels = ("pressure",)
+
+    def encode(self, seq):
+        return np.asarray(seq, dtype=np.float32)[:, None]
+
+
+class MinimalClassifier:
+    """A classifier with only ``fit``, ``predict``, ``predict_proba`` and ``save``:
+    it predicts the most frequent training label."""
+
+    def fit(self, train, val, *, seed, device, progress, n_classes=None):
+        counts = np.bincount(np.asarray(train.labels), minlength=n_classes or 0)
+        self.proba = (counts / counts.sum()).astype(np.float32)
+        return {"epochs": 1}
+
+    def predict_proba(self, batch):
+        return np.tile(self.proba, (len(batch), 1))
+
+    def predict(self, batch):
+        return self.predict_proba(batch).argmax(1).astype(np.int64)
+
+    def save(self, path, metadata=None):
+        return path
+
+
+class NoEncode:
+    channels = ("pressure",)
+
+
+class NoProba(MinimalClassifier):
+    predict_proba = None  # declared but not callable: as bad as missing
+
+
+class NamelessChannels(MinimalEncoder):
+    channels = "pressure"  # a string, not a sequence of names
+
+
+class BadRank(MinimalClassifier):
+    frame_rank = 2
+
+
+@pytest.fixture
+def registry(monkeypatch):
+    """Built-ins plus a plugin ``tiny`` registering the classes above by target."""
+    module = types.ModuleType(MODULE)
+    for cls in (MinimalEncoder, MinimalClassifier, NoEncode, NoProba, NamelessChannels,
+                BadRank):
+        setattr(module, cls.__name__, cls)
+    monkeypatch.setitem(sys.modules, MODULE, module)
+
+    @hookimpl
+    def register_encoders(register):
+        for name, cls in (("minimal", "MinimalEncoder"), ("no-encode", "NoEncode"),
+                          ("string-channels", "NamelessChannels")):
+            register(name, f"{MODULE}:{cls}", summary=name)
+
+    @hookimpl
+    def register_classifiers(register):
+        for name, cls in (("minimal", "MinimalClassifier"), ("no-proba", "NoProba"),
+                          ("rank-2", "BadRank")):
+            register(name, f"{MODULE}:{cls}", summary=name)
+
+    tiny = types.SimpleNamespace(register_encoders=register_encoders,
+                                 register_classifiers=register_classifiers)
+    return collect_registry(make_plugin_manager(entry_points=False, extra=[("tiny", tiny)]))
+
+
+# ----------------------------------------------------------------------------- refused
+
+
+@pytest.mark.parametrize("kind, name, missing", [
+    ("encoder", "no-encode", "no method 'encode'"),
+    ("encoder", "string-channels", "'channels' must be a non-empty sequence"),
+    ("classifier", "no-proba", "'predict_proba' is not callable"),
+    ("classifier", "rank-2", "'frame_rank' must be 3 (images), 1 (taxel vectors) or None"),
+])
+def test_a_component_breaking_its_contract_is_refused_at_build(registry, kind, name, missing):
+    with pytest.raises(ContractError) as err:
+        registry.build(kind, name)
+    message = str(err.value)
+    assert f"{kind} '{name}'" in message and "plugin 'tiny'" in message
+    assert missing in message and "tactbench.contracts" in message
+    # a plugin's mistake, and a TypeError for callers that catch that
+    assert isinstance(err.value, PluginError) and isinstance(err.value, TypeError)
+
+
+def test_check_lists_every_problem_at_once():
+    class Empty:
+        pass
+
+    with pytest.raises(ContractError) as err:
+        contracts.check("classifier", Empty(), name="empty")
+    for member in ("fit", "predict", "predict_proba", "save"):
+        assert f"'{member}'" in str(err.value)
+
+
+# ----------------------------------------------------------------------------- accepted
+
+
+def test_a_documented_protocol_encoder_builds_runs_and_gets_the_defaults(registry):
+    from tactbench.encoders.testing import check_contract
+
+    enc = registry.build("encoder", "minimal")
+    out = enc.encode(np.zeros((4, 5, 6), np.float32))
+    assert out.shape == (4, 1, 5, 6) and out.dtype == np.float32
+    assert ENCODER.get(enc, "version") == "1" and ENCODER.get(enc, "ranges") == ()
+    assert ENCODER.get(enc, "options") is None and ENCODER.get(enc, "metadata") is None
+    check_contract(enc)  # the conformance suite's contract check agrees
+
+
+def test_a_documented_protocol_classifier_builds_fits_and_predicts(registry):
+    from tactbench.classifiers.testing import tiny_windows
+
+    clf = registry.build("classifier", "minimal")
+    assert CLASSIFIER.get(clf, "frame_rank") == 3
+    assert CLASSIFIER.get(type(clf), "frame_rank") == 3  # the class answers too (planning)
+    assert CLASSIFIER.get(clf, "version") == "1" and CLASSIFIER.get(clf, "profiles") == {}
+    assert CLASSIFIER.get(clf, "frame_shape") is None
+    train, test = tiny_windows(3)
+    clf.fit(train, None, seed=0, device="cpu", progress=None)
+    assert clf.predict(test).shape == (len(test),)
+
+
+def test_a_declared_member_wins_over_the_default():
+    from tactbench.classifiers.classical import PooledLogReg
+
+    assert CLASSIFIER.get(PooledLogReg, "frame_rank") is None  # images or vectors
+    assert CLASSIFIER.get(PooledLogReg(), "frame_rank") is None
+
+
+def test_get_refuses_names_outside_the_contract_and_missing_required_members():
+    with pytest.raises(KeyError, match="no member 'frames_rank'"):
+        CLASSIFIER.get(object(), "frames_rank")
+    with pytest.raises(ContractError, match="has no 'channels'"):
+        ENCODER.get(object(), "channels")
+
+
+def test_every_kind_has_one_contract():
+    assert set(CONTRACTS) == set(KINDS)
+
+
+# ----------------------------------------------------------------------------- built-ins
+
+
+def _builtin_specs(registry, kind, tmp_path):
+    """Every built-in component of ``kind`` with the options it needs to be built."""
+    needs = {
+        ("sensor", "replay"): {"path": TINY_SYNTHETIC},
+        ("sensor", "cyskin-can"): {"taxel_ids": "0-10,16-26", "channel": "tb-contracts"},
+        ("dataset", "cyskin-text"): {"path": str(tmp_path)},
+        ("dataset", "cost"): {"path": str(tmp_path / "cost.csv")},
+    }
+    for comp in registry.components(kind):
+        if comp.plugin.startswith("tactbench."):
+            yield comp, needs.get((kind, comp.name), {})
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_builtin_component_satisfies_its_contract(kind, tmp_path):
+    registry = collect_registry(make_plugin_manager(entry_points=False))
+    (tmp_path / "cost.csv").write_text("")
+    built = 0
+    for comp, options in _builtin_specs(registry, kind, tmp_path):
+        if comp.missing_requirements():
+            continue
+        obj = registry.build(kind, comp.name, **options)
+        try:
+            assert CONTRACTS[kind].problems(obj) == [], comp.name
+        finally:
+            if kind == "sensor":
+                obj.close()
+                getattr(obj, "bus", None) and obj.bus.shutdown()
+        built += 1
+    assert built >= {"sensor": 2, "dataset": 3, "encoder": 3, "classifier": 4}[kind]
+
+
+def test_sensors_know_their_taxels_when_built():
+    registry = collect_registry(make_plugin_manager(entry_points=False))
+    with registry.build("sensor", "cyskin-can", taxel_ids="0-3", channel="tb-ids") as sensor:
+        assert SENSOR.get(sensor, "taxel_ids").tolist() == [0, 1, 2, 3]
+        assert SENSOR.get(sensor, "stats") is not None
+    with registry.build("sensor", "replay", path=TINY_SYNTHETIC) as sensor:
+        assert SENSOR.get(sensor, "bus_load") is None  # a replay reads no bus
