@@ -8,42 +8,35 @@ from pathlib import Path
 
 import click
 
-from tactbench.errors import InputError
-
 
 @click.group("data")
 def data_group() -> None:
     """Inspect, simulate and preview datasets."""
 
 
-def _progress(description: str):
-    """A rich progress bar on stderr; returns (context manager, callback)."""
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeRemainingColumn,
-    )
+def _lazy_callback(bars, description: str):
+    """A ``progress(done, total)`` callback that adds its bar on the first report only, so
+    a dataset that loads without reporting (a cache hit, a file) shows no empty bar."""
+    task = []
 
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                        TimeRemainingColumn(), console=Console(stderr=True), transient=True)
-    task = progress.add_task(description, total=None)
+    def report(done: int, total: int | None = None, **_info) -> None:
+        if not task:
+            task.append(bars.add(description, total))
+        bars.update(task[0], done, total)
 
-    def update(done: int, total: int) -> None:
-        progress.update(task, completed=done, total=total)
-
-    return progress, update
+    return report
 
 
 def _load(path: str):
+    """The dataset at ``path`` (or registered as ``path``), with a bar while it is made."""
     from tactbench.cli import get_registry
     from tactbench.datasets.loading import load_dataset
+    from tactbench.ui import Progress
 
-    if Path(path).exists():
-        return load_dataset(path)
-    return load_dataset(path, registry=get_registry())
+    registry = None if Path(path).exists() else get_registry()
+    with Progress() as bars:
+        return load_dataset(path, registry=registry,
+                            progress=_lazy_callback(bars, f"loading {path}"))
 
 
 @data_group.command("info")
@@ -104,31 +97,14 @@ def info_cmd(path: str, as_json: bool) -> None:
 def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int) -> None:
     """Generate the synthetic-forearm gesture dataset into a folder."""
     from tactbench.datasets.synthetic import generate
+    from tactbench.ui import Progress
 
-    progress, update = _progress("simulating gestures")
-    with progress:
+    with Progress() as bars:
         ds = generate(users=users, positions=positions, repetitions=repetitions, seed=seed,
-                      progress=update)
+                      progress=bars.callback("simulating gestures"))
     ds.save(out)
     click.echo(f"wrote {len(ds)} samples ({len(ds.classes)} classes, {users} users) to {out}; "
                f"content hash {ds.content_hash()[:16]}", err=True)
-
-
-def _to_rgb(encoded, encoder):
-    """(T, C, H, W) encoder output → (T, H, W, 3) in [0, 1], channels as R, G, B."""
-    import numpy as np
-
-    t, c, h, w = encoded.shape
-    ranges = getattr(encoder, "ranges", None) or [(0.0, 1.0)] * c
-    rgb = np.zeros((t, h, w, 3), dtype=np.float32)
-    if c == 1:
-        lo, hi = ranges[0]
-        grey = np.clip((encoded[:, 0] - lo) / ((hi - lo) or 1.0), 0, 1)
-        return np.repeat(grey[..., None], 3, axis=-1)
-    for k in range(min(c, 3)):
-        lo, hi = ranges[k]
-        rgb[..., k] = np.clip((encoded[:, k] - lo) / ((hi - lo) or 1.0), 0, 1)
-    return rgb
 
 
 @data_group.command("preview")
@@ -152,49 +128,26 @@ def preview_cmd(path: str, index: int, out: str, encoder: str | None, pixel_mm: 
     A dataset without a layout is shown as its taxel values over time
     (frames down, taxels across).
     """
-    import numpy as np
-    from matplotlib import colormaps
-    from matplotlib.image import imsave
+    from tactbench.data.preview import preview_strip, write_png
 
     ds = _load(path)
-    if index >= len(ds):
-        raise InputError(f"--sample {index} is out of range: {path} has {len(ds)} samples")
-    sample = ds[index]
-    label = ds.classes[sample.label]
-    if ds.layout is None:
-        if encoder:
-            raise InputError(f"dataset {ds.name!r} has no taxel layout, so it has no images "
-                             f"for encoder {encoder!r}; preview without --encoder shows its "
-                             f"taxel values")
-        vec = np.nan_to_num(ds.normalise(sample.recording.values), nan=0.0)
-        rgb = colormaps["inferno"](vec)[..., :3]
-        rgb = np.kron(rgb, np.ones((8, 1, 1)))  # make each frame a visible band
-        imsave(out, rgb)
-        click.echo(f"{ds.name} sample {index} ({label}): no layout; wrote {vec.shape[0]} "
-                   f"frames × {vec.shape[1]} taxels to {out}", err=True)
-        return
-    seq = ds.imager(pixel_mm, method).apply(ds.normalise(sample.recording.values))
-    seq = np.clip(seq, 0, 1)
+    enc = None
     if encoder:
         from tactbench.cli import get_registry
 
         enc = get_registry().build("encoder", encoder)
-        frames = _to_rgb(np.asarray(enc.encode(seq)), enc)
-    else:
-        frames = colormaps["inferno"](seq)[..., :3]
-    frames = frames[:max_frames]
-    t, h, w, _ = frames.shape
-    scale = max(1, int(round(96 / max(h, w))))
-    if scale > 1:
-        frames = frames.repeat(scale, axis=1).repeat(scale, axis=2)
-        h, w = h * scale, w * scale
-    gap = 2
-    strip = np.ones((h, t * (w + gap) - gap, 3), dtype=np.float32)
-    for k in range(t):
-        strip[:, k * (w + gap):k * (w + gap) + w] = frames[k]
-    imsave(out, strip)
+    shown = preview_strip(ds, index, encoder=enc, pixel_mm=pixel_mm, method=method,
+                          max_frames=max_frames)
+    write_png(out, shown.image)
+    sample = ds[index]
+    label = ds.classes[sample.label]
+    if shown.frame_shape is None:
+        click.echo(f"{ds.name} sample {index} ({label}): no layout; wrote {shown.frames} "
+                   f"frames × {shown.taxels} taxels to {out}", err=True)
+        return
+    h, w = shown.frame_shape
     click.echo(f"{ds.name} sample {index} ({label}, {sample.user or 'no user'}): "
-               f"{t} frames of {h // scale}×{w // scale} px"
+               f"{shown.frames} frames of {h}×{w} px"
                f"{' encoded by ' + encoder if encoder else ''} → {out}", err=True)
 
 

@@ -20,17 +20,14 @@ def layout_group() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
     """Taxel count, extent in mm, median spacing of a layout (.json or .csv)."""
-    import math
-
-    from tactbench.data.layout import load_layout
+    from tactbench.data.imaging import image_shape
+    from tactbench.data.layout_io import load_layout
 
     layout = load_layout(file)
     summary = layout.summary()
     summary["path"] = file
-    x0, y0, x1, y1 = layout.bounds
-    summary["image_shapes"] = {
-        f"{p:g}": [math.ceil((y1 - y0) / p - 1e-9), math.ceil((x1 - x0) / p - 1e-9)]
-        for p in (pixel_mm or (1.0, 4.0, 5.0))}
+    summary["image_shapes"] = {f"{p:g}": list(image_shape(layout, p))
+                               for p in (pixel_mm or (1.0, 4.0, 5.0))}
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
@@ -53,7 +50,7 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
 @click.option("--seed", default=0, show_default=True, type=int)
 def generate_cmd(out: str, taxels: int, seed: int) -> None:
     """Write the generated CySkin-like forearm layout as CSV."""
-    from tactbench.data.layout import cyskin_forearm
+    from tactbench.datasets.forearm import cyskin_forearm
 
     layout = cyskin_forearm(taxels, seed=seed)
     layout.to_csv(out)

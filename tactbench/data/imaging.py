@@ -5,7 +5,8 @@ one sparse matrix product, for one frame ``(N,)`` or a batch ``(T, N)``.
 
 Grid
     The image covers the layout's ``bounds`` (mm): ``W = ceil(width / pixel_mm)``
-    columns (``x``) and ``H = ceil(height / pixel_mm)`` rows (``y``); pixel
+    columns (``x``) and ``H = ceil(height / pixel_mm)`` rows (``y``), at least 1 each
+    (:func:`image_shape`, the one place this is computed); pixel
     ``(i, j)`` is the square whose centre is at ``x_min + (j + ½)·pixel_mm``,
     ``y_min + (i + ½)·pixel_mm``. The generated forearm gives 357 × 334 at
     1 mm, 90 × 84 at 4 mm and 72 × 67 at 5 mm.
@@ -57,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from tactbench.data.layout import TaxelLayout
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 
 METHODS = ("linear", "gaussian")
 #: Sub-samples per pixel side are chosen so sub-samples are ≤ spacing / 4 apart.
@@ -98,26 +99,17 @@ class Imager:
                  sigma: float | None = None, supersample: int | None = None) -> None:
         if not isinstance(layout, TaxelLayout):
             raise TypeError(f"layout must be a TaxelLayout, got {type(layout).__name__}")
-        if method not in METHODS:
-            raise InputError(f"unknown imaging method {method!r}; choose one of "
-                             f"{', '.join(METHODS)}")
-        pixel_mm = float(pixel_mm)
-        if not (pixel_mm > 0 and math.isfinite(pixel_mm)):
-            raise InputError(f"pixel_mm must be a positive number, got {pixel_mm}")
+        self.method = check_choice(method, "imaging method", METHODS)
         self.layout = layout
-        self.pixel_mm = pixel_mm
-        self.method = method
-        x0, y0, x1, y1 = layout.bounds
-        self.shape: tuple[int, int] = (max(1, math.ceil((y1 - y0) / pixel_mm - 1e-9)),
-                                       max(1, math.ceil((x1 - x0) / pixel_mm - 1e-9)))
+        self.shape: tuple[int, int] = image_shape(layout, pixel_mm)
+        pixel_mm = self.pixel_mm = float(pixel_mm)
+        x0, y0, _, _ = layout.bounds
         spacing = layout.median_spacing() or pixel_mm
         self.spacing = spacing
         if supersample is None:
             supersample = max(1, math.ceil(pixel_mm / (spacing / _SUBSAMPLES_PER_SPACING)
                                            - 1e-9))
-        if int(supersample) < 1:
-            raise InputError(f"supersample must be ≥ 1, got {supersample}")
-        self.supersample = int(supersample)
+        self.supersample = check_positive_int(supersample, "supersample")
         h, w = self.shape
         s = self.supersample
         # sub-sample centres, in row-major pixel order, s*s per pixel
@@ -132,8 +124,8 @@ class Imager:
             rows, cols, vals = _linear_weights(layout.positions, xs, ys, max_edge,
                                                2.5 * local)
         else:
-            if sigma is not None and not sigma > 0:
-                raise InputError(f"sigma must be > 0, got {sigma}")
+            if sigma is not None:
+                sigma = check_positive_float(sigma, "sigma")
             gy, gx = np.meshgrid(ys, xs, indexing="ij")  # (h*s, w*s)
             pts = np.column_stack([gx.ravel(), gy.ravel()])
             sig = np.full(layout.n_taxels, float(sigma)) if sigma is not None else local / 2
@@ -224,6 +216,20 @@ class Imager:
         return (f"Imager({self.layout.name or 'layout'}, {self.n_taxels} taxels → "
                 f"{self.shape[0]}×{self.shape[1]} px at {self.pixel_mm:g} mm, "
                 f"{self.method}, supersample {self.supersample})")
+
+
+def image_shape(layout: TaxelLayout, pixel_mm: float) -> tuple[int, int]:
+    """``(H, W)`` of the images of ``layout`` at ``pixel_mm`` mm per pixel (> 0).
+
+    ``H = ceil(height / pixel_mm)`` rows and ``W = ceil(width / pixel_mm)`` columns of
+    the layout's ``bounds``, at least 1 each; a bound that is a whole number of pixels
+    (up to 1e-9 pixel of rounding) takes no extra pixel. The one place the image shape
+    is computed: :class:`Imager` and ``tactbench layout info`` use it.
+    """
+    pixel_mm = check_positive_float(pixel_mm, "pixel_mm")
+    x0, y0, x1, y1 = layout.bounds
+    return (max(1, math.ceil((y1 - y0) / pixel_mm - 1e-9)),
+            max(1, math.ceil((x1 - x0) / pixel_mm - 1e-9)))
 
 
 def local_spacing(positions: np.ndarray, *, k: int = 3, fallback: float = 1.0) -> np.ndarray:

@@ -1,15 +1,14 @@
-"""``tactbench data`` and ``tactbench layout``: info, synth, preview, generate."""
+"""``tactbench data``: info, synth, preview."""
 
 from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
-from tactbench.data.recording import Dataset
+from tactbench.data.dataset import Dataset
 
 
 def run(*args):
@@ -106,28 +105,3 @@ def test_preview_without_layout_shows_taxel_values(tmp_path):
 def test_preview_sample_out_of_range(synth_folder, tmp_path):
     result = run("data", "preview", synth_folder, "--sample", 99, "--out", tmp_path / "x.png")
     assert result.exit_code != 0 and "out of range" in result.output
-
-
-def test_layout_generate_and_info(tmp_path):
-    out = tmp_path / "forearm.csv"
-    assert run("layout", "generate", "--out", out).exit_code == 0
-    doc = json.loads(run("layout", "info", out, "--json").stdout)
-    assert doc["taxels"] == 1558 and doc["modules"] == 142
-    assert doc["image_shapes"] == {"1": [357, 334], "4": [90, 84], "5": [72, 67]}
-    assert 7.0 < doc["median_spacing_mm"] <= 7.5
-    text = run("layout", "info", out).output
-    assert "1558 taxels" in text and "357 × 334" in text
-
-
-def test_layout_info_of_real_files(shared_data):
-    doc = json.loads(run("layout", "info", shared_data / "cyskin-layouts" /
-                         "ur10e_link1_patch1_flatmap.json", "--json").stdout)
-    assert doc["taxels"] == 642
-    assert np.allclose(doc["extent_mm"], [153.3, 130.0], atol=0.5)
-
-
-def test_layout_info_bad_file(tmp_path):
-    bad = tmp_path / "l.csv"
-    bad.write_text("id,x_mm\n")
-    result = run("layout", "info", bad)
-    assert result.exit_code != 0 and "l.csv, line 1: header must be" in result.output

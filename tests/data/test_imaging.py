@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactbench.data.imaging import Imager
-from tactbench.data.layout import TaxelLayout, cyskin_forearm
+from tactbench.data.imaging import Imager, image_shape
+from tactbench.data.layout import TaxelLayout
+from tactbench.datasets.forearm import cyskin_forearm
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +26,21 @@ def grid():
 @pytest.mark.parametrize("pixel_mm, shape", [(1.0, (357, 334)), (4.0, (90, 84)),
                                              (5.0, (72, 67))])
 def test_forearm_image_shapes(forearm, pixel_mm, shape):
-    assert Imager(forearm, pixel_mm=pixel_mm).shape == shape
+    assert Imager(forearm, pixel_mm=pixel_mm).shape == shape == image_shape(forearm, pixel_mm)
+    assert Imager(forearm, pixel_mm=pixel_mm).apply(np.zeros(1558)).shape == shape
+
+
+@pytest.mark.parametrize("bounds, pixel_mm, shape", [
+    ((0, 0, 10, 20), 5.0, (4, 2)),  # whole pixels: no extra one
+    ((0, 0, 10 + 1e-12, 20), 5.0, (4, 2)),  # rounding noise is not a pixel
+    ((0, 0, 10.5, 20), 5.0, (4, 3)),  # a part pixel counts
+    ((0, 0, 10, 20), 1e6, (1, 1)),  # never empty
+])
+def test_image_shape_rounds_up_and_is_never_empty(bounds, pixel_mm, shape):
+    layout = TaxelLayout(ids=[1, 2, 3], positions=[[1, 1], [9, 1], [1, 19]], bounds=bounds)
+    assert image_shape(layout, pixel_mm) == shape
+    with pytest.raises(ValueError, match="pixel_mm must be > 0"):
+        image_shape(layout, -1.0)
 
 
 @pytest.mark.parametrize("method", ["linear", "gaussian"])
@@ -120,12 +135,18 @@ def test_coarse_pixels_average_over_their_area(forearm):
 def test_bad_arguments(grid):
     with pytest.raises(ValueError, match="unknown imaging method 'cubic'"):
         Imager(grid, method="cubic")
-    with pytest.raises(ValueError, match="pixel_mm must be a positive"):
+    with pytest.raises(ValueError, match="pixel_mm must be > 0, got 0"):
         Imager(grid, pixel_mm=0)
     im = Imager(grid, pixel_mm=3)
     with pytest.raises(ValueError,
                        match=r"expected values of shape \(N,\) or \(T, N\) with N = 30"):
         im.apply(np.zeros(29))
+    with pytest.raises(ValueError, match="unknown imaging method 'liner'; did you mean 'linear'"):
+        Imager(grid, method="liner")
+    with pytest.raises(ValueError, match="supersample must be ≥ 1"):
+        Imager(grid, supersample=0)
+    with pytest.raises(ValueError, match="sigma must be > 0"):
+        Imager(grid, method="gaussian", sigma=0.0)
     with pytest.raises(ValueError, match="at least 3 taxels"):
         Imager(TaxelLayout(ids=[1, 2], positions=[[0, 0], [1, 0]]))
 
