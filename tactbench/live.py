@@ -18,47 +18,49 @@ The pipeline per sweep (raw taxel values ``(N,)``):
 Classifiers on taxel vectors (``frame_rank == 1``) skip steps 2–3 and see the
 normalised vectors ``(L, N)`` (missing readings as 0, as in training).
 
-What a model file must carry for this (its ``metadata``, see :func:`live_metadata`):
+What a model file must carry for this (its ``metadata``, see
+:func:`tactbench.classifiers.io.live_metadata`):
 ``classes``, ``encoder`` (spec), ``length`` (L), ``imaging`` (``pixel_mm``,
 ``method``), ``layout`` (``ids``, ``positions`` in mm, ``bounds``),
 ``normalisation`` (``offset`` scalar or per taxel, ``scale``) and ``taxel_ids``
 (the order of the values the classifier was trained on).
+
+A sensor whose taxels come in another order is re-indexed to the model's
+(:meth:`LiveClassifier.run` with the sensor's ``taxel_ids``, :func:`reorder_index`).
 """
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from tactbench.errors import InputError
+from tactbench.classifiers.io import live_metadata  # noqa: F401  (its old home; the runner imports it from here)
+from tactbench.contracts import CLASSIFIER, SENSOR
+from tactbench.encoders.flow import flow_to_channels, is_flow_encoder
+from tactbench.errors import InputError, TactbenchError
 
 
 # ------------------------------------------------------------------ encoding
 def encode_next(encoder: Any, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
     """Encode frame ``curr`` (H, W) against ``prev`` (H, W): float32 ``(C, H, W)``.
 
-    Flow encoders (a public ``flow(prev, curr)`` and ``max_flow``/``min_magnitude``)
-    compute one flow field for the pair; any other encoder encodes the two-frame
-    sequence ``[prev, curr]`` and keeps frame 1.
+    Flow encoders (:func:`~tactbench.encoders.flow.is_flow_encoder`) compute one flow
+    field for the pair; any other encoder encodes the two-frame sequence
+    ``[prev, curr]`` and keeps frame 1.
     """
-    flow = getattr(encoder, "flow", None)
-    if callable(flow) and hasattr(encoder, "max_flow") and hasattr(encoder, "min_magnitude"):
+    if is_flow_encoder(encoder):
         from tactbench.encoders.base import check_sequence
 
         pair = check_sequence(np.stack([prev, curr]))
-        try:
-            from tactbench.encoders.flow import flow_to_channels
-
-            f = flow(pair[:1], pair[1:])
-            return flow_to_channels(pair[1:], f, max_flow=encoder.max_flow,
-                                    min_magnitude=encoder.min_magnitude)[0]
-        except (ImportError, TypeError, AttributeError):
-            pass  # the flow encoders' helpers changed shape: take the general path
+        flow = encoder.flow(pair[:1], pair[1:])
+        return flow_to_channels(pair[1:], flow, max_flow=encoder.max_flow,
+                                min_magnitude=encoder.min_magnitude)[0]
     return encoder.encode(np.stack([prev, curr]))[1]
 
 
@@ -120,7 +122,8 @@ class LiveModel:
     def from_file(cls, path: str | Path, *, layout: Any = None, encoder: str | None = None,
                   length: int | None = None, pixel_mm: float | None = None,
                   registry: Any = None) -> "LiveModel":
-        """Load a model file saved with :func:`live_metadata`'s metadata.
+        """Load a model file saved with :func:`~tactbench.classifiers.io.live_metadata`'s
+        metadata.
 
         Keyword arguments override what the metadata says (``layout`` is a
         :class:`~tactbench.data.layout.TaxelLayout` or a layout file).
@@ -140,25 +143,26 @@ class LiveModel:
                    encoder: str | None = None, length: int | None = None,
                    pixel_mm: float | None = None, registry: Any = None,
                    where: str = "model") -> "LiveModel":
-        from tactbench.errors import TactbenchError
-
         def need(key: str, *alts: str) -> Any:
             for k in (key, *alts):
                 if meta.get(k) is not None:
                     return meta[k]
             raise TactbenchError(f"{where}: the model's metadata has no '{key}'; live "
-                                 f"classification needs it (see tactbench.live.live_metadata)")
+                                 f"classification needs it (see tactbench.classifiers.io.live_metadata)")
 
         classes = [str(c) for c in need("classes")]
         L = int(length if length is not None else
-                (meta.get("length") or meta.get("L") or getattr(clf, "length", None) or 0))
+                (meta.get("length") or meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
         if L < 1:
             raise TactbenchError(f"{where}: window length L unknown; give --length")
         norm = meta.get("normalisation") or {}
         offset = norm.get("offset", 0.0)
         offset = np.asarray(offset, np.float32) if isinstance(offset, list) else float(offset)
         scale = float(norm.get("scale", 65535.0))
-        frame_rank = getattr(clf, "frame_rank", 3)
+        frame_rank = CLASSIFIER.get(clf, "frame_rank")
+        if frame_rank is None:  # images or vectors: what it was fitted on decides
+            shape = CLASSIFIER.get(clf, "frame_shape")
+            frame_rank = 3 if shape is None else len(shape)
         lay = _layout(layout if layout is not None else meta.get("layout"), where)
         ids = meta.get("taxel_ids")
         ids = (np.asarray(ids, np.int64) if ids is not None
@@ -189,7 +193,7 @@ class LiveModel:
 
             registry = load_registry()
         model.encoder = registry.build("encoder", model.encoder_spec)
-        shape = getattr(clf, "frame_shape", None)
+        shape = CLASSIFIER.get(clf, "frame_shape")
         expected = (len(model.encoder.channels), *model.imager.shape)
         if shape is not None and tuple(shape) != expected:
             raise TactbenchError(f"{where}: the classifier expects frames {tuple(shape)}, "
@@ -199,47 +203,17 @@ class LiveModel:
 
 
 def _layout(obj: Any, where: str) -> Any:
+    """A layout given as an object, a layout file, or the model metadata's dict."""
     if obj is None:
         return None
-    from tactbench.data.layout import TaxelLayout, load_layout
+    from tactbench.data.layout import TaxelLayout
+    from tactbench.data.layout_io import layout_from_dict, load_layout
 
     if isinstance(obj, TaxelLayout):
         return obj
     if isinstance(obj, (str, Path)):
         return load_layout(obj)
-    if isinstance(obj, dict) and "ids" in obj and "positions" in obj:
-        bounds = obj.get("bounds")
-        return TaxelLayout(ids=np.asarray(obj["ids"], np.int64),
-                           positions=np.asarray(obj["positions"], np.float64),
-                           bounds=tuple(bounds) if bounds else None,
-                           name=str(obj.get("name", "")))
-    raise InputError(f"{where}: cannot read the layout from {type(obj).__name__}")
-
-
-def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
-                  method: str = "linear") -> dict[str, Any]:
-    """The metadata to save with a model so ``tactbench live`` can use it.
-
-    ``dataset`` is the :class:`tactbench.data.recording.Dataset` the model was
-    trained on (its classes, layout and normalisation are recorded).
-    """
-    offset, scale = dataset.normalisation_params()
-    layout = dataset.layout
-    meta: dict[str, Any] = {
-        "classes": list(dataset.classes), "encoder": encoder, "length": int(length),
-        "imaging": {"pixel_mm": float(pixel_mm), "method": method},
-        "taxel_ids": [int(i) for i in dataset.taxel_ids],
-        "normalisation": {"spec": dataset.normalisation.spec,
-                          "offset": (np.asarray(offset).astype(float).tolist()
-                                     if np.ndim(offset) else float(offset)),
-                          "scale": float(scale)},
-        "dataset": getattr(dataset, "name", ""),
-    }
-    if layout is not None:
-        meta["layout"] = {"ids": [int(i) for i in layout.ids],
-                          "positions": np.asarray(layout.positions).tolist(),
-                          "bounds": list(layout.bounds), "name": layout.name}
-    return meta
+    return layout_from_dict(obj, f"{where}: metadata 'layout'")
 
 
 # ------------------------------------------------------------------ cached features
@@ -324,14 +298,19 @@ class Prediction:
     latency_ms: float  # from receiving the sweep to the prediction, in this process
     missing: int = 0  # taxels missing from this sweep
     frame_ms: float = 0.0  # of latency_ms: normalising, imaging and encoding the sweep
+    marker: str | None = None  # the sensor's label marker in force for the sweep, if any
 
     def to_dict(self, classes: list[str]) -> dict[str, Any]:
-        return {"timestamp": self.timestamp, "label": self.label,
-                "confidence": round(self.confidence, 6),
-                "probabilities": {c: round(float(p), 6)
-                                  for c, p in zip(classes, self.probabilities)},
-                "frames": self.frames, "latency_ms": round(self.latency_ms, 3),
-                "frame_ms": round(self.frame_ms, 3), "missing": self.missing}
+        """JSON-ready: probabilities by class name; ``marker`` only when there is one."""
+        row = {"timestamp": self.timestamp, "label": self.label,
+               "confidence": round(self.confidence, 6),
+               "probabilities": {c: round(float(p), 6)
+                                 for c, p in zip(classes, self.probabilities)},
+               "frames": self.frames, "latency_ms": round(self.latency_ms, 3),
+               "frame_ms": round(self.frame_ms, 3), "missing": self.missing}
+        if self.marker is not None:
+            row["marker"] = self.marker
+        return row
 
 
 class LiveClassifier:
@@ -358,7 +337,7 @@ class LiveClassifier:
         self._features: _FeatureWindow | None = None
         self._blank: Any = None
         if cache_features and _FeatureWindow.supported(model.clf):
-            shape = getattr(model.clf, "frame_shape", None)
+            shape = CLASSIFIER.get(model.clf, "frame_shape")
             fw = _FeatureWindow(model.clf, model.length)
             if shape is not None and fw.check(tuple(shape)):
                 self._features = fw
@@ -392,9 +371,13 @@ class LiveClassifier:
         return self.encoder.push(image)
 
     def push(self, values: np.ndarray, timestamp: float = 0.0, *,
-             received: float | None = None, missing: int = 0) -> Prediction | None:
-        """Add one sweep; returns a prediction once the window allows one.
+             received: float | None = None, missing: int = 0,
+             marker: str | None = None) -> Prediction | None:
+        """Add one sweep's raw values ``(N,)`` (model order); a prediction once the window
+        allows one, else ``None``.
 
+        ``timestamp`` (s, the sensor's clock), ``missing`` (taxels not received) and
+        ``marker`` (the label marker in force) are passed on to the prediction.
         ``received`` is the ``time.perf_counter()`` at which the sweep arrived
         (default: now); the prediction's ``latency_ms`` counts from there.
         """
@@ -420,16 +403,80 @@ class LiveClassifier:
                           confidence=float(probs[k]), probabilities=probs,
                           frames=self.frames,
                           latency_ms=1e3 * (time.perf_counter() - received), missing=missing,
-                          frame_ms=frame_ms)
+                          frame_ms=frame_ms, marker=marker)
 
-    def run(self, frames: Iterable[Any], *,
+    def run(self, frames: Iterable[Any], *, taxel_ids: Any = None,
+            max_sweeps: int | None = None,
             on_prediction: Callable[[Prediction], None] | None = None) -> Iterator[Prediction]:
-        """Predictions for a sensor's frames (objects with ``timestamp`` and ``values``)."""
+        """Predictions for a sensor's frames, one per frame once the window allows.
+
+        Parameters
+        ----------
+        frames : iterable
+            Objects with ``timestamp`` (s) and ``values`` float ``(N,)`` raw counts
+            (a sensor's ``frames()``); optional ``missing`` (int, taxels not received)
+            and ``label`` (the label marker in force, ``str`` or ``None``) are carried
+            into each prediction (``missing``, ``marker``).
+        taxel_ids : array-like of int (N,), optional
+            The taxel of each value in the frames (the sensor's ``taxel_ids``): values
+            are re-indexed into the model's taxel order (see :func:`reorder_index`);
+            ``None``: they already are.
+        max_sweeps : int, optional
+            Stop after this many frames (``None``: when ``frames`` ends).
+        on_prediction : callable, optional
+            Called with each prediction as soon as it is made.
+        """
+        index = (None if taxel_ids is None
+                 else reorder_index(taxel_ids, self.model.taxel_ids))
+        if max_sweeps is not None:
+            frames = itertools.islice(frames, max(0, int(max_sweeps)))
         for frame in frames:
             received = time.perf_counter()
-            pred = self.push(frame.values, frame.timestamp, received=received,
-                             missing=int(getattr(frame, "missing", 0)))
+            values = frame.values if index is None else np.asarray(frame.values)[index]
+            # Optional frame members: CAN sweeps carry them, plain Frames do not.
+            pred = self.push(values, frame.timestamp, received=received,
+                             missing=int(getattr(frame, "missing", 0) or 0),
+                             marker=getattr(frame, "label", None))
             if pred is not None:
                 if on_prediction is not None:
                     on_prediction(pred)
                 yield pred
+
+
+def reorder_index(sensor_ids: Any, model_ids: Any) -> np.ndarray | None:
+    """Index that puts a sensor's values in the model's taxel order: ``values[index]``.
+
+    ``sensor_ids`` and ``model_ids`` are int ``(N_sensor,)`` and ``(N_model,)``;
+    returns int ``(N_model,)``, or ``None`` when the orders are already the same. A
+    sensor may have more taxels than the model (the extra are dropped); a model taxel
+    the sensor lacks raises :class:`~tactbench.errors.InputError`.
+    """
+    sensor_ids = np.asarray(sensor_ids, dtype=np.int64)
+    model_ids = np.asarray(model_ids, dtype=np.int64)
+    if sensor_ids.shape == model_ids.shape and np.array_equal(sensor_ids, model_ids):
+        return None
+    where = {int(t): i for i, t in enumerate(sensor_ids)}
+    missing = [int(t) for t in model_ids if int(t) not in where]
+    if missing:
+        raise InputError(f"the sensor lacks {len(missing)} of the model's taxels "
+                         f"(first: {', '.join(map(str, missing[:5]))}); is it the same "
+                         f"skin and layout?")
+    return np.array([where[int(t)] for t in model_ids], dtype=np.int64)
+
+
+def run_summary(live: LiveClassifier, latencies_ms: Sequence[float],
+                sensor: Any = None) -> dict[str, Any]:
+    """What a live session did, JSON-ready: ``{"sweeps", "predictions", "latency_ms"}``
+    with ``latency_ms`` = ``{"p50", "p99", "max"}`` in ms (``None`` without
+    predictions), plus ``"bus"`` (the sensor's ``stats.to_dict()``) when the sensor
+    keeps counters."""
+    lat = np.asarray(latencies_ms, dtype=np.float64)
+    summary: dict[str, Any] = {
+        "sweeps": live.frames, "predictions": int(lat.size),
+        "latency_ms": ({"p50": float(np.percentile(lat, 50)),
+                        "p99": float(np.percentile(lat, 99)),
+                        "max": float(lat.max())} if lat.size else None)}
+    stats = None if sensor is None else SENSOR.get(sensor, "stats")
+    if stats is not None:
+        summary["bus"] = stats.to_dict()
+    return summary

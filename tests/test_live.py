@@ -8,7 +8,14 @@ import uuid
 import numpy as np
 import pytest
 
-from tactbench.live import IncrementalEncoder, LiveClassifier, LiveModel, live_metadata
+from tactbench.classifiers.io import live_metadata
+from tactbench.live import (
+    IncrementalEncoder,
+    LiveClassifier,
+    LiveModel,
+    reorder_index,
+    run_summary,
+)
 from tactbench.plugins import load_registry
 
 REGISTRY = load_registry()
@@ -175,6 +182,104 @@ def test_model_without_live_metadata_is_refused(trained, tmp_path):
         LiveModel.from_file(path, registry=REGISTRY, encoder="raw")
 
 
+# ------------------------------------------------------------- LiveClassifier.run
+
+def test_run_reindexes_a_sensor_in_another_taxel_order(trained):
+    """A sensor with the taxels shuffled (and one extra) predicts as the model's order."""
+    from tactbench.can.assembler import Sweep
+
+    dataset, _, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    values = dataset.samples[6].recording.values  # (T, 64) in the model's order
+    direct = LiveClassifier(model)
+    expected = [p for p in (direct.push(v) for v in values) if p is not None]
+    perm = np.random.default_rng(0).permutation(values.shape[1])
+    sensor_ids = np.append(model.taxel_ids[perm], 9999)  # 9999: a taxel the model lacks
+    frames = [Sweep(timestamp=0.1 * k, values=np.append(v[perm], 123.0), sequence=k,
+                    counter=k, missing=k % 2, first_timestamp=0.1 * k,
+                    label="Twist" if k > 3 else None)
+              for k, v in enumerate(values)]
+    seen = []
+    preds = list(LiveClassifier(model).run(frames, taxel_ids=sensor_ids,
+                                           on_prediction=seen.append))
+    assert [id(p) for p in seen] == [id(p) for p in preds]
+    assert len(preds) == len(expected) == len(values) - 2
+    np.testing.assert_allclose([p.probabilities for p in preds],
+                               [p.probabilities for p in expected], atol=1e-6)
+    assert [p.marker for p in preds] == [None, None] + ["Twist"] * (len(values) - 4)
+    assert [p.missing for p in preds] == [k % 2 for k in range(2, len(values))]
+    assert preds[-1].to_dict(model.classes)["marker"] == "Twist"
+    assert "marker" not in preds[0].to_dict(model.classes)
+    assert [p.timestamp for p in preds] == pytest.approx([0.1 * k for k in range(2, len(values))])
+
+
+def test_run_stops_after_max_sweeps_and_summarises(trained):
+    from tactbench.data.recording import Frame
+
+    dataset, _, path = trained
+    live = LiveClassifier(LiveModel.from_file(path, registry=REGISTRY))
+    rec = dataset.samples[0].recording
+    frames = (Frame(t, v) for t, v in zip(rec.timestamps, rec.values))
+    preds = list(live.run(frames, max_sweeps=4))
+    assert live.frames == 4 and len(preds) == 2
+    summary = run_summary(live, [p.latency_ms for p in preds])
+    assert summary["sweeps"] == 4 and summary["predictions"] == 2
+    assert 0 < summary["latency_ms"]["p50"] <= summary["latency_ms"]["max"]
+    assert "bus" not in summary
+    assert run_summary(live, [])["latency_ms"] is None
+
+
+def test_reorder_index():
+    assert reorder_index([3, 1, 2], [3, 1, 2]) is None
+    index = reorder_index([5, 3, 1, 2], [1, 2, 3])
+    assert np.asarray([5, 3, 1, 2])[index].tolist() == [1, 2, 3]
+    with pytest.raises(ValueError, match="the sensor lacks 2 of the model's taxels "
+                                         r"\(first: 7, 8\)"):
+        reorder_index([1, 2], [1, 7, 8])
+
+
+def test_a_vector_model_of_either_rank_runs_live(tmp_path):
+    """logreg takes images or vectors (frame_rank None): fitted on vectors, live feeds vectors."""
+    from tactbench.data.windows import training_windows
+
+    dataset = tiny_dataset()
+    vectors = dataset.vectors()
+    clf = REGISTRY.build("classifier", "logreg", classes=2)
+    clf.fit(training_windows(vectors, dataset.labels, 3), None, seed=0, device="cpu",
+            progress=None)
+    path = tmp_path / "vectors.safetensors"
+    clf.save(path, live_metadata(dataset, encoder="raw", length=3, pixel_mm=5.0))
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    assert not model.uses_images
+    preds = [p for p in LiveClassifier(model).run(
+        _frames(dataset.samples[1].recording)) if p is not None]
+    offline = clf.predict_proba(np.stack([vectors[1][k - 2:k + 1]
+                                          for k in range(2, len(vectors[1]))]))
+    np.testing.assert_allclose([p.probabilities for p in preds], offline, atol=1e-5)
+
+
+def _frames(rec):
+    from tactbench.data.recording import Frame
+
+    return [Frame(t, v) for t, v in zip(rec.timestamps, rec.values)]
+
+
+def test_live_metadata_records_what_live_needs(trained):
+    from tactbench.classifiers.io import load_model
+    from tactbench.data.layout_io import layout_from_dict
+
+    dataset, _, path = trained
+    _, meta = load_model(path, registry=REGISTRY)
+    assert meta["classes"] == ["right", "left"] and meta["length"] == 3
+    assert meta["encoder"] == "frame-diff" and meta["imaging"] == {"pixel_mm": 5.0,
+                                                                   "method": "linear"}
+    assert meta["taxel_ids"] == dataset.taxel_ids.tolist() and meta["dataset"] == "tiny"
+    assert meta["normalisation"]["scale"] == 20000.0
+    layout = layout_from_dict(meta["layout"], "test")
+    np.testing.assert_array_equal(layout.positions, dataset.layout.positions)
+    np.testing.assert_array_equal(layout.ids, dataset.layout.ids)
+
+
 # ------------------------------------------------------------- the command line
 
 def test_live_command_on_a_can_log(trained, tmp_path):
@@ -256,3 +361,21 @@ def test_live_command_refuses_source_for_a_bus_sensor(trained):
     res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor", "cyskin-can",
                                    "some.blf"])
     assert res.exit_code != 0 and "SOURCE is only for '--sensor replay'" in res.output
+
+
+def test_live_command_on_a_dataset_replay(trained, tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    dataset, _, path = trained
+    dataset.save(tmp_path / "tiny")
+    res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor",
+                                   "replay:sample=3", str(tmp_path / "tiny"), "--jsonl"],
+                             catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    rows = [json.loads(line) for line in res.stdout.splitlines()]
+    assert len(rows) == dataset.samples[3].recording.n_frames - 2
+    assert all("marker" not in r for r in rows)  # a dataset sample carries no markers

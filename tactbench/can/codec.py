@@ -163,6 +163,11 @@ class FrameFormat:
         except ValueError as exc:
             raise InputError(f"{path}: {exc}") from None
 
+    @classmethod
+    def parse(cls, spec: str | None = "", file: str | Path | None = None) -> "FrameFormat":
+        """The format a user gave: a JSON ``file`` when given, else the text ``spec``."""
+        return cls.from_json(file) if file else cls.from_spec(spec)
+
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["module_map"] = {str(k): v for k, v in self.module_map.items()}

@@ -34,10 +34,13 @@ def is_can_log(path: str | Path) -> bool:
     return Path(path).suffix.lower() in LOG_SUFFIXES
 
 
-def _check_suffix(path: Path) -> None:
+def check_log_name(path: str | Path) -> Path:
+    """``path`` as a Path if its suffix names a CAN log format, else :class:`InputError`."""
+    path = Path(path)
     if path.suffix.lower() not in LOG_SUFFIXES:
         raise InputError(f"{path}: not a CAN log file name; use one of "
                          f"{', '.join(LOG_SUFFIXES)}")
+    return path
 
 
 def open_writer(path: str | Path):
@@ -45,7 +48,7 @@ def open_writer(path: str | Path):
     import can
 
     path = Path(path)
-    _check_suffix(path)
+    check_log_name(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     return can.Logger(str(path))
 
@@ -70,7 +73,7 @@ def read_messages(path: str | Path) -> Iterator[Any]:
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: no such CAN log")
-    _check_suffix(path)
+    check_log_name(path)
     try:
         reader = can.LogReader(str(path))
     except Exception as exc:
@@ -166,6 +169,38 @@ class CanLog:
         return (np.concatenate([s.timestamps for s in self.segments]),
                 np.concatenate([s.values for s in self.segments]))
 
+    def sample_segments(self) -> list[Segment]:
+        """The segments that are samples (numbered as in :meth:`to_dataset`): the labelled
+        ones, or, in a log without label markers, the unlabelled stretches; empty ones
+        left out."""
+        return [s for s in (self.labelled or self.segments) if len(s)]
+
+    def iter_sweeps(self, sample: int | None = None) -> Iterator[Sweep]:
+        """The log's sweeps as :class:`~tactbench.can.assembler.Sweep` objects, in order.
+
+        ``sample=None``: every sweep of every segment (labelled or not), as the bus
+        carried them; ``sample=k``: the sweeps of sample ``k`` of :meth:`to_dataset`.
+        Each sweep has ``timestamp`` (s, the log's clock), ``values`` float32 ``(N,)``
+        (a copy), ``missing`` (taxels not received), ``label`` (the marker in force,
+        ``None`` outside markers) and a running ``sequence`` from 0.
+        """
+        if sample is None:
+            segments = self.segments
+        else:
+            segments = self.sample_segments()
+            if isinstance(sample, bool) or not isinstance(sample, (int, np.integer)) \
+                    or not 0 <= sample < len(segments):
+                raise InputError(f"sample {sample!r} is out of range: {self.path} has "
+                                 f"{len(segments)} samples (0..{len(segments) - 1})")
+            segments = [segments[sample]]
+        k = 0
+        for seg in segments:
+            for t, values, missing in zip(seg.timestamps, seg.values, seg.missing):
+                yield Sweep(timestamp=float(t), values=values.copy(), sequence=k,
+                            counter=k % 256, missing=int(missing), first_timestamp=float(t),
+                            label=seg.label)
+                k += 1
+
     def summary(self) -> dict[str, Any]:
         """Counts for ``tactbench data info``: JSON-ready."""
         labels: dict[str, int] = {}
@@ -197,9 +232,9 @@ class CanLog:
         """
         from tactbench.data.recording import Dataset, Recording, Sample
 
-        segments = self.labelled or [Segment({"label": UNLABELLED}, s.timestamps, s.values,
-                                             s.missing) for s in self.segments]
-        segments = [s for s in segments if len(s)]
+        segments = [s if s.info is not None else
+                    Segment({"label": UNLABELLED}, s.timestamps, s.values, s.missing)
+                    for s in self.sample_segments()]
         if not segments:
             raise InputError(f"{self.path}: no sweeps in the log")
         classes = _class_order(segments)
@@ -230,55 +265,21 @@ def _class_order(segments: list[Segment]) -> list[str]:
     return sorted(names, key=index.__getitem__)
 
 
-class LogReplay:
-    """A sensor that plays every sweep of a CAN log, in order (all segments).
+def LogReplay(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None = None,
+              realtime: bool = False, missing: str = "hold") -> Any:
+    """Deprecated: the ``replay`` sensor plays CAN logs (``Replay(path)``); this returns one.
 
-    Frames are :class:`~tactbench.can.assembler.Sweep`-like objects with
-    ``timestamp`` (the log's clock), ``values`` float32 ``(N,)``, ``label``
-    (the marker in force, or ``None``) and ``missing``. With ``realtime`` the
-    sweeps are released at their logged pace.
+    Kept for one release because earlier docs used it.
     """
+    import warnings
 
-    def __init__(self, path: str | Path, *, taxel_ids: Any = None,
-                 fmt: FrameFormat | None = None, realtime: bool = False,
-                 missing: str = "hold") -> None:
-        self.log = read_log(path, taxel_ids=taxel_ids, fmt=fmt, missing=missing)
-        self.taxel_ids = self.log.taxel_ids
-        self.realtime = bool(realtime)
-        self._closed = False
+    warnings.warn("tactbench.can.logs.LogReplay is deprecated: use the 'replay' sensor "
+                  "(tactbench.sensors.replay.Replay(path)), which plays CAN logs",
+                  DeprecationWarning, stacklevel=2)
+    from tactbench.sensors.replay import Replay  # the sensor sits above this module
 
-    def frames(self) -> Iterator[Sweep]:
-        import time
-
-        start_wall = time.monotonic()
-        start_ts: float | None = None
-        k = 0
-        for seg in self.log.segments:
-            for t, values, missing in zip(seg.timestamps, seg.values, seg.missing):
-                if self._closed:
-                    return
-                if start_ts is None:
-                    start_ts = float(t)
-                if self.realtime:
-                    delay = (float(t) - start_ts) - (time.monotonic() - start_wall)
-                    if delay > 0:
-                        time.sleep(delay)
-                yield Sweep(timestamp=float(t), values=values.copy(), sequence=k,
-                            counter=k % 256, missing=int(missing), first_timestamp=float(t),
-                            label=seg.label)
-                k += 1
-
-    def __iter__(self) -> Iterator[Sweep]:
-        return self.frames()
-
-    def close(self) -> None:
-        self._closed = True
-
-    def __enter__(self) -> "LogReplay":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
+    return Replay(str(path), realtime=realtime, taxel_ids=taxel_ids, format=fmt,
+                  missing=missing)
 
 
 class _SegmentBuilder:

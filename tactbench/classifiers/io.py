@@ -14,6 +14,8 @@ Nothing in the file is executed or unpickled. A file that is not safetensors,
 is truncated, has no tactbench header, a newer format version, an unknown
 classifier, or tensors that do not fit the classifier's network raises
 :class:`ModelFileError` naming the file and the problem.
+
+What ``tactbench live`` needs in ``metadata`` is built by :func:`live_metadata`.
 """
 
 from __future__ import annotations
@@ -38,11 +40,13 @@ class ModelFileError(TactbenchError, ValueError):
 def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = None) -> Path:
     """Write ``clf`` (fitted) and ``metadata`` (JSON-serialisable) to ``path``.
 
-    The file is written next to its destination and renamed into place, so an
+    The file is written atomically (:func:`tactbench.paths.atomic_write_bytes`), so an
     interrupted save never leaves a half-written model under ``path``.
     """
     import torch
-    from safetensors.torch import save_file
+    from safetensors.torch import save
+
+    from tactbench.paths import atomic_write_bytes
 
     config, tensors = clf._export()
     header = {"format": FORMAT, "version": FORMAT_VERSION, "classifier": clf.name,
@@ -55,11 +59,40 @@ def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = N
     # safetensors refuses tensors that share memory or are not contiguous.
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in tensors.items()}
     dest = Path(path)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dest.with_name(dest.name + ".part")
-    save_file(tensors, str(tmp), metadata={HEADER_KEY: text})
-    os.replace(tmp, dest)
+    atomic_write_bytes(dest, save(tensors, metadata={HEADER_KEY: text}))
     return dest
+
+
+def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
+                  method: str = "linear") -> dict[str, Any]:
+    """The metadata to save with a model so ``tactbench live`` can use it (JSON-ready).
+
+    ``dataset`` is the :class:`tactbench.data.recording.Dataset` the model was trained
+    on: its ``classes``, ``taxel_ids`` (the order of the values), normalisation
+    (``offset`` scalar or per taxel, ``scale``, in raw sensor units) and layout
+    (:func:`tactbench.data.layout_io.layout_to_dict`, positions in mm) are recorded,
+    with the ``encoder`` spec, the window ``length`` L (frames) and the imaging
+    (``pixel_mm`` in mm per pixel, ``method``). :class:`tactbench.live.LiveModel`
+    reads it back.
+    """
+    import numpy as np
+
+    offset, scale = dataset.normalisation_params()
+    meta: dict[str, Any] = {
+        "classes": list(dataset.classes), "encoder": encoder, "length": int(length),
+        "imaging": {"pixel_mm": float(pixel_mm), "method": method},
+        "taxel_ids": [int(i) for i in dataset.taxel_ids],
+        "normalisation": {"spec": dataset.normalisation.spec,
+                          "offset": (np.asarray(offset).astype(float).tolist()
+                                     if np.ndim(offset) else float(offset)),
+                          "scale": float(scale)},
+        "dataset": dataset.name,
+    }
+    if dataset.layout is not None:
+        from tactbench.data.layout_io import layout_to_dict
+
+        meta["layout"] = layout_to_dict(dataset.layout)
+    return meta
 
 
 def read_header(path: str | os.PathLike) -> dict[str, Any]:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -43,57 +42,7 @@ def bus_options(func):
 def _format(format_spec: str, format_file: str | None):
     from tactbench.can.codec import FrameFormat
 
-    return FrameFormat.from_json(format_file) if format_file else FrameFormat.from_spec(format_spec)
-
-
-def _open_bus(interface: str, channel: str, bitrate: int, data_bitrate: int | None, fd: bool):
-    import can
-
-    kwargs: dict[str, Any] = {"interface": interface, "channel": channel}
-    if interface != "virtual":
-        kwargs["bitrate"] = bitrate
-        if fd:
-            kwargs.update(fd=True, data_bitrate=data_bitrate or bitrate)
-    try:
-        return can.Bus(**kwargs)
-    except Exception as exc:
-        raise TactbenchError(f"cannot open {interface} channel '{channel}': "
-                             f"{type(exc).__name__}: {exc}") from exc
-
-
-def load_samples(source: str, *, rate_hz: float = 10.0):
-    """Samples to play and their taxel ids, from a CAN log or a dataset (path or spec)."""
-    from tactbench.can.logs import is_can_log, read_log
-    from tactbench.can.simulate import SimSample, as_sim_sample
-
-    if is_can_log(source):
-        log = read_log(source)
-        segs = log.labelled or log.segments
-        return [SimSample(s.values, s.timestamps, s.info) for s in segs], log.taxel_ids
-    try:
-        from tactbench.datasets.loading import load_dataset
-    except ImportError as exc:
-        raise TactbenchError(f"cannot load dataset '{source}': dataset loading is not "
-                             f"available ({exc})") from exc
-    dataset = load_dataset(source)
-    samples = [as_sim_sample(s, rate_hz, dataset.classes) for s in dataset.samples]
-    ids = _dataset_taxel_ids(dataset)
-    return samples, ids
-
-
-def _dataset_taxel_ids(dataset: Any):
-    import numpy as np
-
-    layout = getattr(dataset, "layout", None)
-    if layout is not None and getattr(layout, "ids", None) is not None:
-        return np.asarray(layout.ids, dtype=np.int64)
-    first = dataset.samples[0]
-    rec = getattr(first, "recording", first)
-    ids = getattr(rec, "taxel_ids", None)
-    if ids is None:
-        raise TactbenchError("the dataset has neither a layout nor taxel ids; "
-                             "CySkin traffic needs taxel ids")
-    return np.asarray(ids, dtype=np.int64)
+    return FrameFormat.parse(format_spec, format_file)
 
 
 @click.group("can")
@@ -129,13 +78,17 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
     'synthetic-forearm:users=2') or a CAN log. Each labelled sample is framed
     by label markers, so a recording of the bus keeps the labels.
     """
+    from tactbench.can.bus import open_bus
     from tactbench.can.busload import bus_load
     from tactbench.can.codec import TaxelMap
-    from tactbench.can.logs import write_log
-    from tactbench.can.meta import is_meta
-    from tactbench.can.simulate import play, schedule_messages, traffic
+    from tactbench.can.simulate import load_samples, send_samples, write_samples
+    from tactbench.ui import Progress
 
     fmt = _format(format_spec, format_file)
+    if speed < 0:
+        raise click.UsageError("--speed must be ≥ 0")
+    if loop and out is not None:
+        raise click.UsageError("--loop needs a bus, not --out")
     samples, ids = load_samples(source, rate_hz=rate_hz)
     if limit is not None:
         samples = samples[:max(0, limit)]
@@ -145,36 +98,21 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
     load = bus_load(taxels, bitrate=bitrate, rate_hz=rate_hz, data_bitrate=data_bitrate)
     if not as_json:
         _err(f"tactbench can simulate: {load.describe()}")
-    result: dict[str, Any] = {"source": source, "samples": len(samples),
-                              "sweeps": int(sum(len(s.values) for s in samples)),
+    sweeps = int(sum(len(s.values) for s in samples))
+    result: dict[str, Any] = {"source": source, "samples": len(samples), "sweeps": sweeps,
                               "bus_load": load.to_dict(), "format": fmt.to_dict()}
-    bursts = lambda: traffic(samples, taxels, rate_hz=rate_hz, gap_s=gap_s,  # noqa: E731
-                             markers=not no_markers)
+    options = {"rate_hz": rate_hz, "gap_s": gap_s, "markers": not no_markers}
     if out is not None:
-        if loop:
-            raise click.UsageError("--loop needs a bus, not --out")
-        n = write_log(out, schedule_messages(bursts(), t0=time.time()))
-        result.update(out=str(out), messages=n)
+        result.update(out=str(out), messages=write_samples(out, samples, taxels, **options))
     else:
-        if speed < 0:
-            raise click.UsageError("--speed must be ≥ 0")
-        from rich.progress import Progress
-
-        bus = _open_bus(interface, channel, bitrate, data_bitrate, fmt.fd)
+        bus = open_bus(interface, channel, bitrate=bitrate, data_bitrate=data_bitrate,
+                       fd=fmt.fd)
         sent = 0
         try:
-            with Progress(console=_stderr_console(), disable=as_json) as progress:
-                task = progress.add_task("sending sweeps", total=result["sweeps"])
-
-                def tick(_t: float, msgs: list) -> None:
-                    if msgs and not is_meta(msgs[0]):  # a sweep, not a marker
-                        progress.advance(task)
-
-                while True:
-                    sent += play(bus, bursts(), speed=speed, on_burst=tick)
-                    if not loop:
-                        break
-                    progress.reset(task)
+            with Progress(enabled=not as_json) as bars:
+                sent = send_samples(bus, samples, taxels, speed=speed, loop=loop,
+                                    progress=bars.callback("sending sweeps", sweeps),
+                                    **options)
         except KeyboardInterrupt:
             _err("tactbench can simulate: interrupted")
         finally:
@@ -186,12 +124,6 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
         where = result.get("out") or f"{interface}:{channel}"
         _err(f"sent {result['messages']} messages ({result['samples']} samples, "
              f"{result['sweeps']} sweeps) to {where}")
-
-
-def _stderr_console():
-    from rich.console import Console
-
-    return Console(stderr=True)
 
 
 @can_group.command("record")
@@ -220,70 +152,34 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     Stops at --duration, --idle-timeout, --max-messages or Ctrl-C. The log reads
     back with 'tactbench can info', 'tactbench data info' and the replay sensor.
     """
-    from tactbench.can.busload import frame_bits
-    from tactbench.can.logs import open_writer
-    from tactbench.can.meta import marker_messages, taxel_map_messages
+    from tactbench.can.bus import open_bus
+    from tactbench.can.logs import check_log_name
+    from tactbench.can.record import record
     from tactbench.sensors.cyskin_can import resolve_taxel_ids
+    from tactbench.ui import Progress
 
     fmt = _format(format_spec, format_file)
+    check_log_name(out)
     if duration is None and idle_timeout is None and max_messages is None and sys.stdin.isatty():
         _err("recording until Ctrl-C")
     ids = resolve_taxel_ids(taxel_ids, layout) if (taxel_ids or layout) else None
-    writer = open_writer(out)
-    bus = _open_bus(interface, channel, bitrate, data_bitrate, fmt.fd)
     info = {"label": label, **({"user": user} if user else {})} if label else None
-    n = meta = 0
-    bits = 0.0  # nominal bit times of the data frames received (for the measured load)
-    t_start = time.time()
+    bus = open_bus(interface, channel, bitrate=bitrate, data_bitrate=data_bitrate, fd=fmt.fd)
     try:
-        if ids is not None:
-            for msg in taxel_map_messages(ids, 0, timestamp=t_start):
-                writer.on_message_received(msg)
-                meta += 1
-        if info is not None:
-            for msg in marker_messages(True, info, 1, timestamp=t_start):
-                writer.on_message_received(msg)
-                meta += 1
-        start = last = time.monotonic()
-        while True:
-            now = time.monotonic()
-            if duration is not None and now - start >= duration:
-                break
-            if idle_timeout is not None and now - last >= idle_timeout:
-                break
-            if max_messages is not None and n >= max_messages:
-                break
-            msg = bus.recv(timeout=0.05)
-            if msg is None:
-                continue
-            last = time.monotonic()
-            # A log holds one bus. python-can's BLF writer turns a channel *name* into a
-            # number from its trailing digits ("rec-912345" → 912345) and fails above
-            # 65535, so the name is not written.
-            msg.channel = None
-            writer.on_message_received(msg)
-            n += 1
-            if not msg.is_error_frame:
-                bits += frame_bits(min(len(msg.data), 64 if msg.is_fd else 8),
-                                   extended=msg.is_extended_id, fd=msg.is_fd,
-                                   bitrate=bitrate, data_bitrate=data_bitrate)
-    except KeyboardInterrupt:
-        _err("tactbench can record: stopped")
+        with Progress(enabled=not as_json) as bars:
+            result = record(bus, out, duration=duration, idle_timeout=idle_timeout,
+                            max_messages=max_messages, label=info, taxel_ids=ids,
+                            bitrate=bitrate, data_bitrate=data_bitrate,
+                            progress=bars.callback("recording messages", max_messages))
     finally:
-        if info is not None:
-            for msg in marker_messages(False, info, 1, timestamp=time.time()):
-                writer.on_message_received(msg)
-                meta += 1
-        writer.stop()
         bus.shutdown()
-    seconds = time.time() - t_start
-    result = {"out": str(out), "messages": n, "meta_messages": meta, "seconds": seconds,
-              "label": label, "bus_load_measured": bits / bitrate / seconds if seconds > 0 else None}
     if as_json:
-        click.echo(json.dumps(result, indent=2))
+        click.echo(json.dumps(result.to_dict(), indent=2))
     else:
-        load = result["bus_load_measured"]
-        _err(f"recorded {n} messages to {out} in {seconds:.1f} s"
+        load = result.bus_load_measured
+        if result.stopped == "interrupted":
+            _err("tactbench can record: stopped")
+        _err(f"recorded {result.messages} messages to {out} in {result.seconds:.1f} s"
              + (f"; bus load {100 * load:.1f} % of {bitrate / 1e6:g} Mbit/s "
                 f"(nominal frame lengths)" if load is not None else ""))
 

@@ -8,26 +8,21 @@ from typing import Any
 
 import click
 
-from tactbench.errors import TactbenchError
-
 
 def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
                   bus: dict[str, Any]) -> Any:
-    """The sensor for ``spec`` (+ ``source``), with the model's taxels when it needs them."""
+    """The sensor for ``spec`` (+ ``source``, the file ``replay`` plays), with the
+    model's taxels when a bus sensor needs them."""
     from tactbench.cli import get_registry
     from tactbench.plugins import parse_spec
 
     name, options = parse_spec(spec)
-    if name == "replay" and source is not None:
-        from tactbench.can.logs import LogReplay, is_can_log
-
-        if is_can_log(source):
-            # A CAN log plays all its sweeps (every sample in it), like the live bus would.
-            return LogReplay(source, realtime=bool(options.get("realtime", False)))
-        options.setdefault("path", source)
-    elif name == "replay" and "path" not in options:
-        raise click.UsageError("'--sensor replay' needs the file to play: "
-                               "'--sensor replay FILE' (a CAN log, dataset or CySkin text)")
+    if name == "replay":
+        if source is not None:
+            options.setdefault("path", source)
+        if "path" not in options:
+            raise click.UsageError("'--sensor replay' needs the file to play: "
+                                   "'--sensor replay FILE' (a CAN log, dataset or CySkin text)")
     elif source is not None:
         raise click.UsageError(f"SOURCE is only for '--sensor replay' (got sensor '{name}'); "
                                f"give the sensor's options as '{name}:key=value,...'")
@@ -40,39 +35,17 @@ def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
     return get_registry(ctx).build("sensor", name, **options)
 
 
-def _reorder(sensor_ids: Any, model_ids: Any):
-    """Column index that puts a sensor's values in the model's taxel order (None: same)."""
+def _print_prediction(pred: Any, classes: list[str]) -> None:
+    """One human-readable line: time, class, confidence, runner-up, latency, marker."""
     import numpy as np
 
-    sensor_ids = np.asarray(sensor_ids, dtype=np.int64)
-    if sensor_ids.shape == model_ids.shape and np.array_equal(sensor_ids, model_ids):
-        return None
-    where = {int(t): i for i, t in enumerate(sensor_ids)}
-    missing = [int(t) for t in model_ids if int(t) not in where]
-    if missing:
-        raise TactbenchError(f"the sensor lacks {len(missing)} of the model's taxels "
-                             f"(first: {', '.join(map(str, missing[:5]))}); is it the same "
-                             f"skin and layout?")
-    return np.array([where[int(t)] for t in model_ids], dtype=np.int64)
-
-
-class _Reordered:
-    """Frames with values re-indexed into the model's taxel order."""
-
-    def __init__(self, frames, index) -> None:
-        self.frames, self.index = frames, index
-
-    def __iter__(self):
-        for f in self.frames:
-            yield _Frame(f, f.values[self.index])
-
-
-class _Frame:
-    def __init__(self, frame, values) -> None:
-        self.timestamp = frame.timestamp
-        self.values = values
-        self.missing = getattr(frame, "missing", 0)
-        self.label = getattr(frame, "label", None)
+    ranked = np.argsort(pred.probabilities)[::-1]
+    runner = (f"  ({classes[ranked[1]]} {pred.probabilities[ranked[1]]:.2f})"
+              if len(ranked) > 1 else "")
+    mark = f"  [marker: {pred.marker}]" if pred.marker is not None else ""
+    miss = f"  missing {pred.missing}" if pred.missing else ""
+    click.echo(f"{pred.timestamp:14.3f}  {pred.label:<12} {pred.confidence:5.2f}{runner}  "
+               f"{pred.latency_ms:6.1f} ms{miss}{mark}")
 
 
 @click.command("live")
@@ -126,73 +99,45 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
 
 def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
           layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
-    import itertools
-
-    import numpy as np
-
     from tactbench.cli import get_registry
-    from tactbench.live import LiveClassifier, LiveModel
+    from tactbench.contracts import SENSOR
+    from tactbench.live import LiveClassifier, LiveModel, run_summary
 
-    registry = get_registry(ctx, warn=not (as_json or jsonl))
+    quiet = as_json or jsonl
+    registry = get_registry(ctx, warn=not quiet)
     model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
                                 pixel_mm=pixel_mm, registry=registry)
     live = LiveClassifier(model, warmup=warmup)
     bus = {"interface": interface, "channel": channel, "bitrate": bitrate,
            "format": format_spec}
     sensor = _build_sensor(ctx, sensor_spec, source, model, bus)
-    quiet = as_json or jsonl
     if not quiet:
-        where = f" ({sensor.bus_load().describe()})" if hasattr(sensor, "bus_load") else ""
+        load = SENSOR.get(sensor, "bus_load")
+        where = f" ({load().describe()})" if load is not None else ""
         click.echo(f"live: {len(model.classes)} classes, L = {model.length}, encoder "
                    f"{model.encoder_spec if model.uses_images else '(taxel vectors)'}; "
                    f"sensor {sensor_spec}{where}", err=True)
-    predictions = []
-    latencies = []
+    rows: list[dict[str, Any]] = []
+    latencies: list[float] = []
     try:
         with sensor:
-            index = _reorder(sensor.taxel_ids, model.taxel_ids)
-            frames = sensor.frames()
-            if index is not None:
-                frames = iter(_Reordered(frames, index))
-            if max_sweeps is not None:
-                frames = itertools.islice(frames, max(0, max_sweeps))
-            for frame in frames:
-                pred = live.push(frame.values, frame.timestamp,
-                                 missing=int(getattr(frame, "missing", 0)))
-                if pred is None:
-                    continue
+            for pred in live.run(sensor.frames(), taxel_ids=sensor.taxel_ids,
+                                 max_sweeps=max_sweeps):
                 latencies.append(pred.latency_ms)
-                row = pred.to_dict(model.classes)
-                truth = getattr(frame, "label", None)
-                if truth is not None:
-                    row["marker"] = truth
                 if as_json:
-                    predictions.append(row)
+                    rows.append(pred.to_dict(model.classes))
                 elif jsonl:
-                    click.echo(json.dumps(row))
+                    click.echo(json.dumps(pred.to_dict(model.classes)))
                     sys.stdout.flush()
                 else:
-                    ranked = np.argsort(pred.probabilities)[::-1]
-                    runner = (f"  ({model.classes[ranked[1]]} {pred.probabilities[ranked[1]]:.2f})"
-                              if len(ranked) > 1 else "")
-                    mark = f"  [marker: {truth}]" if truth is not None else ""
-                    miss = f"  missing {pred.missing}" if pred.missing else ""
-                    click.echo(f"{pred.timestamp:14.3f}  {pred.label:<12} "
-                               f"{pred.confidence:5.2f}{runner}  {pred.latency_ms:6.1f} ms"
-                               f"{miss}{mark}")
+                    _print_prediction(pred, model.classes)
     except KeyboardInterrupt:
         click.echo("live: stopped", err=True)
-    summary = {"sweeps": live.frames, "predictions": len(latencies),
-               "latency_ms": ({"p50": float(np.percentile(latencies, 50)),
-                               "p99": float(np.percentile(latencies, 99)),
-                               "max": float(np.max(latencies))} if latencies else None)}
-    stats = getattr(sensor, "stats", None)
-    if stats is not None and hasattr(stats, "to_dict"):
-        summary["bus"] = stats.to_dict()
+    summary = run_summary(live, latencies, sensor)
     if as_json:
         click.echo(json.dumps({"model": model_path, "classes": model.classes,
                                "length": model.length, "encoder": model.encoder_spec,
-                               "predictions": predictions, "summary": summary}, indent=2))
+                               "predictions": rows, "summary": summary}, indent=2))
     elif not jsonl and latencies:
         lat = summary["latency_ms"]
         click.echo(f"live: {live.frames} sweeps, {len(latencies)} predictions; latency "

@@ -12,5 +12,6 @@ from tactbench import hookimpl
 @hookimpl
 def register_sensors(register):
     register("replay", "tactbench.sensors.replay:Replay",
-             summary="plays a recorded sample as frames; path, sample, realtime")
+             summary="plays a recorded sample, or every sweep of a CAN log, as frames; "
+                     "path, sample, realtime, loop (CAN logs: taxel_ids, format, missing)")
     register("cyskin-can", "tactbench.sensors.cyskin_can:CySkinCAN", summary="CySkin sweeps from a CAN bus via python-can; options interface, channel, bitrate, taxel_ids or layout, format", requires=("can",))

@@ -16,6 +16,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from tactbench.can.assembler import SweepAssembler
+from tactbench.can.bus import open_bus
 from tactbench.can.busload import BusLoad, bus_load
 from tactbench.can.codec import FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, is_meta
@@ -95,9 +96,7 @@ class CySkinCAN:
                  missing: str = "hold", window: int = 2, flush_after: float = 0.15,
                  idle_timeout: float | None = None, max_sweeps: int | None = None,
                  receive_own_messages: bool = False) -> None:
-        import can
-
-        fmt = FrameFormat.from_json(format_file) if format_file else FrameFormat.from_spec(format)
+        fmt = FrameFormat.parse(format, format_file)
         self.taxel_map = TaxelMap(resolve_taxel_ids(taxel_ids, layout), fmt)
         self.taxel_ids = self.taxel_map.taxel_ids
         self.assembler = SweepAssembler(self.taxel_map, missing=missing, window=window)
@@ -108,24 +107,15 @@ class CySkinCAN:
         self.label: str | None = None
         self._meta = MetaAssembler()
         self._closed = threading.Event()
-        kwargs: dict[str, Any] = {"interface": interface, "channel": channel}
-        if interface != "virtual":
-            kwargs["bitrate"] = bitrate
-            if fmt.fd:
-                kwargs.update(fd=True, data_bitrate=data_bitrate or bitrate)
-        else:
-            kwargs["receive_own_messages"] = receive_own_messages
         # Hardware filters: only this format's data ids and tactbench's meta frames.
         if fmt.ids == "extended":
             filters = [{"can_id": fmt.prefix << 24, "can_mask": 0x1F000000, "extended": True}]
         else:
             filters = [{"can_id": 0, "can_mask": 0, "extended": False}]
         filters.append({"can_id": META_PREFIX << 24, "can_mask": 0x1F000000, "extended": True})
-        try:
-            self.bus = can.Bus(can_filters=filters, **kwargs)
-        except Exception as exc:
-            raise InputError(f"cyskin-can: cannot open {interface} channel '{channel}': "
-                             f"{type(exc).__name__}: {exc}") from exc
+        self.bus = open_bus(interface, channel, bitrate=bitrate, data_bitrate=data_bitrate,
+                            fd=fmt.fd, receive_own_messages=receive_own_messages,
+                            can_filters=filters, who="cyskin-can")
 
     # ------------------------------------------------------------------ info
     @property

@@ -178,18 +178,34 @@ def test_unmarked_log_becomes_an_unlabelled_dataset(tmp_path):
     np.testing.assert_array_equal(dataset.samples[0].recording.values[:, 0], [0, 1, 2, 3])
 
 
-def test_log_replay_sensor_plays_every_sweep_in_order(tmp_path):
-    from tactbench.can.logs import LogReplay
-    from tactbench.contracts import Sensor
-
+def test_iter_sweeps_gives_every_sweep_or_one_sample(tmp_path):
     path = tmp_path / "run.blf"
     originals = samples()
     write_log(path, schedule_messages(traffic(originals, TaxelMap(IDS))))
-    with LogReplay(path) as sensor:
-        assert isinstance(sensor, Sensor)
-        frames = list(sensor.frames())
-    np.testing.assert_array_equal(np.stack([f.values for f in frames]),
+    log = read_log(path)
+    sweeps = list(log.iter_sweeps())
+    np.testing.assert_array_equal(np.stack([s.values for s in sweeps]),
                                   np.concatenate([s.values for s in originals]))
-    assert [f.label for f in frames] == [s.info["label"] for s in originals
+    assert [s.label for s in sweeps] == [s.info["label"] for s in originals
                                          for _ in range(len(s.values))]
-    assert all(np.diff([f.timestamp for f in frames]) > 0)
+    assert [s.sequence for s in sweeps] == list(range(len(sweeps)))
+    assert all(np.diff([s.timestamp for s in sweeps]) > 0)
+    second = list(log.iter_sweeps(1))
+    np.testing.assert_array_equal(np.stack([s.values for s in second]), originals[1].values)
+    second[0].values[:] = -1  # copies: the log is untouched
+    assert (log.segments[1].values >= 0).all()
+    with pytest.raises(ValueError, match="sample 3 is out of range"):
+        next(log.iter_sweeps(3))
+
+
+def test_log_replay_is_a_deprecated_name_for_the_replay_sensor(tmp_path):
+    from tactbench.can.logs import LogReplay
+    from tactbench.sensors.replay import Replay
+
+    path = tmp_path / "run.blf"
+    write_log(path, schedule_messages(traffic(samples(), TaxelMap(IDS))))
+    with pytest.warns(DeprecationWarning, match="'replay' sensor"):
+        sensor = LogReplay(path, realtime=False)
+    assert isinstance(sensor, Replay)
+    with sensor:
+        assert len(list(sensor.frames())) == sum(len(s.values) for s in samples())

@@ -1,0 +1,134 @@
+"""Recording a CAN bus to a log, with tactbench's label markers and taxel map around it.
+
+:func:`record` is what ``tactbench can record`` runs: every message the bus delivers
+goes into the log (``.blf``, ``.asc``, ...), optionally after a taxel-map announcement
+and between a label start and end marker, so :func:`tactbench.can.logs.read_log` (and
+the ``replay`` sensor) read the recording back as labelled sweeps.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from tactbench.can.busload import frame_bits
+from tactbench.can.logs import open_writer
+from tactbench.can.meta import marker_messages, taxel_map_messages
+
+#: Seconds between two calls of the ``progress`` callback (a bus carries thousands of
+#: messages per second; drawing each would cost more than receiving it).
+PROGRESS_EVERY_S = 0.25
+
+
+@dataclass
+class Recorded:
+    """What :func:`record` wrote.
+
+    ``messages`` received from the bus, ``meta_messages`` written by tactbench
+    (taxel map, markers), ``seconds`` of wall time, ``bus_load_measured`` the fraction
+    of the bus the received frames took at nominal frame lengths (``None`` for an
+    empty time span), ``stopped`` why it ended: ``"duration"``, ``"idle"``,
+    ``"max_messages"`` or ``"interrupted"`` (Ctrl-C).
+    """
+
+    out: str
+    messages: int
+    meta_messages: int
+    seconds: float
+    label: str | None
+    bus_load_measured: float | None
+    stopped: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def record(bus: Any, out: str | Path, *, duration: float | None = None,
+           idle_timeout: float | None = None, max_messages: int | None = None,
+           label: dict[str, Any] | None = None, taxel_ids: Any = None,
+           bitrate: int = 1_000_000, data_bitrate: int | None = None,
+           progress: Callable[..., None] | None = None) -> Recorded:
+    """Write what ``bus`` receives to the log ``out`` until a stop condition.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        An open python-can bus (see :func:`tactbench.can.bus.open_bus`); not closed here.
+    out : str or Path
+        The log file; its suffix picks the format (``.blf``, ``.asc``, ``.log``, ``.trc``).
+    duration, idle_timeout : float, optional
+        Stop after ``duration`` seconds, or after ``idle_timeout`` seconds without a
+        message. ``max_messages`` stops after that many messages. With none of them it
+        records until Ctrl-C (``KeyboardInterrupt``), which ends the recording normally
+        (``stopped="interrupted"``): the log is closed with its end marker.
+    label : dict, optional
+        Marker info (``{"label": "Grasp", "user": "u07", ...}``): a start marker is
+        written before the first message and an end marker after the last.
+    taxel_ids : array-like of int, optional
+        Announced in the log first (a taxel-map meta message).
+    bitrate, data_bitrate : int
+        Bit/s, for the measured bus load.
+    progress : callable, optional
+        ``progress(messages, max_messages, seconds=...)``, at most every
+        :data:`PROGRESS_EVERY_S` seconds and once at the end.
+    """
+    writer = open_writer(out)
+    n = meta = 0
+    bits = 0.0  # nominal bit times of the data frames received (for the measured load)
+    t_start = time.time()
+    stopped = "interrupted"
+    try:
+        if taxel_ids is not None:
+            for msg in taxel_map_messages(taxel_ids, 0, timestamp=t_start):
+                writer.on_message_received(msg)
+                meta += 1
+        if label is not None:
+            for msg in marker_messages(True, label, 1, timestamp=t_start):
+                writer.on_message_received(msg)
+                meta += 1
+        start = last = shown = time.monotonic()
+        while True:
+            now = time.monotonic()
+            if duration is not None and now - start >= duration:
+                stopped = "duration"
+                break
+            if idle_timeout is not None and now - last >= idle_timeout:
+                stopped = "idle"
+                break
+            if max_messages is not None and n >= max_messages:
+                stopped = "max_messages"
+                break
+            if progress is not None and now - shown >= PROGRESS_EVERY_S:
+                progress(n, max_messages, seconds=now - start)
+                shown = now
+            msg = bus.recv(timeout=0.05)
+            if msg is None:
+                continue
+            last = time.monotonic()
+            # A log holds one bus. python-can's BLF writer turns a channel *name* into a
+            # number from its trailing digits ("rec-912345" → 912345) and fails above
+            # 65535, so the name is not written.
+            msg.channel = None
+            writer.on_message_received(msg)
+            n += 1
+            if not msg.is_error_frame:
+                bits += frame_bits(min(len(msg.data), 64 if msg.is_fd else 8),
+                                   extended=msg.is_extended_id, fd=msg.is_fd,
+                                   bitrate=bitrate, data_bitrate=data_bitrate)
+    except KeyboardInterrupt:
+        stopped = "interrupted"  # the normal end of an open-ended recording
+    finally:
+        if label is not None:
+            for msg in marker_messages(False, label, 1, timestamp=time.time()):
+                writer.on_message_received(msg)
+                meta += 1
+        writer.stop()
+    seconds = time.time() - t_start
+    if progress is not None:
+        progress(n, n if max_messages is None else max_messages, seconds=seconds)
+    return Recorded(out=str(out), messages=n, meta_messages=meta, seconds=seconds,
+                    label=None if label is None else str(label["label"]),
+                    bus_load_measured=bits / bitrate / seconds if seconds > 0 else None,
+                    stopped=stopped)
