@@ -97,8 +97,8 @@ def plugin_manager(ctx: click.Context):
 
         try:
             state["pm"] = make_plugin_manager()
-        except PluginError as exc:
-            raise click.ClickException(str(exc)) from exc
+        except PluginError as exc:  # strict mode: a broken plugin is the user's to fix
+            raise UserError(str(exc)) from exc
     return state["pm"]
 
 
@@ -113,7 +113,7 @@ def get_registry(ctx: click.Context | None = None, *, warn: bool = True):
         try:
             state["registry"] = collect_registry(plugin_manager(ctx))
         except PluginError as exc:
-            raise click.ClickException(str(exc)) from exc
+            raise UserError(str(exc)) from exc
         if warn:
             for problem in state["registry"].problems:
                 click.echo(f"tactbench: warning: {problem} (skipped; see 'tactbench plugins')",

@@ -7,8 +7,6 @@ import sys
 
 import click
 
-from tactbench.errors import InputError
-
 
 @click.command("stability")
 @click.option("--encoder", "-e", "specs", multiple=True,
@@ -39,14 +37,7 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
             if explicit:
                 raise
             unbuildable[spec] = f"cannot build: {type(exc).__name__}: {exc}"
-    all_cases = st.default_cases()
-    if cases:
-        known = {c.name: c for c in all_cases}
-        unknown = [c for c in cases if c not in known]
-        if unknown:
-            raise InputError(f"unknown case(s) {', '.join(unknown)}; cases: "
-                             f"{', '.join(known)}")
-        all_cases = [known[c] for c in cases]
+    all_cases = st.select_cases(cases)
     with Progress() as bars:
         outcomes = st.run_stability(encoders, all_cases, progress=bars.callback("stability"))
     outcomes += [st.Outcome(case.name, spec, False, reason, 0.0)

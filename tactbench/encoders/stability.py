@@ -39,6 +39,7 @@ import numpy as np
 from tactbench.contracts import ENCODER
 from tactbench.encoders.flow import is_flow_encoder
 from tactbench.encoders.testing import contact_sequence
+from tactbench.errors import InputError
 
 RANGE_ATOL = 1e-6
 
@@ -209,6 +210,19 @@ def default_cases() -> list[Case]:
              lambda: contact_sequence((24, 24), 3, shift=1.0) * 4.0 - 3.0, expect_error=True),
     ]
     return cases
+
+
+def select_cases(names: Sequence[str] = ()) -> list[Case]:
+    """The cases called ``names``, in that order (all of :func:`default_cases` when empty);
+    an unknown name is an :class:`~tactbench.errors.InputError` listing the known ones."""
+    cases = default_cases()
+    if not names:
+        return cases
+    known = {c.name: c for c in cases}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise InputError(f"unknown case(s) {', '.join(unknown)}; cases: {', '.join(known)}")
+    return [known[n] for n in names]
 
 
 # ----------------------------------------------------------------------------- running
