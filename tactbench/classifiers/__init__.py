@@ -1,7 +1,7 @@
 """Built-in classifiers, registered through the same hook as third-party ones.
 
 This module only *describes* classifiers (no torch import); each is imported
-when it is built. The contract is in :mod:`tactbench.classifiers.base`; saved
+when it is built. The contract is :data:`tactbench.contracts.CLASSIFIER`; saved
 models are read with :func:`tactbench.classifiers.io.load_model`.
 """
 
