@@ -66,7 +66,7 @@ def main() -> None:
     from scipy.interpolate import griddata
 
     from tactbench.data.imaging import Imager
-    from tactbench.data.layout import cyskin_forearm
+    from tactbench.datasets.forearm import cyskin_forearm
 
     layout = cyskin_forearm()
     rng = np.random.default_rng(0)

@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from tactbench.classifiers.training import derive_seed
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 
 SPLITS = ("paper", "users")
 
@@ -38,6 +38,7 @@ def paper_split(labels: Sequence[int], *, seed: int, test_per_class: int = 30) -
     A class with fewer than ``2 * test_per_class`` samples gives half of them (at
     least one) to the test set, so small datasets still train on every class.
     """
+    test_per_class = check_positive_int(test_per_class, "test_per_class")
     labels = np.asarray(labels)
     rng = np.random.default_rng(derive_seed(seed, "split", "paper", test_per_class))
     test = []
@@ -56,6 +57,10 @@ def users_split(users: Sequence[str], labels: Sequence[int], *, seed: int,
                 test_fraction: float = 0.2) -> Split:
     """Leave-users-out: a random ``test_fraction`` of the users (at least one) is the test
     set, so no user is in both. Every class must keep training samples."""
+    test_fraction = check_positive_float(test_fraction, "test_fraction")
+    if test_fraction >= 1:
+        raise InputError(f"test_fraction must be < 1 (some users must train), got "
+                         f"{test_fraction}")
     users_arr = np.asarray([str(u) for u in users])
     labels = np.asarray(labels)
     unique = np.unique(users_arr)
@@ -75,8 +80,7 @@ def users_split(users: Sequence[str], labels: Sequence[int], *, seed: int,
 
 def make_split(name: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
                test_per_class: int = 30) -> Split:
-    if name == "paper":
+    """The split called ``name`` (one of :data:`SPLITS`) of these samples."""
+    if check_choice(name, "split", SPLITS) == "paper":
         return paper_split(labels, seed=seed, test_per_class=test_per_class)
-    if name == "users":
-        return users_split(users, labels, seed=seed)
-    raise InputError(f"unknown split '{name}'; splits: {', '.join(SPLITS)}")
+    return users_split(users, labels, seed=seed)

@@ -19,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_positive_int
 
 
 @dataclass(frozen=True)
@@ -38,10 +38,10 @@ class Windows:
     length: int
 
     def __post_init__(self) -> None:
-        if self.length < 1:
-            raise InputError(f"window length L must be ≥ 1, got {self.length}")
+        object.__setattr__(self, "length", check_positive_int(self.length, "window length L"))
         if not (len(self.seq_index) == len(self.starts) == len(self.labels)):
-            raise InputError("seq_index, starts and labels must have the same length")
+            # built by training_windows / test_windows: a mismatch is a bug, not an input
+            raise ValueError("seq_index, starts and labels must have the same length")
         shapes = {s.shape[1:] for s in self.sequences}
         if len(shapes) > 1:
             raise InputError(f"sequences have different frame shapes: {sorted(shapes)}")

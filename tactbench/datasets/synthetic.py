@@ -36,7 +36,7 @@ from tactbench.data.dataset import Dataset
 from tactbench.data.layout import SLOTS_PER_ID, TaxelLayout
 from tactbench.data.recording import Recording, Sample
 from tactbench.datasets.forearm import cyskin_forearm
-from tactbench.errors import InputError, check_positive_int
+from tactbench.errors import InputError, check_choice, check_positive_int
 
 #: Bump when the model changes: it keys the cache.
 GENERATOR_VERSION = 1
@@ -293,6 +293,7 @@ def _strokes(t: np.ndarray, start: float, duration: float, n: int,
 def simulate_pressure(gesture: str, user: User, position: str, r: np.random.Generator,
                       t: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Pressure (kPa) at the taxels ``xy`` over contact times ``t`` (s): ``(T, N)``."""
+    check_choice(gesture, "gesture", CLASSES)
     p = Patches(len(t))
     k = user.hand_mm / 180.0
     # where the hand goes: the user's habit, the position, and this repetition
@@ -356,11 +357,9 @@ def simulate_pressure(gesture: str, user: User, position: str, r: np.random.Gene
             lead[:, :, 2] = 0.4 * rate_n[None, :] + 0.2 * phi[None, :]
             _grip(p, hand, t, force * r.uniform(0.75, 1.0), tau, r, dy=dy, gain=gain,
                   lead=lead)
-    elif gesture == "Push":
+    else:  # Push
         _push(p, user, r, t, TOP_X + (user.x_side if side else 0.0) + r.normal(0, 15),
               y0, force, length)
-    else:
-        raise InputError(f"unknown gesture {gesture!r}; known: {', '.join(CLASSES)}")
     return p.pressure(xy)
 
 

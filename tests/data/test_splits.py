@@ -38,12 +38,16 @@ def test_users_split_shares_no_user():
 
 
 def test_bad_splits_are_named():
-    with pytest.raises(ValueError, match="unknown split 'random'"):
+    with pytest.raises(ValueError, match="unknown split 'random'.*Choices: paper, users"):
         make_split("random", labels=LABELS, users=USERS, seed=0)
     with pytest.raises(ValueError, match="≥ 2 users"):
         users_split(["a"] * 4, [0, 1, 0, 1], seed=0)
     with pytest.raises(ValueError, match="1 sample"):
         paper_split([0, 1, 1], seed=0)
+    with pytest.raises(ValueError, match="test_per_class must be ≥ 1"):
+        paper_split(LABELS, seed=0, test_per_class=0)
+    with pytest.raises(ValueError, match="test_fraction must be < 1"):
+        users_split(USERS, LABELS, seed=0, test_fraction=1.0)
 
 
 def test_derived_seeds_are_stable_and_distinct():

@@ -53,3 +53,11 @@ def test_taxel_vectors_work_too():
 def test_bad_input_is_named(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+def test_mismatched_index_arrays_are_a_bug_not_a_user_error():
+    from tactbench.errors import TactbenchError
+
+    with pytest.raises(ValueError, match="must have the same length") as info:
+        Windows(seqs(), np.zeros(2, int), np.zeros(1, int), np.zeros(2, int), 2)
+    assert not isinstance(info.value, TactbenchError)

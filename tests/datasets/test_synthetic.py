@@ -91,6 +91,8 @@ def test_options_are_checked():
         generate(users=1, positions=3)
     with pytest.raises(ValueError, match="option seed must be ≥ 0"):
         SyntheticForearm(seed=-1)
+    with pytest.raises(ValueError, match="unknown gesture 'Pat'"):
+        simulate_pressure("Pat", make_user(0, 0), "front", _rng(0), np.zeros(3), np.zeros((2, 2)))
 
 
 def test_sensor_model_has_dead_taxels_and_varied_baselines(device):
