@@ -98,16 +98,12 @@ def measure(model_path: Path, dataset, *, n_sweeps: int, rate_hz: float,
 
         sender = threading.Thread(target=send, daemon=True)
         sender.start()
-        for sweep in sensor.frames():
-            out_of_sensor = time.time()
-            t0 = time.perf_counter()
-            pred = live.push(sweep.values, sweep.timestamp, received=t0)
+        # The command's loop (LiveClassifier.run); the first L - 1 sweeps fill the window.
+        for pred in live.run(sensor.frames(), taxel_ids=sensor.taxel_ids):
             done = time.time()
-            if pred is None:  # the first L - 1 sweeps fill the window
-                continue
-            total.append(1e3 * (done - sweep.timestamp))
-            assembly.append(1e3 * (out_of_sensor - sweep.timestamp))
-            compute.append(pred.latency_ms)
+            total.append(1e3 * (done - pred.timestamp))  # from the sweep's bus timestamp
+            compute.append(pred.latency_ms)  # from the sweep leaving the sensor
+            assembly.append(total[-1] - pred.latency_ms)
             frame.append(pred.frame_ms)
         sender.join()
         stats = sensor.stats.to_dict()

@@ -49,7 +49,7 @@ def resolve_taxel_ids(taxel_ids: Any = None, layout: Any = None) -> np.ndarray:
     if taxel_ids is not None:
         return parse_taxel_ids(taxel_ids)
     if isinstance(layout, (str, Path)):
-        from tactbench.data.layout import load_layout
+        from tactbench.data.layout_io import load_layout
 
         layout = load_layout(layout)
     return np.asarray(layout.ids, dtype=np.int64)
@@ -97,6 +97,11 @@ class CySkinCAN:
                  idle_timeout: float | None = None, max_sweeps: int | None = None,
                  receive_own_messages: bool = False) -> None:
         fmt = FrameFormat.parse(format, format_file)
+        if isinstance(layout, (str, Path)):
+            from tactbench.data.layout_io import load_layout
+
+            layout = load_layout(layout)
+        self.layout = layout  # the TaxelLayout when given one (see contracts.SENSOR)
         self.taxel_map = TaxelMap(resolve_taxel_ids(taxel_ids, layout), fmt)
         self.taxel_ids = self.taxel_map.taxel_ids
         self.assembler = SweepAssembler(self.taxel_map, missing=missing, window=window)

@@ -106,13 +106,17 @@ def test_sensor_options_are_checked(channel, tmp_path):
     assert parse_taxel_ids("0-2 5").tolist() == [0, 1, 2, 5]
 
 
-def test_layout_file_gives_the_taxels(channel, tmp_path):
-    layout_mod = pytest.importorskip("tactbench.data.layout")
+def test_layout_file_gives_the_taxels_and_the_layout(channel, tmp_path):
+    from tactbench.data.layout_io import load_layout
+
     path = tmp_path / "layout.csv"
     path.write_text("id,x_mm,y_mm\n" + "".join(f"{t},{i * 7.5},0\n" for i, t in enumerate(IDS)))
-    layout = layout_mod.load_layout(path)
+    layout = load_layout(path)
     with CySkinCAN(channel=channel, layout=str(path)) as sensor:
         np.testing.assert_array_equal(np.sort(sensor.taxel_ids), np.sort(layout.ids))
+        np.testing.assert_array_equal(sensor.layout.positions, layout.positions)
+    with CySkinCAN(channel=channel, taxel_ids=IDS) as sensor:
+        assert sensor.layout is None
 
 
 def test_as_sim_sample_accepts_arrays():
