@@ -1,0 +1,60 @@
+"""One cell: built from the planned component; a raising cell is a failed row."""
+
+from __future__ import annotations
+
+import pickle
+
+import pytest
+
+from tactbench.runner import ensure_encodings, make_jobs, plan, run_cell
+from tactbench.runner.cell import TRACEBACK_FRAMES
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+@pytest.fixture
+def jobs(tiny_scene, cache, fake_registry):
+    """``jobs(classifier)``: the jobs of a one-cell grid of ``classifier`` (raw, L=3)."""
+
+    def make(classifier: str):
+        p = plan(tiny_scene(encoders=["raw"], classifiers=[classifier], seeds=[0]),
+                 fake_registry)
+        return make_jobs(p, p.cells, ensure_encodings(p, cache, p.cells))
+
+    return make
+
+
+def test_a_job_carries_the_planned_component_and_pickles(jobs):
+    (job,) = jobs("added-logreg")
+    assert job.classifier.target == "fake_components:AddedLogReg"
+    assert pickle.loads(pickle.dumps(job)) == job
+
+
+def test_a_cell_builds_its_classifier_from_the_job_not_the_installed_plugins(jobs):
+    # "added-logreg" exists only in the plan's registry; load_registry() does not know it
+    from tactbench.plugins import load_registry
+
+    assert "added-logreg" not in load_registry().names("classifier")
+    (job,) = jobs("added-logreg")
+    row = run_cell(job)
+    assert row["status"] == "ok" and row["classifier"].startswith("added-logreg")
+    assert 0.0 <= row["accuracy"] <= 1.0 and row["fit"]["classifier"] == "added-logreg"
+
+
+def test_a_cell_that_raises_returns_a_failed_row(jobs, monkeypatch):
+    monkeypatch.setenv("TACTBENCH_TEST_FAIL", "1")
+    (job,) = jobs("failing")
+    row = run_cell(job)
+    assert row["status"] == "failed" and row["key"] == job.cell.key
+    assert row["error"]["type"] == "RuntimeError"
+    assert row["error"]["message"] == "deliberate failure in fit"
+    trace = row["error"]["traceback"]
+    assert "fake_components.py" in trace and "deliberate failure in fit" in trace
+    assert trace.count('  File "') <= TRACEBACK_FRAMES
+    assert row["classifier"] == job.identity["classifier"] and "accuracy" not in row
+
+
+def test_ctrl_c_in_a_cell_is_not_a_failure(jobs):
+    (job,) = jobs("interrupted")
+    with pytest.raises(KeyboardInterrupt):
+        run_cell(job)
