@@ -208,7 +208,7 @@ class Dataset:
     def images(self, pixel_mm: float = 1.0, method: str = "linear") -> list[np.ndarray]:
         """Each sample as tactile images, float32 ``(T, H, W)`` in [0, 1].
 
-        Raises ``ValueError`` naming the dataset when it has no layout.
+        Raises :class:`~tactbench.errors.InputError` naming the dataset when it has no layout.
         """
         return list(self.iter_images(pixel_mm, method))
 

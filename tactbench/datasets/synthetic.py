@@ -540,7 +540,7 @@ class SyntheticForearm:
             if (folder / "manifest.json").is_file():
                 try:
                     return Dataset.load(folder)
-                except (ValueError, OSError):
+                except (InputError, OSError):  # a bug elsewhere must not pass for a bad cache
                     shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
             elif folder.exists():  # a leftover without a manifest
                 shutil.rmtree(folder, ignore_errors=True)
