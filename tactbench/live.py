@@ -143,12 +143,16 @@ class LiveModel:
                    encoder: str | None = None, length: int | None = None,
                    pixel_mm: float | None = None, registry: Any = None,
                    where: str = "model") -> "LiveModel":
+        """The live model of a loaded classifier and its metadata (see the module
+        docstring for the keys); keyword arguments override the metadata, ``where``
+        (the file) starts every error message."""
         def need(key: str, *alts: str) -> Any:
             for k in (key, *alts):
                 if meta.get(k) is not None:
                     return meta[k]
             raise TactbenchError(f"{where}: the model's metadata has no '{key}'; live "
-                                 f"classification needs it (see tactbench.classifiers.io.live_metadata)")
+                                 f"classification needs it (see "
+                                 f"tactbench.classifiers.io.live_metadata)")
 
         classes = [str(c) for c in need("classes")]
         L = int(length if length is not None else
@@ -176,6 +180,10 @@ class LiveModel:
         model = cls(clf=clf, classes=classes, length=L, taxel_ids=ids, offset=offset,
                     scale=scale, info=dict(meta))
         if frame_rank == 1:
+            shape = CLASSIFIER.get(clf, "frame_shape")
+            if shape is not None and tuple(shape) != (ids.size,):
+                raise TactbenchError(f"{where}: the classifier expects taxel vectors "
+                                     f"{tuple(shape)}, the metadata names {ids.size} taxels")
             return model
         if lay is None:
             raise TactbenchError(f"{where}: an image classifier needs the taxel layout; "

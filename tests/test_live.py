@@ -256,6 +256,14 @@ def test_a_vector_model_of_either_rank_runs_live(tmp_path):
     offline = clf.predict_proba(np.stack([vectors[1][k - 2:k + 1]
                                           for k in range(2, len(vectors[1]))]))
     np.testing.assert_allclose([p.probabilities for p in preds], offline, atol=1e-5)
+    fewer = dict(model.info, taxel_ids=model.info["taxel_ids"][:60],
+                 normalisation={"scale": 20000.0})
+    fewer.pop("layout")
+    from tactbench.errors import TactbenchError
+
+    with pytest.raises(TactbenchError, match=r"expects taxel vectors \(64,\), the metadata "
+                                         "names 60 taxels"):
+        LiveModel.from_parts(clf, fewer, registry=REGISTRY)
 
 
 def _frames(rec):

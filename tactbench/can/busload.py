@@ -17,10 +17,23 @@ with 29-bit ids per sweep, take 53 % of a 1 Mbit/s bus (65 % with worst-case stu
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tactbench.can.codec import FrameFormat, TaxelMap
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_positive_int
+
+if TYPE_CHECKING:
+    import numpy as np
+
+
+def cyskin_like_ids(n_taxels: int) -> "np.ndarray":
+    """Ids of ``n_taxels`` taxels on CySkin-like modules: 11 taxels in slots 0–10 of
+    modules 0, 1, 2, ... (``module * 16 + slot``), int64 ``(n_taxels,)``."""
+    import numpy as np
+
+    check_positive_int(n_taxels, "the number of taxels")
+    k = np.arange(n_taxels, dtype=np.int64)
+    return (k // 11) * 16 + k % 11
 
 
 def frame_bits(n_bytes: int, *, extended: bool, fd: bool = False,

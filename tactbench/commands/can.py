@@ -200,9 +200,7 @@ def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bi
              data_bitrate: int | None, rate_hz: float, format_spec: str,
              format_file: str | None, as_json: bool) -> None:
     """Messages and bus load per sweep for a layout, bitrate and sweep rate."""
-    import numpy as np
-
-    from tactbench.can.busload import bus_load
+    from tactbench.can.busload import bus_load, cyskin_like_ids
     from tactbench.can.codec import TaxelMap
     from tactbench.sensors.cyskin_can import resolve_taxel_ids
 
@@ -212,8 +210,7 @@ def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bi
     if n_taxels is not None:
         if n_taxels < 1:
             raise click.UsageError("--taxels must be ≥ 1")
-        ids = np.array([m * 16 + s for m in range(n_taxels // 11 + 1) for s in range(11)])
-        ids = ids[:n_taxels]
+        ids = cyskin_like_ids(n_taxels)
     else:
         ids = resolve_taxel_ids(taxel_ids, layout)
     fmt = _format(format_spec, format_file)

@@ -5,12 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactbench.can.busload import bus_load, frame_bits
+from tactbench.can.busload import bus_load, cyskin_like_ids, frame_bits
 from tactbench.can.codec import FrameFormat, TaxelMap
 
 
 def forearm_ids(n: int = 1558) -> np.ndarray:
     return np.array([m * 16 + s for m in range(n // 11 + 1) for s in range(11)])[:n]
+
+
+def test_cyskin_like_ids_fill_slots_0_to_10_of_each_module():
+    np.testing.assert_array_equal(cyskin_like_ids(1558), forearm_ids())
+    assert cyskin_like_ids(13).tolist() == [*range(11), 16, 17]
+    with pytest.raises(ValueError, match="number of taxels"):
+        cyskin_like_ids(0)
 
 
 def test_classic_frame_lengths_follow_iso_11898():
