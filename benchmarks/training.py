@@ -150,8 +150,8 @@ def measure_overhead(cases: list[tuple[str, object, int]], *, repeats: int) -> l
     counts (other jobs share the cores, and only ever slow a run down)."""
     import warnings
 
-    from tactbench.classifiers.training import profile_options
     from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
 
     reg = load_registry()
     rows = []
@@ -215,9 +215,9 @@ def measure_logreg(train) -> dict:
 
 
 def measure_quick(n_sequences: int, seeds, channels_list) -> list[dict]:
-    from tactbench.classifiers.training import profile_options
     from tactbench.data.windows import test_windows, training_windows
     from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
 
     reg = load_registry()
     rows = []
@@ -254,8 +254,8 @@ def measure_paper_epoch(train) -> dict | None:
     if not torch.cuda.is_available():
         print("paper-epoch: no CUDA device, skipped", flush=True)
         return None
-    from tactbench.classifiers.training import profile_options
     from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
 
     opts = profile_options("paper", "cnn-lstm")
     opts["epochs"] = 1

@@ -74,6 +74,43 @@ def test_unknown_profile_or_classifier_is_a_clear_error():
         profile_options("quick", "no-such-classifier")
 
 
+def test_profiles_are_defined_once_in_tactbench_profiles():
+    import tactbench.classifiers.training as training
+    import tactbench.profiles as profiles
+
+    # the old import path is the same function, not a copy
+    assert training.profile_options is profiles.profile_options
+    assert training.PROFILE_NAMES == profiles.PROFILE_NAMES == ("quick", "paper")
+    assert [profiles.get_profile(n).pixel_mm for n in profiles.PROFILE_NAMES] == [5.0, 1.0]
+    with pytest.raises(ValueError, match="unknown profile 'fast'.*quick, paper"):
+        profiles.get_profile("fast")
+
+
+def test_a_plugin_classifier_declares_its_own_profiles(tmp_path, monkeypatch):
+    # read through the registry given (a plugin added without installing it)
+    import tactbench
+    from tactbench.plugins import collect_registry, make_plugin_manager
+
+    (tmp_path / "profiled_clf.py").write_text(
+        "from tactbench.classifiers.classical import PooledLogReg\n\n"
+        "class Profiled(PooledLogReg):\n"
+        "    profiles = {'paper': {'max_iter': 500}}\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    class Plugin:
+        @tactbench.hookimpl
+        def register_classifiers(self, register):
+            register("profiled", "profiled_clf:Profiled", summary="declares profiles")
+            register("plain", "tactbench.classifiers.classical:PooledLogReg",
+                     summary="declares none")
+
+    reg = collect_registry(make_plugin_manager(entry_points=False,
+                                               extra=[("profiled", Plugin())]))
+    assert profile_options("paper", "profiled", registry=reg) == {"max_iter": 500}
+    assert profile_options("quick", "profiled", registry=reg) == {}
+    assert profile_options("paper", "plain", registry=reg) == {}
+
+
 # ----------------------------------------------------------------------------- seeds
 
 
