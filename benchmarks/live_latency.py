@@ -40,9 +40,9 @@ import numpy as np
 def train_quick_model(dataset, encoder_spec: str, length: int, pixel_mm: float, out: Path):
     """A quick-profile small-cnn-lstm, trained for one short epoch, saved with live metadata."""
     from tactbench.classifiers.io import live_metadata
-    from tactbench.classifiers.training import profile_options
     from tactbench.data.windows import training_windows
     from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
 
     registry = load_registry()
     encoder = registry.build("encoder", encoder_spec)
