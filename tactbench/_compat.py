@@ -31,6 +31,32 @@ MOVED_MODULES: dict[str, str] = {
 }
 
 
+#: (module, name) → the module the name moved to, when a module was split; the old
+#: place answers through the module's ``__getattr__`` (:func:`moved_name`).
+MOVED_NAMES: dict[tuple[str, str], str] = {
+    ("tactbench.data.recording", "Dataset"): "tactbench.data.dataset",
+    ("tactbench.data.recording", "Normalisation"): "tactbench.data.normalisation",
+    ("tactbench.data.recording", "FORMAT_NAME"): "tactbench.data.store",
+    ("tactbench.data.recording", "SCHEMA_VERSION"): "tactbench.data.store",
+    ("tactbench.data.recording", "MANIFEST"): "tactbench.data.store",
+    ("tactbench.data.recording", "ARRAYS"): "tactbench.data.store",
+    ("tactbench.data.layout", "load_layout"): "tactbench.data.layout_io",
+    ("tactbench.data.layout", "cyskin_forearm"): "tactbench.datasets.forearm",
+    ("tactbench.live", "live_metadata"): "tactbench.classifiers.io",
+}
+
+
+def moved_name(module: str, name: str):
+    """The object ``name`` that left ``module``, with a warning; ``AttributeError`` for a
+    name that never lived there (so ``hasattr`` and ``from ... import`` behave)."""
+    new = MOVED_NAMES.get((module, name))
+    if new is None:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    warnings.warn(f"{module}.{name} moved to {new}.{name}; the old place goes in "
+                  f"tactbench 0.3", DeprecationWarning, stacklevel=3)
+    return getattr(importlib.import_module(new), name)
+
+
 class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     """Finds the old names and loads them as the new modules."""
 

@@ -193,6 +193,16 @@ SENSOR = Contract("sensor", (
            "describe()); None for sensors without a bus", default=None),
 ))
 
+#: What a sensor's ``frames()`` yields (checked where frames are read, not at build).
+FRAME = Contract("frame", (
+    Member("timestamp", False, "seconds"),
+    Member("values", False, "float32 (N,), in the order of the sensor's taxel_ids"),
+    Member("missing", False, "values of this sweep that did not arrive (held or zeroed)",
+           default=0),
+    Member("label", False, "the gesture marker in force, when the source has markers",
+           default=None),
+))
+
 #: Datasets: built with keyword options (``path=...``), loaded on demand.
 DATASET = Contract("dataset", (
     Member("load", True, "load() → tactbench.data.recording.Dataset"),

@@ -40,8 +40,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from tactbench.classifiers.io import live_metadata  # noqa: F401  (its old home; the runner imports it from here)
-from tactbench.contracts import CLASSIFIER, SENSOR
+from tactbench.contracts import CLASSIFIER, FRAME, SENSOR
 from tactbench.encoders.flow import flow_to_channels, is_flow_encoder
 from tactbench.errors import InputError, TactbenchError
 
@@ -443,8 +442,8 @@ class LiveClassifier:
             values = frame.values if index is None else np.asarray(frame.values)[index]
             # Optional frame members: CAN sweeps carry them, plain Frames do not.
             pred = self.push(values, frame.timestamp, received=received,
-                             missing=int(getattr(frame, "missing", 0) or 0),
-                             marker=getattr(frame, "label", None))
+                             missing=int(FRAME.get(frame, "missing") or 0),
+                             marker=FRAME.get(frame, "label"))
             if pred is not None:
                 if on_prediction is not None:
                     on_prediction(pred)
@@ -488,3 +487,10 @@ def run_summary(live: LiveClassifier, latencies_ms: Sequence[float],
     if stats is not None:
         summary["bus"] = stats.to_dict()
     return summary
+
+
+def __getattr__(name: str) -> Any:
+    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
+    from tactbench._compat import moved_name
+
+    return moved_name(__name__, name)

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 CACHE_ENV = "TACTBENCH_CACHE"
 
@@ -38,3 +42,26 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
+
+
+@contextmanager
+def atomic_folder(folder: str | Path) -> Iterator[Path]:
+    """Build a folder under a temporary name beside ``folder``; rename it to ``folder``
+    when the block ends without an error, else remove it.
+
+    Readers see no folder or the complete one, never half of one. When ``folder``
+    appeared meanwhile (another process finished the same entry first), theirs is kept
+    and ours dropped. Temporary names start with ``.<name>.tmp-``.
+    """
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.tmp-", dir=folder.parent))
+    try:
+        yield tmp
+        try:
+            os.rename(tmp, folder)
+        except OSError:
+            if not folder.is_dir():  # not a lost race: a real failure
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -79,14 +79,21 @@ class Progress:
 
     def callback(self, description: str, total: int | None = None,
                  ) -> "Callable[..., None] | None":
-        """A new task as a ``progress(done, total=None, **info)`` callback (None when off)."""
+        """A task as a ``progress(done, total=None, **info)`` callback (None when off).
+
+        The bar appears at the first report, so work that turns out to need none (a cache
+        hit, a file that loads at once) leaves no empty bar behind.
+        """
         if not self.enabled:
             return None
-        task = self.add(description, total)
+        task: list[Any] = []
 
-        def report(done: int, total: int | None = None, **info: Any) -> None:
+        def report(done: int, total_now: int | None = None, **info: Any) -> None:
+            if not task:
+                task.append(self.add(description, total_now if total_now is not None
+                                     else total))
             text = " ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
                             for k, v in info.items())
-            self.update(task, done, total, text)
+            self.update(task[0], done, total_now, text)
 
         return report

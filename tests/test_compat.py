@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tactbench._compat import MOVED_MODULES
+from tactbench._compat import MOVED_MODULES, MOVED_NAMES
 
 
 @pytest.mark.parametrize("old", sorted(MOVED_MODULES))
@@ -49,3 +49,12 @@ def test_testing_face_exposes_both_conformance_suites():
 
     assert face.check_encoder is check_encoder
     assert face.check_classifier is check_classifier
+
+
+@pytest.mark.parametrize("module, name", sorted(MOVED_NAMES))
+def test_a_name_that_left_a_split_module_is_found_there_with_a_warning(module, name):
+    new = importlib.import_module(MOVED_NAMES[(module, name)])
+    old = importlib.import_module(module)
+    with pytest.warns(DeprecationWarning, match=f"{module}.{name} moved to"):
+        assert getattr(old, name) is getattr(new, name)
+    assert not hasattr(old, "no_such_name")

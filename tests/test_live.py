@@ -56,8 +56,9 @@ def test_incremental_encoding_equals_full_encoding(name):
 
 def tiny_dataset():
     """Two classes of contacts sliding left or right over an 8 × 8 taxel patch."""
+    from tactbench.data.dataset import Dataset
     from tactbench.data.layout import TaxelLayout
-    from tactbench.data.recording import Dataset, Recording, Sample
+    from tactbench.data.recording import Recording, Sample
 
     ids = np.array([m * 16 + s for m in range(1, 7) for s in range(11)])[:64]
     gy, gx = np.divmod(np.arange(64), 8)

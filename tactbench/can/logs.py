@@ -230,7 +230,8 @@ class CanLog:
         label markers gives one sample per unlabelled stretch, of class
         ``"unlabelled"``.
         """
-        from tactbench.data.recording import Dataset, Recording, Sample
+        from tactbench.data.dataset import Dataset
+        from tactbench.data.recording import Recording, Sample
 
         segments = [s if s.info is not None else
                     Segment({"label": UNLABELLED}, s.timestamps, s.values, s.missing)

@@ -29,13 +29,13 @@ from tactbench.classifiers.training import (
     FitReport,
     ProgressFn,
     TrainingInterrupted,
-    derive_seed,
     precision_for,
     select_device,
     train_loop,
 )
 from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
+from tactbench.seeds import derive_seed
 
 #: Above this size the training frames are not resized up front but per batch.
 MAX_BANK_BYTES = 2 * 1024 ** 3

@@ -112,7 +112,7 @@ class PooledLogReg(SequenceClassifier):
             calls[0] += 1
             if progress is not None:
                 progress(min(calls[0], self.max_iter), self.max_iter, epoch=1, epochs=1,
-                         loss=float(loss))
+                         loss=float(loss.detach()))
             return loss
 
         self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length

@@ -6,8 +6,8 @@ before.
 
 Seeds
 -----
-:func:`derive_seed` hashes its parts with SHA-256 (never ``hash()``, which is
-salted per process). The loop draws window order from ``numpy`` with the seed
+:func:`tactbench.seeds.derive_seed` hashes its parts with SHA-256 (never ``hash()``,
+which is salted per process). The loop draws window order from ``numpy`` with the seed
 and seeds torch inside :func:`torch.random.fork_rng`, so the caller's global
 random state is left as it was. On the CPU the same seed gives the same model.
 
@@ -21,7 +21,6 @@ it on the CPU uses bfloat16 autocast, which is how the tests exercise that path.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -31,26 +30,18 @@ import numpy as np
 
 from tactbench.errors import InputError
 from tactbench.profiles import DEFAULT_PROFILE, PROFILE_NAMES, profile_options
+from tactbench.seeds import derive_seed  # re-exported: it lived here before
 
 if TYPE_CHECKING:  # torch stays out of import time
     import torch
 
-__all__ = [  # the profile names are re-exported from tactbench.profiles, their home
+__all__ = [  # profiles and derive_seed are re-exported from their homes
     "DEFAULT_PROFILE", "PROFILE_NAMES", "profile_options", "derive_seed", "select_device",
     "Precision", "precision_for", "FitReport", "TrainingInterrupted", "ProgressFn",
     "epoch_order", "make_optimizer", "train_loop",
 ]
 
 # --------------------------------------------------------------------------- seeds
-
-
-def derive_seed(*parts: Any) -> int:
-    """A seed in ``[0, 2**63)`` from ``parts`` (run seed, cell identity, ...), via SHA-256.
-
-    Stable across processes and Python versions, unlike ``hash()``.
-    """
-    text = "\x1f".join(repr(p) for p in parts)
-    return int.from_bytes(hashlib.sha256(text.encode("utf-8")).digest()[:8], "big") >> 1
 
 
 # --------------------------------------------------------------------------- devices

@@ -14,19 +14,6 @@ def data_group() -> None:
     """Inspect, simulate and preview datasets."""
 
 
-def _lazy_callback(bars, description: str):
-    """A ``progress(done, total)`` callback that adds its bar on the first report only, so
-    a dataset that loads without reporting (a cache hit, a file) shows no empty bar."""
-    task = []
-
-    def report(done: int, total: int | None = None, **_info) -> None:
-        if not task:
-            task.append(bars.add(description, total))
-        bars.update(task[0], done, total)
-
-    return report
-
-
 def _load(path: str):
     """The dataset at ``path`` (or registered as ``path``), with a bar while it is made."""
     from tactbench.cli import get_registry
@@ -36,7 +23,7 @@ def _load(path: str):
     registry = None if Path(path).exists() else get_registry()
     with Progress() as bars:
         return load_dataset(path, registry=registry,
-                            progress=_lazy_callback(bars, f"loading {path}"))
+                            progress=bars.callback(f"loading {path}"))
 
 
 @data_group.command("info")

@@ -233,17 +233,8 @@ def unroll(points: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
     return centred @ vt[:2].T
 
 
-# Names that moved out of this module in the restructuring (issue 10); kept importable
-# from here. Looked up on first use: their modules import this one.
-_MOVED = {
-    "load_layout": "tactbench.data.layout_io",
-    "cyskin_forearm": "tactbench.datasets.forearm",
-}
-
-
 def __getattr__(name: str) -> Any:
-    if name in _MOVED:
-        import importlib
+    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
+    from tactbench._compat import moved_name
 
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return moved_name(__name__, name)

@@ -108,21 +108,8 @@ class Sample:
     source: str = ""
 
 
-# Names that moved out of this module in the restructuring (issue 10); kept importable
-# from here. Looked up on first use: their modules import this one.
-_MOVED = {
-    "Dataset": "tactbench.data.dataset",
-    "Normalisation": "tactbench.data.normalisation",
-    "FORMAT_NAME": "tactbench.data.store",
-    "SCHEMA_VERSION": "tactbench.data.store",
-    "MANIFEST": "tactbench.data.store",
-    "ARRAYS": "tactbench.data.store",
-}
-
-
 def __getattr__(name: str) -> Any:
-    if name in _MOVED:
-        import importlib
+    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
+    from tactbench._compat import moved_name
 
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return moved_name(__name__, name)

@@ -11,8 +11,8 @@ from typing import Sequence
 
 import numpy as np
 
-from tactbench.classifiers.training import derive_seed
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
+from tactbench.seeds import derive_seed
 
 SPLITS = ("paper", "users")
 

@@ -16,21 +16,17 @@ A dataset folder holds
 
 :func:`write_dataset` writes each file atomically, manifest last; :func:`read_dataset`
 validates everything and raises :class:`~tactbench.errors.InputError` naming the file
-and the problem; nothing is half-loaded. :func:`atomic_folder` builds a whole folder
-under a temporary name and renames it into place (the synthetic dataset's cache).
+and the problem; nothing is half-loaded. Whole folders (the synthetic dataset's cache)
+are built with :func:`tactbench.paths.atomic_folder`.
 """
 
 from __future__ import annotations
 
 import io
 import json
-import os
 import re
-import shutil
-import tempfile
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -106,27 +102,6 @@ def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
     atomic_write_bytes(folder / ARRAYS, buf.getbuffer())
     atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1) + "\n")
     return folder
-
-
-@contextmanager
-def atomic_folder(folder: str | Path) -> Iterator[Path]:
-    """Build a folder under a temporary name beside ``folder``; rename it to ``folder``
-    when the block ends without an error (else remove it).
-
-    Readers see no folder or the complete one. When ``folder`` already exists (another
-    process finished first), theirs is kept and the new one is dropped.
-    """
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.tmp-", dir=folder.parent))
-    try:
-        yield tmp
-        try:
-            os.rename(tmp, folder)
-        except OSError:  # a non-empty folder is there: another writer won the race
-            pass
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 # ------------------------------------------------------------------------------ read

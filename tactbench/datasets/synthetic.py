@@ -546,7 +546,7 @@ class SyntheticForearm:
                 shutil.rmtree(folder, ignore_errors=True)
         ds = generate(**self.options, progress=progress)
         if self.cache:
-            from tactbench.data.store import atomic_folder
+            from tactbench.paths import atomic_folder
 
             with atomic_folder(folder) as tmp:  # another process may win the race: fine
                 ds.save(tmp)

@@ -31,7 +31,7 @@ memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
 """
 
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
-from tactbench.runner.cache import EncodingCache, atomic_folder, ensure_encodings, load_encoding
+from tactbench.runner.cache import EncodingCache, ensure_encodings, load_encoding
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
 from tactbench.runner.orchestrate import RunResult, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
@@ -42,7 +42,7 @@ from tactbench.runner.system import git_revision
 __all__ = [
     "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",
     "plan", "Plan", "Cell", "ROW_SCHEMA",
-    "EncodingCache", "atomic_folder", "ensure_encodings", "load_encoding",
+    "EncodingCache", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row",
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows",
     "run", "RunResult", "git_revision",

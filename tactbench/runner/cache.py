@@ -11,38 +11,15 @@ import json
 import os
 import shutil
 import time
-from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
-from tactbench.paths import cache_dir
+from tactbench.paths import atomic_folder, cache_dir
 from tactbench.runner.planning import Cell, Plan, digest, imaging_identity
 from tactbench.runner.system import now
 
 if TYPE_CHECKING:
     from tactbench.ui import Progress
-
-
-@contextmanager
-def atomic_folder(final: Path) -> Iterator[Path]:
-    """Fill a temporary folder beside ``final``, then rename it to ``final``.
-
-    Readers see no folder or a complete one, never half of one. When ``final`` appeared
-    meanwhile (another process finished the same entry first), theirs is kept and ours
-    dropped; when the body raises, the temporary folder is removed.
-    """
-    tmp = final.with_name(f".{final.name}.tmp-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if final.exists():
-        shutil.rmtree(tmp, ignore_errors=True)
-    else:
-        os.replace(tmp, final)
 
 
 class EncodingCache:

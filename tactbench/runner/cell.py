@@ -111,11 +111,11 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None
     import numpy as np
     import torch
 
-    from tactbench.classifiers.training import derive_seed
     from tactbench.data.splits import make_split
     from tactbench.data.windows import test_windows, training_windows
     from tactbench.plugins import Registry
     from tactbench.runner.cache import load_encoding
+    from tactbench.seeds import derive_seed
 
     torch.set_num_threads(job.threads)
     cell = job.cell

@@ -55,7 +55,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     start = time.perf_counter()
     with Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
-        p = plan(scene, registry)
+        p = plan(scene, registry, progress=bars.callback(f"make dataset {scene.dataset}"))
         bars.update(task, 1)
         store = ResultStore(scene.out)
         models = Path(scene.out) / "models" if scene.save_models else None

@@ -137,10 +137,12 @@ def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset
                      f"encoder passes through; got encoder '{enc}'")
 
 
-def plan(scene: Scene, registry=None) -> Plan:
+def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     """Check the whole grid before any work: names, options, L, layout needs, split.
 
     ``registry`` (default: every installed plugin) is the one the cells will use too.
+    ``progress(done, total)`` hears from a dataset that takes a while to make (the
+    simulator's first run).
     Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
     computed or written.
     """
@@ -172,7 +174,7 @@ def plan(scene: Scene, registry=None) -> Plan:
 
     from tactbench.datasets.loading import load_dataset
 
-    dataset = load_dataset(scene.dataset, registry=registry)
+    dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
     has_layout = dataset.layout is not None
     kinds = {clf: input_kind(rank, has_layout) for clf, rank in frame_ranks.items()}
     for clf in classifier_specs:

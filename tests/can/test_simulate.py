@@ -12,7 +12,8 @@ import pytest
 from tactbench.can.codec import TaxelMap
 from tactbench.can.logs import read_log
 from tactbench.can.simulate import SimSample, load_samples, send_samples, write_samples
-from tactbench.data.recording import Dataset, Recording, Sample
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Recording, Sample
 
 IDS = np.array([16, 17, 18, 0, 1])  # not sorted: the values' order is what counts
 

@@ -44,7 +44,8 @@ def test_metadata_that_is_not_json_is_refused_before_anything_is_written(fitted,
 
 
 def test_live_metadata_without_a_layout():
-    from tactbench.data.recording import Dataset, Recording, Sample
+    from tactbench.data.dataset import Dataset
+    from tactbench.data.recording import Recording, Sample
 
     rec = Recording(np.ones((3, 2), np.float32), 0.1 * np.arange(3), [4, 9])
     dataset = Dataset("flat", [Sample(rec, 0)], ("touch",), normalisation="fixed:scale=100")

@@ -1,10 +1,7 @@
-"""Profiles, seeds, devices and the shared training loop (tactbench.classifiers.training)."""
+"""Devices, precision, window order and the shared training loop
+(tactbench.classifiers.training); profiles and seeds have their own test files."""
 
 from __future__ import annotations
-
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -12,17 +9,13 @@ import torch
 from torch import nn
 
 from tactbench.classifiers.training import (
-    PROFILE_NAMES,
     FitReport,
     TrainingInterrupted,
-    derive_seed,
     epoch_order,
     precision_for,
-    profile_options,
     select_device,
     train_loop,
 )
-from tactbench.plugins import load_registry
 
 BUILTIN = ("small-cnn-lstm", "cnn-lstm", "taxel-lstm", "logreg")
 
@@ -30,102 +23,7 @@ BUILTIN = ("small-cnn-lstm", "cnn-lstm", "taxel-lstm", "logreg")
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
-# ----------------------------------------------------------------------------- profiles
-
-
-def test_paper_profile_is_the_papers_protocol():
-    opts = profile_options("paper", "cnn-lstm")
-    assert opts["optimizer"] == "sgd" and opts["lr"] == 1e-3 and opts["epochs"] == 100
-    assert opts["input_size"] == 224
-    assert opts["windows_per_epoch"] == 0  # every training window, every epoch
-
-
-def test_quick_is_the_default_and_matches_the_class_defaults():
-    reg = load_registry()
-    for name in BUILTIN:
-        default = reg.build("classifier", name).options()
-        quick = reg.build("classifier", name, **profile_options("quick", name)).options()
-        assert default == quick, name
-    assert profile_options(classifier="small-cnn-lstm") == profile_options("quick",
-                                                                           "small-cnn-lstm")
-
-
-@pytest.mark.parametrize("profile", PROFILE_NAMES)
-@pytest.mark.parametrize("name", BUILTIN)
-def test_every_profile_option_is_accepted_and_user_options_override(profile, name):
-    opts = profile_options(profile, name)
-    clf = load_registry().build("classifier", name, **opts)
-    for key, value in opts.items():
-        assert getattr(clf, key) == value
-    if "epochs" in opts:
-        opts["epochs"] = 1
-        assert load_registry().build("classifier", name, **opts).epochs == 1
-
-
-def test_profile_options_returns_a_fresh_dict():
-    profile_options("quick", "small-cnn-lstm")["epochs"] = 999
-    assert profile_options("quick", "small-cnn-lstm")["epochs"] != 999
-
-
-def test_unknown_profile_or_classifier_is_a_clear_error():
-    with pytest.raises(ValueError, match="unknown profile 'fast'.*quick, paper"):
-        profile_options("fast", "small-cnn-lstm")
-    with pytest.raises(LookupError, match="unknown classifier"):
-        profile_options("quick", "no-such-classifier")
-
-
-def test_profiles_are_defined_once_in_tactbench_profiles():
-    import tactbench.classifiers.training as training
-    import tactbench.profiles as profiles
-
-    # the old import path is the same function, not a copy
-    assert training.profile_options is profiles.profile_options
-    assert training.PROFILE_NAMES == profiles.PROFILE_NAMES == ("quick", "paper")
-    assert [profiles.get_profile(n).pixel_mm for n in profiles.PROFILE_NAMES] == [5.0, 1.0]
-    with pytest.raises(ValueError, match="unknown profile 'fast'.*quick, paper"):
-        profiles.get_profile("fast")
-
-
-def test_a_plugin_classifier_declares_its_own_profiles(tmp_path, monkeypatch):
-    # read through the registry given (a plugin added without installing it)
-    import tactbench
-    from tactbench.plugins import collect_registry, make_plugin_manager
-
-    (tmp_path / "profiled_clf.py").write_text(
-        "from tactbench.classifiers.classical import PooledLogReg\n\n"
-        "class Profiled(PooledLogReg):\n"
-        "    profiles = {'paper': {'max_iter': 500}}\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-
-    class Plugin:
-        @tactbench.hookimpl
-        def register_classifiers(self, register):
-            register("profiled", "profiled_clf:Profiled", summary="declares profiles")
-            register("plain", "tactbench.classifiers.classical:PooledLogReg",
-                     summary="declares none")
-
-    reg = collect_registry(make_plugin_manager(entry_points=False,
-                                               extra=[("profiled", Plugin())]))
-    assert profile_options("paper", "profiled", registry=reg) == {"max_iter": 500}
-    assert profile_options("quick", "profiled", registry=reg) == {}
-    assert profile_options("paper", "plain", registry=reg) == {}
-
-
-# ----------------------------------------------------------------------------- seeds
-
-
-def test_derive_seed_is_stable_across_processes_and_separates_parts():
-    code = "from tactbench.classifiers.training import derive_seed; print(derive_seed(0, 'raw', 5))"
-    outs = set()
-    for hashseed in ("1", "2"):
-        env = dict(os.environ, PYTHONHASHSEED=hashseed)
-        outs.add(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                                text=True, check=True).stdout.strip())
-    assert outs == {str(derive_seed(0, "raw", 5))}
-    seeds = {derive_seed(0, "raw", 5), derive_seed(1, "raw", 5), derive_seed(0, "flow", 5),
-             derive_seed(0, "raw", 6), derive_seed("0", "raw", 5)}
-    assert len(seeds) == 5
-    assert all(0 <= s < 2 ** 63 for s in seeds)
+# ----------------------------------------------------------------------------- window order
 
 
 def test_epoch_order_permutes_cuts_and_repeats():

@@ -199,7 +199,7 @@ def test_no_holes_where_taxels_are_sparser_than_the_median(method):
 @pytest.mark.parametrize("method", ["linear", "gaussian"])
 def test_real_layouts_image_without_holes(shared_data, name, method):
     """Flattened maps are denser at their edges: the middle must not fall through."""
-    from tactbench.data.layout import load_layout
+    from tactbench.data.layout_io import load_layout
 
     lay = load_layout(shared_data / "cyskin-layouts" / name)
     im = Imager(lay, pixel_mm=1.0, method=method)

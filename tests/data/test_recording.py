@@ -38,15 +38,3 @@ def test_bad_recordings(kwargs, message):
 def test_nan_marks_a_missing_reading():
     rec = Recording(np.array([[1, np.nan]]), [0.0], [1, 2])
     assert np.isnan(rec.values[0, 1])
-
-
-def test_moved_names_stay_importable_from_the_recording_module():
-    from tactbench.data import recording
-    from tactbench.data.dataset import Dataset
-    from tactbench.data.normalisation import Normalisation
-    from tactbench.data.store import MANIFEST
-
-    assert recording.Dataset is Dataset and recording.Normalisation is Normalisation
-    assert recording.MANIFEST == MANIFEST == "manifest.json"
-    with pytest.raises(AttributeError):
-        recording.NoSuchName

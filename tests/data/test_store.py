@@ -144,22 +144,3 @@ def test_saving_again_replaces_the_files_and_leaves_no_temporary_files(tmp_path,
     other.save(folder)
     assert sorted(p.name for p in folder.iterdir()) == ["arrays.npz", "manifest.json"]
     assert Dataset.load(folder).content_hash() == other.content_hash()
-
-
-def test_atomic_folder_appears_complete_or_not_at_all(tmp_path):
-    from tactbench.data.store import atomic_folder
-
-    target = tmp_path / "cache" / "set"
-    with pytest.raises(RuntimeError):
-        with atomic_folder(target) as tmp:
-            (tmp / "half.txt").write_text("x")
-            raise RuntimeError("crash while writing")
-    assert not target.exists() and list((tmp_path / "cache").iterdir()) == []
-    with atomic_folder(target) as tmp:
-        (tmp / "a.txt").write_text("first")
-        assert not target.exists()
-    assert (target / "a.txt").read_text() == "first"
-    with atomic_folder(target) as tmp:  # someone finished first: theirs is kept
-        (tmp / "a.txt").write_text("second")
-    assert (target / "a.txt").read_text() == "first"
-    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["set"]

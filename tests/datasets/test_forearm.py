@@ -45,7 +45,8 @@ def test_forearm_smaller_counts():
 
 
 def test_forearm_is_still_importable_from_its_old_module():
-    from tactbench.data.layout import cyskin_forearm as old
+    with pytest.warns(DeprecationWarning, match="tactbench.datasets.forearm"):
+        from tactbench.data.layout import cyskin_forearm as old
 
     assert old is cyskin_forearm
 

@@ -63,7 +63,8 @@ def fake_registry(monkeypatch):
 def nolayout_dataset(tmp_path) -> Path:
     """A saved dataset of taxel vectors without a layout: 2 classes × 6 samples of
     8 frames × 5 taxels, each class a different taxel pressed (a learnable task)."""
-    from tactbench.data.recording import Dataset, Recording, Sample
+    from tactbench.data.dataset import Dataset
+    from tactbench.data.recording import Recording, Sample
 
     rng = np.random.default_rng(0)
     samples = []

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from tactbench.runner import EncodingCache, atomic_folder, load_encoding
+from tactbench.runner import EncodingCache, load_encoding
 
 
 def test_write_and_load_round_trip(tmp_path):
@@ -32,22 +31,3 @@ def test_keys_change_with_imaging_encoder_and_version():
     assert base != cache_key(None, "h", {"kind": "images"}, "raw", "1")
     assert base != cache_key(None, "h", {"kind": "vectors"}, "frame-diff", "1")
     assert base != cache_key(None, "h", {"kind": "vectors"}, "raw", "2")
-
-
-def test_atomic_folder_leaves_nothing_when_the_writer_fails(tmp_path):
-    final = tmp_path / "entry"
-    with pytest.raises(RuntimeError):
-        with atomic_folder(final) as tmp:
-            (tmp / "half.npy").write_bytes(b"x")
-            raise RuntimeError("disk full")
-    assert list(tmp_path.iterdir()) == []
-
-
-def test_atomic_folder_keeps_the_entry_that_finished_first(tmp_path):
-    final = tmp_path / "entry"
-    with atomic_folder(final) as tmp:
-        (tmp / "who").write_text("first")
-    with atomic_folder(final) as tmp:
-        (tmp / "who").write_text("second")
-    assert (final / "who").read_text() == "first"
-    assert [p.name for p in tmp_path.iterdir()] == ["entry"]

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from tactbench.contracts import Sensor
-from tactbench.data.recording import Dataset, Frame, Recording, Sample
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Frame, Recording, Sample
 from tactbench.datasets.cyskin_text import write_cyskin_text
 from tactbench.plugins import load_registry
 from tactbench.sensors.replay import Replay

@@ -1,0 +1,88 @@
+"""Run profiles, defined once in tactbench.profiles (imaging and classifier halves)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tactbench.plugins import load_registry
+from tactbench.profiles import PROFILE_NAMES, profile_options
+
+BUILTIN = ("small-cnn-lstm", "cnn-lstm", "taxel-lstm", "logreg")
+
+
+def test_paper_profile_is_the_papers_protocol():
+    opts = profile_options("paper", "cnn-lstm")
+    assert opts["optimizer"] == "sgd" and opts["lr"] == 1e-3 and opts["epochs"] == 100
+    assert opts["input_size"] == 224
+    assert opts["windows_per_epoch"] == 0  # every training window, every epoch
+
+
+def test_quick_is_the_default_and_matches_the_class_defaults():
+    reg = load_registry()
+    for name in BUILTIN:
+        default = reg.build("classifier", name).options()
+        quick = reg.build("classifier", name, **profile_options("quick", name)).options()
+        assert default == quick, name
+    assert profile_options(classifier="small-cnn-lstm") == profile_options("quick",
+                                                                           "small-cnn-lstm")
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize("name", BUILTIN)
+def test_every_profile_option_is_accepted_and_user_options_override(profile, name):
+    opts = profile_options(profile, name)
+    clf = load_registry().build("classifier", name, **opts)
+    for key, value in opts.items():
+        assert getattr(clf, key) == value
+    if "epochs" in opts:
+        opts["epochs"] = 1
+        assert load_registry().build("classifier", name, **opts).epochs == 1
+
+
+def test_profile_options_returns_a_fresh_dict():
+    profile_options("quick", "small-cnn-lstm")["epochs"] = 999
+    assert profile_options("quick", "small-cnn-lstm")["epochs"] != 999
+
+
+def test_unknown_profile_or_classifier_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown profile 'fast'.*quick, paper"):
+        profile_options("fast", "small-cnn-lstm")
+    with pytest.raises(LookupError, match="unknown classifier"):
+        profile_options("quick", "no-such-classifier")
+
+
+def test_profiles_are_defined_once_in_tactbench_profiles():
+    import tactbench.classifiers.training as training
+    import tactbench.profiles as profiles
+
+    # the old import path is the same function, not a copy
+    assert training.profile_options is profiles.profile_options
+    assert training.PROFILE_NAMES == profiles.PROFILE_NAMES == ("quick", "paper")
+    assert [profiles.get_profile(n).pixel_mm for n in profiles.PROFILE_NAMES] == [5.0, 1.0]
+    with pytest.raises(ValueError, match="unknown profile 'fast'.*quick, paper"):
+        profiles.get_profile("fast")
+
+
+def test_a_plugin_classifier_declares_its_own_profiles(tmp_path, monkeypatch):
+    # read through the registry given (a plugin added without installing it)
+    import tactbench
+    from tactbench.plugins import collect_registry, make_plugin_manager
+
+    (tmp_path / "profiled_clf.py").write_text(
+        "from tactbench.classifiers.classical import PooledLogReg\n\n"
+        "class Profiled(PooledLogReg):\n"
+        "    profiles = {'paper': {'max_iter': 500}}\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    class Plugin:
+        @tactbench.hookimpl
+        def register_classifiers(self, register):
+            register("profiled", "profiled_clf:Profiled", summary="declares profiles")
+            register("plain", "tactbench.classifiers.classical:PooledLogReg",
+                     summary="declares none")
+
+    reg = collect_registry(make_plugin_manager(entry_points=False,
+                                               extra=[("profiled", Plugin())]))
+    assert profile_options("paper", "profiled", registry=reg) == {"max_iter": 500}
+    assert profile_options("quick", "profiled", registry=reg) == {}
+    assert profile_options("paper", "plain", registry=reg) == {}
