@@ -152,11 +152,12 @@ def test_a_marker_with_a_lost_part_is_counted_not_raised():
 
 
 def test_a_log_becomes_a_dataset(tmp_path):
-    recording = pytest.importorskip("tactbench.data.recording")
+    from tactbench.data.dataset import Dataset
+
     path = tmp_path / "run.blf"
     write_log(path, schedule_messages(traffic(samples(), TaxelMap(IDS)), t0=5.0))
     dataset = read_log(path).to_dataset(name="run")
-    assert isinstance(dataset, recording.Dataset)
+    assert isinstance(dataset, Dataset)
     assert dataset.classes == ("Grasp", "Pull")
     assert dataset.labels.tolist() == [0, 1, 0]
     assert dataset.users == ["0", "1", "0"]
