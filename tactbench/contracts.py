@@ -18,6 +18,7 @@ Shapes use ``T`` frames, ``N`` taxels, ``H × W`` pixels, ``C`` channels,
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Protocol, runtime_checkable
 
@@ -67,7 +68,8 @@ class Contract:
         if value is _REQUIRED:
             if member.required:
                 raise ContractError(f"{self.kind} {_describe(obj)} has no '{name}'")
-            return member.default
+            # a fresh copy of a mutable default ({} for profiles): callers may change it
+            return copy.copy(member.default)
         return value
 
     def problems(self, obj: Any) -> list[str]:

@@ -113,6 +113,8 @@ def _check_scene(scene: Scene) -> None:
     if bad_l:
         raise InputError(f"window length L must be ≥ 1, got {bad_l}")
     check_positive_int(scene.workers, "--workers")
+    if scene.threads is not None:  # torch refuses 0 only inside the cell, after the work
+        check_positive_int(scene.threads, "--threads")
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
 
 

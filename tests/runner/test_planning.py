@@ -18,6 +18,8 @@ from tactbench.runner.planning import input_kind
     ({"profile": "fast"}, InputError, "unknown profile 'fast'"),
     ({"executor": "slurm"}, InputError, "unknown executor"),
     ({"workers": 0}, InputError, "--workers must be ≥ 1"),
+    ({"threads": 0}, InputError, "--threads must be ≥ 1"),
+    ({"threads": -2}, InputError, "--threads must be ≥ 1"),
     ({"pixel_mm": 0.0}, InputError, "pixel size"),
 ])
 def test_the_whole_grid_is_checked_before_any_work(tmp_path, cache, tiny_scene, over, error,
