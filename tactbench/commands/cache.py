@@ -15,7 +15,7 @@ def cache_group() -> None:
 @cache_group.command("ls")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def cache_ls(as_json: bool) -> None:
-    """List cached encodings: encoder, dataset, frames, size."""
+    """List cached encodings: encoder, dataset, imaging, storage precision, frames, size."""
     from tactbench.runner import EncodingCache
 
     cache = EncodingCache()
@@ -27,14 +27,15 @@ def cache_ls(as_json: bool) -> None:
     from rich.table import Table
 
     table = Table(title=f"cached encodings in {cache.root}", title_justify="left")
-    for col in ("key", "encoder", "dataset", "imaging", "frames", "MB", "encode s"):
+    for col in ("key", "encoder", "dataset", "imaging", "precision", "frames", "MB",
+                "encode s"):
         table.add_column(col)
     for e in entries:
         imaging = e.get("imaging", {})
         img = (f"{imaging.get('pixel_mm')} mm {imaging.get('method')}"
                if imaging.get("kind") == "images" else imaging.get("kind", "?"))
         table.add_row(e["key"][:12], e.get("encoder", "?"), e.get("dataset", "?"), img,
-                      str(e.get("frames", "?")), f"{e['bytes'] / 2**20:.1f}",
+                      e["precision"], str(e.get("frames", "?")), f"{e['bytes'] / 2**20:.1f}",
                       f"{e.get('encode_seconds', 0):.1f}")
     Console().print(table)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from tactbench.cli import get_registry
-from tactbench.profiles import PROFILE_NAMES
+from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 
 
 @click.command("run")
@@ -33,6 +33,10 @@ from tactbench.profiles import PROFILE_NAMES
               help="quick: CPU-sized (default); paper: the study's settings (a GPU job).")
 @click.option("--pixel-mm", type=float, help="Tactile-image pixel size in mm "
               "[default: the profile's: quick 5, paper 1].")
+@click.option("--precision", type=click.Choice(PRECISIONS),
+              help="How cached encodings are stored: float32 (exact), float16, or uint8 "
+                   "(8 bits per channel value, as the study's images; a quarter of the "
+                   "disk). [default: the profile's: quick float32, paper uint8]")
 @click.option("--device", help="cpu, cuda, cuda:N or auto. [default: cpu]")
 @click.option("--threads", type=int, help="torch threads per cell [default: cores/workers].")
 @click.option("--executor", type=click.Choice(["local", "dask"]), help="[default: local]")
@@ -46,8 +50,8 @@ from tactbench.profiles import PROFILE_NAMES
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, profile,
-            pixel_mm, device, threads, executor, workers, scheduler, out, rerun, save_models,
-            as_json, no_plots) -> None:
+            pixel_mm, precision, device, threads, executor, workers, scheduler, out, rerun,
+            save_models, as_json, no_plots) -> None:
     """Run a benchmark grid and report accuracy beside its cost.
 
     Finished cells are kept in OUT/cells and skipped when the same command runs again;
@@ -63,9 +67,9 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
              "classifiers": list(classifiers) or None,
              "lengths": parse_lengths(lengths) if lengths else None,
              "seeds": list(seeds) or None, "split": split, "profile": profile,
-             "pixel_mm": pixel_mm, "device": device, "threads": threads,
-             "executor": executor, "workers": workers, "scheduler": scheduler, "out": out,
-             "rerun": rerun, "save_models": save_models}
+             "pixel_mm": pixel_mm, "precision": precision, "device": device,
+             "threads": threads, "executor": executor, "workers": workers,
+             "scheduler": scheduler, "out": out, "rerun": rerun, "save_models": save_models}
     fields.update({k: v for k, v in given.items() if v is not None})
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")

@@ -171,13 +171,20 @@ class Dataset:
         out = (np.asarray(values, dtype=np.float32) - offset) / np.float32(scale)
         return np.clip(out, 0.0, 1.0, out=out).astype(np.float32, copy=False)
 
-    def vectors(self) -> list[np.ndarray]:
+    def vectors(self, indices: Sequence[int] | None = None) -> list[np.ndarray]:
         """Each sample's normalised taxel values, float32 ``(T, N)`` in [0, 1].
 
-        Missing readings (NaN) become 0 (read as "no pressure").
+        Missing readings (NaN) become 0 (read as "no pressure"). ``indices`` (default:
+        every sample) picks the samples, in that order, so a caller can take the
+        dataset a chunk at a time.
         """
         return [np.nan_to_num(self.normalise(s.recording.values), nan=0.0)
-                for s in self.samples]
+                for s in self._picked(indices)]
+
+    def _picked(self, indices: Sequence[int] | None) -> Sequence[Sample]:
+        if indices is None:
+            return self.samples
+        return [self.samples[int(i)] for i in indices]
 
     # ---------------------------------------------------------------- imaging
 
@@ -198,19 +205,28 @@ class Dataset:
             self._imagers[key] = Imager(layout, pixel_mm=pixel_mm, method=method)
         return self._imagers[key]
 
-    def iter_images(self, pixel_mm: float = 1.0, method: str = "linear") -> Iterator[np.ndarray]:
+    def image_shape(self, pixel_mm: float = 1.0, method: str = "linear") -> tuple[int, int]:
+        """``(H, W)`` of this dataset's tactile images at ``pixel_mm``, without imaging any."""
+        return tuple(self.imager(pixel_mm, method).shape)  # type: ignore[return-value]
+
+    def iter_images(self, pixel_mm: float = 1.0, method: str = "linear",
+                    indices: Sequence[int] | None = None) -> Iterator[np.ndarray]:
         """Like :meth:`images`, one sample at a time."""
         imager = self.imager(pixel_mm, method)
-        for s in self.samples:
+        for s in self._picked(indices):
             img = imager.apply(self.normalise(s.recording.values))
             yield np.clip(img, 0.0, 1.0, out=img)
 
-    def images(self, pixel_mm: float = 1.0, method: str = "linear") -> list[np.ndarray]:
+    def images(self, pixel_mm: float = 1.0, method: str = "linear",
+               indices: Sequence[int] | None = None) -> list[np.ndarray]:
         """Each sample as tactile images, float32 ``(T, H, W)`` in [0, 1].
 
-        Raises :class:`~tactbench.errors.InputError` naming the dataset when it has no layout.
+        ``indices`` (default: every sample) picks the samples, in that order: the
+        runner images a dataset a chunk of samples at a time, so that its memory does
+        not grow with the dataset. Raises :class:`~tactbench.errors.InputError` naming
+        the dataset when it has no layout.
         """
-        return list(self.iter_images(pixel_mm, method))
+        return list(self.iter_images(pixel_mm, method, indices))
 
     # ----------------------------------------------------------- content hash
 

@@ -11,13 +11,22 @@ copying of processes. benchmarks/encoders.py measures both
 (docs/encoders.md, "Encoding a dataset"). Each worker's library thread pools
 (OpenCV, torch) are limited to one thread while :func:`encode_all` runs, so
 ``workers`` threads use ``workers`` cores instead of fighting over them.
+
+:func:`encode_chunks` is the streaming form the runner's cache uses: chunks of sequences
+come from an iterator (imaged as they are asked for), every encoder of a mapping encodes
+each chunk on one pool of workers kept for the whole stream, and the next chunk is
+already queued while the caller stores the previous one. Memory is a few chunks, not the
+dataset; the workers never wait at a chunk's end.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-from typing import Any, Callable, Iterator, Sequence
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -76,6 +85,38 @@ def _encode_one(encoder: Any, seq: np.ndarray) -> np.ndarray:
     return encoder.encode(seq)
 
 
+def _encode_timed(encoder: Any, seq: np.ndarray) -> tuple[np.ndarray, float]:
+    """``encoder.encode(seq)`` and the CPU seconds this thread spent on it (one core)."""
+    t0 = time.thread_time()
+    out = encoder.encode(seq)
+    return out, time.thread_time() - t0
+
+
+def _checked_args(mode: str, workers: int | None) -> int:
+    if mode not in MODES:
+        raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    workers = default_workers() if workers is None else int(workers)
+    if workers < 1:
+        raise InputError(f"workers must be ≥ 1, got {workers}")
+    return workers
+
+
+def _pool(workers: int, mode: str) -> tuple[Any, Any]:
+    """``(executor, limits)``: a pool of ``workers`` and the context to run it in."""
+    from concurrent import futures
+
+    if mode == "threads":
+        return futures.ThreadPoolExecutor(max_workers=workers), single_threaded_libraries()
+    import multiprocessing
+
+    # forkserver, not fork: a forked child of a process whose OpenMP/torch
+    # threads are running can deadlock.
+    ctx = multiprocessing.get_context("forkserver")
+    return (futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                                        initializer=_init_process),
+            contextlib.nullcontext())
+
+
 def encode_all(encoder: Any, sequences: Sequence[np.ndarray], *, workers: int | None = None,
                progress: Callable[[int, int], None] | None = None,
                mode: str = "threads") -> list[np.ndarray]:
@@ -94,12 +135,8 @@ def encode_all(encoder: Any, sequences: Sequence[np.ndarray], *, workers: int | 
     A bad sequence raises :class:`~tactbench.errors.InputError` naming its index; any
     other error (a bug in the encoder) keeps its type, with the index in a note.
     """
-    if mode not in MODES:
-        raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    workers = _checked_args(mode, workers)
     total = len(sequences)
-    workers = default_workers() if workers is None else int(workers)
-    if workers < 1:
-        raise InputError(f"workers must be ≥ 1, got {workers}")
     workers = min(workers, max(1, total))
     if progress:
         progress(0, total)
@@ -116,18 +153,7 @@ def encode_all(encoder: Any, sequences: Sequence[np.ndarray], *, workers: int | 
     from concurrent import futures
 
     results: list[np.ndarray | None] = [None] * total
-    if mode == "threads":
-        executor: futures.Executor = futures.ThreadPoolExecutor(max_workers=workers)
-        limits = single_threaded_libraries()
-    else:
-        import multiprocessing
-
-        # forkserver, not fork: a forked child of a process whose OpenMP/torch
-        # threads are running can deadlock.
-        ctx = multiprocessing.get_context("forkserver")
-        executor = futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                               initializer=_init_process)
-        limits = contextlib.nullcontext()
+    executor, limits = _pool(workers, mode)
     with limits, executor:
         pending = {executor.submit(_encode_one, encoder, seq): i
                    for i, seq in enumerate(sequences)}
@@ -156,3 +182,98 @@ def _checked(fn: Callable[..., np.ndarray], arg: Any, index: int) -> np.ndarray:
         if hasattr(exc, "add_note"):  # Python ≥ 3.11
             exc.add_note(f"while encoding sequence {index}")
         raise
+
+
+@dataclass
+class EncodedChunk:
+    """One chunk of :func:`encode_chunks`'s stream, encoded by every encoder."""
+
+    start: int  # index of the chunk's first sequence in the whole stream
+    encoded: dict[str, list[np.ndarray]]  # encoder name → ``(T_i, C, H, W)``, in input order
+    cpu_seconds: dict[str, float]  # encoder name → CPU seconds its encoding took, one core
+
+
+def encode_chunks(encoders: Mapping[str, Any], chunks: Iterable[Sequence[np.ndarray]], *,
+                  workers: int | None = None, mode: str = "threads", ahead: int = 1,
+                  total: int | None = None,
+                  progress: Callable[..., None] | None = None) -> Iterator[EncodedChunk]:
+    """Encode a stream of chunks of sequences with every encoder, chunk by chunk, in order.
+
+    Parameters
+    ----------
+    encoders : name → encoder (``encode(seq)``: ``(T, H, W)`` → ``(T, C, H, W)``)
+    chunks : an iterable of chunks, each a sequence of arrays ``(T_i, H, W)``; it is
+        read lazily, one chunk ahead of the chunk being handed back, so a generator
+        that images the next chunk runs while the workers encode
+    workers : sequences encoded at once (default: the usable cores); one pool of
+        workers serves the whole stream
+    ahead : chunks queued beyond the one being handed back (memory: about
+        ``ahead + 2`` chunks of inputs and ``ahead + 1`` of outputs)
+    total, progress : ``progress(done, total, encoder=name)`` after each sequence an
+        encoder finished (in input order, in the caller's thread); ``total`` is the
+        stream's sequence count if known
+
+    Yields one :class:`EncodedChunk` per input chunk. Errors are those of
+    :func:`encode_all`, with the sequence's index in the whole stream.
+    """
+    workers = _checked_args(mode, workers)
+    ahead = int(ahead)
+    if ahead < 0:
+        raise InputError(f"ahead must be ≥ 0, got {ahead}")
+    done = dict.fromkeys(encoders, 0)
+
+    def report(name: str) -> None:
+        done[name] += 1
+        if progress:
+            progress(done[name], total, encoder=name)
+
+    if workers == 1 or mode == "serial":
+        start = 0
+        for chunk in chunks:
+            encoded: dict[str, list[np.ndarray]] = {}
+            seconds = dict.fromkeys(encoders, 0.0)
+            for name, encoder in encoders.items():
+                encoded[name] = []
+                for i, seq in enumerate(chunk):
+                    out, cpu = _checked(lambda s=seq: _encode_timed(encoder, s), None,
+                                        start + i)
+                    encoded[name].append(out)
+                    seconds[name] += cpu
+                    report(name)
+            yield EncodedChunk(start, encoded, seconds)
+            start += len(chunk)
+        return
+
+    def collect(start: int, pending: dict[str, list[Any]]) -> EncodedChunk:
+        encoded: dict[str, list[np.ndarray]] = {}
+        seconds = dict.fromkeys(pending, 0.0)
+        for name, futs in pending.items():
+            encoded[name] = []
+            for i, fut in enumerate(futs):
+                out, cpu = _checked(fut.result, None, start + i)
+                encoded[name].append(out)
+                seconds[name] += cpu
+                report(name)
+        return EncodedChunk(start, encoded, seconds)
+
+    executor, limits = _pool(workers, mode)
+    queue: deque[tuple[int, dict[str, list[Any]]]] = deque()
+    with limits, executor:
+        try:
+            start = 0
+            for chunk in chunks:
+                queue.append((start, {name: [executor.submit(_encode_timed, enc, seq)
+                                             for seq in chunk]
+                                      for name, enc in encoders.items()}))
+                start += len(chunk)
+                del chunk  # the queued tasks hold the inputs until they are done
+                while len(queue) > ahead:
+                    yield collect(*queue.popleft())
+            while queue:
+                yield collect(*queue.popleft())
+        except BaseException:
+            for _, pending in queue:
+                for futs in pending.values():
+                    for fut in futs:
+                        fut.cancel()
+            raise

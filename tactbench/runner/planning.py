@@ -2,8 +2,10 @@
 
 A cell is one point of the grid (encoder × classifier × L × seed). Its *identity* is
 everything that decides its result (dataset content hash, split, imaging, encoder and
-version, classifier with all options, profile, L, seed); the hash of the identity is the
-cell's key, which names its result file, so a changed setting is a new cell.
+version, storage precision, classifier with all options, profile, L, seed); the hash of
+the identity is the cell's key, which names its result file, so a changed setting is a
+new cell. The precision is written into the identity only when it is not ``float32``, so
+float32 cells keep the keys they had before precisions existed.
 
 (Named ``planning``, not ``plan``: the package re-exports the function :func:`plan`,
 which would hide a submodule of the same name.)
@@ -80,6 +82,12 @@ def imaging_identity(scene: Scene, kind: str) -> dict[str, Any]:
     return {"kind": "images", "pixel_mm": scene.resolved_pixel_mm(), "method": scene.imaging}
 
 
+def storage_identity(precision: str) -> dict[str, Any]:
+    """What the storage precision adds to a cell identity or cache key: nothing for
+    ``float32`` (so keys made before precisions existed stay valid), else ``precision``."""
+    return {} if precision == "float32" else {"precision": precision}
+
+
 def input_kind(frame_rank: int | None, has_layout: bool) -> str:
     """``"vectors"`` or ``"images"``: what a classifier of ``frame_rank`` is fed.
 
@@ -102,9 +110,10 @@ def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dic
 
 def _check_scene(scene: Scene) -> None:
     from tactbench.data.splits import SPLITS
-    from tactbench.profiles import get_profile
+    from tactbench.profiles import PRECISIONS, get_profile
 
     get_profile(scene.profile)
+    check_choice(scene.resolved_precision(), "precision", PRECISIONS)
     check_choice(scene.split, "split", tuple(SPLITS))
     check_choice(scene.executor, "executor", EXECUTORS)
     if not scene.encoders or not scene.classifiers or not scene.lengths or not scene.seeds:
@@ -190,6 +199,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
 
     cells: list[Cell] = []
     identities: dict[str, dict[str, Any]] = {}
+    storage = storage_identity(scene.resolved_precision())
     for enc in encoders:
         for clf in classifier_specs:
             for length in scene.lengths:
@@ -203,6 +213,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                         "imaging": imaging_identity(scene, kinds[clf]),
                         "encoder": enc,
                         "encoder_version": versions[enc],
+                        **storage,
                         "classifier": clf,
                         "profile": scene.profile,
                         "L": int(length),

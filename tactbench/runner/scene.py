@@ -35,6 +35,7 @@ class Scene:
     profile: str = "quick"
     pixel_mm: float | None = None  # None: the profile's
     imaging: str = "linear"
+    precision: str | None = None  # storage of cached encodings (PRECISIONS); None: the profile's
     device: str = "cpu"
     threads: int | None = None  # torch threads per cell; None: cores / workers
     executor: str = "local"
@@ -51,6 +52,14 @@ class Scene:
         from tactbench.profiles import get_profile
 
         return get_profile(self.profile).pixel_mm
+
+    def resolved_precision(self) -> str:
+        """How cached encodings are stored: the scene's precision, else its profile's."""
+        if self.precision is not None:
+            return str(self.precision)
+        from tactbench.profiles import get_profile
+
+        return get_profile(self.profile).precision
 
     def resolved_threads(self) -> int:
         """torch threads per cell: the scene's, else this machine's cores shared by workers."""

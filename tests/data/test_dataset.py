@@ -59,6 +59,16 @@ def test_images_are_float32_in_unit_range(make_dataset):
         assert img.min() >= 0 and img.max() <= 1
 
 
+def test_a_chunk_of_samples_is_imaged_as_in_the_whole_dataset(make_dataset):
+    ds = make_dataset()
+    whole, vectors = ds.images(pixel_mm=2.0), ds.vectors()
+    assert ds.image_shape(2.0) == whole[0].shape[1:]
+    for got, i in zip(ds.images(pixel_mm=2.0, indices=range(2, 5)), range(2, 5)):
+        np.testing.assert_array_equal(got, whole[i])
+    for got, i in zip(ds.vectors(indices=[4, 1]), [4, 1]):
+        np.testing.assert_array_equal(got, vectors[i])
+
+
 def test_images_without_a_layout_say_so(make_dataset):
     ds = make_dataset(layout=False)
     with pytest.raises(ValueError, match="dataset 'tiny' has no taxel layout"):

@@ -1,10 +1,16 @@
-"""Encodings on disk: whole folders or none, keyed by everything that decides them."""
+"""Encodings on disk: whole folders or none, keyed by everything that decides them,
+streamed a chunk at a time, stored at a precision, read back a sequence at a time."""
 
 from __future__ import annotations
 
-import numpy as np
+import json
+import pickle
 
-from tactbench.runner import EncodingCache, load_encoding
+import numpy as np
+import pytest
+
+from tactbench.runner import EncodingCache, ensure_encodings, load_encoding, plan
+from tactbench.runner.cache import Storage, chunk_bounds
 
 
 def test_write_and_load_round_trip(tmp_path):
@@ -12,22 +18,249 @@ def test_write_and_load_round_trip(tmp_path):
     seqs = [np.full((t, 2, 3, 4), t, np.float32) for t in (3, 1, 5)]
     key = cache.key("hash", {"kind": "images", "pixel_mm": 5.0}, "raw", "1")
     assert not cache.has(key)
-    cache.write(key, seqs, {"encoder": "raw", "frames": 9})
+    cache.write(key, seqs, {"encoder": "raw"})
     assert cache.has(key)
     loaded, meta = load_encoding(cache.path(key))
     assert [s.shape for s in loaded] == [s.shape for s in seqs]
     assert all(np.array_equal(a, b) for a, b in zip(loaded, seqs))
     assert meta["encoder"] == "raw" and "created" in meta
+    assert (meta["precision"], meta["dtype"], meta["n_frames"], meta["frames"],
+            meta["frame_shape"], meta["scale"], meta["offset"]) == \
+           ("float32", "float32", 9, 9, [2, 3, 4], [1.0, 1.0], [0.0, 0.0])
     (entry,) = cache.entries()
     assert entry["key"] == key and entry["bytes"] > 9 * 24 * 4
+    assert entry["precision"] == "float32"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no leftovers
     assert cache.clear() == 1 and cache.entries() == []
 
 
-def test_keys_change_with_imaging_encoder_and_version():
+def test_a_failed_write_leaves_no_entry(tmp_path):
+    cache = EncodingCache(tmp_path)
+    with pytest.raises(ValueError, match=r"sequence 1 has shape \(2, 3\), expected \(2, 4\)"):
+        cache.write("k", [np.zeros((2, 4), np.float32), np.zeros((2, 3), np.float32)], {})
+    with pytest.raises(ValueError, match="got 1 of its 2 sequences"):
+        with cache.entry("k", [1, 1], (4,), Storage.for_channels("float32", 1)) as writer:
+            writer.append(np.zeros((1, 4), np.float32))
+    assert not cache.has("k") and list(tmp_path.iterdir()) == []
+
+
+def test_keys_change_with_imaging_encoder_version_and_precision():
     cache_key = EncodingCache.key
     base = cache_key(None, "h", {"kind": "vectors"}, "raw", "1")
     assert base != cache_key(None, "h2", {"kind": "vectors"}, "raw", "1")
     assert base != cache_key(None, "h", {"kind": "images"}, "raw", "1")
     assert base != cache_key(None, "h", {"kind": "vectors"}, "frame-diff", "1")
     assert base != cache_key(None, "h", {"kind": "vectors"}, "raw", "2")
+    others = {cache_key(None, "h", {"kind": "vectors"}, "raw", "1", p)
+              for p in ("float16", "uint8")}
+    assert len(others) == 2 and base not in others
+
+
+def test_float32_keys_are_the_keys_made_before_precisions_existed():
+    # values computed by the cache before storage precisions were added
+    assert EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1") == \
+        EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1", "float32") == \
+        "cc1cbaef06a00073f7131b24"
+    assert EncodingCache.key(None, "h", {"kind": "images", "pixel_mm": 5.0,
+                                         "method": "linear"}, "farneback", "1") == \
+        "c89ed45ea1faad1876b4577d"
+
+
+# --------------------------------------------------------------------- precision
+
+
+def _values(shape, ranges, seed=0):
+    rng = np.random.default_rng(seed)
+    lo = np.array([r[0] for r in ranges], np.float32).reshape(1, -1, 1, 1)
+    hi = np.array([r[1] for r in ranges], np.float32).reshape(1, -1, 1, 1)
+    return (lo + rng.random(shape, dtype=np.float32) * (hi - lo)).astype(np.float32)
+
+
+def test_uint8_is_within_half_a_quantum_of_each_channel_and_clips_outside(tmp_path):
+    ranges = ((0.0, 1.0), (-1.0, 1.0), (0.0, 10.0))
+    seqs = [_values((t, 3, 5, 6), ranges, seed=t) for t in (4, 2, 7)]
+    seqs[0][0, 0, 0, 0], seqs[0][0, 1, 0, 0] = 1.5, -3.0  # outside their ranges
+    cache = EncodingCache(tmp_path)
+    cache.write("q", seqs, {}, precision="uint8", ranges=ranges)
+    loaded, meta = load_encoding(cache.path("q"))
+    assert meta["dtype"] == "uint8" and (tmp_path / "q" / "frames.npy").stat().st_size < \
+        13 * 3 * 30 + 256  # one byte a value, and the .npy header
+    quantum = np.array([(hi - lo) / 255 for lo, hi in ranges])
+    np.testing.assert_allclose(meta["scale"], quantum, rtol=1e-6)
+    assert meta["offset"] == [0.0, -1.0, 0.0]
+    clipped = [np.clip(s, np.reshape([r[0] for r in ranges], (1, 3, 1, 1)),
+                       np.reshape([r[1] for r in ranges], (1, 3, 1, 1))) for s in seqs]
+    for want, got in zip(clipped, loaded):
+        got = np.asarray(got)
+        assert got.dtype == np.float32
+        err = np.abs(got - want).max(axis=(0, 2, 3))
+        assert np.all(err <= quantum / 2 + 1e-6), err
+    assert np.asarray(loaded[0])[0, 0, 0, 0] == 1.0
+    assert np.asarray(loaded[0])[0, 1, 0, 0] == -1.0
+
+
+def test_float16_is_within_a_thousandth_relative(tmp_path):
+    seqs = [_values((t, 2, 4, 4), ((0.0, 1.0), (0.0, 1.0)), seed=t) for t in (3, 5)]
+    cache = EncodingCache(tmp_path)
+    cache.write("h", seqs, {}, precision="float16")
+    loaded, meta = load_encoding(cache.path("h"))
+    assert meta["precision"] == meta["dtype"] == "float16"
+    for want, got in zip(seqs, loaded):
+        np.testing.assert_allclose(np.asarray(got), want, rtol=1e-3, atol=1e-7)
+
+
+def test_taxel_vectors_are_one_channel():
+    storage = Storage.for_channels("uint8", 1)
+    vectors = np.linspace(0, 1, 12, dtype=np.float32).reshape(3, 4)
+    back = storage.decode(storage.encode(vectors))
+    assert back.shape == (3, 4) and np.abs(back - vectors).max() <= 0.5 / 255 + 1e-7
+    with pytest.raises(ValueError, match="2 value ranges for 3 channels"):
+        Storage.for_channels("uint8", 3, ((0, 1), (0, 1)))
+    with pytest.raises(ValueError, match="precision"):
+        Storage.for_channels("int4", 1)
+
+
+# ------------------------------------------------------------------------ reader
+
+
+@pytest.fixture
+def stored(tmp_path):
+    """A uint8 entry of three sequences and the float32 values it was made from."""
+    seqs = [_values((t, 2, 3, 4), ((0.0, 1.0), (0.0, 1.0)), seed=t) for t in (5, 1, 3)]
+    cache = EncodingCache(tmp_path)
+    cache.write("r", seqs, {}, precision="uint8")
+    loaded, _ = load_encoding(cache.path("r"))
+    return loaded, [Storage.for_channels("uint8", 2).decode(
+        Storage.for_channels("uint8", 2).encode(s)) for s in seqs]
+
+
+def test_a_stored_sequence_reads_like_a_float32_array(stored):
+    loaded, want = stored
+    s, w = loaded[0], want[0]
+    assert (s.shape, len(s), s.ndim, s.dtype, s.size) == ((5, 2, 3, 4), 5, 4, np.float32,
+                                                          120)
+    for index in (slice(1, 4), slice(3, None), slice(None, -2), slice(4, 9), slice(3, 1),
+                  2, -1, slice(None, None, 2), slice(None, None, -1), [4, 0, 2],
+                  (slice(1, 3), 1), (0, 1, 2), Ellipsis):
+        got = s[index]
+        assert got.dtype == np.float32, index
+        np.testing.assert_array_equal(got, w[index], err_msg=str(index))
+    np.testing.assert_array_equal(np.asarray(s), w)
+    whole = np.ascontiguousarray(s, dtype=np.float32)
+    assert whole.flags.c_contiguous and whole.flags.writeable
+    np.testing.assert_array_equal(whole, w)
+    assert np.asarray(s, dtype=np.float64).dtype == np.float64
+    with pytest.raises(IndexError):
+        s[5]
+    assert [x.shape for x in loaded] == [(5, 2, 3, 4), (1, 2, 3, 4), (3, 2, 3, 4)]
+
+
+def test_stored_sequences_pickle_and_are_read_in_another_process(stored):
+    import concurrent.futures
+    import multiprocessing
+
+    loaded, want = stored
+    again = pickle.loads(pickle.dumps(loaded))
+    np.testing.assert_array_equal(again[2][1:], want[2][1:])
+    ctx = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=ctx) as pool:
+        np.testing.assert_array_equal(pool.submit(np.asarray, loaded[0]).result(), want[0])
+
+
+def test_reading_an_entry_sequence_by_sequence_keeps_memory_small(tmp_path):
+    """48 MiB on disk, read whole, one sequence at a time: the process grows by about
+    one sequence (1 MiB), not by the entry (a memory map's touched pages would stay)."""
+    cache = EncodingCache(tmp_path)
+    frame = (4, 64, 64)  # 64 KiB a frame
+    with cache.entry("big", [16] * 48, frame, Storage.for_channels("float32", 4)) as w:
+        for i in range(48):
+            w.append(np.full((16, *frame), i, np.float32))
+    loaded, _ = load_encoding(cache.path("big"))
+
+    def rss_mib() -> float:
+        with open("/proc/self/status") as fh:
+            line = next(x for x in fh if x.startswith("VmRSS:"))
+        return int(line.split()[1]) / 1024
+
+    before = rss_mib()
+    total = 0.0
+    for i, seq in enumerate(loaded):
+        total += float(seq[:].mean())
+        assert seq[15, 3, 63, 63] == i
+    assert total == sum(range(48))
+    assert rss_mib() - before < 12
+
+
+def test_an_entry_written_before_precisions_is_read_as_float32(tmp_path):
+    folder = tmp_path / "old"
+    folder.mkdir()
+    frames = np.lib.format.open_memmap(folder / "frames.npy", mode="w+", dtype=np.float32,
+                                       shape=(4, 3))
+    frames[:] = np.arange(12).reshape(4, 3)
+    frames.flush()
+    del frames
+    np.save(folder / "offsets.npy", np.array([0, 1, 4], np.int64))
+    (folder / "meta.json").write_text(json.dumps({"encoder": "raw", "frames": 4}))
+    loaded, meta = load_encoding(folder)
+    np.testing.assert_array_equal(loaded[1][:], np.arange(3, 12).reshape(3, 3))
+    assert EncodingCache(tmp_path).entries()[0]["precision"] == "float32"
+
+
+# --------------------------------------------------------------------- streaming
+
+
+def test_chunk_bounds_respect_the_budget_and_take_every_sample():
+    assert chunk_bounds([3, 3, 3, 3], 10, budget=60) == [(0, 2), (2, 4)]
+    assert chunk_bounds([3, 9, 1], 10, budget=40) == [(0, 1), (1, 2), (2, 3)]  # a long one
+    assert chunk_bounds([2] * 5, 1, budget=1000) == [(0, 5)]
+    assert chunk_bounds([], 4) == []
+
+
+def test_streaming_writes_exactly_what_the_in_memory_path_wrote(tiny_scene, cache):
+    """Several chunks (the budget holds two samples' images), every encoder of the
+    plan, bit-identical to imaging and encoding the whole dataset at once."""
+    from tactbench.encoders.parallel import encode_all
+
+    p = plan(tiny_scene(encoders=["raw", "farneback"], classifiers=["logreg"]))
+    ds, pixel_mm = p.dataset, p.scene.resolved_pixel_mm()
+    h, w = ds.image_shape(pixel_mm)
+    budget = 4 * h * w * int(ds.lengths()[:2].sum())
+    assert len(chunk_bounds(ds.lengths(), 4 * h * w, budget)) >= 4
+    folders = ensure_encodings(p, cache, p.cells, chunk_bytes=budget)
+    images = ds.images(pixel_mm=pixel_mm)
+    for enc in ("raw", "farneback"):
+        loaded, meta = load_encoding(folders[(enc, "images")])
+        expected = encode_all(p.encoders[enc], images, workers=1)
+        assert len(loaded) == len(expected) == len(ds)
+        for got, want in zip(loaded, expected):
+            assert np.array_equal(np.asarray(got), want)
+        assert meta["chunk_bytes"] == budget and meta["n_frames"] == sum(map(len, images))
+        assert meta["imaging_seconds"] > 0 and meta["encode_seconds"] >= 0
+        assert meta["frame_shape"] == [len(meta["channels"]), h, w]
+        assert meta["peak_rss_mb"] > 0 and meta["workers"] >= 1
+
+
+def test_taxel_vectors_stream_into_the_cache(tiny_scene, cache, nolayout_dataset):
+    from tactbench.datasets.loading import load_dataset
+
+    p = plan(tiny_scene(dataset=str(nolayout_dataset), encoders=["raw"],
+                        classifiers=["logreg"], precision="uint8"))
+    folders = ensure_encodings(p, cache, p.cells, chunk_bytes=100)
+    loaded, meta = load_encoding(folders[("raw", "vectors")])
+    assert meta["precision"] == "uint8" and meta["frame_shape"] == [5]
+    for got, want in zip(loaded, load_dataset(str(nolayout_dataset)).vectors()):
+        assert got.shape == want.shape
+        assert np.abs(np.asarray(got) - want).max() <= 0.5 / 255 + 1e-7
+
+
+def test_a_run_at_uint8_completes_and_its_rows_record_the_precision(tiny_scene, cache):
+    from tactbench.runner import run
+
+    result = run(tiny_scene(encoders=["frame-diff"], classifiers=["logreg"], seeds=[0],
+                            precision="uint8"), progress=False, cache=cache)
+    (row,) = result.rows
+    assert row["status"] == "ok" and row["precision"] == "uint8"
+    assert row["run"]["scene"]["precision"] == "uint8"
+    (entry,) = cache.entries()
+    assert entry["precision"] == "uint8" and entry["encoder"] == "frame-diff"
+    assert entry["scale"] == pytest.approx([1 / 255, 2 / 255]) and entry["offset"] == [0, -1]
