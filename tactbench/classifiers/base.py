@@ -20,8 +20,9 @@ Labels are ``0 .. K-1``; ``K`` comes from the ``classes`` option, else from
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Iterator
+from typing import Any, Callable, ClassVar, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -37,8 +38,15 @@ from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 from tactbench.seeds import derive_seed
 
-#: Above this size the training frames are not resized up front but per batch.
-MAX_BANK_BYTES = 2 * 1024 ** 3
+#: The largest :class:`FrameBank` (every training frame prepared once and held for the
+#: whole fit), in bytes: a budget that does not grow with the dataset. Above it, windows
+#: are read from the sequences and prepared per batch (:class:`WindowBatches`), so a fit's
+#: memory is O(min(dataset, budget) + batch + model). ``$TACTBENCH_BANK_MIB`` overrides
+#: it (``0``: always per batch); the results are the same either way.
+BANK_BUDGET_BYTES = 512 * 2 ** 20
+#: Raw (unprepared) frames read from the sequences at once, in bytes: a batch is read
+#: in sub-batches of at most this size, each prepared (resized) before the next is read.
+READ_CHUNK_BYTES = 64 * 2 ** 20
 #: Frames sampled to estimate the normalisation statistics.
 NORM_SAMPLE_FRAMES = 4096
 #: The ``optimizer`` and ``schedule`` options :func:`.training.train_loop` accepts.
@@ -195,9 +203,13 @@ class FrameBank:
         offsets = np.concatenate([[0], np.cumsum(lengths)])
         first = prepare(torch.from_numpy(np.ascontiguousarray(seqs[0][:1], dtype=np.float32)))
         bank = torch.zeros((int(offsets[-1]) + 1, *first.shape[1:]), dtype=dtype or first.dtype)
+        # Each sequence is read in chunks of at most READ_CHUNK_BYTES raw frames.
+        step = _frames_per_chunk(windows.frame_shape)
         for i, seq in enumerate(seqs):
-            chunk = torch.from_numpy(np.ascontiguousarray(seq, dtype=np.float32))
-            bank[offsets[i]:offsets[i + 1]] = prepare(chunk)
+            for a in range(0, int(lengths[i]), step):
+                b = min(int(lengths[i]), a + step)
+                chunk = torch.from_numpy(np.ascontiguousarray(seq[a:b], dtype=np.float32))
+                bank[offsets[i] + a:offsets[i] + b] = prepare(chunk)
         blank = len(bank) - 1
         steps = np.arange(windows.length, dtype=np.int64)
         pos = windows.starts[:, None] + steps[None, :]
@@ -209,6 +221,7 @@ class FrameBank:
 
     @staticmethod
     def nbytes(windows: Windows, prepared_shape: tuple[int, ...]) -> int:
+        """Bytes of the bank of ``windows`` with frames of ``prepared_shape`` (float32)."""
         total = sum(s.shape[0] for s in windows.sequences) + 1
         return total * int(np.prod(prepared_shape)) * 4
 
@@ -224,6 +237,140 @@ class FrameBank:
         sel = torch.as_tensor(np.ascontiguousarray(idx), dtype=torch.int64,
                               device=self.index.device)
         return self.frames[self.index[sel]], self.labels[sel]
+
+
+def bank_budget_bytes() -> int:
+    """The frame-bank budget in bytes: ``$TACTBENCH_BANK_MIB`` (MiB) when set, else
+    :data:`BANK_BUDGET_BYTES`."""
+    text = os.environ.get("TACTBENCH_BANK_MIB", "").strip()
+    if not text:
+        return BANK_BUDGET_BYTES
+    try:
+        mib = float(text)
+    except ValueError:
+        mib = -1.0
+    if not mib >= 0:
+        raise InputError(f"TACTBENCH_BANK_MIB must be a number of MiB ≥ 0, got {text!r}")
+    return int(mib * 2 ** 20)
+
+
+def _frames_per_chunk(frame_shape: Sequence[int], frames_per_item: int = 1) -> int:
+    """How many items of ``frames_per_item`` raw float32 frames fit in READ_CHUNK_BYTES
+    (at least one)."""
+    item = 4 * frames_per_item * int(np.prod(frame_shape, dtype=np.int64))
+    return max(1, READ_CHUNK_BYTES // max(item, 1))
+
+
+def read_windows(windows: Windows | np.ndarray, index: np.ndarray | slice,
+                 prepare: Callable[[Any], Any] | None = None):
+    """Windows ``index`` as one float32 tensor ``(B, L, *prepared frame)``.
+
+    ``windows`` is a :class:`Windows` (frames read from its sequences on demand) or an
+    array ``(N, L, *frame_shape)``. Raw frames are read in sub-batches of at most
+    :data:`READ_CHUNK_BYTES`, and each sub-batch is passed through ``prepare``
+    (``(n, *frame_shape)`` → ``(n, *prepared)``, e.g. the network's resize) before the
+    next is read: the memory is the prepared batch plus one raw sub-batch. Past a
+    sequence's end, frames are blank (zero) before ``prepare``.
+    """
+    import torch
+
+    idx = np.arange(len(windows))[index] if isinstance(index, slice) else np.asarray(index)
+    length = windows.length if isinstance(windows, Windows) else windows.shape[1]
+    frame_shape = windows.frame_shape if isinstance(windows, Windows) else windows.shape[2:]
+    step = _frames_per_chunk(frame_shape, length)
+    out = None
+    for lo in range(0, len(idx), step):
+        part = idx[lo:lo + step]
+        raw = (windows.batch(part) if isinstance(windows, Windows)
+               else np.ascontiguousarray(windows[part], dtype=np.float32))
+        x = torch.from_numpy(raw)
+        if prepare is not None:
+            b = x.shape[0]
+            x = prepare(x.reshape(b * length, *x.shape[2:]))
+            x = x.reshape(b, length, *x.shape[1:])
+        if out is None:
+            if len(part) == len(idx):
+                return x
+            out = torch.empty((len(idx), *x.shape[1:]), dtype=x.dtype)
+        out[lo:lo + len(part)] = x
+    if out is None:  # no windows asked for
+        x = torch.zeros((0, *frame_shape))
+        x = prepare(x) if prepare is not None else x
+        return x.reshape(0, length, *x.shape[1:])
+    return out
+
+
+class WindowBatches:
+    """A map-style torch dataset whose items are whole batches, read lazily.
+
+    ``batches[idx]`` (``idx``: an array of window indices) is ``(x, y)``: ``x`` the
+    windows read and prepared by :func:`read_windows`, float32 ``(B, L, *prepared)``,
+    and ``y`` their labels, int64 ``(B,)``. Nothing is held but the windows' positions,
+    so memory is O(batch) whatever the dataset's size. Give it to
+    ``torch.utils.data.DataLoader(batches, batch_size=None, sampler=[idx, ...],
+    num_workers=n)`` to read ahead in worker processes.
+    """
+
+    def __init__(self, windows: Windows, prepare: Callable[[Any], Any] | None = None) -> None:
+        self.windows = windows
+        self.prepare = prepare
+
+    def __len__(self) -> int:
+        return len(self.windows)
+
+    def __getitem__(self, idx):
+        import torch
+
+        idx = np.asarray(idx)
+        with torch.no_grad():
+            x = read_windows(self.windows, idx, self.prepare)
+        return x, torch.from_numpy(np.asarray(self.windows.labels[idx], dtype=np.int64))
+
+
+def streamed_mean_std(chunks: Iterable[Any]) -> tuple[Any, Any]:
+    """Mean and standard deviation over axis 1 (channels, taxels or features) of chunks
+    ``(n_i, D, *spatial)`` that are never held together: per-chunk mean and squared
+    deviations in float64, merged (Chan et al.); Bessel's correction, like ``torch.std``.
+    Returns two float64 tensors ``(D,)``; equal to the whole-array statistics up to
+    rounding."""
+    import torch
+
+    n, mean, m2 = 0, None, None
+    for chunk in chunks:
+        x = chunk.double()
+        dims = [0] + list(range(2, x.ndim))
+        k = x.numel() // x.shape[1] if x.ndim > 1 else 0
+        if k == 0:
+            continue
+        mu = x.mean(dim=dims)
+        sq = ((x - mu.reshape(1, -1, *[1] * (x.ndim - 2))) ** 2).sum(dim=dims)
+        if mean is None:
+            n, mean, m2 = k, mu, sq
+            continue
+        delta = mu - mean
+        mean = mean + delta * (k / (n + k))
+        m2 = m2 + sq + delta ** 2 * (n * k / (n + k))
+        n += k
+    if mean is None:
+        raise InputError("no frames to compute statistics from")
+    return mean, torch.sqrt(m2 / max(n - 1, 1))
+
+
+def loader_workers(device) -> int:
+    """DataLoader worker processes that read ahead during a per-batch fit:
+    ``$TACTBENCH_LOADER_WORKERS`` when set, else 0 on the CPU (where torch's own
+    threads already use the cores; see docs/classifiers.md) and up to 4 with CUDA."""
+    text = os.environ.get("TACTBENCH_LOADER_WORKERS", "").strip()
+    if text:
+        try:
+            value = int(text)
+        except ValueError:
+            raise InputError(f"TACTBENCH_LOADER_WORKERS must be an integer ≥ 0, "
+                             f"got {text!r}") from None
+        return check_positive_int(value, "TACTBENCH_LOADER_WORKERS", minimum=0)
+    if getattr(device, "type", "cpu") != "cuda":
+        return 0
+    return max(0, min(4, (os.cpu_count() or 1) - 1))
 
 
 @dataclass(eq=False, repr=False, kw_only=True)
@@ -318,7 +465,7 @@ class TorchSequenceClassifier(SequenceClassifier):
             net = self._build_net(tuple(train.frame_shape), k, pretrained=True)
             with torch.no_grad():
                 self._set_normalization(net, train, seed)
-            get_batch = self._batches(net, train, dev)
+            get_batch, load_batches = self._batches(net, train, dev, report)
             evaluate = None
             if val is not None:
                 def evaluate() -> float:
@@ -329,7 +476,8 @@ class TorchSequenceClassifier(SequenceClassifier):
             self.length = train.length
             self._device, self._precision = dev, precision
             try:
-                train_loop(net, get_batch, n_windows=len(train), report=report,
+                train_loop(net, get_batch, load_batches=load_batches,
+                           n_windows=len(train), report=report,
                            epochs=self.epochs, batch_size=self.batch_size,
                            windows_per_epoch=self.windows_per_epoch, optimizer=self.optimizer,
                            lr=self.lr, momentum=self.momentum, weight_decay=self.weight_decay,
@@ -367,6 +515,10 @@ class TorchSequenceClassifier(SequenceClassifier):
         return {}
 
     def _set_normalization(self, net, train: Windows, seed: int) -> None:
+        """Mean and std of up to :data:`NORM_SAMPLE_FRAMES` seeded training frames after
+        ``net.prepare``. The sampled frames are read a few sequences at a time and
+        prepared as they come; the prepared sample is kept whole (exactly today's
+        statistics) when it fits the frame-bank budget, else merged chunk by chunk."""
         import torch
 
         rng = np.random.default_rng(derive_seed(seed, self.name, "normalize"))
@@ -376,18 +528,45 @@ class TorchSequenceClassifier(SequenceClassifier):
         flat = np.sort(rng.choice(total, size=min(total, NORM_SAMPLE_FRAMES), replace=False))
         offsets = np.concatenate([[0], np.cumsum(lengths)])
         which = np.searchsorted(offsets, flat, side="right") - 1
-        frames = np.stack([seqs[i][t - offsets[i]] for i, t in zip(which, flat)])
-        prepared = net.prepare(torch.from_numpy(frames.astype(np.float32, copy=False)))
-        mean, std = self._normalization(prepared)
+        step = _frames_per_chunk(train.frame_shape)
+
+        def prepared_chunks():
+            for lo in range(0, len(flat), step):
+                frames = []
+                w, t = which[lo:lo + step], flat[lo:lo + step] - offsets[which[lo:lo + step]]
+                for i in np.unique(w):
+                    ts = t[w == i]
+                    if 2 * len(ts) >= ts[-1] - ts[0] + 1:  # dense: one read of the span
+                        span = np.asarray(seqs[i][int(ts[0]):int(ts[-1]) + 1],
+                                          dtype=np.float32)
+                        frames.append(span[ts - ts[0]])
+                    else:  # sparse: frame by frame
+                        frames += [np.asarray(seqs[i][int(j):int(j) + 1], dtype=np.float32)
+                                   for j in ts]
+                yield net.prepare(torch.from_numpy(np.concatenate(frames)))
+
+        probe = net.prepare(torch.zeros((1, *train.frame_shape)))
+        if len(flat) * probe[0].numel() * 4 <= bank_budget_bytes():
+            mean, std = self._normalization(torch.cat(list(prepared_chunks())))
+        else:
+            mean, std = streamed_mean_std(prepared_chunks())
         net.normalize.set(mean, std)
 
-    def _batches(self, net, train: Windows, dev):
-        """``get_batch(indices) → (x, y)`` on ``dev``: from a :class:`FrameBank` of frames
-        resized once when it fits in memory, else materialised and resized per batch."""
+    def _batches(self, net, train: Windows, dev, report: FitReport):
+        """``(get_batch, load_batches)`` for :func:`.training.train_loop` on ``dev``.
+
+        From a :class:`FrameBank` of frames prepared once when it fits
+        :func:`bank_budget_bytes`, else read and prepared per batch
+        (:class:`WindowBatches`, with :func:`loader_workers` processes reading ahead).
+        Both give the same batches. ``report`` records the path taken.
+        """
         import torch
 
         probe = net.prepare(torch.zeros((1, *train.frame_shape)))
-        if FrameBank.nbytes(train, tuple(probe.shape[1:])) <= MAX_BANK_BYTES:
+        bank_bytes = FrameBank.nbytes(train, tuple(probe.shape[1:]))
+        report.bank_mb = bank_bytes / 2 ** 20
+        if bank_bytes <= bank_budget_bytes():
+            report.batches = "frame bank"
             with torch.no_grad():
                 bank = FrameBank(train, net.prepare)
             if dev.type == "cuda":
@@ -396,13 +575,30 @@ class TorchSequenceClassifier(SequenceClassifier):
             def get_batch(idx):
                 x, y = bank.batch(idx)
                 return x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
-            return get_batch
-        labels = torch.from_numpy(np.asarray(train.labels, dtype=np.int64))
+            return get_batch, None
+        report.batches = "per batch"
+        reader = WindowBatches(train, net.prepare)
+        workers = loader_workers(dev)
+        report.loader_workers = workers
 
-        def get_streamed(idx):
-            x = torch.from_numpy(train.batch(np.asarray(idx)))
-            return x.to(dev, non_blocking=True), labels[torch.as_tensor(idx)].to(dev)
-        return get_streamed
+        def get_read(idx):
+            x, y = reader[idx]
+            return x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+
+        if workers == 0:
+            return get_read, None
+
+        def load_batches(indices: list[np.ndarray]):
+            from torch.utils.data import DataLoader
+
+            # Its own generator: a DataLoader draws a worker seed from the generator it is
+            # given, and from the global one (dropout's) without: that would change the model.
+            loader = DataLoader(reader, batch_size=None, sampler=indices, num_workers=workers,
+                                pin_memory=dev.type == "cuda",
+                                generator=torch.Generator().manual_seed(0))
+            for x, y in loader:
+                yield x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
+        return get_read, load_batches
 
     # -- predict -----------------------------------------------------------------------
 
@@ -418,8 +614,10 @@ class TorchSequenceClassifier(SequenceClassifier):
         out = []
         try:
             with torch.inference_mode():
-                for chunk in self._chunks(x, self.eval_batch_size):
-                    xb = torch.from_numpy(np.ascontiguousarray(chunk, dtype=np.float32)).to(dev)
+                for lo in range(0, len(x), self.eval_batch_size):
+                    # read and resized in sub-batches: the raw batch is never whole
+                    xb = read_windows(x, slice(lo, lo + self.eval_batch_size),
+                                      net.prepare).to(dev)
                     with precision.autocast(dev):
                         logits = net(xb)
                     out.append(torch.softmax(logits.float(), dim=1).cpu().numpy())

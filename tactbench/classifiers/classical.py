@@ -8,20 +8,37 @@ features side by side, standardised with the training statistics; a
 multinomial logistic regression with an L2 penalty is fitted by full-batch
 L-BFGS in float64 (deterministic; no extra dependency, and it saves like the
 other classifiers).
+
+Memory: frames are read from the sequences a chunk at a time and reduced to their
+features at once (``F`` numbers per frame). The window features ``(B, L × F)`` float64
+are held whole when they fit the frame-bank budget
+(:func:`tactbench.classifiers.base.bank_budget_bytes`), as before; above it the
+statistics, the loss and its gradient are accumulated over chunks of
+:data:`FEATURE_CHUNK` windows, gathered from a bank of per-frame features (or, when even
+that exceeds the budget, read from the sequences for each chunk).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from tactbench.classifiers.base import FrameBank, SequenceClassifier
+from tactbench.classifiers.base import (
+    FrameBank,
+    SequenceClassifier,
+    bank_budget_bytes,
+    read_windows,
+    streamed_mean_std,
+)
 from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted
 from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_positive_float, check_positive_int
+
+#: Windows per chunk when the window features are not held whole.
+FEATURE_CHUNK = 4096
 
 
 def frame_features(frames, grid: int):
@@ -64,6 +81,7 @@ class PooledLogReg(SequenceClassifier):
         self.feat_std = None
 
     def _window_features(self, x: Windows | np.ndarray):
+        """All window features ``(B, L × F)`` float64 at once."""
         import torch
 
         prepare = lambda t: frame_features(t, self.grid)  # noqa: E731
@@ -76,6 +94,35 @@ class PooledLogReg(SequenceClassifier):
                 b, length = t.shape[:2]
                 feats = prepare(t.reshape(b * length, *t.shape[2:])).reshape(b, length, -1)
         return feats.flatten(1).double()
+
+    def _feature_chunks(self, x: Windows | np.ndarray) -> list[tuple[slice, Callable[[], Any]]]:
+        """The window features as ``[(rows, read)]``: ``read()`` gives the features of
+        ``rows``, ``(b, L × F)`` float64. One chunk of every window (exactly the
+        features of :meth:`_window_features`) when they fit the frame-bank budget, else
+        chunks of :data:`FEATURE_CHUNK` windows."""
+        import torch
+
+        n = len(x)
+        frame_shape = x.frame_shape if isinstance(x, Windows) else tuple(x.shape[2:])
+        length = x.length if isinstance(x, Windows) else x.shape[1]
+        prepare = lambda t: frame_features(t, self.grid)  # noqa: E731
+        n_feat = int(prepare(torch.zeros((1, *frame_shape))).shape[1])
+        budget = bank_budget_bytes()
+        if n * length * n_feat * 8 <= budget:
+            return [(slice(0, n), lambda: self._window_features(x))]
+        if isinstance(x, Windows) and FrameBank.nbytes(x, (n_feat,)) <= budget:
+            with torch.no_grad():
+                bank = FrameBank(x, prepare)
+
+            def read(rows):
+                return bank.frames[bank.index[rows]].flatten(1).double()
+        else:
+            def read(rows):
+                with torch.no_grad():
+                    return read_windows(x, rows, prepare).flatten(1).double()
+        return [(slice(lo, min(n, lo + FEATURE_CHUNK)),
+                 lambda rows=slice(lo, min(n, lo + FEATURE_CHUNK)): read(rows))
+                for lo in range(0, n, FEATURE_CHUNK)]
 
     def fit(self, train: Windows, val: Windows | None = None, *, seed: int,
             device: str = "cpu", progress: ProgressFn | None = None,
@@ -93,22 +140,50 @@ class PooledLogReg(SequenceClassifier):
         report = FitReport(classifier=self.name, seed=int(seed), device="cpu", amp=False,
                            n_classes=k, options=self.options(), train_windows=len(train))
         start = time.perf_counter()
-        feats = self._window_features(train)
-        mean = feats.mean(0)
-        std = feats.std(0)
-        std = torch.where(std < 1e-9, torch.ones_like(std), std)
-        z = (feats - mean) / std
+        chunks = self._feature_chunks(train)
         y = torch.from_numpy(np.asarray(train.labels, dtype=np.int64))
-        weight = torch.zeros((k, z.shape[1]), dtype=torch.float64, requires_grad=True)
+        z = feats = None  # z: the standardised features, when held whole
+        if len(chunks) == 1:
+            feats = chunks[0][1]()
+            mean = feats.mean(0)
+            std = feats.std(0)
+        else:
+            mean, std = streamed_mean_std(read() for _, read in chunks)
+        std = torch.where(std < 1e-9, torch.ones_like(std), std)
+        if feats is not None:
+            z = (feats - mean) / std
+            del feats
+        weight = torch.zeros((k, mean.shape[0]), dtype=torch.float64, requires_grad=True)
         bias = torch.zeros(k, dtype=torch.float64, requires_grad=True)
         opt = torch.optim.LBFGS([weight, bias], lr=1.0, max_iter=self.max_iter,
                                 line_search_fn="strong_wolfe")
         calls = [0]
+        n = len(train)
+
+        def data_loss(w, b):
+            """Mean cross-entropy over the training windows (backward done per chunk
+            when they are not held whole; returns a float then)."""
+            if z is not None:
+                return F.cross_entropy(z @ w.T + b, y)
+            total = 0.0
+            for rows, read in chunks:
+                part = F.cross_entropy(((read() - mean) / std) @ w.T + b, y[rows],
+                                       reduction="sum") / n
+                if part.requires_grad:
+                    part.backward()
+                total += float(part.detach())
+            return total
 
         def closure():
             opt.zero_grad()
-            loss = F.cross_entropy(z @ weight.T + bias, y) + 0.5 * self.l2 * (weight ** 2).sum()
-            loss.backward()
+            penalty = 0.5 * self.l2 * (weight ** 2).sum()
+            if z is not None:
+                loss = data_loss(weight, bias) + penalty
+                loss.backward()
+            else:
+                penalty.backward()
+                loss = torch.tensor(data_loss(weight, bias) + float(penalty.detach()),
+                                    dtype=torch.float64)
             calls[0] += 1
             if progress is not None:
                 progress(min(calls[0], self.max_iter), self.max_iter, epoch=1, epochs=1,
@@ -127,7 +202,7 @@ class PooledLogReg(SequenceClassifier):
             raise TrainingInterrupted(report) from None
         self.weight, self.bias = weight.detach(), bias.detach()
         with torch.no_grad():
-            final = F.cross_entropy(z @ self.weight.T + self.bias, y)
+            final = data_loss(self.weight, self.bias)
         report.epochs, report.steps, report.windows_seen = 1, calls[0], len(train)
         report.final_loss = float(final)
         report.epoch_losses = [report.final_loss]
@@ -151,8 +226,11 @@ class PooledLogReg(SequenceClassifier):
             raise InputError(f"logreg needs frames of the trained shape {self.frame_shape}, "
                              f"got {x.frame_shape}")
         with torch.no_grad():
-            z = (self._window_features(x) - self.feat_mean) / self.feat_std
-            p = torch.softmax(z @ self.weight.T + self.bias, dim=1)
+            parts = []
+            for _, read in self._feature_chunks(x):
+                z = (read() - self.feat_mean) / self.feat_std
+                parts.append(torch.softmax(z @ self.weight.T + self.bias, dim=1))
+            p = parts[0] if len(parts) == 1 else torch.cat(parts)
         return p.float().numpy()
 
     def _export(self):

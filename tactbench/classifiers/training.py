@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
@@ -130,6 +130,11 @@ class FitReport:
     interrupted: bool = False
     n_classes: int = 0
     options: dict[str, Any] = field(default_factory=dict)
+    #: How training batches were made: "frame bank" (frames prepared once, held in
+    #: memory) or "per batch" (read from the sequences and prepared for each batch).
+    batches: str = "per batch"
+    bank_mb: float = 0.0  # size of the frame bank (held only when batches is "frame bank")
+    loader_workers: int = 0  # DataLoader processes reading ahead (per batch only)
 
     def as_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -194,15 +199,19 @@ def train_loop(
     precision: Precision,
     progress: ProgressFn | None = None,
     evaluate: Callable[[], float] | None = None,
+    load_batches: Callable[[list[np.ndarray]], Iterable[tuple["torch.Tensor", "torch.Tensor"]]]
+    | None = None,
 ) -> FitReport:
     """Train ``model`` with cross-entropy and fill ``report``.
 
     ``get_batch(indices)`` returns ``(x, y)`` on ``device`` for those training
-    windows. ``progress(done, total, **info)`` is called after every step
-    (``info``: ``epoch``, ``epochs``, ``loss``) and after each epoch's
-    evaluation (``val_accuracy``). ``evaluate()`` (optional) returns the
-    validation accuracy after each epoch. Random order comes from
-    ``report.seed``; the caller seeds torch.
+    windows. ``load_batches(index_arrays)`` (optional) yields the same ``(x, y)`` for
+    each of an epoch's index arrays in order, and may read ahead (a ``DataLoader``
+    with workers); without it, ``get_batch`` is called step by step.
+    ``progress(done, total, **info)`` is called after every step (``info``: ``epoch``,
+    ``epochs``, ``loss``) and after each epoch's evaluation (``val_accuracy``).
+    ``evaluate()`` (optional) returns the validation accuracy after each epoch. Random
+    order comes from ``report.seed``; the caller seeds torch.
     """
     import torch
     import torch.nn.functional as F
@@ -229,9 +238,11 @@ def train_loop(
             model.train()
             order = epoch_order(rng, n_windows, windows_per_epoch)
             loss_sum, count = 0.0, 0
-            for s in range(steps_per_epoch):
-                idx = order[s * batch_size:(s + 1) * batch_size]
-                x, y = get_batch(idx)
+            indices = [order[s * batch_size:(s + 1) * batch_size]
+                       for s in range(steps_per_epoch)]
+            stream = (load_batches(indices) if load_batches is not None
+                      else (get_batch(idx) for idx in indices))
+            for idx, (x, y) in zip(indices, stream):
                 opt.zero_grad(set_to_none=True)
                 with precision.autocast(device):
                     loss = F.cross_entropy(model(x), y)

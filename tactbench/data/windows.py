@@ -9,7 +9,10 @@ The study's protocol:
 
 A :class:`Windows` holds the sequences once and the window positions, so the
 many overlapping training windows share memory; :meth:`Windows.batch`
-materialises a batch ``(B, L, *frame_shape)`` on demand.
+materialises a batch ``(B, L, *frame_shape)`` on demand. The sequences may be
+arrays or *stored sequences* (:func:`tactbench.runner.cache.load_encoding`: anything
+with ``shape`` and slicing that reads frames from disk on demand): a batch then reads
+only its windows' frames, so memory is O(batch), whatever the dataset's size.
 """
 
 from __future__ import annotations
@@ -27,7 +30,8 @@ class Windows:
     """Windows of ``length`` frames over ``sequences``.
 
     ``sequences[i]`` is float32 ``(T_i, *frame_shape)`` (``(T, C, H, W)`` for
-    images, ``(T, N)`` for taxel vectors); window ``j`` starts at frame
+    images, ``(T, N)`` for taxel vectors), an array or a stored sequence (only
+    ``shape`` and ``seq[a:b]`` are used); window ``j`` starts at frame
     ``starts[j]`` of sequence ``seq_index[j]`` and has label ``labels[j]``.
     """
 
@@ -65,7 +69,8 @@ class Windows:
         return out
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """All windows and labels at once: ``(B, L, *frame_shape)``, ``(B,)``."""
+        """All windows and labels at once: ``(B, L, *frame_shape)``, ``(B,)`` (O(dataset)
+        memory: for small sets and tests; training and prediction read in batches)."""
         return self.batch(slice(None)), self.labels.copy()
 
 

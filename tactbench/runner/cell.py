@@ -22,7 +22,7 @@ from typing import Any, Callable, Sequence
 
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.store import FAILED, OK
-from tactbench.runner.system import host, now, peak_rss_mb, versions
+from tactbench.runner.system import MemoryTracker, host, now, versions
 
 #: How many of the innermost traceback frames a failed row keeps.
 TRACEBACK_FRAMES = 5
@@ -79,16 +79,20 @@ def run_cell(job: CellJob, progress: Callable[..., None] | None = None) -> dict[
     ``progress(done, total, **info)`` follows training (see
     :func:`tactbench.classifiers.training.train_loop`).
     """
+    memory = MemoryTracker()
     try:
-        return train_and_test(job, progress)
+        return train_and_test(job, progress, memory=memory)
     except Exception as exc:  # noqa: BLE001 — any failure is this cell's, recorded in its row
-        return failed_row(job, exc)
+        return failed_row(job, exc, memory=memory)
 
 
-def failed_row(job: CellJob, exc: BaseException) -> dict[str, Any]:
-    """The row of a cell that raised ``exc``: identity, error type, message, last frames."""
+def failed_row(job: CellJob, exc: BaseException,
+               memory: MemoryTracker | None = None) -> dict[str, Any]:
+    """The row of a cell that raised ``exc``: identity, error type, message, last frames,
+    and (with ``memory``) the peak memory of the steps it got through."""
     frames = traceback.format_exception(type(exc), exc, exc.__traceback__,
                                         limit=-TRACEBACK_FRAMES, chain=False)
+    memory = memory or MemoryTracker()
     return {
         "key": job.cell.key,
         **job.identity,
@@ -98,16 +102,24 @@ def failed_row(job: CellJob, exc: BaseException) -> dict[str, Any]:
         "classes": list(job.classes),
         "device": job.device,
         "threads": job.threads,
-        "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb": memory.peak_mb,
+        "peak_step": memory.peak_step,
+        "memory": memory.as_dict(),
         "versions": versions(),
         "host": host(),
         "finished": now(),
     }
 
 
-def train_and_test(job: CellJob, progress: Callable[..., None] | None = None
-                   ) -> dict[str, Any]:
-    """Train and test one cell and return its ``ok`` row; raises what the cell raises."""
+def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
+                   memory: MemoryTracker | None = None) -> dict[str, Any]:
+    """Train and test one cell and return its ``ok`` row; raises what the cell raises.
+
+    ``memory`` (made here when not given) records the peak resident memory after each
+    step: ``load encoding``, ``windows``, ``fit``, ``predict``, ``save model``; the row's
+    ``peak_step`` names the step that set ``peak_rss_mb`` (see
+    :class:`~tactbench.runner.system.MemoryTracker`).
+    """
     import numpy as np
     import torch
 
@@ -117,31 +129,37 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None
     from tactbench.runner.cache import load_encoding
     from tactbench.seeds import derive_seed
 
+    memory = memory if memory is not None else MemoryTracker()
     torch.set_num_threads(job.threads)
     cell = job.cell
-    sequences, meta = load_encoding(job.encoding_dir)
-    labels = np.asarray(job.labels, dtype=np.int64)
-    split = make_split(job.split, labels=labels, users=job.users, seed=cell.seed,
-                       test_per_class=job.test_per_class)
-    train = training_windows([sequences[i] for i in split.train], labels[split.train],
-                             cell.length)
-    test = test_windows([sequences[i] for i in split.test], labels[split.test], cell.length)
-
-    # The planned component, not a fresh plugin lookup: see the module docstring.
-    clf = Registry([job.classifier]).build("classifier", cell.classifier,
-                                           classes=len(job.classes))
+    with memory.track("load encoding"):
+        sequences, meta = load_encoding(job.encoding_dir)
+    with memory.track("windows"):
+        labels = np.asarray(job.labels, dtype=np.int64)
+        split = make_split(job.split, labels=labels, users=job.users, seed=cell.seed,
+                           test_per_class=job.test_per_class)
+        train = training_windows([sequences[i] for i in split.train], labels[split.train],
+                                 cell.length)
+        test = test_windows([sequences[i] for i in split.test], labels[split.test],
+                            cell.length)
+        # The planned component, not a fresh plugin lookup: see the module docstring.
+        clf = Registry([job.classifier]).build("classifier", cell.classifier,
+                                               classes=len(job.classes))
     seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length)
-    rss0 = peak_rss_mb()
-    t0 = time.perf_counter()
-    fit_report = clf.fit(train, None, seed=seed, device=job.device, progress=progress)
-    train_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    predicted = clf.predict(test)
-    infer_s = time.perf_counter() - t0
+    rss0 = memory.peak_mb
+    with memory.track("fit"):
+        t0 = time.perf_counter()
+        fit_report = clf.fit(train, None, seed=seed, device=job.device, progress=progress)
+        train_s = time.perf_counter() - t0
+    with memory.track("predict"):
+        t0 = time.perf_counter()
+        predicted = clf.predict(test)
+        infer_s = time.perf_counter() - t0
     if job.model_path:
-        clf.save(job.model_path, {**(job.model_meta or {}), "classifier": cell.classifier,
-                                  "seed": cell.seed, "cell": cell.key,
-                                  "test_accuracy": float((predicted == test.labels).mean())})
+        with memory.track("save model"):
+            clf.save(job.model_path, {**(job.model_meta or {}), "classifier": cell.classifier,
+                                      "seed": cell.seed, "cell": cell.key,
+                                      "test_accuracy": float((predicted == test.labels).mean())})
 
     k = len(job.classes)
     truth = test.labels
@@ -165,7 +183,9 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None
         * int(meta.get("workers", 1)) / frames,
         "train_s": train_s,
         "inference_ms_per_sequence": 1e3 * infer_s / max(1, len(test)),
-        "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb": memory.peak_mb,
+        "peak_step": memory.peak_step,
+        "memory": memory.as_dict(),
         "rss_before_fit_mb": rss0,
         "n_train_windows": len(train),
         "n_test": len(test),

@@ -73,10 +73,20 @@ def summarise(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
                      "peak_rss_mb"):
             summary[cost + "_mean"], summary[cost + "_std"] = _mean_std(
                 [r.get(cost) for r in members])
+        summary["peak_step"] = peak_step(members)
         out.append(summary)
     out.sort(key=lambda s: (s["dataset"], s["split"], s["L"], short_name(s["classifier"]),
                             s["encoder"]))
     return out
+
+
+def peak_step(rows: Sequence[dict[str, Any]]) -> str:
+    """The step that set the peak memory of most of ``rows`` (the first seed's on a tie);
+    "-" for rows that do not say (written before steps were recorded)."""
+    steps = [r.get("peak_step") for r in rows if r.get("peak_step")]
+    if not steps:
+        return "-"
+    return max(dict.fromkeys(steps), key=steps.count)
 
 
 def _pct(mean: float, std: float) -> str:
@@ -95,12 +105,13 @@ def table_rows(summaries: Sequence[dict[str, Any]]) -> list[list[str]]:
             f"{s['train_s_mean']:.1f}",
             f"{s['inference_ms_per_sequence_mean']:.2f}",
             f"{s['peak_rss_mb_mean']:.0f}",
+            s.get("peak_step", "-"),
         ])
     return rows
 
 
 TABLE_HEADER = ["encoder", "classifier", "L", "accuracy %", "seeds", "encode ms/frame",
-                "train s", "infer ms/seq", "peak MB"]
+                "train s", "infer ms/seq", "peak MB", "peak step"]
 
 
 def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "") -> None:
@@ -109,8 +120,8 @@ def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "") -> None
 
     table = Table(title=title or None, title_justify="left")
     for col in TABLE_HEADER:
-        table.add_column(col, justify="right" if col not in ("encoder", "classifier") else
-                         "left")
+        table.add_column(col, justify="right" if col not in ("encoder", "classifier",
+                                                              "peak step") else "left")
     for row in table_rows(summaries):
         table.add_row(*row)
     console = Console()
@@ -182,7 +193,8 @@ def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
                "classifier", "profile", "L", "seed", "status", "accuracy",
                *[f"acc_{c}" for c in classes],
                "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
-               "n_train_windows", "n_test", "device", "threads", "finished", "key", "error"]
+               "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
+               "error"]
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
@@ -240,7 +252,11 @@ def markdown_report(summaries, rows, meta, figures) -> str:
         "",
         "Accuracy is mean ± standard deviation over seeds (test set: "
         f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "
-        "core; train seconds are wall time; inference is per test sequence, batched.",
+        "core; train seconds are wall time; inference is per test sequence, batched. "
+        "Peak MB is the peak resident memory of the process that ran the cell; peak step "
+        "is the step that set it (load encoding, windows, fit, predict, save model, or "
+        "\"before this cell\": earlier work in the same process, such as a serial run's "
+        "encoding).",
         "", markdown_table(summaries), "", "## Per-class accuracy (%, mean over seeds)", "",
         per_class_markdown(summaries), "",
     ]

@@ -1,11 +1,14 @@
-"""Facts about where a cell ran: library versions, peak memory, host, time, git revision."""
+"""Facts about where a cell ran: library versions, memory, host, time, git revision."""
 
 from __future__ import annotations
 
 import os
 import sys
 import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 
 def now() -> str:
@@ -28,6 +31,100 @@ def peak_rss_mb() -> float:
         return rss / 1024.0 if sys.platform != "darwin" else rss / 2 ** 20
     except ImportError:  # Windows
         return float("nan")
+
+
+def _status_mb(field_name: str) -> float | None:
+    """A ``kB`` field of ``/proc/self/status`` (Linux) in MiB; None where there is none."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith(field_name + ":"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def current_rss_mb() -> float:
+    """Resident memory of this process now, in MiB (``VmRSS``; NaN where the OS
+    does not say)."""
+    value = _status_mb("VmRSS")
+    return float("nan") if value is None else value
+
+
+def memory_mb() -> tuple[float, float]:
+    """``(current, peak)`` resident memory of this process in MiB: ``VmRSS`` and the
+    larger of ``VmHWM`` and ``ru_maxrss`` (they agree unless something reset the
+    high-water mark)."""
+    hwm = _status_mb("VmHWM")
+    peak = peak_rss_mb()
+    if hwm is not None and not (hwm <= peak):
+        peak = hwm
+    return current_rss_mb(), peak
+
+
+#: The step a peak reached before the tracker started is attributed to.
+BEFORE = "before this cell"
+
+
+@dataclass
+class MemoryTracker:
+    """Which step of a piece of work set the process's peak resident memory.
+
+    Call :meth:`step` at the end of each named step; the peak is read then (it only
+    grows), so the step whose end first shows the final peak is the one that set it.
+    A peak already reached when the tracker was made (by earlier work in the same
+    process: a serial run's encoding, an earlier cell of the same worker) is
+    attributed to :data:`BEFORE`::
+
+        mem = MemoryTracker()
+        ...; mem.step("load encoding")
+        with mem.track("fit"):
+            ...
+        mem.peak_mb, mem.peak_step   # e.g. 812.4, "fit"
+    """
+
+    #: ``(name, current MiB, peak MiB)`` at the end of each step, the start first
+    steps: list[tuple[str, float, float]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not self.steps:
+            self.steps.append((BEFORE, *memory_mb()))
+
+    def step(self, name: str) -> float:
+        """Record the end of step ``name``; returns the peak so far (MiB)."""
+        current, peak = memory_mb()
+        previous = self.steps[-1][2]
+        if previous >= peak:  # the sources disagree by a page now and then: keep it monotone
+            peak = previous
+        self.steps.append((name, current, peak))
+        return peak
+
+    @contextmanager
+    def track(self, name: str) -> Iterator[None]:
+        """``with mem.track("fit"): ...``: :meth:`step` at the end, raised or not."""
+        try:
+            yield
+        finally:
+            self.step(name)
+
+    @property
+    def peak_mb(self) -> float:
+        return self.steps[-1][2]
+
+    @property
+    def peak_step(self) -> str:
+        """The first step at whose end the final peak was reached."""
+        final = self.peak_mb
+        for name, _current, peak in self.steps:
+            if peak >= final:
+                return name
+        return self.steps[-1][0]  # NaN peaks (Windows): the last step
+
+    def as_dict(self) -> dict[str, dict[str, float]]:
+        """``{step: {"rss_mb": current, "peak_mb": peak}}`` in order (JSON-ready)."""
+        return {name: {"rss_mb": current, "peak_mb": peak}
+                for name, current, peak in self.steps}
 
 
 def versions() -> dict[str, str]:

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from tactbench.classifiers import base as base_module
-from tactbench.classifiers.base import FrameBank
+from tactbench.classifiers.base import FrameBank, WindowBatches, read_windows
 from tactbench.classifiers.io import ModelFileError, load_model, read_header
 from tactbench.classifiers.models import SmallCnnLstm
 from tactbench.classifiers.training import TrainingInterrupted
@@ -260,10 +260,16 @@ def test_frame_bank_matches_windows_batch():
     assert np.array_equal(y.numpy(), windows.labels[idx])
 
 
-def test_resizing_per_batch_gives_the_same_model_as_the_frame_bank(monkeypatch):
-    a, _, test = fit("small-cnn-lstm", seed=3)
-    monkeypatch.setattr(base_module, "MAX_BANK_BYTES", 0)  # force the streaming path
-    b, _, _ = fit("small-cnn-lstm", seed=3)
+@pytest.mark.parametrize("name", ["small-cnn-lstm", "taxel-lstm"])
+def test_reading_per_batch_gives_the_same_model_as_the_frame_bank(monkeypatch, name):
+    a, report_a, test = fit(name, seed=3)
+    assert report_a["batches"] == "frame bank" and report_a["bank_mb"] > 0
+    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 0)  # nothing held: per batch
+    b, report_b, _ = fit(name, seed=3)
+    assert report_b["batches"] == "per batch" and report_b["loader_workers"] == 0
+    assert np.array_equal(a.predict(test), b.predict(test))
+    assert report_a["val_accuracy"] == report_b["val_accuracy"]
+    # only the normalisation statistics' rounding differs (merged in float64, see below)
     assert np.allclose(a.predict_proba(test), b.predict_proba(test), atol=1e-5)
 
 
@@ -453,3 +459,143 @@ def test_batchnorm_statistics_are_recalibrated_after_short_training():
     # and it stays deterministic
     again, _, _ = fit("cnn-lstm", epochs=1, windows_per_epoch=8)
     assert np.array_equal(fresh.predict_proba(test), again.predict_proba(test))
+
+
+# ----------------------------------------------------------------------------- memory
+
+
+class CountingSequence:
+    """A stored sequence (the interface of the runner's cache: ``shape``, ``len``,
+    slicing, ``__array__``) over an array, that records every slice read from it."""
+
+    def __init__(self, array: np.ndarray, reads: list) -> None:
+        self._array, self.reads = array, reads
+        self.shape, self.dtype, self.ndim = array.shape, np.dtype(np.float32), array.ndim
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, index):
+        start, stop, _ = index.indices(len(self))  # slices only, like the cache's
+        self.reads.append(stop - start)
+        return self._array[index].copy()
+
+    def __array__(self, dtype=None, copy=None):
+        self.reads.append(len(self))
+        return self._array.astype(dtype or np.float32)
+
+
+def lazy_data(n=24, **kw):
+    seqs, labels = moving_blobs(n, **kw)
+    reads: list[int] = []
+    lazy = [CountingSequence(s, reads) for s in seqs]
+    return (training_windows(lazy, labels, 3), test_windows(lazy, labels, 3), reads,
+            training_windows(seqs, labels, 3))
+
+
+def test_read_windows_prepares_in_sub_batches_and_matches_the_frame_bank(monkeypatch):
+    from tactbench.classifiers.nets import resize_frames
+
+    train, _, reads, in_memory = lazy_data(size=12)
+    prepare = lambda t: resize_frames(t, 5)  # noqa: E731
+    idx = np.arange(len(train))[::-1]
+    bank = FrameBank(in_memory, prepare)
+    one_window = 3 * 1 * 12 * 12 * 4  # L × C × H × W float32
+    monkeypatch.setattr(base_module, "READ_CHUNK_BYTES", 2 * one_window)
+    reads.clear()
+    x = read_windows(train, idx, prepare)
+    assert x.shape == (len(train), 3, 1, 5, 5)
+    assert torch.equal(x, bank.batch(idx)[0])  # bit for bit, padding included
+    assert max(reads) <= 3  # never more than one window's frames per read
+    xb, yb = WindowBatches(train, prepare)[idx[:4]]
+    assert torch.equal(xb, x[:4]) and np.array_equal(yb.numpy(), train.labels[idx[:4]])
+    assert read_windows(train, idx[:0], prepare).shape == (0, 3, 1, 5, 5)
+
+
+def test_a_fit_above_the_budget_reads_batches_and_never_builds_the_bank(monkeypatch):
+    train, test, reads, _ = lazy_data()
+    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 1024)  # below this tiny bank
+
+    def no_bank(*args, **kwargs):
+        raise AssertionError("the frame bank was built above the budget")
+
+    monkeypatch.setattr(base_module.FrameBank, "__init__", no_bank)
+    clf = build("small-cnn-lstm")
+    report = clf.fit(train, None, seed=0)
+    assert report["batches"] == "per batch" and report["bank_mb"] * 2 ** 20 > 1024
+    longest = max(len(s) for s in train.sequences)
+    assert reads and max(reads) <= longest  # no read of more than one sequence
+    assert clf.predict(test).shape == (len(test),)
+
+
+def test_the_normalisation_sample_is_read_lazily_and_merged_above_the_budget(monkeypatch):
+    train, _, reads, in_memory = lazy_data(n=30, channels=2)
+    whole = build("small-cnn-lstm")
+    net = whole._build_net(train.frame_shape, 3, pretrained=False)
+    with torch.no_grad():
+        whole._set_normalization(net, in_memory, seed=0)
+    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 0)
+    monkeypatch.setattr(base_module, "READ_CHUNK_BYTES", 7 * 2 * 12 * 12 * 4)  # 7 frames
+    streamed = build("small-cnn-lstm")._build_net(train.frame_shape, 3, pretrained=False)
+    reads.clear()
+    with torch.no_grad():
+        build("small-cnn-lstm")._set_normalization(streamed, train, seed=0)
+    assert max(reads) <= max(len(s) for s in train.sequences)
+    assert torch.allclose(streamed.normalize.mean, net.normalize.mean, rtol=1e-5, atol=1e-7)
+    assert torch.allclose(streamed.normalize.std, net.normalize.std, rtol=1e-5, atol=1e-7)
+
+
+def test_streamed_statistics_equal_the_whole_arrays():
+    from tactbench.classifiers.base import streamed_mean_std
+
+    x = torch.rand(50, 3, 4, 5, dtype=torch.float64) * torch.tensor([1.0, 5.0, 0.1]
+                                                                     ).reshape(1, 3, 1, 1)
+    mean, std = streamed_mean_std([x[:7], x[7:8], x[8:8], x[8:]])
+    assert torch.allclose(mean, x.mean(dim=[0, 2, 3])) and torch.allclose(std, x.std(dim=[0, 2, 3]))
+    rows = torch.rand(40, 6, dtype=torch.float64)  # (windows, features): per column
+    mean, std = streamed_mean_std([rows[:13], rows[13:]])
+    assert torch.allclose(mean, rows.mean(0)) and torch.allclose(std, rows.std(0))
+
+
+def test_logreg_above_the_budget_accumulates_over_chunks_with_the_same_result(monkeypatch):
+    import tactbench.classifiers.classical as classical
+
+    train, test, reads, _ = lazy_data(n=30)
+    whole = build("logreg")
+    whole.fit(train, None, seed=0)
+    monkeypatch.setattr(classical, "FEATURE_CHUNK", 16)
+    for budget in (2000, 0):  # 2000 B: a bank of frame features; 0: read per chunk
+        monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", budget)
+        reads.clear()
+        chunked = build("logreg")
+        chunked.fit(train, None, seed=0)
+        assert max(reads) <= max(len(s) for s in train.sequences)
+        assert np.allclose(chunked.predict_proba(test), whole.predict_proba(test), atol=1e-6)
+        assert np.array_equal(chunked.predict(test), whole.predict(test))
+
+
+def test_the_budget_can_be_set_from_the_environment(monkeypatch):
+    from tactbench.classifiers.base import bank_budget_bytes, loader_workers
+    from tactbench.errors import InputError
+
+    monkeypatch.setenv("TACTBENCH_BANK_MIB", "1.5")
+    assert bank_budget_bytes() == int(1.5 * 2 ** 20)
+    monkeypatch.setenv("TACTBENCH_BANK_MIB", "lots")
+    with pytest.raises(InputError, match="TACTBENCH_BANK_MIB"):
+        bank_budget_bytes()
+    monkeypatch.delenv("TACTBENCH_BANK_MIB")
+    assert bank_budget_bytes() == base_module.BANK_BUDGET_BYTES
+    assert loader_workers(torch.device("cpu")) == 0
+    monkeypatch.setenv("TACTBENCH_LOADER_WORKERS", "-1")
+    with pytest.raises(InputError, match="TACTBENCH_LOADER_WORKERS"):
+        loader_workers(torch.device("cpu"))
+
+
+def test_dataloader_workers_give_the_same_model(monkeypatch):
+    a, _, test = fit("small-cnn-lstm", seed=4)
+    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 0)
+    b, _, _ = fit("small-cnn-lstm", seed=4)
+    monkeypatch.setenv("TACTBENCH_LOADER_WORKERS", "1")
+    c, report, _ = fit("small-cnn-lstm", seed=4)
+    assert report["loader_workers"] == 1
+    assert np.array_equal(b.predict_proba(test), c.predict_proba(test))

@@ -61,3 +61,28 @@ def test_mismatched_index_arrays_are_a_bug_not_a_user_error():
     with pytest.raises(ValueError, match="must have the same length") as info:
         Windows(seqs(), np.zeros(2, int), np.zeros(1, int), np.zeros(2, int), 2)
     assert not isinstance(info.value, TactbenchError)
+
+
+class SliceOnly:
+    """A stored sequence as the runner's cache gives it: ``shape``, ``ndim`` and slices, nothing
+    more; it records the frames each read asked for."""
+
+    def __init__(self, array, reads):
+        self.array, self.reads, self.shape, self.ndim = array, reads, array.shape, array.ndim
+
+    def __len__(self):
+        return self.shape[0]
+
+    def __getitem__(self, index):
+        assert isinstance(index, slice)
+        self.reads.append(index.indices(len(self))[:2])
+        return self.array[index].copy()
+
+
+def test_a_batch_reads_only_its_windows_frames_from_stored_sequences():
+    reads = []
+    lazy = [SliceOnly(s, reads) for s in seqs()]
+    w = training_windows(lazy, [0, 1, 2], 3)
+    np.testing.assert_array_equal(w.batch([5, 2]), training_windows(seqs(), [0, 1, 2], 3)
+                                  .batch([5, 2]))
+    assert reads == [(2, 5), (1, 4)]  # window 5: frames 2..4 of seq 2; window 2: 1..3 of seq 1

@@ -58,3 +58,44 @@ def test_ctrl_c_in_a_cell_is_not_a_failure(jobs):
     (job,) = jobs("interrupted")
     with pytest.raises(KeyboardInterrupt):
         run_cell(job)
+
+
+def test_a_row_says_which_step_set_the_peak_memory(jobs):
+    (job,) = jobs("added-logreg")
+    row = run_cell(job)
+    steps = list(row["memory"])
+    assert steps == ["before this cell", "load encoding", "windows", "fit", "predict"]
+    assert row["peak_step"] in steps
+    peaks = [row["memory"][s]["peak_mb"] for s in steps]
+    assert peaks == sorted(peaks)  # a peak only grows
+    assert row["peak_rss_mb"] == max(peaks) > 0
+    first = next(s for s in steps if row["memory"][s]["peak_mb"] == max(peaks))
+    assert row["peak_step"] == first
+    assert row["rss_before_fit_mb"] == row["memory"]["windows"]["peak_mb"]
+
+
+def test_a_failed_row_keeps_the_memory_of_the_steps_it_got_through(jobs, monkeypatch):
+    monkeypatch.setenv("TACTBENCH_TEST_FAIL", "1")
+    (job,) = jobs("failing")
+    row = run_cell(job)
+    assert row["status"] == "failed"
+    assert list(row["memory"])[-1] == "fit"  # the step that raised is recorded too
+    assert row["peak_step"] in row["memory"] and row["peak_rss_mb"] > 0
+
+
+def test_the_memory_tracker_names_the_step_that_set_the_peak():
+    import numpy as np
+
+    from tactbench.runner.system import BEFORE, MemoryTracker, memory_mb
+
+    current, peak = memory_mb()
+    assert 0 < current <= peak
+    mem = MemoryTracker()
+    mem.step("small")
+    assert mem.peak_step == BEFORE  # nothing new: the peak predates the tracker
+    block = np.ones(int((peak + 64) * 2 ** 20 / 8))  # raise the peak by ≥ 64 MiB
+    mem.step("big")
+    del block
+    mem.step("after")
+    assert mem.peak_step == "big" and mem.peak_mb >= peak + 64
+    assert mem.as_dict()["after"]["rss_mb"] < mem.as_dict()["big"]["rss_mb"]

@@ -27,7 +27,23 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
     assert len(csv_lines) == 3 and "acc_" in csv_lines[0]
     summary = summarise(result.rows)[0]
     assert abs(sum(summary["confusion_normalised"][0]) - 1.0) < 1e-9
-    assert "Failed cells" not in paths["markdown"].read_text()
+    report = paths["markdown"].read_text()
+    assert "Failed cells" not in report
+    # the peak memory and the step that set it, in the table and the CSV
+    assert "| peak MB | peak step |" in report
+    for s in summarise(result.rows):
+        assert s["peak_step"] in {row["peak_step"] for row in result.rows}
+        assert f"| {s['peak_rss_mb_mean']:.0f} | {s['peak_step']} |" in report
+    assert "peak_step" in csv_lines[0].split(",")
+
+
+def test_the_peak_step_of_a_summary_is_the_most_common_over_seeds():
+    from tactbench.runner.reports import peak_step
+
+    assert peak_step([{"peak_step": "fit"}, {"peak_step": "predict"},
+                      {"peak_step": "predict"}]) == "predict"
+    assert peak_step([{"peak_step": "fit"}, {"peak_step": "windows"}]) == "fit"  # tie: first
+    assert peak_step([{"accuracy": 1.0}]) == "-"  # rows written before steps were recorded
 
 
 def test_failed_cells_are_listed_and_left_out_of_the_accuracies(
