@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 #: Images per chunk when streaming a dataset into the cache, bytes (float32 images). The
 #: encodings of a chunk are ``C`` times that per encoder; about three chunks are alive
 #: at once (one being imaged, one being encoded, one being written).
-CHUNK_BYTES = 32 * 2 ** 20
+CHUNK_BYTES = 16 * 2 ** 20
 
 #: Version of the entry format: 2 added precision, scale and offset (an entry without
 #: them is float32, as version 1 wrote them).
