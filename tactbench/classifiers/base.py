@@ -44,6 +44,11 @@ from tactbench.seeds import derive_seed
 #: memory is O(min(dataset, budget) + batch + model). ``$TACTBENCH_BANK_MIB`` overrides
 #: it (``0``: always per batch); the results are the same either way.
 BANK_BUDGET_BYTES = 512 * 2 ** 20
+#: The normalisation sample (at most NORM_SAMPLE_FRAMES prepared frames, a size that
+#: does not grow with the dataset) is held whole below this many bytes, giving the exact
+#: float32 statistics; above it (e.g. 4096 frames at 224 px, 2.4 GB) its statistics are
+#: merged chunk by chunk in float64, equal up to rounding.
+NORM_SAMPLE_BYTES = 512 * 2 ** 20
 #: Raw (unprepared) frames read from the sequences at once, in bytes: a batch is read
 #: in sub-batches of at most this size, each prepared (resized) before the next is read.
 READ_CHUNK_BYTES = 64 * 2 ** 20
@@ -517,8 +522,8 @@ class TorchSequenceClassifier(SequenceClassifier):
     def _set_normalization(self, net, train: Windows, seed: int) -> None:
         """Mean and std of up to :data:`NORM_SAMPLE_FRAMES` seeded training frames after
         ``net.prepare``. The sampled frames are read a few sequences at a time and
-        prepared as they come; the prepared sample is kept whole (exactly today's
-        statistics) when it fits the frame-bank budget, else merged chunk by chunk."""
+        prepared as they come; the prepared sample is kept whole when it fits
+        :data:`NORM_SAMPLE_BYTES`, else its statistics are merged chunk by chunk."""
         import torch
 
         rng = np.random.default_rng(derive_seed(seed, self.name, "normalize"))
@@ -546,7 +551,7 @@ class TorchSequenceClassifier(SequenceClassifier):
                 yield net.prepare(torch.from_numpy(np.concatenate(frames)))
 
         probe = net.prepare(torch.zeros((1, *train.frame_shape)))
-        if len(flat) * probe[0].numel() * 4 <= bank_budget_bytes():
+        if len(flat) * probe[0].numel() * 4 <= NORM_SAMPLE_BYTES:
             mean, std = self._normalization(torch.cat(list(prepared_chunks())))
         else:
             mean, std = streamed_mean_std(prepared_chunks())
