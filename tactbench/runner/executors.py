@@ -15,13 +15,16 @@ from tactbench.runner.cell import CellJob, failed_row, run_cell
 
 if TYPE_CHECKING:
     from tactbench.runner.scene import Scene
+    from tactbench.runner.system import MemoryTracker
     from tactbench.ui import Progress
 
 Finish = Callable[[dict[str, Any]], None]
 
 
-def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress") -> None:
-    """Run ``jobs`` on the scene's executor, with an overall bar in ``bars``."""
+def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress",
+            memory: "MemoryTracker | None" = None) -> None:
+    """Run ``jobs`` on the scene's executor, with an overall bar in ``bars``; ``memory``
+    has the run's steps so far in this process (see :func:`run_serial`)."""
     overall = bars.add("cells", total=len(jobs))
     done = 0
 
@@ -32,17 +35,30 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         bars.update(overall, done)
 
     if scene.executor == "local" and scene.workers == 1:
-        run_serial(jobs, finished, bars)
+        run_serial(jobs, finished, bars, memory)
     elif scene.executor == "local":
         run_processes(jobs, finished, workers=scene.workers)
     else:
         run_dask(jobs, finished, workers=scene.workers, scheduler=scene.scheduler)
 
 
-def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress") -> None:
-    """One cell after another in this process, each with its training bar."""
+def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
+               memory: "MemoryTracker | None" = None) -> None:
+    """One cell after another in this process, each with its training bar.
+
+    ``memory`` follows the run's own steps in this process (planning, encoding, each
+    cell): a cell whose peak was set before it started names the step that set it.
+    """
+    from tactbench.runner.system import BEFORE, MemoryTracker
+
+    memory = memory if memory is not None else MemoryTracker()
     for job in jobs:
-        finish(run_cell(job, bars.callback(f"train {job.cell.label()}")))
+        earlier = memory.peak_step
+        row = run_cell(job, bars.callback(f"train {job.cell.label()}"))
+        if row.get("peak_step") == BEFORE and earlier != BEFORE:
+            row["peak_step"] = f"{earlier} (earlier in this run)"
+        memory.step(f"cell {job.cell.label()}")
+        finish(row)
 
 
 def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:

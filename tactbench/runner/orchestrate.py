@@ -18,7 +18,7 @@ from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.scene import Scene
 from tactbench.runner.store import ResultStore, failed_rows, ok_rows
-from tactbench.runner.system import git_revision
+from tactbench.runner.system import MemoryTracker, git_revision
 from tactbench.ui import Progress
 
 
@@ -53,15 +53,18 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     go on; ``on_row(row)`` is called with each row as it is stored.
     """
     start = time.perf_counter()
+    memory = MemoryTracker()  # which of this process's steps sets its peak memory
     with Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
         p = plan(scene, registry, progress=bars.callback(f"make dataset {scene.dataset}"))
         bars.update(task, 1)
+        memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
         models = Path(scene.out) / "models" if scene.save_models else None
         pending = [c for c in p.cells if scene.rerun or not store.finished(c.key)
                    or (models and not (models / f"{c.key}.safetensors").exists())]
         folders = ensure_encodings(p, cache or EncodingCache(), pending, bars)
+        memory.step("encode")
         jobs = make_jobs(p, pending, folders, models)
         run_meta = {"command": " ".join(sys.argv), "git": git_revision(),
                     "scene": asdict(scene)}
@@ -73,7 +76,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
                 on_row(row)
 
         if jobs:
-            execute(scene, jobs, finish, bars)
+            execute(scene, jobs, finish, bars, memory)
     rows = store.rows(c.key for c in p.cells)
     return RunResult(p, rows, computed=len(pending), skipped=len(p.cells) - len(pending),
                      seconds=time.perf_counter() - start)

@@ -30,8 +30,13 @@ def test_run_reports_and_resumes_without_recomputing(tiny_scene, cache):
     row = first.rows[0]
     for key in ("status", "accuracy", "per_class_accuracy", "confusion",
                 "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
-                "versions", "split", "split_seed", "device", "run"):
+                "peak_step", "versions", "split", "split_seed", "device", "run"):
         assert key in row, key
+    # in a serial run a peak set before a cell is named: planning, encoding or a cell
+    cell_steps = {"load encoding", "windows", "fit", "predict", "save model"}
+    for r in first.rows:
+        assert r["peak_step"] in cell_steps or r["peak_step"].endswith(
+            "(earlier in this run)"), r["peak_step"]
     assert row["status"] == "ok" and 0.0 <= row["accuracy"] <= 1.0
     assert np.asarray(row["confusion"]).sum() == row["n_test"]
     entries = cache.entries()
