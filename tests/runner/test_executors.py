@@ -58,3 +58,21 @@ def test_dask_local_cluster_gives_the_same_results_as_local(tmp_path, tiny_scene
     key = lambda r: (r["encoder"], r["L"], r["seed"])  # noqa: E731
     assert [(key(r), r["confusion"]) for r in sorted(local.rows, key=key)] == \
            [(key(r), r["confusion"]) for r in sorted(dask.rows, key=key)]
+
+
+def test_serial_cells_name_the_run_step_that_set_their_peak(monkeypatch):
+    from types import SimpleNamespace
+
+    from tactbench.runner import executors
+    from tactbench.runner.system import BEFORE, MemoryTracker
+    from tactbench.ui import Progress
+
+    rows = iter([{"peak_step": BEFORE}, {"peak_step": "fit"}])
+    monkeypatch.setattr(executors, "run_cell", lambda job, progress=None: next(rows))
+    job = SimpleNamespace(cell=SimpleNamespace(label=lambda: "raw × logreg L=5 seed=0"))
+    # the run so far: its encoding pass set a peak far above anything a cell reaches
+    memory = MemoryTracker(steps=[(BEFORE, 10.0, 10.0), ("encode", 10.0, 1e9)])
+    got = []
+    with Progress(enabled=False) as bars:
+        executors.run_serial([job, job], got.append, bars, memory)
+    assert [r["peak_step"] for r in got] == ["encode (earlier in this run)", "fit"]
