@@ -43,3 +43,29 @@ def test_normalisation_specs():
         Normalisation.parse("fixed:high=3")
     with pytest.raises(ValueError, match="0 ≤ low < high ≤ 100"):
         Normalisation.parse("baseline:low=50,high=10")
+
+
+@pytest.mark.parametrize("nan_fraction", [0.0, 0.02])
+def test_baseline_fit_in_blocks_equals_the_plain_percentiles_to_the_bit(monkeypatch,
+                                                                       nan_fraction):
+    import tactbench.data.normalisation as norm
+
+    monkeypatch.setattr(norm, "OFFSET_BLOCK_BYTES", 4 * 64 * 3)  # 3 taxels a block
+    rng = np.random.default_rng(7)
+    ids = np.arange(10)
+    samples = []
+    for k in range(4):
+        values = rng.integers(0, 65535, size=(16, 10)).astype(np.float32)
+        values[rng.random(values.shape) < nan_fraction] = np.nan
+        samples.append(Sample(Recording(values, np.arange(16) * .1, ids), 0))
+    before = [s.recording.values.copy() for s in samples]
+    offset, scale = Normalisation.parse("baseline:low=5,high=99").fit(samples)
+
+    stacked = np.concatenate(before, axis=0)
+    pct = np.nanpercentile if nan_fraction else np.percentile
+    want_offset = np.nan_to_num(pct(stacked, 5.0, axis=0), nan=0.0).astype(np.float32)
+    rest = stacked - want_offset
+    want_scale = max(float(np.percentile(rest[np.isfinite(rest)], 99.0)), 1.0)
+    assert np.array_equal(offset, want_offset) and scale == want_scale
+    for s, v in zip(samples, before):  # the readings themselves are left alone
+        assert np.array_equal(s.recording.values, v, equal_nan=True)
