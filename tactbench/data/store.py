@@ -49,6 +49,13 @@ _LAYOUT_DTYPES = {"ids": np.int64, "positions": np.float64, "bounds": np.float64
 # ----------------------------------------------------------------------------- write
 
 
+def _raw_counts(values: np.ndarray) -> bool:
+    """Whether ``values`` are all whole numbers in [0, 65535] (raw sensor counts)."""
+    return bool(np.all(np.isfinite(values)) and (values.size == 0 or (
+        values.min() >= 0 and values.max() <= UINT16_MAX
+        and np.array_equal(values, np.round(values)))))
+
+
 def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
     """Write ``manifest.json`` and ``arrays.npz`` of ``dataset`` into ``folder`` (created).
 
@@ -61,11 +68,12 @@ def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     samples = dataset.samples
-    values = np.concatenate([s.recording.values for s in samples], axis=0)
-    stored = values
-    if np.all(np.isfinite(values)) and values.min() >= 0 and values.max() <= UINT16_MAX \
-            and np.array_equal(values, np.round(values)):
-        stored = values.astype(np.uint16)
+    # One array of all values is unavoidable (the npz member); it is built in its stored
+    # type straight from the samples, checked a sample at a time, so writing a large
+    # dataset costs one copy of its values rather than three.
+    counts = all(_raw_counts(s.recording.values) for s in samples)
+    stored = np.concatenate([s.recording.values.astype(np.uint16 if counts else np.float32,
+                                                       copy=False) for s in samples], axis=0)
     lengths = dataset.lengths()
     arrays: dict[str, np.ndarray] = {
         "values": stored,
