@@ -52,6 +52,9 @@ NORM_SAMPLE_BYTES = 512 * 2 ** 20
 #: Raw (unprepared) frames read from the sequences at once, in bytes: a batch is read
 #: in sub-batches of at most this size, each prepared (resized) before the next is read.
 READ_CHUNK_BYTES = 64 * 2 ** 20
+#: Prepared input of one forward pass at prediction, at most (the quick profile's 256
+#: windows of 5 × 3 × 32 × 32 floats are 16 MB; at 224 px the step shrinks to ~21 windows).
+EVAL_INPUT_BYTES = 64 * 2 ** 20
 #: Frames sampled to estimate the normalisation statistics.
 NORM_SAMPLE_FRAMES = 4096
 #: The ``optimizer`` and ``schedule`` options :func:`.training.train_loop` accepts.
@@ -619,10 +622,10 @@ class TorchSequenceClassifier(SequenceClassifier):
         out = []
         try:
             with torch.inference_mode():
-                for lo in range(0, len(x), self.eval_batch_size):
+                step = self._eval_step(x, net)
+                for lo in range(0, len(x), step):
                     # read and resized in sub-batches: the raw batch is never whole
-                    xb = read_windows(x, slice(lo, lo + self.eval_batch_size),
-                                      net.prepare).to(dev)
+                    xb = read_windows(x, slice(lo, lo + step), net.prepare).to(dev)
                     with precision.autocast(dev):
                         logits = net(xb)
                     out.append(torch.softmax(logits.float(), dim=1).cpu().numpy())
@@ -631,6 +634,16 @@ class TorchSequenceClassifier(SequenceClassifier):
         if not out:
             return np.zeros((0, self.n_classes), dtype=np.float32)
         return np.concatenate(out).astype(np.float32, copy=False)
+
+    def _eval_step(self, x: Windows | np.ndarray, net) -> int:
+        """Windows per forward pass: ``eval_batch_size``, fewer when that many prepared
+        windows would exceed :data:`EVAL_INPUT_BYTES` (224-px inputs: ~3 MB a window,
+        and the network's activations grow with them)."""
+        if len(x) == 0:
+            return self.eval_batch_size
+        probe = read_windows(x, slice(0, 1), net.prepare)
+        per_window = max(1, probe.numel() * probe.element_size())
+        return max(1, min(self.eval_batch_size, EVAL_INPUT_BYTES // per_window))
 
     # -- save / load -------------------------------------------------------------------
 

@@ -125,6 +125,20 @@ def test_predict_contract(fitted, name):
     assert clf.predict_proba(test.batch(slice(0, 0))).shape == (0, 3)
 
 
+@pytest.mark.parametrize("name", ["small-cnn-lstm", "taxel-lstm"])
+def test_prediction_steps_shrink_to_a_byte_budget_with_the_same_answers(fitted, name,
+                                                                        monkeypatch):
+    import tactbench.classifiers.base as base
+
+    clf, _report, test = fitted[name]
+    whole = clf.predict_proba(test)
+    assert clf._eval_step(test, clf.net) == clf.eval_batch_size  # tiny windows: no cap
+    per_window = base.read_windows(test, slice(0, 1), clf.net.prepare).numel() * 4
+    monkeypatch.setattr(base, "EVAL_INPUT_BYTES", 2 * per_window)
+    assert clf._eval_step(test, clf.net) == 2
+    assert np.allclose(clf.predict_proba(test), whole, atol=1e-6)
+
+
 @pytest.mark.parametrize("name", list(TINY))
 def test_fit_report(fitted, name):
     _clf, report, test = fitted[name]
