@@ -16,7 +16,6 @@ import numpy as np
 from tactbench.data.recording import UINT16_MAX, Sample
 from tactbench.errors import InputError, check_choice
 
-
 #: Bytes of readings copied at once while finding each taxel's rest value.
 OFFSET_BLOCK_BYTES = 16 * 2 ** 20
 
