@@ -117,7 +117,6 @@ def plot(points: list[dict], path: Path) -> None:
                                 "encoding cache on disk (GiB)")):
         ax.set_xlabel("simulated users (38 = the study's size)")
         ax.set_title(title)
-        ax.set_xscale("log", base=2)
         ax.grid(alpha=0.3)
     axes[0].axhline(4, color="grey", ls=":", lw=1)
     axes[0].legend(fontsize=8)
