@@ -124,6 +124,11 @@ def _check_scene(scene: Scene) -> None:
     check_positive_int(scene.workers, "--workers")
     if scene.threads is not None:  # torch refuses 0 only inside the cell, after the work
         check_positive_int(scene.threads, "--threads")
+    # the training memory settings come from the environment: read them now, not in a cell
+    from tactbench.classifiers.base import bank_budget_bytes, loader_workers
+
+    bank_budget_bytes()
+    loader_workers(None)
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
 
 

@@ -88,3 +88,13 @@ def test_logreg_on_the_real_fingers_set_without_layout(shared_data, tmp_path, ca
     assert p.dataset.layout is None and list(p.input_kind.values()) == ["vectors"]
     (row,) = run(scene, progress=False, cache=cache).rows
     assert row["status"] == "ok" and row["accuracy"] > 0.5  # 6 classes: chance is 1/6
+
+
+@pytest.mark.parametrize("name, value", [("TACTBENCH_BANK_MIB", "abc"),
+                                         ("TACTBENCH_LOADER_WORKERS", "-1")])
+def test_bad_training_memory_settings_are_refused_before_any_work(tmp_path, cache, tiny_scene,
+                                                                  monkeypatch, name, value):
+    monkeypatch.setenv(name, value)
+    with pytest.raises(InputError, match=name):
+        run(tiny_scene(), progress=False, cache=cache)
+    assert not (tmp_path / "out").exists() and not any(cache.root.iterdir())
