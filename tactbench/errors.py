@@ -102,3 +102,22 @@ def check_shape(arr: Any, dims: str, name: str = "array", *, dtype_kind: str | N
         raise InputError(f"{name} must be {want}, got {tuple(shape)}")
     if dtype_kind is not None and arr.dtype.kind not in dtype_kind:
         raise InputError(f"{name} must hold numbers, got dtype {arr.dtype}")
+
+
+class CorruptArtefactError(TactbenchError):
+    """Something tactbench stored (cache entry, cell row, model, dataset folder) failed
+    its verification when read back: its checksum, identity or shapes do not match.
+
+    ``artefact`` names what was read (a path); ``problem`` says what is wrong. Readers of
+    artefacts tactbench can rebuild catch it and rebuild; the others let it reach the
+    user as one line.
+    """
+
+    def __init__(self, artefact: Any, problem: str) -> None:
+        self.artefact = str(artefact)
+        self.problem = problem
+        super().__init__(f"{self.artefact}: {problem}")
+
+
+class BudgetError(InputError):
+    """A step would need more memory than the budget allows (see tactbench.integrity)."""

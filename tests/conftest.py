@@ -76,3 +76,31 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture
+def memory_cap():
+    """``with memory_cap(mib): ...`` fails the test when the block's peak traced
+    allocation (Python objects and numpy array data, via tracemalloc) exceeds ``mib``.
+
+    Used by the fuzz tests: a hostile input must be refused before anything large is
+    allocated, not after.
+    """
+    import contextlib
+    import tracemalloc
+
+    @contextlib.contextmanager
+    def cap(mib: float):
+        started = not tracemalloc.is_tracing()
+        if started:
+            tracemalloc.start()
+        tracemalloc.reset_peak()
+        try:
+            yield
+        finally:
+            _, peak = tracemalloc.get_traced_memory()
+            if started:
+                tracemalloc.stop()
+        assert peak <= mib * (1 << 20), f"peak allocation {peak / (1 << 20):.1f} MiB > {mib} MiB"
+
+    return cap
