@@ -220,8 +220,12 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     """Split ``"farneback:winsize=9,levels=2"`` into a name and typed options.
 
     Values become ``int``, ``float``, ``bool`` (``true``/``false``), ``None``
-    (``none``) or stay strings.
+    (``none``) or stay strings. An option given twice is refused (naming it), rather
+    than the last one winning silently.
     """
+    if not isinstance(spec, str):
+        raise InputError(f"a component is named by text such as 'farneback:winsize=9', "
+                         f"got {type(spec).__name__} {spec!r}")
     name, _, rest = spec.partition(":")
     name = name.strip()
     if not name:
@@ -236,6 +240,8 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
                     f"bad option '{item}' in '{spec}': expected key=value, as in "
                     f"'{name}:key=value,other=value'"
                 )
+            if key in options:
+                raise InputError(f"option '{key}' is given twice in '{spec}'; give it once")
             options[key] = _coerce(value.strip())
     return name, options
 

@@ -12,7 +12,7 @@ import click
 import pytest
 
 from tactbench import hookimpl, hookspecs
-from tactbench.errors import ComponentLoadError, PluginError, UnknownComponentError
+from tactbench.errors import ComponentLoadError, InputError, PluginError, UnknownComponentError
 from tactbench.plugins import collect_registry, format_spec, make_plugin_manager, parse_spec
 
 GOOD_PLUGIN = """
@@ -279,6 +279,22 @@ def test_parse_spec(spec, expected):
 @pytest.mark.parametrize("spec", ["", ":a=1", "x:a", "x:1a=2", "x:a=1,,b=2"])
 def test_parse_spec_rejects_malformed(spec):
     with pytest.raises(ValueError):
+        parse_spec(spec)
+
+
+@pytest.mark.parametrize("spec, match", [
+    ("farneback:winsize=9,winsize=11", "option 'winsize' is given twice in "
+                                       "'farneback:winsize=9,winsize=11'"),
+    ("x:a=1, a =1", "option 'a' is given twice"),
+])
+def test_an_option_given_twice_is_refused_not_overridden(spec, match):
+    with pytest.raises(InputError, match=match):
+        parse_spec(spec)
+
+
+@pytest.mark.parametrize("spec", [1, None, ["raw"], {"raw": 1}, 1.5, True])
+def test_a_spec_that_is_not_text_is_one_clear_error(spec):
+    with pytest.raises(InputError, match="a component is named by text"):
         parse_spec(spec)
 
 
