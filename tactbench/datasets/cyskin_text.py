@@ -10,10 +10,14 @@ A folder of such files with one sub-folder per class (``0_finger/``,
 ``1_finger/``, …) is a dataset: the class is the folder name, sorted; a single
 file is a one-sample dataset whose class is its folder's name.
 
-Reading is strict: an empty file, a bad header, ragged or truncated rows,
-non-numeric values, infinite values, duplicate taxel ids and timestamps that go
-backwards each raise :class:`~tactbench.errors.InputError` naming the file, the line
-and the problem.
+Reading is strict: an empty file, a bad header, taxel ids outside 0..2**63-1,
+ragged or truncated rows, non-numeric values, infinite values or values beyond
+float32's range, duplicate taxel ids and timestamps that go backwards each raise
+:class:`~tactbench.errors.InputError` naming the file, the line, the field and the
+problem. Row lengths are checked against the header before anything is allocated,
+and the values' memory (frames × taxels, and for a folder every file's) is checked
+against :func:`tactbench.integrity.check_budget` first (a
+:class:`~tactbench.errors.BudgetError` beyond it).
 ``nan`` in a reading marks a missing taxel: kept as NaN (counted by
 ``tactbench data info``), not an error. Writing and reading back is exact.
 """
@@ -21,13 +25,14 @@ and the problem.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
+from tactbench.integrity import check_budget
 
 SUFFIX = ".txt"
 #: CySkin text values are baseline-removed raw counts, non-negative; the scale
@@ -37,70 +42,157 @@ NORMALISATION = "baseline:low=5,high=99.9"
 
 def read_cyskin_text(path: str | Path) -> Recording:
     """Read one recording (see the module docstring for the format and errors)."""
-    path = Path(path)
+    return _read(Path(path), held=0)
+
+
+#: Largest magnitude a reading may have: values are stored as float32.
+VALUE_MAX = float(np.finfo(np.float32).max)
+#: Taxel ids are stored as int64 and are never negative (``module * 16 + slot``).
+ID_MAX = int(np.iinfo(np.int64).max)
+#: Bytes one token of a split line costs while it is held (a short str and its pointer).
+_TOKEN_BYTES = 64
+
+
+def _read(path: Path, held: int) -> Recording:
+    """Read ``path`` in two streamed passes: the first checks the header and every row's
+    field count and sizes the arrays (nothing is allocated for a malformed file, and the
+    memory budget is asked first); the second parses the numbers into them. ``held``
+    bytes of earlier files of the same dataset count against the budget too."""
     if not path.is_file():
         raise MissingFileError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="ascii")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not a CySkin text file (non-ASCII byte at offset "
-                         f"{exc.start})") from None
-    lines = text.splitlines()
-    while lines and not lines[-1].strip():
-        lines.pop()
-    if not lines:
+    ids: np.ndarray | None = None
+    n_rows = 0
+    blank: int | None = None  # first blank line after the last non-blank one
+    for lineno, line in _lines(path):
+        toks = line.split()
+        if not toks:
+            blank = blank or lineno
+            continue
+        if ids is None:
+            if blank is not None:
+                raise InputError(f"{path}, line 1: empty header (expected the taxel ids)")
+            ids = _header(path, toks)
+        else:
+            if blank is not None:
+                _ragged(path, blank, 0, ids.size)
+            if len(toks) != ids.size + 2:
+                _ragged(path, lineno, len(toks), ids.size)
+            n_rows += 1
+        blank = None
+    if ids is None:
         raise InputError(f"{path}: empty file (expected a line of taxel ids, then frames)")
-    header = lines[0].split()
-    if not header:
-        raise InputError(f"{path}, line 1: empty header (expected the taxel ids)")
+    if n_rows == 0:
+        raise InputError(f"{path}: no frames after the header")
+    n = int(ids.size)
+    # values (float32), the reader's checks on them (bool) and the timestamps
+    check_budget(held + n_rows * n * 5 + n_rows * 16,
+                 f"{path}: {n_rows} frames × {n} taxels")
+    values = np.empty((n_rows, n), dtype=np.float32)
+    ts = np.empty(n_rows, dtype=np.float64)
+    k = 0
+    for lineno, line in _lines(path):
+        toks = line.split()
+        if lineno == 1 or not toks:
+            continue
+        if len(toks) != n + 2 or k == n_rows:
+            raise InputError(f"{path}, line {lineno}: the file changed while it was read")
+        _parse_row(path, lineno, toks, ids, values[k], ts, k)
+        k += 1
+    if k != n_rows:
+        raise InputError(f"{path}: the file changed while it was read")
+    return Recording(values, ts, ids)
+
+
+def _lines(path: Path) -> Iterator[tuple[int, str]]:
+    """``(line number, text)`` for each line, streamed; a non-ASCII byte is an InputError."""
     try:
-        ids = np.array([int(tok) for tok in header], dtype=np.int64)
-    except ValueError:
-        bad = next(tok for tok in header if not _is_int(tok))
-        raise InputError(f"{path}, line 1: the header must list integer taxel ids, found "
-                         f"{bad!r}") from None
-    uniq, counts = np.unique(ids, return_counts=True)
-    if uniq.size != ids.size:
+        with open(path, encoding="ascii", errors="strict") as f:
+            for lineno, line in enumerate(f, start=1):
+                # One line's tokens are held at a time: refuse a line they would not fit.
+                check_budget(_TOKEN_BYTES * (len(line) // 2 + 1),
+                             f"{path}, line {lineno}: a line of {len(line)} characters")
+                yield lineno, line
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a CySkin text file (non-ASCII byte at offset "
+                         f"{_first_non_ascii(path)})") from None
+
+
+def _first_non_ascii(path: Path) -> int:
+    offset = 0
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            bad = next((k for k, byte in enumerate(block) if byte > 127), None)
+            if bad is not None:
+                return offset + bad
+            offset += len(block)
+    return -1  # not reached: only called after a decode error
+
+
+def _header(path: Path, toks: list[str]) -> np.ndarray:
+    """The taxel ids of line 1: integers in 0..2**63-1, unique."""
+    ids = []
+    for col, tok in enumerate(toks):
+        where = f"{path}, line 1, field {col + 1}"
+        try:
+            value = int(tok)
+        except ValueError:
+            if not tok.lstrip("+-").isdigit():  # else: too many digits for int()
+                raise InputError(f"{where}: the header must list integer taxel ids, found "
+                                 f"{_show(tok)}") from None
+            value = -1 if tok.startswith("-") else ID_MAX + 1
+        if not 0 <= value <= ID_MAX:
+            raise InputError(f"{where}: taxel id {_show(tok)} is out of range "
+                             f"(0 to 2**63-1)")
+        ids.append(value)
+    arr = np.array(ids, dtype=np.int64)
+    uniq, counts = np.unique(arr, return_counts=True)
+    if uniq.size != arr.size:
         dup = uniq[counts > 1]
         raise InputError(f"{path}, line 1: duplicate taxel id(s) "
                          f"{', '.join(map(str, dup[:8]))}")
-    n = ids.size
-    if len(lines) < 2:
-        raise InputError(f"{path}: no frames after the header")
-    rows = np.empty((len(lines) - 1, n + 2), dtype=np.float64)
-    for k, line in enumerate(lines[1:]):
-        lineno = k + 2
-        toks = line.split()
-        if len(toks) != n + 2:
-            what = "truncated or ragged row" if len(toks) < n + 2 else "too many values"
-            raise InputError(f"{path}, line {lineno}: {what}: expected {n + 2} fields "
-                             f"(frame index, timestamp, {n} values), got {len(toks)}")
-        try:
-            rows[k] = np.array(toks, dtype=np.float64)
-        except ValueError:
-            col = next(i for i, tok in enumerate(toks) if not _is_float(tok))
-            raise InputError(f"{path}, line {lineno}, field {col + 1}: {toks[col]!r} is not "
-                             f"a number") from None
-    index, ts, values = rows[:, 0], rows[:, 1], rows[:, 2:]
-    if not np.all(np.isfinite(index)) or not np.all(index == np.round(index)):
-        k = int(np.nonzero(~np.isfinite(index) | (index != np.round(index)))[0][0])
-        raise InputError(f"{path}, line {k + 2}: frame index {lines[k + 1].split()[0]!r} is "
-                         f"not an integer")
-    if not np.all(np.isfinite(ts)):
-        k = int(np.nonzero(~np.isfinite(ts))[0][0])
-        raise InputError(f"{path}, line {k + 2}: timestamp is not finite")
-    back = np.nonzero(np.diff(ts) < 0)[0]
-    if back.size:
-        k = int(back[0]) + 1
-        raise InputError(f"{path}, line {k + 2}: timestamp {ts[k]:.6f} s goes backwards "
+    return arr
+
+
+def _ragged(path: Path, lineno: int, got: int, n: int) -> None:
+    what = "truncated or ragged row" if got < n + 2 else "too many values"
+    raise InputError(f"{path}, line {lineno}: {what}: expected {n + 2} fields "
+                     f"(frame index, timestamp, {n} values), got {got}")
+
+
+def _parse_row(path: Path, lineno: int, toks: list[str], ids: np.ndarray,
+               out: np.ndarray, ts: np.ndarray, k: int) -> None:
+    """Parse one frame line into ``out`` (its values) and ``ts[k]``, checking each field."""
+    where = f"{path}, line {lineno}"
+    try:
+        row = np.fromiter(map(float, toks), dtype=np.float64, count=len(toks))
+    except ValueError:
+        col = next(i for i, tok in enumerate(toks) if not _is_float(tok))
+        raise InputError(f"{where}, field {col + 1}: {_show(toks[col])} is not "
+                         f"a number") from None
+    index, t = row[0], row[1]
+    if not np.isfinite(index) or index != np.round(index):
+        raise InputError(f"{where}, field 1: frame index {_show(toks[0])} is not an integer")
+    if not np.isfinite(t):
+        raise InputError(f"{where}, field 2: timestamp {_show(toks[1])} is not finite")
+    if k and t < ts[k - 1]:
+        raise InputError(f"{where}, field 2: timestamp {t:.6f} s goes backwards "
                          f"(previous {ts[k - 1]:.6f} s)")
-    inf = np.argwhere(np.isinf(values))
-    if inf.size:
-        k, col = inf[0]
-        raise InputError(f"{path}, line {k + 2}: taxel {ids[col]} reads "
-                         f"{lines[k + 1].split()[col + 2]!r}; infinite values are not "
-                         f"allowed (write nan for a missing reading)")
-    return Recording(values.astype(np.float32), ts, ids)
+    values = row[2:]
+    big = np.flatnonzero(np.abs(values) > VALUE_MAX)  # NaN (a missing reading) passes
+    if big.size:
+        col = int(big[0])
+        why = ("infinite values are not allowed (write nan for a missing reading)"
+               if np.isinf(values[col]) else
+               f"out of range (a reading is stored as float32, at most {VALUE_MAX:.3g})")
+        raise InputError(f"{where}, field {col + 3}: taxel {ids[col]} reads "
+                         f"{_show(toks[col + 2])}; {why}")
+    ts[k] = t
+    out[:] = values
+
+
+def _show(tok: str, limit: int = 40) -> str:
+    """A token for an error line, quoted, cut to ``limit`` characters."""
+    return repr(tok if len(tok) <= limit else tok[:limit] + "…")
 
 
 def write_cyskin_text(recording: Recording, path: str | Path, *,
@@ -133,14 +225,6 @@ def _fmt32(x: float) -> str:
     if float(x).is_integer():
         return str(int(x))
     return repr(float(np.float32(x)))
-
-
-def _is_int(tok: str) -> bool:
-    try:
-        int(tok)
-        return True
-    except ValueError:
-        return False
 
 
 def _is_float(tok: str) -> bool:
@@ -177,8 +261,10 @@ def read_cyskin_folder(path: str | Path, *, name: str | None = None,
     classes = sorted(set(class_of))
     samples = []
     counter: dict[str, int] = {}
+    held = 0  # bytes of values already read: the budget covers the whole dataset
     for k, (f, cls) in enumerate(zip(files, class_of)):
-        rec = read_cyskin_text(f)
+        rec = _read(f, held)
+        held += rec.values.nbytes
         if samples and not np.array_equal(rec.taxel_ids, samples[0].recording.taxel_ids):
             raise InputError(f"{f}: its taxel ids differ from those of {files[0]} "
                              f"({rec.n_taxels} vs {samples[0].recording.n_taxels} taxels); "

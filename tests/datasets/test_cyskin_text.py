@@ -12,6 +12,7 @@ from tactbench.datasets.cyskin_text import (
     read_cyskin_text,
     write_cyskin_text,
 )
+from tactbench.errors import BudgetError, InputError
 
 HEADER = "56560 56561 56562"
 
@@ -46,23 +47,75 @@ def test_write_and_read_back_is_exact(tmp_path):
 @pytest.mark.parametrize("text, message", [
     ("", "empty file"),
     ("\n\n", "empty file"),
+    ("\n1 2 3\n0 0 1 2 3\n", "line 1: empty header"),
     ("frame timestamp a b\n0 0 1 2\n",
-     r"line 1: the header must list integer taxel ids, found 'frame'"),
+     r"line 1, field 1: the header must list integer taxel ids, found 'frame'"),
     ("1 2 2\n0 0 1 2 3\n", "line 1: duplicate taxel id.s. 2"),
     ("1 2 3\n", "no frames after the header"),
     ("1 2 3\n0 0 1 2 3\n1 0.1 1 2\n", "line 3: truncated or ragged row: expected 5 fields"),
+    ("1 2 3\n0 0 1 2 3\n\n1 0.1 1 2 3\n", "line 3: truncated or ragged row: .* got 0"),
     ("1 2 3\n0 0 1 2 3 4\n", "line 2: too many values"),
     ("1 2 3\n0 0 1 x 3\n", r"line 2, field 4: 'x' is not a number"),
-    ("1 2 3\n0 0 1 inf 3\n", "line 2: taxel 2 reads 'inf'; infinite values"),
-    ("1 2 3\n0 0.2 1 2 3\n1 0.1 1 2 3\n", "line 3: timestamp 0.100000 s goes backwards"),
-    ("1 2 3\n0.5 0 1 2 3\n", "line 2: frame index '0.5' is not an integer"),
-    ("1 2 3\n0 nan 1 2 3\n", "line 2: timestamp is not finite"),
+    ("1 2 3\n0 0 1 inf 3\n", "line 2, field 4: taxel 2 reads 'inf'; infinite values"),
+    ("1 2 3\n0 0.2 1 2 3\n1 0.1 1 2 3\n",
+     "line 3, field 2: timestamp 0.100000 s goes backwards"),
+    ("1 2 3\n0.5 0 1 2 3\n", "line 2, field 1: frame index '0.5' is not an integer"),
+    ("1 2 3\n0 nan 1 2 3\n", "line 2, field 2: timestamp 'nan' is not finite"),
+    # hostile values: one line each, naming the field (OverflowError / inf before)
+    ("12345678901234567890123 2 3\n0 0 1 2 3\n",
+     "line 1, field 1: taxel id '12345678901234567890123' is out of range"),
+    ("1 -2 3\n0 0 1 2 3\n", "line 1, field 2: taxel id '-2' is out of range"),
+    ("1 2 " + "9" * 5000 + "\n0 0 1 2 3\n", "line 1, field 3: taxel id '9999.*…' is out of"),
+    ("1 2 3\n0 0 1 2 1e300\n", "line 2, field 5: taxel 3 reads '1e300'; out of range"),
 ])
 def test_bad_files(tmp_path, text, message):
     path = write(tmp_path / "bad.txt", text)
-    with pytest.raises(ValueError, match=message) as info:
+    with pytest.raises(InputError, match=message) as info:
         read_cyskin_text(path)
-    assert "bad.txt" in str(info.value)
+    assert "bad.txt" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_many_ids_and_short_rows_are_refused_before_allocating(tmp_path, memory_cap):
+    """1.2 MB: 100 000 ids and 100 000 short rows. The old reader allocated the
+    rows × ids matrix (75 GiB) before it looked at a row."""
+    ids = " ".join(str(k) for k in range(100_000))
+    path = write(tmp_path / "wide.txt", ids + "\n" + "0 0 1\n" * 100_000)
+    with memory_cap(64), pytest.raises(InputError, match=r"wide.txt, line 2: truncated .*"
+                                                         r"expected 100002 fields"):
+        read_cyskin_text(path)
+
+
+def test_a_file_beyond_the_memory_budget_is_refused(tmp_path, monkeypatch, memory_cap):
+    """Well-formed, but ids × rows above the budget: one line, nothing allocated."""
+    n, rows = 2000, 300  # 2.4 MB of float32 values
+    ids = " ".join(str(k) for k in range(n))
+    row = " ".join(["0"] * n)
+    path = write(tmp_path / "big.txt",
+                 ids + "\n" + "".join(f"{k} {k / 10} {row}\n" for k in range(rows)))
+    assert read_cyskin_text(path).values.shape == (rows, n)
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "1")
+    with memory_cap(16), pytest.raises(BudgetError, match=r"big.txt: 300 frames × 2000 "
+                                                          r"taxels would need about"):
+        read_cyskin_text(path)
+    # a folder counts what its earlier files hold
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "3")
+    write(tmp_path / "ds" / "a" / "1.txt", path.read_text())
+    write(tmp_path / "ds" / "a" / "2.txt", path.read_text())
+    assert read_cyskin_text(tmp_path / "ds" / "a" / "2.txt").n_frames == rows
+    with pytest.raises(BudgetError, match=r"2.txt: 300 frames"):
+        read_cyskin_folder(tmp_path / "ds")
+
+
+def test_the_cli_prints_one_line_and_exits_2(tmp_path):
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    path = write(tmp_path / "c" / "bad.txt", "12345678901234567890123 2\n0 0 1 2\n")
+    res = CliRunner().invoke(cli, ["data", "info", str(path)])
+    assert res.exit_code == 2, res.output
+    [line] = res.output.strip().splitlines()
+    assert line.startswith("Error: ") and "line 1, field 1: taxel id" in line
 
 
 def test_binary_file_and_missing_file(tmp_path):
