@@ -153,7 +153,14 @@ class LiveModel:
                                  f"classification needs it (see "
                                  f"tactbench.classifiers.io.live_metadata)")
 
-        classes = [str(c) for c in need("classes")]
+        classes = need("classes")
+        if not isinstance(classes, list) or not classes:
+            raise TactbenchError(f"{where}: the metadata's 'classes' must be a list of names")
+        classes = [str(c) for c in classes]
+        outputs = getattr(clf, "n_classes", None)
+        if outputs is not None and len(classes) != outputs:
+            raise TactbenchError(f"{where}: the metadata lists {len(classes)} classes, but "
+                                 f"the classifier has {outputs} outputs")
         L = int(length if length is not None else
                 (meta.get("length") or meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
         if L < 1:

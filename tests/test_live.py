@@ -388,3 +388,105 @@ def test_live_command_on_a_dataset_replay(trained, tmp_path):
     rows = [json.loads(line) for line in res.stdout.splitlines()]
     assert len(rows) == dataset.samples[3].recording.n_frames - 2
     assert all("marker" not in r for r in rows)  # a dataset sample carries no markers
+
+
+# ------------------------------------------------------------- models that are refused
+
+
+def _corrupted(src, dst, how):
+    """A copy of model ``src`` spoiled ``how``: NaN weights (checksum recomputed, so the
+    finite check is what refuses it), a flipped tensor byte, or 1 class name for a
+    2-output network (a consistent file, as an old tactbench could write)."""
+    import json
+
+    from safetensors import safe_open
+    from safetensors.torch import save_file
+
+    from tactbench.classifiers.io import payload_digest
+
+    if how == "flipped":
+        data = bytearray(src.read_bytes())
+        data[-5] ^= 0x01
+        dst.write_bytes(bytes(data))
+        return dst
+    with safe_open(str(src), framework="pt") as f:
+        h = json.loads(f.metadata()["tactbench"])
+        t = {k: f.get_tensor(k).clone() for k in f.keys()}
+    if how == "nan":
+        name = next(k for k in sorted(t) if t[k].is_floating_point() and t[k].numel() > 1)
+        t[name].view(-1)[0] = float("nan")
+    else:
+        h["metadata"]["classes"] = h["classes"] = ["right"]
+    h["checksum"]["digest"] = payload_digest(h, t)
+    save_file(t, str(dst), metadata={"tactbench": json.dumps(h)})
+    return dst
+
+
+@pytest.mark.parametrize("how, message", [
+    ("nan", "holds 1 NaN or infinite value"),
+    ("flipped", "checksum .* does not match"),
+    ("classes", "lists 1 classes, but the network has 2 outputs"),
+])
+def test_live_command_refuses_a_bad_model_before_opening_the_sensor(trained, tmp_path,
+                                                                    monkeypatch, how, message):
+    import re
+
+    from click.testing import CliRunner
+
+    import tactbench.commands.live as live_command
+    from tactbench.cli import cli
+
+    _, _, path = trained
+    bad = _corrupted(path, tmp_path / "bad.safetensors", how)
+
+    def no_sensor(*args, **kwargs):
+        raise AssertionError("the sensor was opened for a bad model")
+
+    monkeypatch.setattr(live_command, "_build_sensor", no_sensor)
+    res = CliRunner().invoke(cli, ["live", "--model", str(bad), "--sensor", "replay",
+                                   str(tmp_path / "unused.blf")])
+    assert res.exit_code == 2, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"Error: {bad}: ")
+    assert re.search(message, lines[0])
+
+
+def test_from_parts_refuses_class_names_that_do_not_fit_the_outputs(trained):
+    from tactbench.errors import TactbenchError
+
+    _, _, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    for classes in (["right"], ["right", "left", "up"]):
+        with pytest.raises(TactbenchError, match=f"lists {len(classes)} classes, but the "
+                                                 f"classifier has 2 outputs"):
+            LiveModel.from_parts(model.clf, dict(model.info, classes=classes),
+                                 registry=REGISTRY)
+    with pytest.raises(TactbenchError, match="'classes' must be a list"):
+        LiveModel.from_parts(model.clf, dict(model.info, classes="rl"), registry=REGISTRY)
+
+
+def test_live_command_reads_a_format_1_model_with_one_warning_line(trained, tmp_path):
+    import json
+
+    from click.testing import CliRunner
+    from safetensors import safe_open
+    from safetensors.torch import save_file
+
+    from tactbench.cli import cli
+
+    dataset, _, path = trained
+    with safe_open(str(path), framework="pt") as f:
+        h = json.loads(f.metadata()["tactbench"])
+        t = {k: f.get_tensor(k) for k in f.keys()}
+    h["version"] = 1
+    for key in ("checksum", "classes", "cell"):
+        h.pop(key)
+    old = tmp_path / "old.safetensors"
+    save_file(t, str(old), metadata={"tactbench": json.dumps(h)})
+    folder = dataset.save(tmp_path / "ds")
+    res = CliRunner().invoke(cli, ["live", "--model", str(old), "--sensor", "replay",
+                                   str(folder), "--max-sweeps", "4"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    warned = [line for line in res.stderr.splitlines() if "warning" in line]
+    assert len(warned) == 1 and "has no checksum" in warned[0]
+    assert len(res.stdout.strip().splitlines()) == 2

@@ -1,19 +1,36 @@
-"""Saving and loading trained classifiers without pickle.
+"""Saving and loading trained classifiers without pickle, verified on every read.
 
 A model file is one safetensors file: the network's tensors, and in the
 header's metadata (key ``tactbench``) a JSON document::
 
-    {"format": "tactbench-model", "version": 1,
+    {"format": "tactbench-model", "version": 2,
      "classifier": "small-cnn-lstm",          # registry name, used to rebuild it
      "config": {"options": {...}, "n_classes": 5, "frame_shape": [3, 60, 70],
                 "length": 5, "fit_report": {...}},
+     "classes": ["Grasp", ...],                # or null: the class names, if given
+     "cell": "3f2a…",                          # or null: the run cell that produced it
      "metadata": {...},                        # what the caller passed to save()
-     "tactbench": "0.1.0", "torch": "2.13.0+cpu"}
+     "tactbench": "0.1.0", "torch": "2.13.0+cpu",
+     "checksum": {"algorithm": "sha256", "digest": "…"}}
 
-Nothing in the file is executed or unpickled. A file that is not safetensors,
-is truncated, has no tactbench header, a newer format version, an unknown
-classifier, or tensors that do not fit the classifier's network raises
-:class:`ModelFileError` naming the file and the problem.
+What the model is (classifier, options, classes, input shape ``frame_shape`` and window
+length, producing version and cell) is recorded beside the tensors, and ``checksum``
+is a SHA-256 over that record (every header field but ``checksum``, as canonical JSON)
+and every tensor (name, dtype, shape, bytes, in name order): a flipped bit or an
+edited header field is detected.
+
+:func:`load_model` (and :func:`verify_model`, which only checks) refuses, with
+:class:`ModelFileError` (a :class:`~tactbench.errors.CorruptArtefactError`) naming the
+file and the problem in one line: a file that is not safetensors or is truncated, has
+no tactbench header, a newer format version, an unknown classifier, tensors that do not
+fit the classifier's network, a checksum that does not match, a tensor holding NaN or
+infinity, or class names whose number differs from the network's outputs. Nothing in
+the file is executed or unpickled.
+
+Files of format 1 (written before checksums existed) are still read, with every check
+but the checksum, and an :class:`UnverifiedModelWarning`: re-saving such a file would
+only bless whatever it holds, and every failure reported against them (NaN weights,
+class counts, truncation) is caught by the other checks; retraining gives a verified file.
 
 What ``tactbench live`` needs in ``metadata`` is built by :func:`live_metadata`.
 """
@@ -22,44 +39,91 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from tactbench import __version__
-from tactbench.errors import InputError, TactbenchError
+from tactbench.errors import CorruptArtefactError, InputError, TactbenchError
 
 FORMAT = "tactbench-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: The format before checksums (read with a warning, see the module docstring).
+UNVERIFIED_VERSION = 1
 HEADER_KEY = "tactbench"
 
 
-class ModelFileError(TactbenchError, ValueError):
-    """A model file that cannot be read back (corrupt, foreign, or mismatched)."""
+class ModelFileError(CorruptArtefactError, ValueError):
+    """A model file that cannot be read back (corrupt, foreign, or mismatched).
+
+    ``ModelFileError(path, problem)``: the message is ``"<path>: <problem>"``.
+    """
+
+
+class UnverifiedModelWarning(UserWarning):
+    """A model file of format 1 was read: it has no checksum to verify."""
+
+
+def _tensor_chunks(tensors: dict[str, Any]) -> Iterator[bytes | memoryview]:
+    """Name, dtype, shape and bytes of each tensor, in name order (what the digest covers)."""
+    import torch
+
+    for name in sorted(tensors):
+        t = tensors[name].detach().cpu().contiguous()
+        yield json.dumps([name, str(t.dtype), list(t.shape)]).encode()
+        yield t.reshape(-1).view(torch.uint8).numpy().data
+
+
+def payload_digest(record: dict[str, Any], tensors: dict[str, Any]) -> str:
+    """SHA-256 of a model's header ``record`` (canonical JSON, without ``checksum``) and
+    its ``tensors`` (see the module docstring)."""
+    from tactbench.integrity import hash_chunks
+
+    head = {k: v for k, v in record.items() if k != "checksum"}
+    text = json.dumps(head, sort_keys=True, separators=(",", ":"))
+
+    def chunks():
+        yield text.encode()
+        yield from _tensor_chunks(tensors)
+
+    return hash_chunks(chunks())
 
 
 def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = None) -> Path:
     """Write ``clf`` (fitted) and ``metadata`` (JSON-serialisable) to ``path``.
 
-    The file is written atomically (:func:`tactbench.paths.atomic_write_bytes`), so an
-    interrupted save never leaves a half-written model under ``path``.
+    ``metadata["classes"]`` (the class names) and ``metadata["cell"]`` (the producing
+    run cell's key), when given, are also recorded in the header; class names must be
+    as many as the classifier's outputs. The file is written atomically
+    (:func:`tactbench.paths.atomic_write_bytes`), so an interrupted save never leaves a
+    half-written model under ``path``.
     """
     import torch
     from safetensors.torch import save
 
+    from tactbench.integrity import ALGORITHM
     from tactbench.paths import atomic_write_bytes
 
     config, tensors = clf._export()
+    meta = dict(metadata or {})
+    classes = meta.get("classes")
+    if classes is not None:
+        classes = [str(c) for c in classes]
+        if len(classes) != config.get("n_classes"):
+            raise InputError(f"model metadata names {len(classes)} classes, the classifier "
+                             f"has {config.get('n_classes')} outputs")
     header = {"format": FORMAT, "version": FORMAT_VERSION, "classifier": clf.name,
-              "config": config, "metadata": dict(metadata or {}),
-              "tactbench": __version__, "torch": torch.__version__}
-    try:
-        text = json.dumps(header)
+              "config": config, "classes": classes, "cell": meta.get("cell"),
+              "metadata": meta, "tactbench": __version__, "torch": torch.__version__}
+    try:  # round trip: the digest is of what a reader parses back
+        header = json.loads(json.dumps(header))
     except (TypeError, ValueError) as exc:
         raise InputError(f"model metadata must be JSON-serialisable: {exc}") from exc
     # safetensors refuses tensors that share memory or are not contiguous.
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in tensors.items()}
+    header["checksum"] = {"algorithm": ALGORITHM, "digest": payload_digest(header, tensors)}
     dest = Path(path)
-    atomic_write_bytes(dest, save(tensors, metadata={HEADER_KEY: text}))
+    atomic_write_bytes(dest, save(tensors, metadata={HEADER_KEY: json.dumps(header)}))
     return dest
 
 
@@ -95,46 +159,133 @@ def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
     return meta
 
 
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
+
+
 def read_header(path: str | os.PathLike) -> dict[str, Any]:
-    """The JSON header of a model file, without loading its tensors."""
+    """The JSON header of a model file, without loading its tensors (not verified
+    against them: :func:`load_model` does that). Its fields' types are checked."""
     from safetensors import safe_open
 
     p = Path(path)
     if not p.is_file():
-        raise ModelFileError(f"model file {p} does not exist")
+        raise ModelFileError(p, "model file does not exist")
     try:
         with safe_open(str(p), framework="pt") as f:
             raw = (f.metadata() or {}).get(HEADER_KEY)
-    except Exception as exc:
-        raise ModelFileError(f"{p} is not a readable model file (corrupt, truncated or not "
-                             f"safetensors): {type(exc).__name__}: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 — safetensors raises several kinds
+        raise ModelFileError(p, f"not a readable model file (corrupt, truncated or not "
+                                f"safetensors): {type(exc).__name__}: {exc}") from None
     if raw is None:
-        raise ModelFileError(f"{p} is a safetensors file but not a tactbench model "
-                             f"(no '{HEADER_KEY}' metadata)")
+        raise ModelFileError(p, f"a safetensors file but not a tactbench model "
+                                f"(no '{HEADER_KEY}' metadata)")
     try:
         header = json.loads(raw)
-    except json.JSONDecodeError as exc:
-        raise ModelFileError(f"{p}: the tactbench header is not valid JSON: {exc}") from exc
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ModelFileError(p, f"the tactbench header is not valid JSON: {exc}") from None
     found = header.get("format") if isinstance(header, dict) else header
     if found != FORMAT:
-        raise ModelFileError(f"{p}: header format is {found!r}, expected '{FORMAT}'")
+        raise ModelFileError(p, f"header format is {found!r:.60}, expected '{FORMAT}'")
     version = header.get("version")
-    if not isinstance(version, int) or version > FORMAT_VERSION:
-        raise ModelFileError(f"{p}: model format version {version!r} is newer than this "
-                             f"tactbench reads ({FORMAT_VERSION}); upgrade tactbench")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise ModelFileError(p, f"header 'version' must be a positive integer, got "
+                                f"{version!r:.40}")
+    if version > FORMAT_VERSION:
+        raise ModelFileError(p, f"model format version {version!r} is newer than this "
+                                f"tactbench reads ({FORMAT_VERSION}); upgrade tactbench")
     for key in ("classifier", "config"):
         if key not in header:
-            raise ModelFileError(f"{p}: header lacks '{key}'")
+            raise ModelFileError(p, f"header lacks '{key}'")
+    _check_header(header, p)
     return header
 
 
+def _check_header(h: dict[str, Any], p: Path) -> None:
+    """Types of the header's fields: one line naming the first that is wrong."""
+    def bad(field: str, want: str) -> ModelFileError:
+        return ModelFileError(p, f"header field '{field}' must be {want}")
+
+    if not isinstance(h["classifier"], str) or not h["classifier"]:
+        raise bad("classifier", "a classifier name")
+    config = h["config"]
+    if not isinstance(config, dict):
+        raise bad("config", "an object")
+    if not isinstance(config.get("options", {}), dict):
+        raise bad("config.options", "an object")
+    if not _is_count(config.get("n_classes")):
+        raise bad("config.n_classes", "a positive integer")
+    shape = config.get("frame_shape")
+    if not isinstance(shape, list) or not shape or not all(_is_count(s) for s in shape):
+        raise bad("config.frame_shape", "a list of positive integers")
+    if config.get("length") is not None and not _is_count(config["length"]):
+        raise bad("config.length", "a positive integer or null")
+    if not isinstance(h.get("metadata", {}), dict):
+        raise bad("metadata", "an object")
+    classes = h.get("classes")
+    if classes is not None and not (isinstance(classes, list)
+                                    and all(isinstance(c, str) for c in classes)):
+        raise bad("classes", "a list of names or null")
+    if h.get("cell") is not None and not isinstance(h["cell"], str):
+        raise bad("cell", "a cell key or null")
+    if h["version"] >= 2:
+        check = h.get("checksum")
+        if not isinstance(check, dict) or not isinstance(check.get("digest"), str):
+            raise ModelFileError(p, "header has no checksum ('checksum.digest')")
+        from tactbench.integrity import ALGORITHM
+
+        if check.get("algorithm") != ALGORITHM:
+            raise ModelFileError(p, f"checksum algorithm {check.get('algorithm')!r:.40} is "
+                                    f"not {ALGORITHM!r}")
+
+
+def _check_agreement(header: dict[str, Any], p: Path) -> None:
+    """Class names, window length and taxels of the metadata against the network."""
+    config, meta = header["config"], header.get("metadata", {})
+    k = config["n_classes"]
+    for where, names in (("header 'classes'", header.get("classes")),
+                         ("metadata 'classes'", meta.get("classes"))):
+        if names is None:
+            continue
+        if not isinstance(names, list):
+            raise ModelFileError(p, f"{where} must be a list of class names")
+        if len(names) != k:
+            raise ModelFileError(p, f"{where} lists {len(names)} classes, but the network "
+                                    f"has {k} outputs")
+    if header.get("classes") is not None and meta.get("classes") is not None \
+            and [str(c) for c in meta["classes"]] != header["classes"]:
+        raise ModelFileError(p, "metadata 'classes' differ from the header's")
+    length = meta.get("length")
+    if length is not None and config.get("length") is not None and length != config["length"]:
+        raise ModelFileError(p, f"metadata 'length' {length!r:.20} differs from the network's "
+                                f"window length {config['length']}")
+    ids = meta.get("taxel_ids")
+    shape = config["frame_shape"]
+    if ids is not None and len(shape) == 1 and (not isinstance(ids, list)
+                                                or len(ids) != shape[0]):
+        raise ModelFileError(p, f"metadata 'taxel_ids' names "
+                                f"{len(ids) if isinstance(ids, list) else '?'} taxels, but "
+                                f"the network takes vectors of {shape[0]}")
+
+
+def _check_finite(tensors: dict[str, Any], p: Path) -> None:
+    import torch
+
+    for name in sorted(tensors):
+        t = tensors[name]
+        if t.is_floating_point() and not bool(torch.isfinite(t).all()):
+            bad = int((~torch.isfinite(t)).sum())
+            raise ModelFileError(p, f"tensor '{name}' holds {bad} NaN or infinite value(s)")
+
+
 def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str, Any]]:
-    """Read a model saved by ``clf.save(path, metadata)``: returns ``(clf, metadata)``.
+    """Read and verify a model saved by ``clf.save(path, metadata)``: ``(clf, metadata)``.
 
     ``clf`` is ready to predict on the CPU (``clf.to("cuda")`` moves it);
     ``metadata`` is the dict given to ``save``. The classifier is rebuilt through
     the registry (``registry`` or all installed plugins), so models of plugin
-    classifiers load when the plugin is installed.
+    classifiers load when the plugin is installed. Every check of the module
+    docstring runs first; a failure raises :class:`ModelFileError` in one line.
     """
     from safetensors.torch import load_file
 
@@ -148,15 +299,33 @@ def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str
     try:
         cls = registry.get("classifier", name).load()
     except TactbenchError as exc:
-        raise ModelFileError(f"{p}: cannot rebuild classifier '{name}': {exc}") from exc
+        raise ModelFileError(p, f"cannot rebuild classifier '{name}': {exc}") from None
     try:
         tensors = load_file(str(p))
-    except Exception as exc:
-        raise ModelFileError(f"{p}: cannot read the tensors (corrupt or truncated): "
-                             f"{type(exc).__name__}: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 — safetensors raises several kinds
+        raise ModelFileError(p, f"cannot read the tensors (corrupt or truncated): "
+                                f"{type(exc).__name__}: {exc}") from None
+    if header["version"] >= 2:
+        digest = payload_digest(header, tensors)
+        if digest != header["checksum"]["digest"]:
+            raise ModelFileError(p, f"checksum {digest[:12]}… does not match the recorded "
+                                    f"{header['checksum']['digest'][:12]}…: the file was "
+                                    f"modified or is corrupted")
+    else:
+        warnings.warn(f"{p}: model file of format {UNVERIFIED_VERSION} has no checksum; "
+                      f"read with every other check (retrain to get a verified file)",
+                      UnverifiedModelWarning, stacklevel=2)
+    _check_agreement(header, p)
+    _check_finite(tensors, p)
     try:
         clf = cls._restore(header["config"], tensors)
     except (ValueError, TypeError, KeyError) as exc:
-        raise ModelFileError(f"{p}: does not match classifier '{name}': "
-                             f"{type(exc).__name__}: {exc}") from exc
+        raise ModelFileError(p, f"does not match classifier '{name}': "
+                                f"{type(exc).__name__}: {exc}") from None
     return clf, header.get("metadata", {})
+
+
+def verify_model(path: str | os.PathLike, *, registry=None) -> None:
+    """Raise :class:`ModelFileError` unless ``path`` is a model :func:`load_model` accepts
+    (every check, the network rebuilt; nothing returned)."""
+    load_model(path, registry=registry)

@@ -99,14 +99,23 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
 
 def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
           layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
+    import warnings
+
+    from tactbench.classifiers.io import UnverifiedModelWarning
     from tactbench.cli import get_registry
     from tactbench.contracts import SENSOR
     from tactbench.live import LiveClassifier, LiveModel, run_summary
 
     quiet = as_json or jsonl
     registry = get_registry(ctx, warn=not quiet)
-    model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
-                                pixel_mm=pixel_mm, registry=registry)
+    # The model is loaded and verified (checksum, finite weights, classes against the
+    # network) before the sensor is opened: a bad model never sees a sweep.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UnverifiedModelWarning)
+        model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
+                                    pixel_mm=pixel_mm, registry=registry)
+    for w in caught:
+        click.echo(f"tactbench: warning: {w.message}", err=True)
     live = LiveClassifier(model, warmup=warmup)
     bus = {"interface": interface, "channel": channel, "bitrate": bitrate,
            "format": format_spec}

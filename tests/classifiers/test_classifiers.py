@@ -358,6 +358,9 @@ def _rewrite_header(src, dst, edit):
         header = json.loads(f.metadata()["tactbench"])
         tensors = {k: f.get_tensor(k) for k in f.keys()}
     edit(header)
+    from tactbench.classifiers.io import payload_digest  # a consistent file, re-signed
+
+    header["checksum"]["digest"] = payload_digest(header, tensors)
     save_file(tensors, str(dst), metadata={"tactbench": json.dumps(header)})
     return dst
 

@@ -54,3 +54,167 @@ def test_live_metadata_without_a_layout():
     assert meta["taxel_ids"] == [4, 9] and meta["classes"] == ["touch"]
     assert meta["imaging"] == {"pixel_mm": 1.5, "method": "nearest"}
     assert meta["normalisation"]["scale"] == 100.0
+
+
+# ----------------------------------------------------------------- verification on read
+
+
+def _rewrite(src, dst, *, header=None, tensors=None, resign=True):
+    """Copy a model file through ``header(h)`` / ``tensors(t)`` edits; ``resign`` records
+    the checksum of the edited content (a consistent file), else the old one stays."""
+    import json
+
+    from safetensors import safe_open
+    from safetensors.torch import save_file
+
+    from tactbench.classifiers.io import payload_digest
+
+    with safe_open(str(src), framework="pt") as f:
+        h = json.loads(f.metadata()["tactbench"])
+        t = {k: f.get_tensor(k).clone() for k in f.keys()}
+    if header is not None:
+        header(h)
+    if tensors is not None:
+        tensors(t)
+    if resign and isinstance(h.get("checksum"), dict):
+        h["checksum"]["digest"] = payload_digest(h, t)
+    save_file(t, str(dst), metadata={"tactbench": json.dumps(h)})
+    return dst
+
+
+def _one_line_model_error(path, match):
+    from tactbench.classifiers.io import ModelFileError
+    from tactbench.errors import CorruptArtefactError
+
+    with pytest.raises(ModelFileError, match=match) as info:
+        load_model(path, registry=REGISTRY)
+    assert isinstance(info.value, CorruptArtefactError)
+    assert info.value.artefact == str(path) and "\n" not in str(info.value)
+    return info.value
+
+
+def test_the_header_records_what_the_model_is_and_a_checksum(fitted, tmp_path):
+    from tactbench import __version__
+    from tactbench.classifiers.io import verify_model
+
+    clf, _ = fitted
+    path = save_model(clf, tmp_path / "m.safetensors", {"classes": ["a", "b"], "cell": "k1"})
+    h = read_header(path)
+    assert h["version"] == 2 and h["classifier"] == "logreg"
+    assert h["classes"] == ["a", "b"] and h["cell"] == "k1" and h["tactbench"] == __version__
+    assert h["config"]["n_classes"] == 2 and h["config"]["frame_shape"] == [5]
+    assert h["config"]["length"] == 2
+    assert h["checksum"]["algorithm"] == "sha256" and len(h["checksum"]["digest"]) == 64
+    assert verify_model(path, registry=REGISTRY) is None
+
+
+def test_a_flipped_byte_in_the_tensors_is_refused(fitted, tmp_path):
+    clf, _ = fitted
+    path = save_model(clf, tmp_path / "m.safetensors")
+    data = bytearray(path.read_bytes())
+    data[-3] ^= 0x10  # inside the last tensor's bytes: still a valid safetensors file
+    path.write_bytes(bytes(data))
+    _one_line_model_error(path, "checksum .* does not match the recorded")
+
+
+def test_an_edited_header_field_is_refused(fitted, tmp_path):
+    clf, _ = fitted
+    good = save_model(clf, tmp_path / "good.safetensors", {"classes": ["a", "b"]})
+
+    def relabel(h):
+        h["metadata"]["classes"] = ["b", "a"]
+        h["classes"] = ["b", "a"]
+
+    _one_line_model_error(_rewrite(good, tmp_path / "m.safetensors", header=relabel,
+                                   resign=False), "checksum")
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_nan_or_infinite_tensors_are_refused_even_with_a_matching_checksum(fitted, tmp_path,
+                                                                           value):
+    clf, _ = fitted
+    good = save_model(clf, tmp_path / "good.safetensors")
+
+    def poison(t):
+        t["weight"][0, 0] = value
+
+    err = _one_line_model_error(_rewrite(good, tmp_path / "m.safetensors", tensors=poison),
+                                "tensor 'weight' holds 1 NaN or infinite value")
+    assert "checksum" not in str(err)
+
+
+def test_class_names_must_be_as_many_as_the_network_outputs(fitted, tmp_path):
+    clf, _ = fitted
+    with pytest.raises(ValueError, match="names 3 classes, the classifier has 2 outputs"):
+        save_model(clf, tmp_path / "m.safetensors", {"classes": ["a", "b", "c"]})
+    assert list(tmp_path.iterdir()) == []
+    good = save_model(clf, tmp_path / "good.safetensors", {"classes": ["a", "b"]})
+
+    def three(h):
+        h["metadata"]["classes"] = h["classes"] = ["a", "b", "c"]
+
+    _one_line_model_error(_rewrite(good, tmp_path / "c.safetensors", header=three),
+                          "lists 3 classes, but the network has 2 outputs")
+
+
+def _as_format_1(h):
+    """What save_model wrote before checksums: version 1, no classes/cell/checksum."""
+    h["version"] = 1
+    for key in ("checksum", "classes", "cell"):
+        h.pop(key)
+
+
+def test_a_format_1_file_is_read_with_every_other_check_and_a_warning(fitted, tmp_path):
+    from tactbench.classifiers.io import UnverifiedModelWarning
+
+    clf, windows = fitted
+    good = save_model(clf, tmp_path / "good.safetensors", {"classes": ["a", "b"]})
+    old = _rewrite(good, tmp_path / "old.safetensors", header=_as_format_1)
+    with pytest.warns(UnverifiedModelWarning, match="has no checksum"):
+        back, meta = load_model(old, registry=REGISTRY)
+    assert meta == {"classes": ["a", "b"]}
+    np.testing.assert_allclose(back.predict_proba(windows), clf.predict_proba(windows),
+                               atol=1e-6)
+
+    def three(h):
+        _as_format_1(h)
+        h["metadata"]["classes"] = ["a", "b", "c"]
+
+    def nan(t):
+        t["bias"][1] = float("nan")
+
+    with pytest.warns(UnverifiedModelWarning):
+        _one_line_model_error(_rewrite(good, tmp_path / "c.safetensors", header=three),
+                              "lists 3 classes")
+    with pytest.warns(UnverifiedModelWarning):
+        _one_line_model_error(_rewrite(good, tmp_path / "n.safetensors", header=_as_format_1,
+                                       tensors=nan), "tensor 'bias' holds 1 NaN")
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda h: h.pop("checksum"), "has no checksum"),
+    (lambda h: h["checksum"].update(algorithm="md5"), "checksum algorithm 'md5'"),
+    (lambda h: h["config"].update(n_classes="2"), "'config.n_classes' must be a positive"),
+    (lambda h: h["config"].update(frame_shape=[]), "'config.frame_shape' must be a list"),
+    (lambda h: h["config"].update(length=0), "'config.length' must be a positive"),
+    (lambda h: h.update(metadata=[1]), "'metadata' must be an object"),
+    (lambda h: h.update(classes="ab"), "'classes' must be a list of names"),
+    (lambda h: h.update(version=True), "'version' must be a positive integer"),
+    (lambda h: h.update(classifier=7), "'classifier' must be a classifier name"),
+    (lambda h: h["metadata"].update(length=9), "metadata 'length' 9 differs"),
+    (lambda h: h["metadata"].update(taxel_ids=[1, 2]), "names 2 taxels, but the network "
+                                                       "takes vectors of 5"),
+])
+def test_header_fields_of_the_wrong_type_or_value_are_one_line(fitted, tmp_path, edit, message):
+    clf, _ = fitted
+    good = save_model(clf, tmp_path / "good.safetensors")
+    _one_line_model_error(_rewrite(good, tmp_path / "m.safetensors", header=edit), message)
+
+
+@pytest.mark.parametrize("keep", [0, 7, 8, 100, -1])
+def test_a_truncated_file_is_one_line(fitted, tmp_path, keep):
+    clf, _ = fitted
+    path = save_model(clf, tmp_path / "m.safetensors")
+    data = path.read_bytes()
+    path.write_bytes(data[:keep] if keep >= 0 else data[:keep])
+    _one_line_model_error(path, "corrupt|truncated")
