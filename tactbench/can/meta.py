@@ -60,8 +60,9 @@ def _frames(kind: int, payload: bytes, seq: int, timestamp: float, prefix: int) 
 def marker_messages(start: bool, info: dict[str, Any], seq: int, *, timestamp: float = 0.0,
                     prefix: int = META_PREFIX) -> list:
     """A label start/end marker as CAN messages; ``info`` needs at least ``"label"``."""
-    if "label" not in info:
-        raise InputError("a marker needs a 'label'")
+    problem = marker_problem(info)
+    if problem:
+        raise InputError(problem.replace("marker without a label", "a marker needs a 'label'"))
     text = json.dumps(info, separators=(",", ":"), sort_keys=True).encode()
     return _frames(LABEL_START if start else LABEL_END, text, seq, timestamp, prefix)
 
@@ -90,8 +91,85 @@ class MetaEvent:
     taxel_ids: np.ndarray | None = None  # for taxel maps, sorted
 
 
+#: Deepest nesting of JSON arrays and objects a marker may have. tactbench writes flat
+#: objects; the limit keeps a hostile marker (16 000 nested ``[``) from reaching the
+#: JSON parser, which recurses.
+MAX_MARKER_DEPTH = 8
+#: Marker fields the readers turn into text (a sample's class, user, ...): JSON scalars.
+TEXT_FIELDS = ("label", "user", "position", "source")
+_INT64 = (-(1 << 63), (1 << 63) - 1)
+
+
+def marker_problem(info: Any) -> str | None:
+    """Why ``info`` is not a usable marker (``None`` if it is).
+
+    A marker is a JSON object with a ``label``; ``label``, ``user``, ``position`` and
+    ``source`` are strings or finite numbers, ``repetition`` an integer (int64).
+    """
+    if not isinstance(info, dict) or "label" not in info:
+        return "marker without a label"
+    for key in TEXT_FIELDS:
+        if key in info and not _scalar(info[key]):
+            return f"marker field {key!r} must be a string or a number"
+    rep = info.get("repetition", 0)
+    if isinstance(rep, bool) or not isinstance(rep, int) or not _INT64[0] <= rep <= _INT64[1]:
+        return "marker field 'repetition' must be an integer"
+    return None
+
+
+def _scalar(value: Any) -> bool:
+    if isinstance(value, float):
+        return value == value and abs(value) != float("inf")
+    return isinstance(value, (str, int))
+
+
+def json_depth(text: str, limit: int = MAX_MARKER_DEPTH) -> int:
+    """Nesting depth of the arrays and objects in JSON ``text``, counted without
+    recursion; stops counting (returns ``limit + 1``) once past ``limit``."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for ch in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+        elif ch == '"':
+            in_string = True
+        elif ch in "[{":
+            depth += 1
+            if depth > limit:
+                return limit + 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    return deepest
+
+
+def parse_marker(payload: bytes) -> dict[str, Any]:
+    """A label marker's info from its payload; :class:`InputError` if it is not one
+    (not UTF-8 JSON, nested deeper than :data:`MAX_MARKER_DEPTH`, see
+    :func:`marker_problem`)."""
+    text = payload.decode("utf-8")
+    if json_depth(text) > MAX_MARKER_DEPTH:
+        raise InputError(f"marker nested deeper than {MAX_MARKER_DEPTH} levels")
+    info = json.loads(text)
+    problem = marker_problem(info)
+    if problem:
+        raise InputError(problem)
+    return info
+
+
 class MetaAssembler:
-    """Reassemble meta messages from their parts; broken ones are counted, never raised."""
+    """Reassemble meta messages from their parts; broken ones are counted, never raised.
+
+    Broken: an unknown kind, a missing part, a taxel map whose length is not a multiple
+    of 4, a marker that is not UTF-8 JSON, is nested deeper than
+    :data:`MAX_MARKER_DEPTH`, or has fields of the wrong type (:func:`marker_problem`),
+    and anything that only looks like a message.
+    """
 
     def __init__(self, prefix: int = META_PREFIX) -> None:
         self.prefix = prefix
@@ -99,7 +177,13 @@ class MetaAssembler:
         self.broken = 0
 
     def feed(self, msg: Any) -> MetaEvent | None:
-        arb = int(msg.arbitration_id)
+        try:
+            arb = int(msg.arbitration_id)
+            data = bytes(msg.data)
+            timestamp = float(msg.timestamp)
+        except Exception:  # an object that only looks like a message
+            self.broken += 1
+            return None
         kind, last = (arb >> 20) & 0xF, bool((arb >> 19) & 1)
         part, seq = (arb >> 8) & 0x7FF, arb & 0xFF
         if kind not in KINDS:
@@ -107,7 +191,7 @@ class MetaAssembler:
             return None
         key = (kind, seq)
         parts = self._parts.setdefault(key, {})
-        parts[part] = bytes(msg.data)
+        parts[part] = data
         if not last:
             return None
         del self._parts[key]
@@ -115,7 +199,6 @@ class MetaAssembler:
             self.broken += 1
             return None
         payload = b"".join(parts[i] for i in range(part + 1))
-        timestamp = float(msg.timestamp)
         try:
             if kind == TAXEL_MAP:
                 if len(payload) % 4:
@@ -126,11 +209,10 @@ class MetaAssembler:
                     mask = int.from_bytes(payload[i + 2:i + 4], "big")
                     ids += [module * SLOTS_PER_MODULE + s for s in range(SLOTS_PER_MODULE)
                             if mask >> s & 1]
+                if not ids:
+                    raise InputError("taxel map without taxels")
                 return MetaEvent("taxel_map", timestamp, taxel_ids=np.array(ids, np.int64))
-            info = json.loads(payload.decode())
-            if not isinstance(info, dict) or "label" not in info:
-                raise InputError("marker without a label")
-            return MetaEvent(KINDS[kind], timestamp, info=info)
-        except (ValueError, UnicodeDecodeError):
+            return MetaEvent(KINDS[kind], timestamp, info=parse_marker(payload))
+        except (ValueError, UnicodeDecodeError, RecursionError):
             self.broken += 1
             return None
