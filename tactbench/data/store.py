@@ -33,7 +33,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.layout_io import layout_from_dict, layout_to_dict
 from tactbench.data.recording import UINT16_MAX, Recording, Sample
-from tactbench.errors import InputError, MissingFileError
+from tactbench.errors import InputError, MissingFileError, TactbenchError
 from tactbench.paths import atomic_write_bytes, atomic_write_text
 
 FORMAT_NAME = "tactbench-dataset"
@@ -118,8 +118,12 @@ def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
 def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
     """Read a dataset folder written by :func:`write_dataset`, validating it.
 
+    Every manifest field's type is checked; of ``arrays.npz`` only the members the
+    format defines are read (others are ignored, never decompressed), each after its
+    npy header (shape × item size) was checked against the zip member's size and the
+    whole against the memory budget (:func:`tactbench.integrity.check_budget`).
     ``verify`` recomputes the content hash and compares it with the manifest's
-    (detects edited or corrupted arrays).
+    (detects edited or corrupted arrays). Nothing in the folder is written.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -127,15 +131,21 @@ def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
     mpath, apath = folder / MANIFEST, folder / ARRAYS
     if not mpath.is_file():
         raise InputError(f"{folder}: not a tactbench dataset folder (no {MANIFEST})")
+    from tactbench.integrity import check_budget
+
+    # Parsed JSON takes several times its text (the samples' lists of strings).
+    check_budget(16 * mpath.stat().st_size, f"reading {mpath}")
     try:
         manifest = json.loads(mpath.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{mpath}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"{mpath}: not valid JSON: nested too deeply") from None
     _check_manifest(manifest, mpath)
     if not apath.is_file():
         raise InputError(f"{folder}: {ARRAYS} is missing (the manifest names "
                          f"{manifest['n_samples']} samples)")
-    ds = _dataset_from(manifest, _read_npz(apath), mpath, apath)
+    ds = _dataset_from(manifest, _read_npz(apath, manifest), mpath, apath)
     if verify and ds.content_hash() != manifest["content_hash"]:
         raise InputError(f"{apath}: content hash {ds.content_hash()[:12]}… does not "
                          f"match the manifest's {str(manifest['content_hash'])[:12]}…: "
@@ -148,16 +158,27 @@ _MANIFEST_FIELDS = {
     "normalisation": str, "n_samples": int, "n_taxels": int, "n_frames": int,
     "users": list, "positions": list, "sources": list, "content_hash": str,
 }
+#: Optional fields and their types (``None`` allowed where the type is a tuple with it).
+_MANIFEST_OPTIONAL = {"description": (str,), "values_dtype": (str,),
+                      "layout": (dict, type(None))}
+#: The values types write_dataset stores.
+_VALUES_DTYPES = ("uint16", "float32")
+
+
+def _type_name(typ: type) -> str:
+    return {"str": "string", "int": "integer", "list": "list", "dict": "object",
+            "NoneType": "null"}.get(typ.__name__, typ.__name__)
 
 
 def _check_manifest(m: Any, path: Path) -> None:
     if not isinstance(m, dict):
         raise InputError(f"{path}: the manifest must be a JSON object")
     if m.get("format") != FORMAT_NAME:
-        raise InputError(f"{path}: 'format' is {m.get('format')!r}, expected {FORMAT_NAME!r}")
+        raise InputError(f"{path}: 'format' is {m.get('format')!r:.60}, expected "
+                         f"{FORMAT_NAME!r}")
     version = m.get("schema_version")
-    if version != SCHEMA_VERSION:
-        raise InputError(f"{path}: schema_version {version!r} is not supported (this "
+    if version != SCHEMA_VERSION or isinstance(version, bool):
+        raise InputError(f"{path}: schema_version {version!r:.40} is not supported (this "
                          f"tactbench reads version {SCHEMA_VERSION})")
     for key, typ in _MANIFEST_FIELDS.items():
         if key not in m:
@@ -165,6 +186,14 @@ def _check_manifest(m: Any, path: Path) -> None:
         if not isinstance(m[key], typ) or (typ is int and isinstance(m[key], bool)):
             raise InputError(f"{path}: field {key!r} must be a {typ.__name__}, got "
                              f"{type(m[key]).__name__}")
+    for key, types in _MANIFEST_OPTIONAL.items():
+        if key in m and not isinstance(m[key], types):
+            raise InputError(f"{path}: field {key!r} must be "
+                             f"{' or '.join(map(_type_name, types))}, got "
+                             f"{type(m[key]).__name__}")
+    for key in ("n_samples", "n_taxels", "n_frames"):
+        if m[key] < 1:
+            raise InputError(f"{path}: field {key!r} must be ≥ 1, got {m[key]}")
     n = m["n_samples"]
     for key in ("users", "positions", "sources"):
         if len(m[key]) != n or not all(isinstance(v, str) for v in m[key]):
@@ -173,19 +202,92 @@ def _check_manifest(m: Any, path: Path) -> None:
         raise InputError(f"{path}: 'classes' must be strings")
     if not re.fullmatch(r"[0-9a-f]{64}", m["content_hash"]):
         raise InputError(f"{path}: 'content_hash' is not a SHA-256 hex digest")
+    if m.get("values_dtype", "float32") not in _VALUES_DTYPES:
+        raise InputError(f"{path}: field 'values_dtype' must be one of "
+                         f"{', '.join(_VALUES_DTYPES)}, got {m['values_dtype']!r:.40}")
+    layout = m.get("layout")
+    if layout is not None:
+        unknown = sorted(set(layout) - {"name"})
+        if unknown or not isinstance(layout.get("name", ""), str):
+            raise InputError(f"{path}: field 'layout' must be null or {{\"name\": string}}, "
+                             f"got {json.dumps(layout)[:60]}")
 
 
-def _read_npz(path: Path) -> dict[str, np.ndarray]:
+#: The members of ``arrays.npz`` the format defines; no other member is ever read.
+MEMBERS = ("values", "timestamps", "offsets", "taxel_ids", "labels", "repetitions",
+           *(_LAYOUT_PREFIX + key for key in _LAYOUT_DTYPES))
+
+
+def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]:
+    """The format's members of ``path`` (see :data:`MEMBERS`), each checked before it is
+    read: its npy header (no objects; shape × item size equal to the zip member's
+    uncompressed size) and the members' total (plus the float32 copy of ``values``)
+    against the memory budget. Other members are not decompressed."""
+    import math
     import zipfile
+    import zlib
+
+    from numpy.lib import format as npy
+
+    from tactbench.integrity import _human, check_budget
+
+    def bad(problem: str) -> InputError:
+        return InputError(f"{path}: {problem}")
 
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    except (zipfile.BadZipFile, EOFError, OSError) as exc:
-        raise InputError(f"{path}: cannot read the arrays (truncated or not an .npz "
-                         f"file): {exc}") from None
-    except ValueError as exc:  # object arrays need pickle: refused
-        raise InputError(f"{path}: {exc}") from None
+        archive = zipfile.ZipFile(path)
+    except zipfile.BadZipFile:
+        raise bad("not a valid .npz file (not a zip archive, or truncated)") from None
+    except OSError as exc:
+        raise bad(f"cannot read the arrays: {exc}") from None
+    with archive:
+        infos: dict[str, zipfile.ZipInfo] = {}
+        for info in archive.infolist():
+            key = info.filename[:-4] if info.filename.endswith(".npy") else None
+            if key in MEMBERS:
+                if key in infos:
+                    raise bad(f"member {info.filename!r} appears twice")
+                infos[key] = info
+        headers: dict[str, tuple[tuple[int, ...], bool, np.dtype]] = {}
+        try:
+            for key, info in infos.items():
+                with archive.open(info) as fh:
+                    try:
+                        version = npy.read_magic(fh)
+                        if version not in ((1, 0), (2, 0)):
+                            raise ValueError(f"npy format version {version} is not read")
+                        read_header = (npy.read_array_header_1_0 if version == (1, 0)
+                                       else npy.read_array_header_2_0)
+                        shape, fortran, dtype = read_header(fh)
+                    except ValueError as exc:
+                        raise bad(f"member {key!r} is not a valid .npy array: "
+                                  f"{str(exc).splitlines()[0][:120]}") from None
+                    if dtype.hasobject:
+                        raise bad(f"member {key!r} holds Python objects, which would need "
+                                  f"allow_pickle; refused")
+                    claimed = math.prod(shape) * dtype.itemsize
+                    held = info.file_size - fh.tell()
+                    if claimed != held:
+                        raise bad(f"member {key!r} claims shape {shape} {dtype} "
+                                  f"({_human(claimed)}), but holds {_human(held)}")
+                headers[key] = (shape, fortran, dtype)
+            total = sum(math.prod(s) * d.itemsize for s, _, d in headers.values())
+            if "values" in headers and headers["values"][2] != np.float32:
+                total += 4 * math.prod(headers["values"][0])  # the float32 copy
+            check_budget(total, f"reading {path} ({len(headers)} arrays)")
+            arrays = {}
+            for key, info in infos.items():
+                with archive.open(info) as fh:
+                    arrays[key] = npy.read_array(fh, allow_pickle=False)
+            return arrays
+        except TactbenchError:
+            raise
+        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as exc:
+            raise bad(f"cannot read the arrays (corrupt or truncated): "
+                      f"{type(exc).__name__}: {str(exc)[:120]}") from None
+        except ValueError as exc:  # read_array: data shorter than its header says
+            raise bad(f"cannot read the arrays (corrupt or truncated): "
+                      f"{str(exc).splitlines()[0][:120]}") from None
 
 
 def _need(arrays: dict, key: str, path: Path, ndim: int, kinds: str) -> np.ndarray:
@@ -225,12 +327,18 @@ def _dataset_from(m: dict, arrays: dict, mpath: Path, apath: Path) -> Dataset:
     if bad.size:
         raise InputError(f"{apath}: sample {bad[0]} has label {labels[bad[0]]}, but there "
                          f"are {len(classes)} classes")
+    dtype = m.get("values_dtype")
+    if dtype is not None and values.dtype != np.dtype(dtype):
+        raise InputError(f"{apath}: 'values' is {values.dtype}, the manifest says {dtype}")
     layout = None
     if "layout_ids" in arrays:
         fields = {key[len(_LAYOUT_PREFIX):]: value for key, value in arrays.items()
                   if key.startswith(_LAYOUT_PREFIX)}
         layout = layout_from_dict({**fields, "name": (m.get("layout") or {}).get("name", "")},
                                   f"{apath}: layout")
+    elif m.get("layout") is not None:
+        raise InputError(f"{apath}: the manifest names a layout, but there is no "
+                         f"'layout_ids' array")
     vals32 = values.astype(np.float32, copy=False)
     samples = []
     for k in range(n):

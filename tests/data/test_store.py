@@ -77,7 +77,8 @@ def test_load_errors_name_the_file_and_problem(tmp_path, make_dataset):
     (dict(taxel_ids=np.zeros(16, np.int64)), "duplicate taxel ids"),
     (dict(values=np.zeros((5, 16), np.float32)), "'values' has shape"),
     (dict(timestamps=np.full(1, 0.0)), "'timestamps' has 1 entries"),
-    (dict(users=np.array(["x"], dtype=object)), "allow_pickle"),
+    (dict(labels=np.array([0, 1, 2, 0, 1, 2], dtype=object)),
+     "member 'labels' holds Python objects, which would need allow_pickle"),
 ])
 def test_bad_arrays(tmp_path, change, message, make_dataset):
     folder, manifest = _saved(tmp_path, make_dataset)
@@ -112,7 +113,7 @@ def test_truncated_arrays_file(tmp_path, make_dataset):
     folder, _ = _saved(tmp_path, make_dataset)
     data = (folder / "arrays.npz").read_bytes()
     (folder / "arrays.npz").write_bytes(data[: len(data) // 2])
-    with pytest.raises(ValueError, match="cannot read the arrays"):
+    with pytest.raises(ValueError, match="not a valid .npz file"):
         Dataset.load(folder)
 
 
@@ -144,3 +145,144 @@ def test_saving_again_replaces_the_files_and_leaves_no_temporary_files(tmp_path,
     other.save(folder)
     assert sorted(p.name for p in folder.iterdir()) == ["arrays.npz", "manifest.json"]
     assert Dataset.load(folder).content_hash() == other.content_hash()
+
+
+# ------------------------------------------------------------------ hostile folders
+
+
+def _load_error(folder, match):
+    """Load ``folder``; the error must be a TactbenchError in one line naming a file."""
+    from tactbench.errors import TactbenchError
+
+    with pytest.raises(TactbenchError, match=match) as info:
+        Dataset.load(folder)
+    text = str(info.value)
+    assert "\n" not in text and ("arrays.npz" in text or "manifest.json" in text), text
+    return info.value
+
+
+def _npy_bytes(header: dict, payload: bytes) -> bytes:
+    """An .npy file with any header (``descr``, ``fortran_order``, ``shape``)."""
+    import io
+
+    from numpy.lib import format as npy
+
+    buf = io.BytesIO()
+    npy.write_array_header_1_0(buf, header)
+    return buf.getvalue() + payload
+
+
+def _with_members(folder, **members):
+    """Rewrite arrays.npz with members replaced or added: name → .npy bytes, stored
+    deflated."""
+    import zipfile
+
+    path = folder / "arrays.npz"
+    with zipfile.ZipFile(path) as z:
+        old = {i.filename: z.read(i) for i in z.infolist()}
+    old.update({f"{k}.npy": v for k, v in members.items()})
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        for name, data in old.items():
+            z.writestr(name, data)
+
+
+def test_random_bytes_are_not_a_valid_npz(tmp_path, make_dataset):
+    folder, _ = _saved(tmp_path, make_dataset)
+    (folder / "arrays.npz").write_bytes(np.random.default_rng(0).bytes(4096))
+    _load_error(folder, "arrays.npz: not a valid .npz file")
+
+
+def test_a_member_claiming_a_huge_shape_is_refused_before_allocating(tmp_path, make_dataset,
+                                                                     memory_cap):
+    folder, _ = _saved(tmp_path, make_dataset)
+    huge = _npy_bytes({"descr": "<f8", "fortran_order": False, "shape": (20_000_000_000,)},
+                      b"\0" * 64)
+    _with_members(folder, timestamps=huge)
+    with memory_cap(50):
+        _load_error(folder, r"member 'timestamps' claims shape \(20000000000,\) float64 "
+                            r"\(149.0 GiB\), but holds 64 B")
+
+
+def test_arrays_above_the_memory_budget_are_refused(tmp_path, make_dataset, monkeypatch):
+    from tactbench.errors import BudgetError
+
+    rec = Recording(np.ones((300, 1000), np.float32), 0.1 * np.arange(300), np.arange(1000))
+    folder = Dataset("big", [Sample(rec, 0)], ("a",)).save(tmp_path / "big")
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "1")
+    err = _load_error(folder, r"reading .*arrays.npz \(6 arrays\) would need about 1.7 MiB, "
+                              r"more than the memory budget of 1.0 MiB; set "
+                              r"TACTBENCH_MEMORY_MIB")
+    assert isinstance(err, BudgetError)
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "8")
+    assert Dataset.load(folder).n_taxels == 1000
+
+
+def test_an_extra_member_is_never_decompressed(tmp_path, make_dataset, memory_cap):
+    """64 MiB of zeros deflate to 64 KiB: reading the member would show in the cap."""
+    import zipfile
+
+    folder, _ = _saved(tmp_path, make_dataset)
+    expected = Dataset.load(folder).content_hash()
+    zeros = np.zeros(8 << 20, np.float64)
+    with zipfile.ZipFile(folder / "arrays.npz", "a", compression=zipfile.ZIP_DEFLATED) as z:
+        with z.open("extra.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array(f, zeros)
+        z.writestr("notes.txt", "not an array")
+    del zeros
+    assert (folder / "arrays.npz").stat().st_size < 1 << 20
+    with memory_cap(20):
+        assert Dataset.load(folder).content_hash() == expected
+
+
+def test_duplicate_and_malformed_members(tmp_path, make_dataset):
+    import zipfile
+
+    folder, _ = _saved(tmp_path, make_dataset)
+    with zipfile.ZipFile(folder / "arrays.npz", "a") as z:
+        with pytest.warns(UserWarning, match="Duplicate name"):
+            z.writestr("labels.npy", b"\x93NUMPY")
+    _load_error(folder, "member 'labels.npy' appears twice")
+    folder, _ = _saved(tmp_path / "2", make_dataset)
+    _with_members(folder, labels=b"\x93NUMPY\x01\x00garbage")
+    _load_error(folder, "member 'labels' is not a valid .npy array")
+    folder, _ = _saved(tmp_path / "3", make_dataset)
+    # a header that says 6 int64 labels over 6 bytes of data
+    _with_members(folder, labels=_npy_bytes({"descr": "<i8", "fortran_order": False,
+                                             "shape": (6,)}, b"\0" * 6))
+    _load_error(folder, r"member 'labels' claims shape \(6,\) int64 \(48 B\), but holds 6 B")
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"layout": "grid"}, "field 'layout' must be object or null, got str"),
+    ({"layout": ["grid"]}, "field 'layout' must be object or null, got list"),
+    ({"layout": {"name": 3}}, r"field 'layout' must be null or \{\"name\": string\}"),
+    ({"layout": {"name": "g", "x": 1}}, r"field 'layout' must be null or"),
+    ({"description": 5}, "field 'description' must be string, got int"),
+    ({"values_dtype": ["uint16"]}, "field 'values_dtype' must be string, got list"),
+    ({"values_dtype": "int8"}, "'values_dtype' must be one of uint16, float32, got 'int8'"),
+    ({"values_dtype": "float32"}, "'values' is uint16, the manifest says float32"),
+    ({"n_frames": 0}, "field 'n_frames' must be ≥ 1"),
+    ({"n_samples": -1}, "field 'n_samples' must be ≥ 1"),
+    ({"schema_version": True}, "schema_version True is not supported"),
+    ({"classes": "abc"}, "field 'classes' must be a list"),
+    ({"users": None}, "field 'users' must be a list, got NoneType"),
+    ({"content_hash": 12}, "field 'content_hash' must be a str"),
+])
+def test_manifest_fields_of_the_wrong_type_are_one_line(tmp_path, make_dataset, change,
+                                                        message):
+    folder, manifest = _saved(tmp_path, make_dataset)
+    (folder / "manifest.json").write_text(json.dumps({**manifest, **change}))
+    _load_error(folder, message)
+
+
+def test_a_manifest_naming_a_layout_needs_the_layout_arrays(tmp_path, make_dataset):
+    folder = make_dataset(layout=False).save(tmp_path / "d")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    (folder / "manifest.json").write_text(json.dumps({**manifest, "layout": {"name": "g"}}))
+    _load_error(folder, "the manifest names a layout, but there is no 'layout_ids' array")
+
+
+def test_a_deeply_nested_manifest_is_one_line(tmp_path, make_dataset):
+    folder, _ = _saved(tmp_path, make_dataset)
+    (folder / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
+    _load_error(folder, "manifest.json: not valid JSON")
