@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
-from tactbench.can.codec import FrameFormat, TaxelMap
+from tactbench.can.codec import MAX_TAXELS, FrameFormat, TaxelMap
 from tactbench.errors import InputError, check_positive_int
 
 if TYPE_CHECKING:
@@ -32,6 +32,9 @@ def cyskin_like_ids(n_taxels: int) -> "np.ndarray":
     import numpy as np
 
     check_positive_int(n_taxels, "the number of taxels")
+    if n_taxels > MAX_TAXELS:
+        raise InputError(f"{n_taxels} taxels: a CAN bus carries at most {MAX_TAXELS} "
+                         f"(4096 modules × 16 slots)")
     k = np.arange(n_taxels, dtype=np.int64)
     return (k // 11) * 16 + k % 11
 

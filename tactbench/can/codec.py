@@ -31,6 +31,9 @@ from tactbench.errors import InputError
 
 SLOTS_PER_MODULE = 16
 COUNTER_MODULO = 256
+#: Most taxels one bus can carry in any id scheme: 4096 bus modules (the 12 module bits
+#: of an extended id) × 16 slots. Taxel-id lists and ranges beyond it are refused.
+MAX_TAXELS = 4096 * SLOTS_PER_MODULE
 MAX_COUNT = 0xFFFF
 
 #: Payload lengths CAN FD allows (a shorter payload is padded up to the next one).

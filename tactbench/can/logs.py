@@ -10,6 +10,7 @@ up as taxels that are always 0).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -43,14 +44,38 @@ def check_log_name(path: str | Path) -> Path:
     return path
 
 
+def check_log_out(path: str | Path) -> Path:
+    """``path`` as a Path if a log can be written there, else one :class:`InputError` line.
+
+    Checked before any work (``tactbench can record`` checks before it opens the bus):
+    a CAN log suffix, not a folder, no file where a folder of its path should be, and
+    the nearest existing folder (the ones missing are created) writable.
+    """
+    path = check_log_name(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give a log file name ({', '.join(LOG_SUFFIXES)})")
+    existing = path.parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{path}: cannot write there: {existing} is a file, not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"{path}: cannot write in {existing} (permission denied)")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise InputError(f"{path}: cannot overwrite it (permission denied)")
+    return path
+
+
 def open_writer(path: str | Path):
     """A python-can writer for ``path`` (format from the suffix); call ``.stop()`` to close."""
     import can
 
-    path = Path(path)
-    check_log_name(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return can.Logger(str(path))
+    path = check_log_out(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return can.Logger(str(path))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the log: {exc.strerror or exc}") from None
 
 
 def write_log(path: str | Path, messages: Iterable[Any]) -> int:

@@ -89,6 +89,10 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
         raise click.UsageError("--speed must be ≥ 0")
     if loop and out is not None:
         raise click.UsageError("--loop needs a bus, not --out")
+    if out is not None:
+        from tactbench.can.logs import check_log_out
+
+        check_log_out(out)  # before the samples are loaded
     samples, ids = load_samples(source, rate_hz=rate_hz)
     if limit is not None:
         samples = samples[:max(0, limit)]
@@ -153,13 +157,13 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     back with 'tactbench can info', 'tactbench data info' and the replay sensor.
     """
     from tactbench.can.bus import open_bus
-    from tactbench.can.logs import check_log_name
+    from tactbench.can.logs import check_log_out
     from tactbench.can.record import record
     from tactbench.sensors.cyskin_can import resolve_taxel_ids
     from tactbench.ui import Progress
 
     fmt = _format(format_spec, format_file)
-    check_log_name(out)
+    check_log_out(out)  # before the bus is opened: nothing recorded is lost to a bad --out
     if duration is None and idle_timeout is None and max_messages is None and sys.stdin.isatty():
         _err("recording until Ctrl-C")
     ids = resolve_taxel_ids(taxel_ids, layout) if (taxel_ids or layout) else None

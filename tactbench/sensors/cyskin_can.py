@@ -18,27 +18,55 @@ import numpy as np
 from tactbench.can.assembler import SweepAssembler
 from tactbench.can.bus import open_bus
 from tactbench.can.busload import BusLoad, bus_load
-from tactbench.can.codec import FrameFormat, TaxelMap
+from tactbench.can.codec import MAX_TAXELS, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, is_meta
 from tactbench.errors import InputError
 
 
 def parse_taxel_ids(spec: Any) -> np.ndarray:
-    """Taxel ids from an array, a list, or text: ``"0,1,2"``, ``"0-10,16-26"``."""
+    """Taxel ids from an array, a list, or text: ``"0,1,2"``, ``"0-10,16-26"``.
+
+    Text may name at most :data:`~tactbench.can.codec.MAX_TAXELS` ids (what one bus
+    carries); a range beyond that (``0-99999999999``) is refused before it is expanded.
+    """
     if isinstance(spec, (list, tuple, np.ndarray)):
-        return np.asarray(spec, dtype=np.int64)
-    if isinstance(spec, int):
-        return np.array([spec], dtype=np.int64)
-    ids: list[int] = []
+        try:
+            return np.asarray(spec, dtype=np.int64)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"taxel ids must be integers (0 to 2**63-1), got "
+                             f"{_short(spec)}") from None
+    if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
+        spec = str(int(spec))
+    ranges: list[tuple[int, int]] = []
+    total = 0
     for item in str(spec).replace(";", ",").replace(" ", ",").split(","):
         if not item:
             continue
         lo, dash, hi = item.partition("-")
         try:
-            ids += list(range(int(lo), int(hi) + 1)) if dash else [int(lo)]
+            first, last = int(lo), int(hi) if dash else int(lo)
         except ValueError:
-            raise InputError(f"bad taxel id item '{item}' in '{spec}': expected N or N-M") from None
-    return np.asarray(ids, dtype=np.int64)
+            raise InputError(f"bad taxel id item {_short(item)} in {_short(spec)}: expected "
+                             f"N or N-M") from None
+        if not 0 <= first <= last <= _ID_MAX:
+            raise InputError(f"bad taxel id item {_short(item)}: " + (
+                f"the range {first}-{last} is empty (N-M needs N ≤ M)" if first > last
+                else "taxel ids must be 0 to 2**63-1"))
+        total += last - first + 1
+        if total > MAX_TAXELS:
+            raise InputError(f"taxel ids {_short(spec)} name more than {MAX_TAXELS} taxels, "
+                             f"the most a CAN bus carries (4096 modules × 16 slots)")
+        ranges.append((first, last))
+    return np.asarray([k for first, last in ranges for k in range(first, last + 1)],
+                      dtype=np.int64)
+
+
+_ID_MAX = int(np.iinfo(np.int64).max)
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value) if not isinstance(value, str) else f"'{value}'"
+    return text if len(text) <= limit else text[:limit] + "…"
 
 
 def resolve_taxel_ids(taxel_ids: Any = None, layout: Any = None) -> np.ndarray:

@@ -210,3 +210,15 @@ def test_log_replay_is_a_deprecated_name_for_the_replay_sensor(tmp_path):
     assert isinstance(sensor, Replay)
     with sensor:
         assert len(list(sensor.frames())) == sum(len(s.values) for s in samples())
+
+
+def test_a_log_under_a_file_or_onto_a_folder_is_one_clear_error(tmp_path):
+    from tactbench.errors import InputError
+
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(InputError, match=r"rec.blf: cannot write there: .*f is a file"):
+        write_log(tmp_path / "f" / "sub" / "rec.blf", [])
+    (tmp_path / "d.asc").mkdir()
+    with pytest.raises(InputError, match=r"d.asc: is a folder"):
+        write_log(tmp_path / "d.asc", [])
+    assert (tmp_path / "f").read_text() == "x"

@@ -112,3 +112,59 @@ def test_errors_are_one_line(tmp_path):
     res = runner.invoke(cli, ["can", "record", "--out", str(tmp_path / "x.txt"),
                               "--duration", "0"])
     assert res.exit_code != 0 and "not a CAN log file name" in res.output
+
+
+def one_error_line(res, *needles: str) -> str:
+    """The command failed as a user's mistake: exit 2 and one line naming the problem."""
+    assert res.exit_code == 2, (res.exit_code, res.output, res.exception)
+    [line] = res.output.strip().splitlines()
+    assert line.startswith("Error: ") and all(n in line for n in needles), line
+    return line
+
+
+def test_an_out_under_a_file_is_refused_before_the_bus_opens(tmp_path):
+    """Before: NotADirectoryError from the log writer, after the bus was opened. The
+    interface below cannot open, so an error about --out shows it is checked first."""
+    runner = CliRunner()
+    (tmp_path / "file").write_text("x")
+    under = str(tmp_path / "file" / "rec.blf")
+    one_error_line(runner.invoke(cli, ["can", "record", "--out", under, "--interface",
+                                       "no-such-interface", "--duration", "0"]),
+                   "rec.blf", "is a file, not a folder")
+    deeper = str(tmp_path / "file" / "a" / "b" / "rec.asc")
+    one_error_line(runner.invoke(cli, ["can", "record", "--out", deeper, "--interface",
+                                       "no-such-interface", "--duration", "0"]),
+                   "is a file, not a folder")
+    folder = tmp_path / "folder.blf"
+    folder.mkdir()
+    res = runner.invoke(cli, ["can", "record", "--out", str(folder), "--interface",
+                              "no-such-interface", "--duration", "0"])
+    assert res.exit_code == 2 and "is a directory" in res.output  # click's own check
+    # simulate checks --out before it loads the samples
+    one_error_line(runner.invoke(cli, ["can", "simulate", "no-such-dataset", "--out", under]),
+                   "is a file, not a folder")
+    # a missing folder is created, as before
+    out = tmp_path / "new" / "deeper" / "s.asc"
+    assert invoke("can", "simulate", "synthetic-forearm:users=1,repetitions=1", "--samples",
+                  "1", "--out", str(out)).exit_code == 0
+    assert out.stat().st_size > 0
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["can", "info", "LOG", "--taxel-ids", "0-99999999999"], "more than 65536 taxels"),
+    (["can", "info", "LOG", "--taxel-ids", "0-99999999999999999999999"], "0 to 2**63-1"),
+    (["can", "info", "LOG", "--taxel-ids", "10-5"], "the range 10-5 is empty"),
+    (["can", "load", "--taxel-ids", "0-40000,50000-99999"], "more than 65536 taxels"),
+    (["can", "load", "--taxels", "99999999999"], "at most 65536"),
+    (["can", "record", "--out", "OUT", "--taxel-ids", "0-99999999999", "--duration", "0"],
+     "more than 65536 taxels"),
+])
+def test_huge_taxel_id_ranges_are_refused_before_expanding(tmp_path, memory_cap, args, needle):
+    """Before: MemoryError (a list of 10^11 ints) for `can info --taxel-ids 0-99999999999`."""
+    log = tmp_path / "s.asc"
+    log.write_text("")
+    args = [str(log) if a == "LOG" else str(tmp_path / "r.blf") if a == "OUT" else a
+            for a in args]
+    with memory_cap(50):
+        res = CliRunner().invoke(cli, args)
+    one_error_line(res, needle)
