@@ -98,7 +98,17 @@ def _numbers(value: Any, key: str, where: str) -> np.ndarray:
     if arr.dtype.kind not in "iuf":
         raise InputError(f"{where}: the layout's {key!r} must hold numbers, got "
                          f"{'nothing' if arr.size == 0 else arr.dtype}")
+    if key == "ids" and arr.size and arr.dtype.kind in "uf":
+        with np.errstate(invalid="ignore"):
+            out = ~((arr >= _ID_MIN) & (arr <= _ID_MAX))  # NaN is out of range too
+        if np.any(out):
+            raise InputError(f"{where}: the layout's 'ids' hold {arr[out].ravel()[0]!r}, "
+                             f"outside the 64-bit integer range")
     return arr
+
+
+#: Taxel ids are stored as int64.
+_ID_MIN, _ID_MAX = -(1 << 63), (1 << 63) - 1
 
 
 # ----------------------------------------------------------------------------- files
@@ -176,8 +186,11 @@ def read_layout_csv(path: str | Path) -> TaxelLayout:
         try:
             tid = int(row[0])
         except ValueError:
-            raise InputError(f"{path}, line {lineno}: taxel id {row[0]!r} is not an "
+            raise InputError(f"{path}, line {lineno}: taxel id {row[0]!r:.40} is not an "
                              f"integer") from None
+        if not _ID_MIN <= tid <= _ID_MAX:
+            raise InputError(f"{path}, line {lineno}: taxel id {row[0].strip()[:40]} is "
+                             f"outside the 64-bit integer range")
         vals = []
         for name, cell in zip(header[1:], row[1:]):
             try:
@@ -215,12 +228,17 @@ def read_layout_json(path: str | Path, *, map_index: int = 0) -> TaxelLayout:
         doc = json.loads(_read_text(path))
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}, line {exc.lineno}: not valid JSON: {exc.msg}") from None
+    except RecursionError:
+        raise InputError(f"{path}: not valid JSON: nested too deeply") from None
     if not isinstance(doc, dict) or not ("skin" in doc or "tactile_maps" in doc):
         raise InputError(f"{path}: not a CySkin calibration file (expected a top-level "
                          f"'skin' or 'tactile_maps' object)")
     skin = _json_taxels(doc["skin"], path, "skin", dims=3) if "skin" in doc else None
     if "tactile_maps" not in doc:
         ids, x3, n3 = skin
+        if len(ids) < 3:
+            raise InputError(f"{path}: 'skin.taxels' has {len(ids)} taxel(s) and no "
+                             f"'tactile_maps'; flattening 3-D positions needs at least 3")
         return _build(ids, unroll(x3, n3), x3, n3, path)
     maps = doc["tactile_maps"]
     if isinstance(maps, list):
@@ -252,19 +270,53 @@ def read_layout_json(path: str | Path, *, map_index: int = 0) -> TaxelLayout:
 def _read_text(path: Path) -> str:
     if not path.exists():
         raise MissingFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: a folder, not a layout file")
+    from tactbench.integrity import check_budget
+
+    # Parsed JSON of numbers takes several times its text.
+    check_budget(16 * path.stat().st_size, f"reading layout file {path}")
     try:
-        return path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8-sig")  # a byte-order mark is no mistake
     except UnicodeDecodeError as exc:
         raise InputError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the file: {exc.strerror or exc}") from None
 
 
 def _build(ids, pos2, p3, nrm, path: Path, bounds=None) -> TaxelLayout:
-    """The layout named after the file; its own checks' errors name the file."""
+    """The layout named after the file; its own checks' errors name the file.
+
+    Positions must be finite and span an area (the image bounds too)."""
+    if not np.all(np.isfinite(pos2)):
+        raise InputError(f"{path}: the taxels' 2-D positions are not all finite")
     try:
-        return TaxelLayout(ids=np.asarray(ids, dtype=np.int64), positions=pos2,
-                           positions_3d=p3, normals=nrm, bounds=bounds, name=path.stem)
+        layout = TaxelLayout(ids=np.asarray(ids, dtype=np.int64), positions=pos2,
+                             positions_3d=p3, normals=nrm, bounds=bounds, name=path.stem)
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
+    x0, y0, x1, y1 = layout.bounds
+    if not all(math.isfinite(b) for b in layout.bounds) or not (x1 > x0 and y1 > y0):
+        raise InputError(f"{path}: the taxels' positions give image bounds {layout.bounds}, "
+                         f"which are not a finite area (all taxels at one point, or "
+                         f"positions too large)")
+    return layout
+
+
+def _json_vector(value: Any, dims: int, where: str, *, exact: bool) -> list[float]:
+    """The first ``dims`` (exactly ``dims`` with ``exact``) finite numbers of a JSON list."""
+    want = f"a list of {dims} finite numbers"
+    if not isinstance(value, list) or len(value) < dims or (exact and len(value) != dims) \
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       for v in value[:dims]):
+        raise InputError(f"{where} must be {want}, got {json.dumps(value)[:60]}")
+    try:
+        out = [float(v) for v in value[:dims]]
+    except OverflowError:
+        out = [math.inf]
+    if not all(math.isfinite(v) for v in out):
+        raise InputError(f"{where} must be {want}, got {json.dumps(value)[:60]}")
+    return out
 
 
 def _json_taxels(obj: Any, path: Path, where: str, *, dims: int):
@@ -281,18 +333,14 @@ def _json_taxels(obj: Any, path: Path, where: str, *, dims: int):
             raise InputError(f"{loc}: each taxel needs 'id' and 'x'")
         tid = tax["id"]
         if isinstance(tid, bool) or not isinstance(tid, int):
-            raise InputError(f"{loc}: id {tid!r} is not an integer")
-        x = tax["x"]
-        if not isinstance(x, list) or len(x) < dims or \
-                not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in x):
-            raise InputError(f"{loc}: 'x' must be a list of {dims} numbers, got {x!r}")
+            raise InputError(f"{loc}: id {tid!r:.40} is not an integer")
+        if not _ID_MIN <= tid <= _ID_MAX:
+            raise InputError(f"{loc}: id {tid!r:.40} is outside the 64-bit integer range")
+        x = _json_vector(tax["x"], dims, f"{loc}: 'x'", exact=False)
         ids.append(tid)
-        xs.append([float(v) * 1000.0 for v in x[:dims]])  # metres → mm
+        xs.append([v * 1000.0 for v in x])  # metres → mm
         if dims == 3 and "n" in tax:
-            n = tax["n"]
-            if not isinstance(n, list) or len(n) != 3:
-                raise InputError(f"{loc}: 'n' must be a 3-vector, got {n!r}")
-            ns.append([float(v) for v in n])
+            ns.append(_json_vector(tax["n"], 3, f"{loc}: 'n'", exact=True))
     pos = np.asarray(xs, dtype=np.float64)
     if not np.all(np.isfinite(pos)):
         raise InputError(f"{path}: '{where}' has non-finite taxel positions")

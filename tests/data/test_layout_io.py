@@ -128,7 +128,7 @@ def test_json_3d_cylinder_is_unrolled_keeping_distances(tmp_path):
     ('{"tactile_maps": []}', "empty list"),
     ('{"tactile_maps": {"taxels": [{"id": 1}]}}', r"taxels\[0\]: each taxel needs"),
     ('{"tactile_maps": {"taxels": [{"id": "a", "x": [0, 0]}]}}', "is not an integer"),
-    ('{"tactile_maps": {"taxels": [{"id": 1, "x": [0]}]}}', "list of 2 numbers"),
+    ('{"tactile_maps": {"taxels": [{"id": 1, "x": [0]}]}}', "list of 2 finite numbers"),
     ('{"tactile_maps": {"taxels": [{"id": 1, "x": [0, 0]}, {"id": 1, "x": [1, 0]}]}}',
      "duplicate taxel ids"),
     ('{"skin": {"taxels": [{"id": 1, "x": [0, 0, 0]}]}, '
@@ -228,3 +228,80 @@ def test_bad_dicts_name_where_they_came_from(obj, message):
         layout_from_dict(obj, "model.json: layout")
     assert str(info.value).startswith("model.json: layout: ")
 
+
+
+# ------------------------------------------------------------- malformed files: one line
+
+_MAP = '{"tactile_maps": {"taxels": [%s]}}'
+_TWO = '{"id": 2, "x": [0.01, 0]}, {"id": 3, "x": [0, 0.01]}'
+
+
+@pytest.mark.parametrize("text, message", [
+    (_MAP % ('{"id": 100000000000000000000000, "x": [0, 0]}, ' + _TWO),
+     r"tactile_maps.taxels\[0\]: id 100000000000000000000000 is outside the 64-bit"),
+    (_MAP % ('{"id": 1, "x": [1e999, 0]}, ' + _TWO),
+     r"tactile_maps.taxels\[0\]: 'x' must be a list of 2 finite numbers"),
+    (_MAP % ('{"id": 1, "x": [' + "9" * 400 + ', 0]}, ' + _TWO),
+     r"tactile_maps.taxels\[0\]: 'x' must be a list of 2 finite numbers"),
+    (_MAP % ('{"id": 1, "x": [NaN, 0]}, ' + _TWO), "'x' must be a list of 2 finite numbers"),
+    (_MAP % ('{"id": 1, "x": [null, 0]}, ' + _TWO), "'x' must be a list of 2 finite numbers"),
+    ('{"skin": {"taxels": [{"id": 1, "x": [0, 0, 0], "n": ["a", 0, 1]}]}}',
+     r"skin.taxels\[0\]: 'n' must be a list of 3 finite numbers, got \[\"a\", 0, 1\]"),
+    ('{"skin": {"taxels": [{"id": 1, "x": [0, 0, 0], "n": [null, 0, 1]}]}}',
+     r"skin.taxels\[0\]: 'n' must be a list of 3 finite numbers"),
+    ('{"skin": {"taxels": [{"id": 1, "x": [0, 0, 0], "n": [1e999, 0, 1]}]}}',
+     r"skin.taxels\[0\]: 'n' must be a list of 3 finite numbers"),
+    ('{"skin": {"taxels": [{"id": 1, "x": [0, 0, 0], "n": [0, 1]}]}}',
+     r"skin.taxels\[0\]: 'n' must be a list of 3 finite numbers"),
+    ('{"skin": {"taxels": [{"id": 1, "x": [0, 0, 0]}, {"id": 2, "x": [0, 0.1, 0]}]}}',
+     "'skin.taxels' has 2 taxel\\(s\\) and no 'tactile_maps'; flattening 3-D positions needs"),
+    (_MAP % ", ".join('{"id": %d, "x": [0.01, 0.01]}' % i for i in range(4)),
+     r"image bounds \(.*\), which are not a finite area"),
+    (_MAP % '{"id": 1, "x": [1e307, 0]}, {"id": 2, "x": [-1e307, 0]}',
+     "'tactile_maps' has non-finite taxel positions"),
+    ('{"skin": [1], "tactile_maps": {"taxels": [{"id": 1, "x": [0, 0]}]}}',
+     "'skin' has no 'taxels' list"),
+    ('{"tactile_maps": [3]}', r"'tactile_maps\[0\]' has no 'taxels' list"),
+    ("[" * 50_000 + "]" * 50_000, "not valid JSON: nested too deeply"),
+])
+def test_malformed_json_layouts_are_one_line_naming_file_and_field(tmp_path, text, message):
+    from tactbench.errors import TactbenchError
+
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    with pytest.raises(TactbenchError, match=message) as info:
+        load_layout(path)
+    assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("id,x_mm,y_mm\n" + "9" * 23 + ",0,0\n2,1,1\n",
+     "line 2: taxel id 99999999999999999999999 is outside the 64-bit integer range"),
+    ("id,x_mm,y_mm\n1,1e308,0\n2,-1e308,0\n", "not a finite area"),
+    ("id,x_mm,y_mm\n1,5,5\n2,5,5\n3,5,5\n", "not a finite area"),
+])
+def test_malformed_csv_layouts_are_one_line(tmp_path, text, message):
+    from tactbench.errors import TactbenchError
+
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(TactbenchError, match=message) as info:
+        load_layout(path)
+    assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+def test_a_folder_or_a_byte_order_mark(tmp_path):
+    from tactbench.errors import TactbenchError
+
+    (tmp_path / "dir.json").mkdir()
+    with pytest.raises(TactbenchError, match="a folder, not a layout file"):
+        load_layout(tmp_path / "dir.json")
+    path = tmp_path / "excel.csv"
+    path.write_text("\ufeffid,x_mm,y_mm\n1,0,0\n2,7.5,0\n", encoding="utf-8")
+    assert load_layout(path).ids.tolist() == [1, 2]
+
+
+@pytest.mark.parametrize("ids", [[1e30, 2.0], [np.nan, 2.0], np.array([2**64 - 1, 1], np.uint64)])
+def test_dict_ids_outside_int64_are_refused(ids):
+    with pytest.raises(ValueError, match="'ids' hold .* outside the 64-bit integer range"):
+        layout_from_dict({"ids": ids, "positions": [[0, 0], [1, 0]]}, "model.json: layout")
