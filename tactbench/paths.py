@@ -1,15 +1,32 @@
-"""Where tactbench keeps files it can recompute (caches), and how it writes files: atomically."""
+"""Where tactbench keeps files it can recompute (caches), and how it writes files: atomically.
+
+Every file or folder tactbench writes is first built under a *temporary name* beside its
+target and renamed over it when complete, so a reader sees the old version or the new
+one, never half of one. A temporary name says who made it:
+``.<target>.tmp-<pid>-<host>-<random>`` (``host``: 8 hex digits of the machine's name), so
+a temporary whose process is gone (killed mid-write) is recognised as an *orphan* by
+:func:`temporaries` and removed by :func:`remove_orphans` at the next start.
+"""
 
 from __future__ import annotations
 
+import errno
 import os
+import re
 import shutil
-import tempfile
+import uuid
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 CACHE_ENV = "TACTBENCH_CACHE"
+
+#: ``.<target>.<kind>-<pid>[-<host>][-<random>]``: kind ``tmp`` (being written) or ``bad``
+#: (a damaged artefact moved aside to be deleted). Names from before the pid was recorded
+#: (``.<target>.tmp-<random>``) have no pid.
+_TEMP = re.compile(r"^\.(?P<target>.+)\.(?P<kind>tmp|bad)-(?:(?P<pid>\d+)"
+                   r"(?:-(?P<host>[0-9a-f]{8}))?(?:-[0-9a-z]+)?|[0-9a-z_]+)$")
 
 
 def cache_dir(*parts: str) -> Path:
@@ -26,6 +43,106 @@ def cache_dir(*parts: str) -> Path:
     return path
 
 
+def host_tag() -> str:
+    """8 hex digits naming this machine (its host name's SHA-256), for temporary names."""
+    import hashlib
+    import socket
+
+    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+
+
+def temp_name(target: str, kind: str = "tmp") -> str:
+    """A fresh temporary name for ``target``: ``.<target>.<kind>-<pid>-<host>-<random>``."""
+    return f".{target}.{kind}-{os.getpid()}-{host_tag()}-{uuid.uuid4().hex[:8]}"
+
+
+@dataclass(frozen=True)
+class Temporary:
+    """A temporary file or folder beside its target (see the module docstring)."""
+
+    path: Path
+    target: str  # the name it was going to have (a cache key, a row's file name)
+    pid: int | None  # the process writing it (None: a name from before pids were recorded)
+    state: str  # "orphaned" (its process is gone), "in progress", or "other host"
+
+    @property
+    def orphaned(self) -> bool:
+        return self.state == "orphaned"
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists, someone else's (or cannot tell: keep it)
+    return True
+
+
+def parse_temporary(path: str | Path) -> Temporary | None:
+    """The :class:`Temporary` that ``path`` names, or None when it is not a temporary name.
+
+    A temporary of this machine whose process no longer runs is ``"orphaned"``, as is
+    one named before pids were recorded; one of another machine (a shared cache) is
+    ``"other host"``: its process cannot be checked from here.
+    """
+    path = Path(path)
+    match = _TEMP.match(path.name)
+    if match is None:
+        return None
+    pid = int(match["pid"]) if match["pid"] else None
+    if match["kind"] == "bad" or pid is None:
+        state = "orphaned" if pid is None or not _alive(pid) else "in progress"
+    elif match["host"] and match["host"] != host_tag():
+        state = "other host"
+    else:
+        state = "in progress" if _alive(pid) else "orphaned"
+    return Temporary(path, match["target"], pid, state)
+
+
+def temporaries(folder: str | Path) -> list[Temporary]:
+    """The temporary files and folders directly in ``folder``, by name."""
+    try:
+        children = sorted(Path(folder).iterdir())
+    except FileNotFoundError:
+        return []
+    return [t for c in children if (t := parse_temporary(c)) is not None]
+
+
+def remove_path(path: str | Path) -> None:
+    """Delete a file or a folder tree; nothing when it is already gone."""
+    path = Path(path)
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def remove_orphans(folder: str | Path) -> list[Temporary]:
+    """Delete the orphaned temporaries in ``folder`` (their writers are gone); returns them."""
+    gone = [t for t in temporaries(folder) if t.orphaned]
+    for t in gone:
+        remove_path(t.path)
+    return gone
+
+
+def discard(path: str | Path) -> bool:
+    """Remove a damaged artefact so that a new one can take its name: renamed aside first
+    (atomic: readers and writers see it or nothing), then deleted. False when it was
+    already gone (another process discarded it first)."""
+    path = Path(path)
+    aside = path.with_name(temp_name(path.name, "bad"))
+    try:
+        os.rename(path, aside)
+    except FileNotFoundError:
+        return False
+    remove_path(aside)
+    return True
+
+
 def atomic_write_text(path: str | Path, text: str) -> None:
     """Write ``text`` so that ``path`` holds either the old or the new content, never half."""
     atomic_write_bytes(path, text.encode())
@@ -36,12 +153,20 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     ``path``: readers see the old file or the new one, never half of one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    tmp = path.with_name(temp_name(path.name))
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+#: What ``rename(2)`` says when the target folder exists and is not empty.
+_TAKEN = (errno.ENOTEMPTY, errno.EEXIST)
 
 
 @contextmanager
@@ -50,18 +175,21 @@ def atomic_folder(folder: str | Path) -> Iterator[Path]:
     when the block ends without an error, else remove it.
 
     Readers see no folder or the complete one, never half of one. When ``folder``
-    appeared meanwhile (another process finished the same entry first), theirs is kept
-    and ours dropped. Temporary names start with ``.<name>.tmp-``.
+    appeared meanwhile (another process finished the same entry first: ``rename`` fails
+    with ENOTEMPTY or EEXIST), theirs is kept and ours dropped; any other failure of the
+    rename is raised. The temporary is named by :func:`temp_name`
+    (``.<name>.tmp-<pid>-...``), so one left by a killed process is found as an orphan.
     """
     folder = Path(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.tmp-", dir=folder.parent))
+    tmp = folder.with_name(temp_name(folder.name))
+    tmp.mkdir()
     try:
         yield tmp
         try:
             os.rename(tmp, folder)
-        except OSError:
-            if not folder.is_dir():  # not a lost race: a real failure
+        except OSError as exc:
+            if exc.errno not in _TAKEN or not folder.is_dir():  # not a lost race
                 raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -31,15 +31,24 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
-import shutil
 import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence
 
-from tactbench.errors import InputError, check_choice
-from tactbench.paths import atomic_folder, cache_dir
+from tactbench.errors import CorruptArtefactError, InputError, check_choice
+from tactbench.paths import (
+    Temporary,
+    atomic_folder,
+    cache_dir,
+    discard,
+    parse_temporary,
+    remove_orphans,
+    remove_path,
+    temporaries,
+)
 from tactbench.runner.planning import Cell, Plan, digest, imaging_identity, storage_identity
 from tactbench.runner.system import now, peak_rss_mb
 
@@ -48,14 +57,17 @@ if TYPE_CHECKING:
 
     from tactbench.ui import Progress
 
+log = logging.getLogger("tactbench.runner.cache")
+
 #: Images per chunk when streaming a dataset into the cache, bytes (float32 images). The
 #: encodings of a chunk are ``C`` times that per encoder; about three chunks are alive
 #: at once (one being imaged, one being encoded, one being written).
 CHUNK_BYTES = 16 * 2 ** 20
 
-#: Version of the entry format: 2 added precision, scale and offset (an entry without
-#: them is float32, as version 1 wrote them).
-FORMAT = 2
+#: Version of the entry format: 2 added precision, scale and offset; 3 added the entry's
+#: key and identity, the sizes and checksums of its files and of ``meta.json`` itself.
+#: Entries of another format are rebuilt.
+FORMAT = 3
 
 
 # ---------------------------------------------------------------------- precision
@@ -145,28 +157,56 @@ class Storage:
 # ------------------------------------------------------------------------ writing
 
 
+def _canonical(obj: Any) -> bytes:
+    """The bytes a JSON document's checksum is taken of: sorted keys, no spaces."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
+
+
+def seal(meta: dict[str, Any]) -> dict[str, Any]:
+    """``meta`` with ``meta_checksum``: the checksum of everything else in it."""
+    from tactbench.integrity import hash_bytes
+
+    body = {k: v for k, v in meta.items() if k != "meta_checksum"}
+    return {**body, "meta_checksum": hash_bytes(_canonical(body))}
+
+
 class EntryWriter:
     """Writes one entry's ``frames.npy`` front to back, one sequence at a time.
 
     The header states the total shape ``(ΣT, *frame_shape)`` up front; :meth:`append`
-    stores each sequence (in sample order) with plain file writes. :attr:`meta` is
-    written as ``meta.json`` when the entry is complete: add to it while writing.
+    stores each sequence (in sample order) with plain file writes, hashing the bytes as
+    they are written (so the checksum costs no second read). :attr:`meta` is written as
+    ``meta.json`` when the entry is complete: add to it while writing.
     """
 
     def __init__(self, folder: Path, lengths: Sequence[int], frame_shape: Sequence[int],
-                 storage: Storage) -> None:
+                 storage: Storage, key: str | None = None) -> None:
+        import io
+
         import numpy as np
+
+        from tactbench.integrity import new_hasher
 
         self.lengths = [int(n) for n in lengths]
         self.frame_shape = tuple(int(n) for n in frame_shape)
         self.storage = storage
         self.meta: dict[str, Any] = {}
+        self.key = key if key is not None else folder.name
         self._folder = folder
         self._done = 0
+        self._hash = new_hasher()
+        self._bytes = 0
         self._fh = open(folder / "frames.npy", "wb")
         header = {"descr": np.lib.format.dtype_to_descr(storage.dtype),
                   "fortran_order": False, "shape": (sum(self.lengths), *self.frame_shape)}
-        np.lib.format.write_array_header_1_0(self._fh, header)
+        buffer = io.BytesIO()
+        np.lib.format.write_array_header_1_0(buffer, header)
+        self._write(buffer.getvalue())
+
+    def _write(self, data: Any) -> None:
+        self._hash.update(data)
+        self._fh.write(data)
+        self._bytes += memoryview(data).nbytes
 
     def append(self, sequence: Any) -> None:
         """Store the next sample's frames, float ``(T_i, *frame_shape)``."""
@@ -177,7 +217,7 @@ class EntryWriter:
         if tuple(sequence.shape) != expected:
             raise InputError(f"sequence {i} has shape {tuple(sequence.shape)}, expected "
                              f"{expected}")
-        self._fh.write(self.storage.encode(sequence).reshape(-1).view("u1"))
+        self._write(self.storage.encode(sequence).reshape(-1).view("u1"))
         self._done += 1
 
     def discard(self) -> None:
@@ -186,18 +226,32 @@ class EntryWriter:
 
     def close(self) -> None:
         """Finish the files; raises when a sequence is missing."""
+        import io
+
         import numpy as np
+
+        from tactbench import __version__
+        from tactbench.integrity import ALGORITHM, hash_bytes
 
         self._fh.close()
         if self._done != len(self.lengths):
             raise InputError(f"entry got {self._done} of its {len(self.lengths)} sequences")
         offsets = np.concatenate([[0], np.cumsum(self.lengths)]).astype(np.int64)
-        np.save(self._folder / "offsets.npy", offsets)
+        buffer = io.BytesIO()
+        np.save(buffer, offsets)
+        offsets_bytes = buffer.getvalue()
+        (self._folder / "offsets.npy").write_bytes(offsets_bytes)
         n_frames = int(offsets[-1])
-        meta = {**self.meta, "format": FORMAT, **self.storage.describe(),
-                "n_frames": n_frames, "frames": n_frames,
-                "frame_shape": list(self.frame_shape), "created": now()}
-        (self._folder / "meta.json").write_text(json.dumps(meta, indent=2))
+        meta = {**self.meta, "format": FORMAT, "key": self.key, "tactbench": __version__,
+                **self.storage.describe(), "n_frames": n_frames, "frames": n_frames,
+                "n_sequences": len(self.lengths), "frame_shape": list(self.frame_shape),
+                "algorithm": ALGORITHM,
+                "files": {"frames.npy": {"bytes": self._bytes,
+                                         "checksum": self._hash.hexdigest()},
+                          "offsets.npy": {"bytes": len(offsets_bytes),
+                                          "checksum": hash_bytes(offsets_bytes)}},
+                "created": now()}
+        (self._folder / "meta.json").write_text(json.dumps(seal(meta), indent=2))
 
 
 class EncodingCache:
@@ -206,39 +260,76 @@ class EncodingCache:
 
     A folder holds ``frames.npy`` (all frames stacked, ``(ΣT, C, H, W)`` or ``(ΣT, N)``
     in the entry's storage dtype), ``offsets.npy`` (int64 ``(n + 1,)``: sample i is
-    ``frames[o[i]:o[i+1]]``) and ``meta.json``. It is written with :func:`atomic_folder`,
-    so a folder that exists is complete.
+    ``frames[o[i]:o[i+1]]``) and ``meta.json`` (what the entry is, and the sizes and
+    checksums of both files: see :func:`verify_entry`). It is written with
+    :func:`atomic_folder`, so a folder that exists was complete when it was renamed
+    into place; whether it is still intact is what :meth:`verify` checks.
     """
 
     def __init__(self, root: str | Path | None = None) -> None:
         self.root = Path(root) if root is not None else cache_dir("encodings")
         self.root.mkdir(parents=True, exist_ok=True)
 
+    @staticmethod
+    def identity(dataset_hash: str, imaging: dict[str, Any], encoder: str, version: str,
+                 precision: str = "float32") -> dict[str, Any]:
+        """What decides an entry's content; its digest is the entry's key, and
+        ``meta.json`` records it so that a reader can check the key against it."""
+        return {"dataset": dataset_hash, "imaging": imaging, "encoder": encoder,
+                "version": version, **storage_identity(precision)}
+
     def key(self, dataset_hash: str, imaging: dict[str, Any], encoder: str,
             version: str, precision: str = "float32") -> str:
-        return digest({"dataset": dataset_hash, "imaging": imaging, "encoder": encoder,
-                       "version": version, **storage_identity(precision)}, 24)
+        return digest(EncodingCache.identity(dataset_hash, imaging, encoder, version,
+                                             precision), KEY_DIGITS)
 
     def path(self, key: str) -> Path:
         return self.root / key
 
     def has(self, key: str) -> bool:
+        """Whether an entry folder of ``key`` is there (cheap; :meth:`verify` says
+        whether it is intact)."""
         return (self.path(key) / "meta.json").is_file()
+
+    def verify(self, key: str, *, full: bool = True) -> dict[str, Any]:
+        """The entry's ``meta.json`` after :func:`verify_entry`; raises
+        :class:`CorruptArtefactError` naming the entry and what is wrong."""
+        return verify_entry(self.path(key), full=full)
+
+    def discard(self, key: str) -> None:
+        """Remove the entry ``key`` (a damaged one, so it can be written again)."""
+        _forget(self.path(key))
+        discard(self.path(key))
+
+    def clean(self) -> list[Temporary]:
+        """Remove the temporary folders whose writing process is gone; returns them."""
+        return remove_orphans(self.root)
 
     @contextlib.contextmanager
     def entry(self, key: str, lengths: Sequence[int], frame_shape: Sequence[int],
               storage: Storage) -> Iterator[EntryWriter]:
         """Write the entry ``key`` sequence by sequence: the block gets an
         :class:`EntryWriter`; the entry appears, complete, when the block ends without
-        an error (and not at all otherwise)."""
+        an error (and not at all otherwise).
+
+        When another process wrote the same key first, its entry is kept (ours is
+        dropped) and verified here: a damaged winner raises
+        :class:`CorruptArtefactError` (the next run rebuilds it).
+        """
         with atomic_folder(self.path(key)) as tmp:
-            writer = EntryWriter(tmp, lengths, frame_shape, storage)
+            writer = EntryWriter(tmp, lengths, frame_shape, storage, key=key)
             try:
                 yield writer
             except BaseException:
                 writer.discard()
                 raise
             writer.close()
+            ours = json.loads((tmp / "meta.json").read_text())["meta_checksum"]
+        _forget(self.path(key))
+        meta = json.loads((self.path(key) / "meta.json").read_text()) \
+            if (self.path(key) / "meta.json").is_file() else {}
+        if meta.get("meta_checksum") != ours:  # another process's entry: verify it
+            self.verify(key)
 
     def write(self, key: str, sequences: Sequence[Any], meta: dict[str, Any], *,
               precision: str = "float32", ranges: Sequence[Sequence[float]] = ()) -> Path:
@@ -254,24 +345,240 @@ class EncodingCache:
         return self.path(key)
 
     def entries(self) -> list[dict[str, Any]]:
-        """``meta.json`` of every entry, with its ``key``, size in ``bytes`` and
-        ``precision`` (float32 for entries older than precisions)."""
+        """Every entry folder: its ``meta.json`` (as far as it is readable), ``key``,
+        size in ``bytes``, ``precision`` and ``state``: ``"ok"``, or ``"damaged"`` with
+        the ``problem`` (sizes, identity and offsets are checked; checksums are not,
+        to keep listing cheap)."""
         out = []
-        for meta_path in sorted(self.root.glob("*/meta.json")):
-            meta = json.loads(meta_path.read_text())
-            size = sum(f.stat().st_size for f in meta_path.parent.iterdir())
-            out.append({"key": meta_path.parent.name, "bytes": size,
-                        "precision": "float32", **meta})
+        for folder in sorted(p for p in self.root.iterdir()
+                             if p.is_dir() and not p.name.startswith(".")):
+            size = sum(f.stat().st_size for f in folder.iterdir() if f.is_file())
+            entry: dict[str, Any] = {"key": folder.name, "bytes": size,
+                                     "precision": "float32"}
+            try:
+                entry.update(verify_entry(folder, full=False))
+                entry["state"] = "ok"
+            except CorruptArtefactError as exc:
+                entry.update(_readable_meta(folder))
+                entry.update({"state": "damaged", "problem": exc.problem})
+            entry["key"], entry["bytes"] = folder.name, size
+            out.append(entry)
+        return out
+
+    def temporaries(self) -> list[dict[str, Any]]:
+        """Temporary folders beside the entries: ``name``, ``key`` (the entry it was
+        going to be), ``pid``, ``state`` (``"orphaned"``: its process is gone, removed
+        at the next run; ``"in progress"``; ``"other host"``) and ``bytes``."""
+        out = []
+        for t in temporaries(self.root):
+            try:
+                size = sum(f.stat().st_size for f in t.path.rglob("*") if f.is_file()) \
+                    if t.path.is_dir() else t.path.stat().st_size
+            except OSError:
+                size = 0
+            out.append({"name": t.path.name, "key": t.target, "pid": t.pid,
+                        "state": t.state, "bytes": size})
         return out
 
     def clear(self) -> int:
-        """Delete every entry; returns how many."""
+        """Delete every entry and every orphaned temporary folder; returns how many.
+        Temporaries of running writers (``"in progress"``) are left to them."""
         n = 0
         for child in self.root.iterdir():
-            if child.is_dir():
-                shutil.rmtree(child)
+            temp = parse_temporary(child)
+            if temp is not None and temp.state != "orphaned":
+                continue
+            if child.is_dir() or temp is not None:
+                _forget(child)
+                remove_path(child)
                 n += 1
         return n
+
+
+# ------------------------------------------------------------------- verification
+
+#: Hex digits of an entry's key.
+KEY_DIGITS = 24
+#: ``meta.json`` larger than this is not one tactbench wrote.
+META_MAX_BYTES = 1 << 20
+#: ``(folder, signature of its files)`` whose checksums this process verified.
+_VERIFIED: set[tuple[str, tuple]] = set()
+
+
+def _signature(folder: Path) -> tuple:
+    """What changes when an entry's files are written, replaced or touched."""
+    sig = []
+    for name in ("meta.json", "offsets.npy", "frames.npy"):
+        try:
+            st = os.stat(folder / name)
+        except OSError:
+            sig.append(None)
+            continue
+        sig.append((st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns))
+    return tuple(sig)
+
+
+def _forget(folder: Path) -> None:
+    folder = Path(folder)
+    for item in [v for v in _VERIFIED if v[0] == str(folder)]:
+        _VERIFIED.discard(item)
+    for item in [k for k in _LOADED if k[0] == str(folder)]:
+        del _LOADED[item]
+
+
+def _readable_meta(folder: Path) -> dict[str, Any]:
+    """Whatever of ``meta.json`` can be read, for listing a damaged entry."""
+    try:
+        if (folder / "meta.json").stat().st_size <= META_MAX_BYTES:
+            meta = json.loads((folder / "meta.json").read_text())
+            return meta if isinstance(meta, dict) else {}
+    except (OSError, ValueError, RecursionError):
+        pass
+    return {}
+
+
+def _read_meta(folder: Path) -> dict[str, Any]:
+    path = folder / "meta.json"
+    try:
+        size = path.stat().st_size
+        if size > META_MAX_BYTES:
+            raise CorruptArtefactError(folder, f"meta.json is {size} bytes, not an entry's")
+        meta = json.loads(path.read_bytes())
+    except FileNotFoundError:
+        raise CorruptArtefactError(folder, "meta.json is missing") from None
+    except (ValueError, RecursionError) as exc:
+        raise CorruptArtefactError(folder, f"meta.json is not valid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise CorruptArtefactError(folder, "meta.json is not a JSON object")
+    fmt = meta.get("format", 1)
+    if fmt != FORMAT:
+        raise CorruptArtefactError(folder, f"entry format {fmt!r}, this tactbench writes and "
+                                           f"reads format {FORMAT}")
+    if seal(meta)["meta_checksum"] != meta.get("meta_checksum"):
+        raise CorruptArtefactError(folder, "meta.json does not match its checksum (edited "
+                                           "or damaged)")
+    return meta
+
+
+def _expect(folder: Path, ok: bool, problem: str) -> None:
+    if not ok:
+        raise CorruptArtefactError(folder, problem)
+
+
+def verify_entry(folder: str | Path, *, full: bool = True) -> dict[str, Any]:
+    """The entry's ``meta.json``, after :func:`check_entry`."""
+    return check_entry(folder, full=full)[0]
+
+
+def check_entry(folder: str | Path, *, full: bool = True,
+                ) -> tuple[dict[str, Any], "np.ndarray"]:
+    """Check a cache entry before use and return its ``meta.json``.
+
+    Always (cheap: a few ``stat`` calls and small reads): ``meta.json`` is a JSON object
+    of this format whose ``meta_checksum`` matches; its ``key`` is the folder's name
+    and its ``identity`` digests to that key (another entry copied under this name is
+    refused); both files have the recorded sizes; the ``.npy`` header of
+    ``frames.npy`` states ``(n_frames, *frame_shape)`` of the recorded dtype;
+    ``offsets.npy`` has the recorded checksum and runs from 0 up to ``n_frames``
+    without going down. With ``full``, once per process for each version of the files:
+    the SHA-256 of ``frames.npy`` (streamed in 1 MiB reads; see ``docs/runner.md``
+    for its cost). Returns ``(meta, offsets)``; raises :class:`CorruptArtefactError`
+    (the entry and the problem, in one line).
+    """
+    import numpy as np
+
+    from tactbench.integrity import hash_bytes, hash_file
+
+    folder = Path(folder)
+    signature = _signature(folder)
+    if not folder.is_dir():
+        raise CorruptArtefactError(folder, "the entry folder is missing")
+    meta = _read_meta(folder)
+    _expect(folder, meta.get("key") == folder.name,
+            f"meta.json belongs to entry {str(meta.get('key'))!r}, not to this one")
+    identity = meta.get("identity")
+    if identity is not None:
+        _expect(folder, digest(identity, len(folder.name)) == folder.name,
+                "its recorded identity does not hash to its key")
+    files = meta.get("files")
+    _expect(folder, isinstance(files, dict) and all(
+        isinstance(files.get(n), dict) and isinstance(files[n].get("bytes"), int)
+        and isinstance(files[n].get("checksum"), str) for n in ("frames.npy", "offsets.npy")),
+        "meta.json lacks the sizes and checksums of its files")
+    for name in ("frames.npy", "offsets.npy"):
+        try:
+            size = (folder / name).stat().st_size
+        except FileNotFoundError:
+            raise CorruptArtefactError(folder, f"{name} is missing") from None
+        _expect(folder, size == files[name]["bytes"],
+                f"{name} is {size} bytes, meta.json records {files[name]['bytes']} "
+                f"({'truncated' if size < files[name]['bytes'] else 'grown'})")
+    frame_shape, n_frames = meta.get("frame_shape"), meta.get("n_frames")
+    n_sequences = meta.get("n_sequences")
+    _expect(folder, isinstance(frame_shape, list) and 1 <= len(frame_shape) <= 3
+            and all(isinstance(n, int) and n > 0 for n in frame_shape)
+            and isinstance(n_frames, int) and n_frames >= 0
+            and isinstance(n_sequences, int) and n_sequences >= 0,
+            "meta.json's frame_shape, n_frames or n_sequences are not counts")
+    channels = frame_shape[0] if len(frame_shape) == 3 else 1
+    try:
+        storage = Storage.from_meta(meta, channels)
+        _expect(folder, storage.scale.shape == storage.offset.shape == (channels,),
+                f"meta.json's scale and offset are not one number per channel ({channels})")
+        header = _npy_header(folder / "frames.npy")
+    except (InputError, TypeError, ValueError) as exc:
+        raise CorruptArtefactError(folder, f"frames.npy or its meta.json: {exc}") from None
+    shape, fortran, dtype, data_offset = header
+    _expect(folder, not fortran and dtype == storage.dtype
+            and shape == (n_frames, *frame_shape),
+            f"frames.npy holds {dtype} {shape}, meta.json says {storage.dtype} "
+            f"{(n_frames, *frame_shape)}")
+    _expect(folder, data_offset + n_frames * int(np.prod(frame_shape)) * dtype.itemsize
+            == files["frames.npy"]["bytes"], "frames.npy's size does not fit its header")
+    data = (folder / "offsets.npy").read_bytes()  # its size was checked: (n + 1) × 8 + header
+    _expect(folder, hash_bytes(data) == files["offsets.npy"]["checksum"],
+            "offsets.npy does not match its checksum")
+    offsets = _offsets(folder, data, n_sequences, n_frames)
+    key = (str(folder), signature)
+    if full and key not in _VERIFIED:
+        got = hash_file(folder / "frames.npy")
+        _expect(folder, got == files["frames.npy"]["checksum"],
+                f"frames.npy does not match its checksum ({got[:12]}…, recorded "
+                f"{files['frames.npy']['checksum'][:12]}…)")
+        if _signature(folder) == signature:  # unchanged while it was read
+            _VERIFIED.add(key)
+    return meta, offsets
+
+
+def _npy_header(path: Path) -> tuple[tuple[int, ...], bool, Any, int]:
+    import numpy as np
+
+    fmt = np.lib.format
+    with open(path, "rb") as fh:
+        version = fmt.read_magic(fh)
+        read_header = fmt.read_array_header_1_0 if version == (1, 0) \
+            else fmt.read_array_header_2_0
+        shape, fortran, dtype = read_header(fh, max_header_size=4096)
+        return tuple(shape), bool(fortran), dtype, fh.tell()
+
+
+def _offsets(folder: Path, data: bytes, n_sequences: int, n_frames: int) -> "np.ndarray":
+    import io
+
+    import numpy as np
+
+    try:
+        offsets = np.load(io.BytesIO(data), allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise CorruptArtefactError(folder, f"offsets.npy is not a valid .npy ({exc})") \
+            from None
+    _expect(folder, offsets.dtype == np.int64 and offsets.shape == (n_sequences + 1,),
+            f"offsets.npy holds {offsets.dtype} {offsets.shape}, expected int64 "
+            f"({n_sequences + 1},)")
+    _expect(folder, offsets[0] == 0 and offsets[-1] == n_frames
+            and bool(np.all(np.diff(offsets) >= 0)),
+            f"offsets.npy does not run from 0 up to its {n_frames} frames")
+    return offsets
 
 
 # ------------------------------------------------------------------------ reading
@@ -286,16 +593,11 @@ class EntryFile:
 
         self.path = str(path)
         self.storage = storage
-        fmt = np.lib.format
-        with open(self.path, "rb") as fh:
-            version = fmt.read_magic(fh)
-            read_header = fmt.read_array_header_1_0 if version == (1, 0) \
-                else fmt.read_array_header_2_0
-            shape, fortran, dtype = read_header(fh)
-            self.data_offset = fh.tell()
+        shape, fortran, dtype, self.data_offset = _npy_header(Path(self.path))
         if fortran or dtype != storage.dtype:
-            raise InputError(f"{self.path}: stored as {dtype}{' (Fortran order)' * fortran}"
-                             f", but its meta.json says {storage.dtype}")
+            raise CorruptArtefactError(self.path, f"stored as {dtype}"
+                                       f"{' (Fortran order)' * fortran}, but its meta.json "
+                                       f"says {storage.dtype}")
         self.shape = tuple(shape)
         self.frame_bytes = int(np.prod(self.shape[1:], dtype=np.int64)) * dtype.itemsize
         self._open()
@@ -331,8 +633,8 @@ class EntryFile:
                     os.lseek(self._fd, position + got, os.SEEK_SET)
                     n = os.readv(self._fd, [buffer[got:]])
             if n == 0:
-                raise InputError(f"{self.path} is shorter than its header says; delete the "
-                                 f"entry (tactbench cache clear) to recompute it")
+                raise CorruptArtefactError(self.path, "shorter than its header says "
+                                           "(truncated); the next run rebuilds the entry")
             got += n
         return self.storage.decode(stored)
 
@@ -410,28 +712,33 @@ class StoredSequence:
         return whole if dtype is None else whole.astype(dtype, copy=False)
 
 
-_LOADED: dict[str, tuple[list[StoredSequence], dict[str, Any]]] = {}
+_LOADED: dict[tuple[str, tuple], tuple[list[StoredSequence], dict[str, Any]]] = {}
 
 
 def load_encoding(folder: str | Path) -> tuple[list[StoredSequence], dict[str, Any]]:
     """The cached sequences (read from disk on demand, float32) and metadata of an entry.
 
-    Memoised per process: the cells of one process that read the same entry share its
-    open file. Reading costs a ``preadv`` per slice plus, for float16 and uint8, one
-    pass to float32; nothing stays resident after a read but the array it returns.
+    The entry is verified first (:func:`check_entry`: sizes, identity and offsets each
+    time, the checksum of ``frames.npy`` once per process); a damaged one raises
+    :class:`CorruptArtefactError`. Memoised per process and version of the entry's
+    files: the cells of one process that read the same entry share its open file.
+    Reading costs a ``preadv`` per slice plus, for float16 and uint8, one pass to
+    float32; nothing stays resident after a read but the array it returns.
     """
-    import numpy as np
-
-    folder = str(folder)
-    if folder not in _LOADED:
-        meta = json.loads((Path(folder) / "meta.json").read_text())
-        offsets = np.load(Path(folder) / "offsets.npy")
-        frame_shape = meta.get("frame_shape")
-        channels = frame_shape[0] if frame_shape and len(frame_shape) == 3 else 1
-        file = EntryFile(Path(folder) / "frames.npy", Storage.from_meta(meta, channels))
+    path = Path(folder)
+    memo = (str(path), _signature(path))
+    if memo not in _LOADED:
+        meta, offsets = check_entry(path)
+        frame_shape = meta["frame_shape"]
+        channels = frame_shape[0] if len(frame_shape) == 3 else 1
+        file = EntryFile(path / "frames.npy", Storage.from_meta(meta, channels))
         seqs = [StoredSequence(file, a, b) for a, b in zip(offsets[:-1], offsets[1:])]
-        _LOADED[folder] = (seqs, meta)
-    return _LOADED[folder]
+        verified = (str(path), memo[1]) in _VERIFIED
+        _forget(path)  # an older version of this entry
+        if verified:
+            _VERIFIED.add((str(path), memo[1]))
+        _LOADED[memo] = (seqs, meta)
+    return _LOADED[memo]
 
 
 # ----------------------------------------------------------------------- encoding
@@ -471,17 +778,33 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
     pending_pairs = {(c.encoder, plan_.input_kind[c.classifier]) for c in pending}
     folders: dict[tuple[str, str], str] = {}
     missing: dict[str, dict[str, str]] = {"images": {}, "vectors": {}}  # kind → enc → key
+    identities: dict[str, dict[str, Any]] = {}
+    for orphan in cache.clean():
+        log.info("removed the temporary folder %s left by process %s", orphan.path,
+                 orphan.pid)
     for enc, kind in sorted(needed):
         imaging = imaging_identity(scene, kind)
         key = cache.key(plan_.dataset_hash, imaging, enc, plan_.encoder_versions[enc],
                         precision)
+        identities[key] = cache.identity(plan_.dataset_hash, imaging, enc,
+                                         plan_.encoder_versions[enc], precision)
         folders[(enc, kind)] = str(cache.path(key))
-        if not cache.has(key) and (enc, kind) in pending_pairs:
-            missing[kind][enc] = key
+        if (enc, kind) not in pending_pairs:
+            continue
+        if cache.path(key).exists() or cache.path(key).is_symlink():
+            try:
+                cache.verify(key)
+                continue
+            except CorruptArtefactError as exc:
+                log.warning("tactbench: warning: cached encoding %s (%s, %s) is damaged: %s; "
+                            "encoding it again", key, enc, kind, exc.problem)
+                cache.discard(key)
+        missing[kind][enc] = key
     if missing["vectors"]:
-        _store_vectors(plan_, cache, missing["vectors"], precision, chunk_bytes)
+        _store_vectors(plan_, cache, missing["vectors"], precision, chunk_bytes, identities)
     if missing["images"]:
-        _encode_images(plan_, cache, missing["images"], precision, progress, chunk_bytes)
+        _encode_images(plan_, cache, missing["images"], precision, progress, chunk_bytes,
+                       identities)
     return folders
 
 
@@ -495,7 +818,8 @@ def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
 
 
 def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
-                   precision: str, chunk_bytes: int) -> None:
+                   precision: str, chunk_bytes: int,
+                   identities: dict[str, dict[str, Any]]) -> None:
     """The taxel-vector entries: no imaging and no encoder (raw passes vectors through;
     planning refuses any other encoder on vectors). One channel, in [0, 1]."""
     from tactbench.contracts import ENCODER
@@ -511,6 +835,7 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
                 for vec in dataset.vectors(range(a, b)):
                     writer.append(vec)
             writer.meta.update({**_common_meta(plan_, enc, "vectors"),
+                                "identity": identities[key],
                                 "encode_seconds": 0.0, "encode_cpu_seconds": 0.0,
                                 "imaging_seconds": 0.0, "workers": 1,
                                 "wall_seconds": time.perf_counter() - t0,
@@ -518,7 +843,8 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
 
 
 def _encode_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], precision: str,
-                   progress: "Progress | None", chunk_bytes: int) -> None:
+                   progress: "Progress | None", chunk_bytes: int,
+                   identities: dict[str, dict[str, Any]]) -> None:
     """One streaming pass: image a chunk, encode it with every encoder of ``keys``,
     append each encoding to its entry; all entries appear together at the end."""
     from tactbench.contracts import ENCODER
@@ -576,6 +902,7 @@ def _encode_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], prec
         for enc, writer in writers.items():
             writer.meta.update({
                 **_common_meta(plan_, enc, "images"),
+                "identity": identities[keys[enc]],
                 "imaging_seconds": imaging_s,
                 # one core's CPU time over the workers: the wall time the encoding
                 # alone takes on `workers` cores (cell rows: × workers / frames)

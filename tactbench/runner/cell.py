@@ -73,6 +73,41 @@ def model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
                          pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
 
 
+def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
+    """What is wrong with the saved model of ``cell`` at ``path``, or None when it is
+    sound: it must load (:func:`~tactbench.classifiers.io.load_model`, whose errors
+    name checksum, truncation and header problems), be this cell's (its metadata's
+    ``cell``, ``encoder``, ``length``, ``classes``) and hold only finite weights."""
+    import torch
+
+    from tactbench.classifiers.io import load_model, read_header
+    from tactbench.errors import TactbenchError
+
+    try:
+        clf, meta = load_model(path, registry=p.registry)
+        config = read_header(path).get("config", {})
+    except TactbenchError as exc:
+        return str(exc)
+    want = {"cell": cell.key, "encoder": cell.encoder, "length": cell.length,
+            "classes": list(p.dataset.classes)}
+    for field, value in want.items():
+        if meta.get(field) != value:
+            return f"its metadata records {field} = {str(meta.get(field))[:60]!r}, " \
+                   f"this cell has {str(value)[:60]!r}"
+    n_classes = config.get("n_classes") if isinstance(config, dict) else None
+    if n_classes is not None and n_classes != len(want["classes"]):
+        return f"a {n_classes}-class network for {len(want['classes'])} classes"
+    try:
+        _, tensors = clf._export()
+    except Exception:  # noqa: BLE001 — a classifier without tensors to check
+        return None
+    for name, tensor in tensors.items():
+        if isinstance(tensor, torch.Tensor) and tensor.is_floating_point() \
+                and not bool(torch.isfinite(tensor).all()):
+            return f"tensor {name!r} holds NaN or infinite values"
+    return None
+
+
 def run_cell(job: CellJob, progress: Callable[..., None] | None = None) -> dict[str, Any]:
     """Train and test one cell; its ``ok`` row, or a ``failed`` row if anything raised.
 

@@ -6,20 +6,24 @@ cell, executors, store, system).
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from tactbench.paths import discard
 from tactbench.runner.cache import EncodingCache, ensure_encodings
-from tactbench.runner.cell import make_jobs
+from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.scene import Scene
 from tactbench.runner.store import ResultStore, failed_rows, ok_rows
 from tactbench.runner.system import MemoryTracker, git_revision
 from tactbench.ui import Progress
+
+log = logging.getLogger("tactbench.runner")
 
 
 @dataclass
@@ -43,6 +47,21 @@ class RunResult:
         return failed_rows(self.rows)
 
 
+def _model_is_sound(models: Path, p: Plan, cell) -> bool:
+    """Whether the saved model of a finished cell is there and sound; a damaged one is
+    reported in one line and removed (the cell is then computed again)."""
+    path = models / f"{cell.key}.safetensors"
+    if not (path.exists() or path.is_symlink()):
+        return False
+    problem = model_problem(path, p, cell)
+    if problem is None:
+        return True
+    log.warning("tactbench: warning: saved model %s is damaged (%s); the cell is computed "
+                "again", path, problem)
+    discard(path)
+    return False
+
+
 def run(scene: Scene, *, registry=None, progress: bool = True,
         cache: EncodingCache | None = None,
         on_row: Callable[[dict[str, Any]], None] | None = None) -> RunResult:
@@ -60,9 +79,11 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         bars.update(task, 1)
         memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
+        store.clean()
         models = Path(scene.out) / "models" if scene.save_models else None
-        pending = [c for c in p.cells if scene.rerun or not store.finished(c.key)
-                   or (models and not (models / f"{c.key}.safetensors").exists())]
+        pending = [c for c in p.cells if scene.rerun
+                   or not store.finished(c.key, p.identities[c.key])
+                   or (models and not _model_is_sound(models, p, c))]
         folders = ensure_encodings(p, cache or EncodingCache(), pending, bars)
         memory.step("encode")
         jobs = make_jobs(p, pending, folders, models)

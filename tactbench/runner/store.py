@@ -9,18 +9,34 @@ A row is a cell's identity (see :mod:`tactbench.runner.planning`) plus what came
 
 Rows written before ``status`` existed are finished rows (``"ok"``). A failed row is not
 finished: the next run of the same scene retries it.
+
+Each file records its cell's ``key`` and a ``checksum`` (SHA-256 of the rest of the row
+as sorted, compact JSON). Reading verifies both and the row's shape (a JSON object with
+``status`` and the fields of its status, and, given the planned identity, that
+identity): a damaged row (truncated, edited, another cell's copied under this name) is
+reported in one warning line and treated as missing, so the run recomputes the cell.
+Rows written before checksums existed have none to verify and are checked for shape
+only.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+import math
 from pathlib import Path
 from typing import Any, Iterable
 
-from tactbench.paths import atomic_write_text
+from tactbench.errors import CorruptArtefactError
+from tactbench.paths import Temporary, atomic_write_text, remove_orphans
+
+log = logging.getLogger("tactbench.runner.store")
 
 OK = "ok"
 FAILED = "failed"
+
+#: A cell file larger than this is not a row tactbench wrote (rows are a few kB).
+ROW_MAX_BYTES = 16 << 20
 
 
 def row_status(row: dict[str, Any]) -> str:
@@ -38,8 +54,44 @@ def failed_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for r in rows if row_status(r) == FAILED]
 
 
+def row_checksum(row: dict[str, Any]) -> str:
+    """The checksum of a row: SHA-256 of everything but ``checksum``, as sorted JSON."""
+    from tactbench.integrity import hash_bytes
+
+    body = {k: v for k, v in row.items() if k != "checksum"}
+    return hash_bytes(json.dumps(body, sort_keys=True, separators=(",", ":")).encode())
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
+def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str | None:
+    """What is wrong with ``row`` as the row of cell ``key``, or None when nothing is."""
+    if not isinstance(row, dict):
+        return f"holds a JSON {type(row).__name__}, not a row"
+    if row.get("key") != key:
+        return f"is the row of cell {str(row.get('key'))[:40]!r}, not of this cell"
+    if "checksum" in row and row["checksum"] != row_checksum(row):
+        return "does not match its checksum (edited or damaged)"
+    status = row.get("status", OK)
+    if status == OK:
+        if not _number(row.get("accuracy")) or not 0.0 <= row["accuracy"] <= 1.0:
+            return f"has no accuracy in [0, 1] (got {str(row.get('accuracy'))[:40]})"
+    elif status == FAILED:
+        if not isinstance(row.get("error"), dict):
+            return "is a failed row without its error"
+    else:
+        return f"has an unknown status {str(status)[:40]!r}"
+    for field, value in json.loads(json.dumps(identity or {})).items():
+        if row.get(field) != value:
+            return f"records {field} = {str(row.get(field))[:40]!r}, the cell has {value!r}"
+    return None
+
+
 class ResultStore:
-    """One JSON file per cell under ``OUT/cells``, written atomically."""
+    """One JSON file per cell under ``OUT/cells``, written atomically, verified on read."""
 
     def __init__(self, out: str | Path) -> None:
         self.out = Path(out)
@@ -49,23 +101,55 @@ class ResultStore:
         """Where the row of cell ``key`` is (or will be) kept."""
         return self.cells / f"{key}.json"
 
-    def get(self, key: str) -> dict[str, Any] | None:
-        """The row of cell ``key``, ok or failed; None when there is none."""
+    def read(self, key: str, identity: dict[str, Any] | None = None,
+             ) -> dict[str, Any] | None:
+        """The verified row of cell ``key``; None when there is none; raises
+        :class:`CorruptArtefactError` when the file is not a sound row of this cell
+        (``identity``: the cell's planned identity, checked field by field)."""
+        path = self.path(key)
         try:
-            return json.loads(self.path(key).read_text())
+            size = path.stat().st_size
+            if size > ROW_MAX_BYTES:
+                raise CorruptArtefactError(path, f"{size} bytes, not a cell row")
+            row = json.loads(path.read_bytes())
         except FileNotFoundError:
             return None
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            return None  # cannot happen with atomic writes; recompute if it does
+        except IsADirectoryError:
+            raise CorruptArtefactError(path, "is a folder, not a cell row") from None
+        except (ValueError, RecursionError) as exc:  # UnicodeDecodeError is a ValueError
+            raise CorruptArtefactError(path, f"is not valid JSON ({exc})") from None
+        problem = check_row(row, key, identity)
+        if problem is not None:
+            raise CorruptArtefactError(path, problem)
+        return row
 
-    def finished(self, key: str) -> bool:
-        """Whether cell ``key`` has an ``ok`` row (a failed one is retried)."""
-        row = self.get(key)
+    def get(self, key: str, identity: dict[str, Any] | None = None,
+            ) -> dict[str, Any] | None:
+        """The row of cell ``key``, ok or failed; None when there is none, or when it is
+        damaged (then a warning names the file and the problem; the cell is recomputed)."""
+        try:
+            return self.read(key, identity)
+        except CorruptArtefactError as exc:
+            log.warning("tactbench: warning: cell row %s %s; the cell is computed again",
+                        exc.artefact, exc.problem)
+            return None
+
+    def finished(self, key: str, identity: dict[str, Any] | None = None) -> bool:
+        """Whether cell ``key`` has a sound ``ok`` row (a failed one is retried)."""
+        row = self.get(key, identity)
         return row is not None and row_status(row) == OK
 
     def put(self, row: dict[str, Any]) -> None:
+        """Write ``row`` (with its ``key``) and its checksum, atomically."""
+        # the checksum of the row as it will be read back (tuples as lists, ...)
+        row = json.loads(json.dumps({k: v for k, v in row.items() if k != "checksum"}))
+        row["checksum"] = row_checksum(row)
         atomic_write_text(self.path(row["key"]), json.dumps(row, indent=2))
 
+    def clean(self) -> list[Temporary]:
+        """Remove temporary row files whose writing process is gone; returns them."""
+        return remove_orphans(self.cells)
+
     def rows(self, keys: Iterable[str]) -> list[dict[str, Any]]:
-        """The stored rows of ``keys``, in that order, skipping cells without one."""
+        """The stored rows of ``keys``, in that order, skipping cells without a sound one."""
         return [row for key in keys if (row := self.get(key)) is not None]

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tactbench.errors import CorruptArtefactError
 from tactbench.runner import EncodingCache, ensure_encodings, load_encoding, plan
 from tactbench.runner.cache import Storage, chunk_bounds
 
@@ -191,19 +193,28 @@ def test_reading_an_entry_sequence_by_sequence_keeps_memory_small(tmp_path):
     assert rss_mib() - before < 12
 
 
-def test_an_entry_written_before_precisions_is_read_as_float32(tmp_path):
-    folder = tmp_path / "old"
-    folder.mkdir()
-    frames = np.lib.format.open_memmap(folder / "frames.npy", mode="w+", dtype=np.float32,
-                                       shape=(4, 3))
-    frames[:] = np.arange(12).reshape(4, 3)
-    frames.flush()
-    del frames
-    np.save(folder / "offsets.npy", np.array([0, 1, 4], np.int64))
-    (folder / "meta.json").write_text(json.dumps({"encoder": "raw", "frames": 4}))
+def test_an_entry_of_an_older_format_is_refused_and_rebuilt(tiny_scene, cache, caplog):
+    """Format 1 (before precisions) had no key, sizes or checksums: it cannot be verified,
+    so it is reported and encoded again, not read and not crashed on."""
+    p = plan(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0]))
+    (folder,) = ensure_encodings(p, cache, p.cells).values()
+    loaded, _ = load_encoding(folder)
+    want = [np.asarray(s) for s in loaded]
+    for name in ("frames.npy", "offsets.npy", "meta.json"):
+        (Path(folder) / name).unlink()
+    frames = np.concatenate(want)
+    np.save(Path(folder) / "frames.npy", frames)
+    np.save(Path(folder) / "offsets.npy", np.cumsum([0] + [len(s) for s in want]))
+    (Path(folder) / "meta.json").write_text(json.dumps({"encoder": "raw",
+                                                        "frames": len(frames)}))
+    with pytest.raises(CorruptArtefactError, match="entry format 1"):
+        load_encoding(folder)
+    assert cache.entries()[0]["state"] == "damaged"
+    ensure_encodings(p, cache, p.cells)
+    assert "entry format 1" in caplog.text and "encoding it again" in caplog.text
     loaded, meta = load_encoding(folder)
-    np.testing.assert_array_equal(loaded[1][:], np.arange(3, 12).reshape(3, 3))
-    assert EncodingCache(tmp_path).entries()[0]["precision"] == "float32"
+    assert meta["format"] == 3 and meta["key"] == Path(folder).name
+    assert all(np.array_equal(a, b) for a, b in zip(loaded, want))
 
 
 # --------------------------------------------------------------------- streaming
