@@ -86,8 +86,8 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
     try:
         clf, meta = load_model(path, registry=p.registry)
         config = read_header(path).get("config", {})
-    except TactbenchError as exc:
-        return str(exc)
+    except TactbenchError as exc:  # ModelFileError is a CorruptArtefactError: a problem
+        return getattr(exc, "problem", None) or str(exc)
     want = {"cell": cell.key, "encoder": cell.encoder, "length": cell.length,
             "classes": list(p.dataset.classes)}
     for field, value in want.items():
