@@ -26,14 +26,37 @@ def _load(path: str):
                             progress=bars.callback(f"loading {path}"))
 
 
+def _load_as(fmt: str, src: str):
+    """``src`` read by the registered dataset ``fmt`` (with options), ``src`` as its path."""
+    from tactbench.cli import get_registry
+    from tactbench.datasets.loading import check_loaded, takes_progress
+    from tactbench.errors import InputError, MissingFileError
+    from tactbench.plugins import parse_spec
+    from tactbench.ui import Progress
+
+    name, options = parse_spec(fmt)
+    if "path" in options:
+        raise InputError(f"--format {fmt}: give the path as SRC, not as path=")
+    if not Path(src).exists():
+        raise MissingFileError(f"{src}: no such file or folder")
+    source = get_registry().build("dataset", name, **options, path=src)
+    with Progress() as bars:
+        if takes_progress(source.load):
+            ds = source.load(progress=bars.callback(f"loading {src} as {name}"))
+        else:
+            ds = source.load()
+    return check_loaded(ds, fmt)
+
+
 @data_group.command("info")
 @click.argument("path")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def info_cmd(path: str, as_json: bool) -> None:
     """Counts, shapes, classes and users of a dataset.
 
-    PATH is a dataset folder, a CySkin text file or folder, a CoST .csv, or a
-    registered dataset (``synthetic-forearm:users=4``).
+    PATH is a dataset folder, a folder of recordings (ROOT/<class>/*.npy|.npz|.csv),
+    a CySkin text file or folder, a CoST .csv, a CAN log, or a registered dataset
+    (``synthetic-forearm:users=4``, ``folder:path=ROOT,users=prefix``).
     """
     ds = _load(path)
     summary = ds.summary()
@@ -92,6 +115,42 @@ def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int)
     ds.save(out)
     click.echo(f"wrote {len(ds)} samples ({len(ds.classes)} classes, {users} users) to {out}; "
                f"content hash {ds.content_hash()[:16]}", err=True)
+
+
+@data_group.command("import")
+@click.argument("src")
+@click.option("--out", "out", required=True, type=click.Path(),
+              help="Folder to write the dataset to (new or empty).")
+@click.option("--format", "fmt", default=None,
+              help="Reader to use, with options, SRC becoming its path: "
+                   "folder:users=prefix,pitch_mm=8 or cost:pitch_mm=10 [default: "
+                   "detected from SRC].")
+def import_cmd(src: str, out: str, fmt: str | None) -> None:
+    """Convert any readable dataset into tactbench's own dataset folder, once.
+
+    SRC is a path (a folder of recordings, CySkin text, CoST .csv, CAN log, dataset
+    folder) or a registered dataset spec. The folder written is verified by reading it
+    back: its content hash must equal the source's.
+    """
+    from tactbench.data.store import MANIFEST, read_dataset
+    from tactbench.errors import InputError
+
+    dest = Path(out)
+    if dest.exists() and not dest.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    if dest.is_dir() and any(dest.iterdir()):
+        what = "a tactbench dataset" if (dest / MANIFEST).is_file() else "files"
+        raise InputError(f"--out {out}: already holds {what}; choose a new or empty folder "
+                         f"(nothing was written)")
+    ds = _load(src) if fmt is None else _load_as(fmt, src)
+    ds.save(dest)
+    back = read_dataset(dest)  # verifies the stored content hash against the arrays
+    if back.content_hash() != ds.content_hash():
+        raise RuntimeError(f"{dest}: read back with content hash {back.content_hash()[:16]} "
+                           f"instead of {ds.content_hash()[:16]}")  # a bug, not user error
+    click.echo(f"imported {len(ds)} samples ({len(ds.classes)} classes, {ds.n_taxels} taxels"
+               f"{', layout ' + ds.layout.name if ds.layout is not None else ', no layout'}) "
+               f"into {out}; content hash {ds.content_hash()[:16]}, verified", err=True)
 
 
 @data_group.command("preview")

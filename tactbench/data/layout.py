@@ -83,6 +83,28 @@ class TaxelLayout:
         object.__setattr__(self, "bounds", bounds)
         self._index.update({int(t): i for i, t in enumerate(ids)})
 
+    @classmethod
+    def grid(cls, rows: int, cols: int, pitch_mm: float, *, name: str | None = None
+             ) -> "TaxelLayout":
+        """A ``rows`` × ``cols`` grid of taxels ``pitch_mm`` apart (a pressure mat, a glove).
+
+        Taxel ``r * cols + c`` (row-major, as a ``(T, rows, cols)`` array flattens) sits at
+        ``x = c · pitch_mm``, ``y = r · pitch_mm``, so image row ``i`` and column ``j`` follow
+        the grid's rows and columns. The image bounds pad the grid by half a pitch on each
+        side, so at ``pixel_mm == pitch_mm`` one pixel covers one cell.
+        """
+        from tactbench.errors import check_positive_float, check_positive_int
+
+        rows = check_positive_int(rows, "grid rows")
+        cols = check_positive_int(cols, "grid cols")
+        pitch = check_positive_float(pitch_mm, "grid pitch_mm")
+        k = np.arange(rows * cols, dtype=np.int64)
+        pos = np.column_stack([(k % cols) * pitch, (k // cols) * pitch]).astype(np.float64)
+        half = 0.5 * pitch
+        bounds = (-half, -half, (cols - 1) * pitch + half, (rows - 1) * pitch + half)
+        return cls(ids=k, positions=pos, bounds=bounds,
+                   name=name if name is not None else f"grid-{rows}x{cols}")
+
     # ------------------------------------------------------------------ queries
 
     def __len__(self) -> int:

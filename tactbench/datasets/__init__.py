@@ -18,3 +18,6 @@ def register_datasets(register):
              summary="CySkin acquisition text files; path=FOLDER|FILE")
     register("cost", "tactbench.datasets.cost:CoST",
              summary="Corpus of Social Touch CSV (8x8, 135 Hz); path=FILE")
+    register("folder", "tactbench.datasets.folder:FolderDataset",
+             summary="your own data: ROOT/<class>/<recording>.npy|.npz|.csv, (T,H,W) grids "
+                     "or (T,N) taxel vectors; path=ROOT (see docs/own-data.md)")

@@ -38,10 +38,8 @@ NORMALISATION = "fixed:scale=1023"
 
 def cost_layout(pitch_mm: float = 10.0) -> TaxelLayout:
     """The 8 × 8 grid: id ``k - 1`` for ``ch{k}``, row-major, ``pitch_mm`` apart."""
-    pitch_mm = check_positive_float(pitch_mm, "pitch_mm")
-    k = np.arange(GRID * GRID)
-    pos = np.column_stack([(k % GRID) * pitch_mm, (k // GRID) * pitch_mm]).astype(float)
-    return TaxelLayout(ids=k.astype(np.int64), positions=pos, name="cost-8x8")
+    return TaxelLayout.grid(GRID, GRID, check_positive_float(pitch_mm, "pitch_mm"),
+                            name="cost-8x8")
 
 
 def _natural(text: str):

@@ -20,14 +20,20 @@ CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".trc")
 
 
 def detect_format(path: Path) -> str:
-    """``"dataset"`` (tactbench folder), ``"cyskin-text"``, ``"cost"`` or ``"can-log"``."""
+    """``"dataset"`` (tactbench folder), ``"folder"`` (class folders of arrays),
+    ``"cyskin-text"``, ``"cost"`` or ``"can-log"``."""
     if path.is_dir():
         if (path / MANIFEST).is_file():
             return "dataset"
+        from tactbench.datasets.folder import looks_like_folder
+
+        if looks_like_folder(path):
+            return "folder"
         if any(p.is_file() for p in path.rglob("*.txt")):
             return "cyskin-text"
-        raise InputError(f"{path}: neither a tactbench dataset folder (no {MANIFEST}) nor a "
-                         f"folder of CySkin text files (*.txt)")
+        raise InputError(f"{path}: neither a tactbench dataset folder (no {MANIFEST}), a "
+                         f"folder of recordings (ROOT/<class>/*.npy|.npz|.csv) nor a folder "
+                         f"of CySkin text files (*.txt)")
     suffix = path.suffix.lower()
     if suffix in CAN_LOG_SUFFIXES:
         return "can-log"
@@ -42,14 +48,19 @@ def detect_format(path: Path) -> str:
                      f"or a CAN log ({', '.join(CAN_LOG_SUFFIXES)})")
 
 
-def load_path(path: str | Path) -> Dataset:
-    """Load a dataset folder, a CySkin text file or folder, a CoST CSV file or a CAN log."""
+def load_path(path: str | Path, *, progress: Callable[..., None] | None = None) -> Dataset:
+    """Load a dataset folder, a folder of recordings (class folders of .npy/.npz/.csv),
+    a CySkin text file or folder, a CoST CSV file or a CAN log."""
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such file or folder")
     kind = detect_format(path)
     if kind == "dataset":
         return Dataset.load(path if path.is_dir() else path.parent)
+    if kind == "folder":
+        from tactbench.datasets.folder import read_folder
+
+        return read_folder(path, progress=progress)
     if kind == "cyskin-text":
         from tactbench.datasets.cyskin_text import read_cyskin_folder
 
@@ -85,7 +96,7 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
     text = str(spec_or_path)
     path = Path(text).expanduser()
     if path.exists():
-        return load_path(path)
+        return load_path(path, progress=progress)
     if isinstance(spec_or_path, Path) or _looks_like_path(text) and ":" not in text.split("/")[0]:
         raise MissingFileError(f"{text}: no such file or folder (and not a dataset name)")
     if registry is None:
@@ -93,17 +104,22 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
 
         registry = load_registry()
     source = registry.build("dataset", text)
-    if progress is not None and _takes_progress(source.load):
+    if progress is not None and takes_progress(source.load):
         dataset = source.load(progress=progress)
     else:
         dataset = source.load()
+    return check_loaded(dataset, text)
+
+
+def check_loaded(dataset: Any, spec: str) -> Dataset:
+    """``dataset`` if a dataset's ``load()`` returned a :class:`Dataset`, else ContractError."""
     if not isinstance(dataset, Dataset):
-        raise ContractError(f"dataset {text!r}: load() returned {type(dataset).__name__}, "
+        raise ContractError(f"dataset {spec!r}: load() returned {type(dataset).__name__}, "
                             f"expected a tactbench.data.dataset.Dataset")
     return dataset
 
 
-def _takes_progress(load: Callable[..., Any]) -> bool:
+def takes_progress(load: Callable[..., Any]) -> bool:
     try:
         params = inspect.signature(load).parameters
     except (TypeError, ValueError):  # a builtin or C callable: call it plainly

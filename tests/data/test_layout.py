@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tactbench.data.layout import TaxelLayout, unroll
+from tactbench.errors import InputError
 
 # ------------------------------------------------------------- the contract
 
@@ -60,3 +61,20 @@ def test_unroll_flat_patch_keeps_distances():
     d_in = np.linalg.norm(flat[:, None] - flat[None], axis=2)
     d_out = np.linalg.norm(out[:, None] - out[None], axis=2)
     assert d_out == pytest.approx(d_in, abs=1e-9)
+
+
+def test_grid_layout_is_row_major_with_half_pitch_bounds():
+    lay = TaxelLayout.grid(3, 4, 2.5)
+    assert lay.name == "grid-3x4" and lay.n_taxels == 12
+    # taxel r * cols + c sits at x = c * pitch, y = r * pitch
+    np.testing.assert_array_equal(lay.positions[6], [2 * 2.5, 1 * 2.5])
+    np.testing.assert_array_equal(lay.ids, np.arange(12))
+    assert lay.bounds == (-1.25, -1.25, 3 * 2.5 + 1.25, 2 * 2.5 + 1.25)
+    from tactbench.data.imaging import image_shape
+
+    assert image_shape(lay, 2.5) == (3, 4)  # one pixel per cell at pixel == pitch
+    one = TaxelLayout.grid(1, 1, 4.0)
+    assert one.bounds == (-2.0, -2.0, 2.0, 2.0)
+    for bad in [(0, 4, 1.0), (3, 4, 0.0), (2.5, 4, 1.0)]:
+        with pytest.raises(InputError):
+            TaxelLayout.grid(*bad)

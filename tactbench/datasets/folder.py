@@ -1,0 +1,553 @@
+"""Your own sensor's data: a folder of arrays or CSV files, one file per recording.
+
+The layout most grid and taxel sensors' data already has::
+
+    ROOT/<class>/<recording>.npy | .npz | .csv
+    ROOT/<class>/<user>/<recording>.*          (with ``users=folder``)
+    ROOT/users.csv                             (optional: recording → user)
+
+What a file may hold (every recording of a dataset alike):
+
+``(T, H, W)`` arrays — a grid
+    ``T`` frames of an ``H`` × ``W`` grid (pressure mat, glove, skin patch). The layout
+    is the grid itself (:meth:`TaxelLayout.grid`), ``pitch_mm`` apart (default
+    :data:`DEFAULT_PITCH_MM`); taxel ``r · W + c`` is row ``r``, column ``c``. Image
+    encoders run on it with no layout file.
+``(T, N)`` arrays — taxel vectors
+    ``T`` frames of ``N`` taxels with no layout (layout-free classifiers such as
+    ``taxel-lstm``), or with ``layout=FILE`` (column ``k`` is the file's ``k``-th taxel),
+    or ``grid=HxW`` when the columns are a row-major grid.
+``.npy``
+    one array; ``.npz``: member ``values`` (or its only member) and optionally
+    ``timestamps`` ``(T,)`` seconds; no other member is read.
+``.csv``
+    one frame per row (comma, semicolon or tab separated; an optional header row). With
+    ``timestamp_column=NAME`` (a header name, or a 0-based column number) that column
+    holds seconds and the others are the taxels; ``nan`` marks a missing reading.
+
+Timestamps come from the file when it has them; otherwise frame ``k`` is at ``k / rate``
+(``rate`` in Hz, default :data:`DEFAULT_RATE_HZ`, an assumption shown in the dataset's
+description). Users (for ``--split users``): ``users=prefix`` (the file name before the
+first ``users_sep``, default ``_``), ``users=folder`` (``ROOT/<class>/<user>/``),
+``users=FILE.csv`` (columns ``recording,user``, and optionally ``class``, checked against
+the folder), or ``ROOT/users.csv`` when present; otherwise no users. Classes are the
+folder names (natural order) or ``classes=a;b;c`` (that order; every name must be a
+folder and every folder a name). Normalisation: ``vmin``/``vmax`` (the sensor's range),
+``normalisation=SPEC`` (e.g. ``baseline``), or by default the data's own range (0, or the
+minimum when negative, to the maximum), stored in the manifest so it is reproducible.
+
+Every mistake is one :class:`~tactbench.errors.InputError` naming the file (and line).
+See ``docs/own-data.md``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tactbench.data.dataset import Dataset
+from tactbench.data.layout import TaxelLayout
+from tactbench.data.recording import Recording, Sample
+from tactbench.errors import InputError, MissingFileError, check_positive_float
+
+SUFFIXES = (".npy", ".npz", ".csv")
+#: Grid pitch assumed when none is given: the quick profile's pixel, so one pixel per cell.
+DEFAULT_PITCH_MM = 5.0
+#: Frame rate assumed for files without timestamps (the study's 10 Hz).
+DEFAULT_RATE_HZ = 10.0
+#: A mapping recording → user picked up from the dataset's root when present.
+USERS_FILE = "users.csv"
+USER_RULES = ("prefix", "folder")
+
+
+@dataclass
+class _Read:
+    """One file's frames before they become a Recording."""
+
+    path: Path
+    values: np.ndarray      # (T, H, W) or (T, N)
+    timestamps: np.ndarray | None
+
+
+def natural_key(text: str) -> list[Any]:
+    """Sort key that puts ``"2"`` before ``"10"`` (and ``"tap2"`` before ``"tap10"``)."""
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower())
+            for t in re.split(r"(\d+)", text) if t]
+
+
+# --------------------------------------------------------------------------- files
+
+
+def read_array_file(path: Path, *, timestamp_column: str | int | None = None
+                    ) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(values, timestamps or None)`` of one ``.npy``, ``.npz`` or ``.csv`` file."""
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        with path.open("rb") as fh:
+            return _read_npy(fh, path, path.stat().st_size, "the file"), None
+    if suffix == ".npz":
+        return _read_npz(path)
+    if suffix == ".csv":
+        return _read_csv(path, timestamp_column)
+    raise InputError(f"{path}: unknown suffix {suffix!r}; expected one of {', '.join(SUFFIXES)}")
+
+
+def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
+    """An npy array from ``fh``, its header checked (and its size budgeted) before reading."""
+    from numpy.lib import format as npformat
+
+    from tactbench.integrity import check_budget
+
+    try:
+        version = npformat.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = npformat.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, fortran, dtype = npformat.read_array_header_2_0(fh)
+        else:  # 3.0 (UTF-8 field names) has no public reader
+            shape, fortran, dtype = npformat._read_array_header(fh, version)
+    except (ValueError, OSError, EOFError, SyntaxError) as exc:
+        raise InputError(f"{path}: {what} is not a valid .npy array ({exc})") from None
+    if dtype.hasobject:
+        raise InputError(f"{path}: {what} holds Python objects (a ragged array of "
+                         f"recordings or frames of different sizes?), not numbers")
+    if dtype.kind not in "biuf":
+        raise InputError(f"{path}: {what} holds {dtype} values; expected numbers")
+    count = math.prod(shape)
+    nbytes = count * dtype.itemsize
+    check_budget(nbytes, f"reading {path} ({'×'.join(map(str, shape))} {dtype})")
+    header_end = fh.tell()
+    truncated = InputError(f"{path}: {what} is truncated: its header says "
+                           f"{'×'.join(map(str, shape))} {dtype} ({nbytes} bytes), "
+                           f"{max(size - header_end, 0)} bytes follow")
+    if size - header_end < nbytes:
+        raise truncated
+    arr = np.empty(count, dtype=dtype)
+    view, got = memoryview(arr).cast("B"), 0
+    while got < nbytes:
+        n = fh.readinto(view[got:])
+        if not n:
+            raise truncated
+        got += n
+    return arr.reshape(shape, order="F" if fortran else "C")
+
+
+def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    try:
+        zf = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a valid .npz file (not a zip archive: {exc})") from None
+    with zf:
+        members = {Path(i.filename).stem: i for i in zf.infolist()
+                   if i.filename.endswith(".npy") and not i.is_dir()}
+        if "values" in members:
+            values_info = members["values"]
+        elif len(members) == 1:
+            values_info = next(iter(members.values()))
+        else:
+            raise InputError(f"{path}: .npz needs a member 'values' (or exactly one array); "
+                             f"found {', '.join(sorted(members)) or 'none'}")
+        values = _read_member(zf, values_info, path)
+        ts = None
+        if "timestamps" in members and members["timestamps"] is not values_info:
+            ts = _read_member(zf, members["timestamps"], path).astype(np.float64)
+            if ts.shape != values.shape[:1]:
+                raise InputError(f"{path}: 'timestamps' has shape {ts.shape}; expected "
+                                 f"({values.shape[0] if values.ndim else '?'},), one per frame")
+    return values, ts
+
+
+def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.ndarray:
+    try:
+        with zf.open(info) as fh:
+            return _read_npy(fh, path, info.file_size, f"member {info.filename!r}")
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError) as exc:
+        raise InputError(f"{path}: member {info.filename!r} cannot be read "
+                         f"(damaged .npz: {exc})") from None
+
+
+def _read_csv(path: Path, timestamp_column: str | int | None
+              ) -> tuple[np.ndarray, np.ndarray | None]:
+    from tactbench.integrity import check_budget
+
+    # a CSV cell of a number is ≥ 2 bytes ("0,"), and becomes 8 bytes as float64
+    check_budget(path.stat().st_size * 4, f"reading {path}")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text CSV file (not UTF-8; binary data?)") from None
+    if "\x00" in text:
+        raise InputError(f"{path}: not a text CSV file (it holds NUL bytes; binary data?)")
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), 1) if line.strip()]
+    if not lines:
+        raise InputError(f"{path}: empty CSV file (expected one frame per row)")
+    first = lines[0][1]
+    delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
+    rows = [(n, [c.strip() for c in row]) for (n, _), row in
+            zip(lines, csv.reader([line for _, line in lines], delimiter=delimiter))]
+    header = None
+    if any(not _is_number(c) for c in rows[0][1]):
+        header = rows[0][1]
+        rows = rows[1:]
+        if not rows:
+            raise InputError(f"{path}: only a header row, no frames")
+    width = len(header) if header is not None else len(rows[0][1])
+    ts_col = _timestamp_index(timestamp_column, header, width, path)
+    out = np.empty((len(rows), width), dtype=np.float64)
+    for k, (lineno, row) in enumerate(rows):
+        if len(row) != width:
+            raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {width} "
+                             f"({'as the header' if header is not None else 'as the first row'};"
+                             f" rows of different lengths)")
+        try:
+            out[k] = [float(c) for c in row]
+        except ValueError:
+            col = next(i for i, c in enumerate(row) if not _is_number(c))
+            name = header[col] if header is not None else f"column {col}"
+            raise InputError(f"{path}, line {lineno}: {name} is {row[col]!r}, not a number"
+                             ) from None
+    if ts_col is None:
+        return out, None
+    ts = out[:, ts_col].copy()
+    return np.delete(out, ts_col, axis=1), ts
+
+
+def _timestamp_index(column: str | int | None, header: list[str] | None, width: int,
+                     path: Path) -> int | None:
+    if column is None:
+        return None
+    if header is not None and str(column) in header:
+        return header.index(str(column))
+    if isinstance(column, int) and not isinstance(column, bool):
+        if 0 <= column < width:
+            return column
+        raise InputError(f"{path}: timestamp_column {column} is out of range "
+                         f"(the file has {width} columns)")
+    where = f"header ({', '.join(header[:6])}{', …' if len(header) > 6 else ''})" \
+        if header is not None else "file (it has no header row)"
+    raise InputError(f"{path}: no column {column!r} in the {where} for timestamp_column")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+# -------------------------------------------------------------------------- the tree
+
+
+def find_recordings(root: Path, *, users: str | None = None
+                    ) -> dict[str, list[Path]]:
+    """Class folder name → its recording files (sorted naturally); checks the tree."""
+    if not root.exists():
+        raise MissingFileError(f"{root}: no such folder")
+    if not root.is_dir():
+        raise InputError(f"{root}: not a folder (expected ROOT/<class>/<recording>.npy|.npz|.csv)")
+    stray = sorted(p.name for p in root.iterdir()
+                   if p.is_file() and p.suffix.lower() in SUFFIXES and p.name != USERS_FILE)
+    if stray:
+        raise InputError(f"{root / stray[0]}: a recording outside any class folder; put each "
+                         f"recording in ROOT/<class>/ (the folder name is its label)")
+    folders = sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")),
+                     key=lambda p: natural_key(p.name))
+    if not folders:
+        raise InputError(f"{root}: no class folders (expected ROOT/<class>/<recording>"
+                         f".npy|.npz|.csv)")
+    found: dict[str, list[Path]] = {}
+    for folder in folders:
+        files = []
+        for p in folder.rglob("*"):
+            if not p.is_file() or p.suffix.lower() not in SUFFIXES \
+                    or any(part.startswith(".") for part in p.relative_to(root).parts):
+                continue
+            depth = len(p.relative_to(folder).parts)
+            if users == "folder" and depth != 2:
+                raise InputError(f"{p}: with users=folder every recording sits in "
+                                 f"ROOT/<class>/<user>/")
+            if users != "folder" and depth != 1:
+                raise InputError(f"{p}: recordings sit directly in their class folder "
+                                 f"(use users=folder for ROOT/<class>/<user>/<recording>)")
+            files.append(p)
+        if not files:
+            raise InputError(f"{folder}: empty class folder (no .npy, .npz or .csv "
+                             f"recordings); remove it or add its recordings")
+        found[folder.name] = sorted(files, key=lambda p: natural_key(p.relative_to(root)
+                                                                      .as_posix()))
+    return found
+
+
+def _order_classes(found: dict[str, list[Path]], classes: str | None, root: Path) -> list[str]:
+    if classes is None:
+        return list(found)
+    names = [c.strip() for c in str(classes).split(";") if c.strip()]
+    if len(set(names)) != len(names):
+        raise InputError(f"classes={classes!r} names a class twice")
+    missing = [c for c in names if c not in found]
+    if missing:
+        raise InputError(f"{root / missing[0]}: class {missing[0]!r} (from classes=) has no "
+                         f"folder; folders: {', '.join(found)}")
+    extra = [c for c in found if c not in names]
+    if extra:
+        raise InputError(f"{root / extra[0]}: folder {extra[0]!r} is not among classes="
+                         f"{';'.join(names)}")
+    return names
+
+
+def _users_of(files: dict[str, list[Path]], root: Path, rule: str | None,
+              sep: str) -> dict[Path, str]:
+    """Recording file → user name, by the ``users`` rule (see the module docstring)."""
+    all_files = [p for ps in files.values() for p in ps]
+    if rule is None:
+        if not (root / USERS_FILE).is_file():
+            return {p: "" for p in all_files}
+        rule = str(root / USERS_FILE)
+    if rule == "prefix":
+        out = {}
+        for p in all_files:
+            user, found, _ = p.stem.partition(sep)
+            if not found or not user:
+                raise InputError(f"{p}: users=prefix needs file names like "
+                                 f"USER{sep}REST{p.suffix}; this one has no {sep!r}")
+            out[p] = user
+        return out
+    if rule == "folder":
+        return {p: p.parent.name for p in all_files}
+    return _users_from_csv(Path(rule), files, root)
+
+
+def _users_from_csv(path: Path, files: dict[str, list[Path]], root: Path) -> dict[Path, str]:
+    if not path.is_file():
+        if not (root / path).is_file():
+            raise MissingFileError(f"{path}: users file not found (users= takes 'prefix', "
+                                   f"'folder' or a CSV file recording,user)")
+        path = root / path
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text CSV file") from None
+    rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+    if not rows:
+        raise InputError(f"{path}: empty users file (expected a header recording,user)")
+    head = [c.strip().lower() for c in rows[0]]
+    if "recording" not in head or "user" not in head:
+        raise InputError(f"{path}, line 1: header must name columns 'recording' and 'user' "
+                         f"(and optionally 'class'), got {','.join(rows[0])!r}")
+    i_rec, i_user = head.index("recording"), head.index("user")
+    i_cls = head.index("class") if "class" in head else None
+    by_key: dict[str, tuple[str, str | None, int]] = {}
+    for lineno, row in enumerate(rows[1:], 2):
+        if len(row) != len(head):
+            raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {len(head)}")
+        rec = row[i_rec].strip().replace("\\", "/")
+        by_key[rec] = (row[i_user].strip(), None if i_cls is None else row[i_cls].strip(),
+                       lineno)
+    out: dict[Path, str] = {}
+    for cls, paths in files.items():
+        for p in paths:
+            rel = p.relative_to(root).as_posix()
+            keys = (rel, rel[: -len(p.suffix)], p.name, p.stem)
+            hit = next((by_key[k] for k in keys if k in by_key), None)
+            if hit is None:
+                raise InputError(f"{p}: not listed in {path} (a row recording,user with "
+                                 f"{rel!r} or {p.stem!r})")
+            user, label, lineno = hit
+            if label is not None and label != cls:
+                raise InputError(f"{path}, line {lineno}: class {label!r} does not match the "
+                                 f"folder of {rel} ({cls!r})")
+            if not user:
+                raise InputError(f"{path}, line {lineno}: empty user for {rel}")
+            out[p] = user
+    return out
+
+
+def _parse_grid(text: Any) -> tuple[int, int]:
+    m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", str(text))
+    if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
+        raise InputError(f"grid must be ROWSxCOLS such as 8x8, got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
+# -------------------------------------------------------------------------- the reader
+
+
+def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
+                layout: str | Path | None = None, rate: float | None = None,
+                timestamp_column: str | int | None = None, users: str | None = None,
+                users_sep: str = "_", grid: str | None = None, vmin: float | None = None,
+                vmax: float | None = None, normalisation: str | None = None,
+                classes: str | None = None, name: str | None = None,
+                progress: Callable[..., None] | None = None) -> Dataset:
+    """Read ``ROOT/<class>/<recording>.{npy,npz,csv}`` into a :class:`Dataset`.
+
+    Options are those of the module docstring; ``progress(done, total)`` is called
+    after each file.
+    """
+    root = Path(root)
+    pitch = check_positive_float(pitch_mm, "pitch_mm")
+    rate_hz = DEFAULT_RATE_HZ if rate is None else check_positive_float(rate, "rate")
+    if not users_sep:
+        raise InputError("users_sep must not be empty")
+    found = find_recordings(root, users=users)
+    class_names = _order_classes(found, classes, root)
+    user_of = _users_of(found, root, users, str(users_sep))
+    grid_shape = None if grid is None else _parse_grid(grid)
+    if grid_shape is not None and layout is not None:
+        raise InputError("give grid= or layout=, not both")
+
+    total = sum(len(v) for v in found.values())
+    reads: list[tuple[int, _Read]] = []
+    first: _Read | None = None
+    done = 0
+    for label, cls in enumerate(class_names):
+        for path in found[cls]:
+            values, ts = read_array_file(path, timestamp_column=timestamp_column)
+            item = _Read(path, values, ts)
+            _check_frames(item, first, grid_shape)
+            if first is None:
+                first = item
+            reads.append((label, item))
+            done += 1
+            if progress is not None:
+                progress(done, total)
+    assert first is not None  # find_recordings refuses an empty tree
+
+    frame_shape = first.values.shape[1:]
+    if len(frame_shape) == 1 and grid_shape is not None:
+        frame_shape = grid_shape
+    if len(frame_shape) == 2:
+        if layout is not None:
+            raise InputError(f"{first.path}: layout= is for (T, N) taxel vectors; a "
+                             f"(T, H, W) grid is its own layout (set pitch_mm)")
+        lay: TaxelLayout | None = TaxelLayout.grid(*frame_shape, pitch)
+        ids = lay.ids
+    elif layout is not None:
+        from tactbench.data.layout_io import load_layout
+
+        lay = load_layout(layout)
+        if lay.n_taxels != frame_shape[0]:
+            raise InputError(f"{first.path}: {frame_shape[0]} taxels per frame, but layout "
+                             f"{layout} has {lay.n_taxels}")
+        ids = lay.ids
+    else:
+        lay, ids = None, np.arange(frame_shape[0], dtype=np.int64)
+
+    samples: list[Sample] = []
+    repetition: dict[tuple[int, str], int] = {}
+    for label, item in reads:
+        t = item.values.shape[0]
+        flat = item.values.reshape(t, -1)
+        if item.timestamps is not None:
+            ts = item.timestamps - item.timestamps[0] if t else item.timestamps
+        else:
+            ts = np.arange(t, dtype=np.float64) / rate_hz
+        try:
+            rec = Recording(flat.astype(np.float32, copy=False), ts, ids)
+        except InputError as exc:
+            raise InputError(f"{item.path}: {exc}") from None
+        user = user_of[item.path]
+        repetition[(label, user)] = repetition.get((label, user), 0) + 1
+        samples.append(Sample(rec, label, user=user, repetition=repetition[(label, user)],
+                              source=item.path.relative_to(root).as_posix()))
+
+    norm = _normalisation(samples, vmin, vmax, normalisation)
+    kind = (f"{frame_shape[0]}×{frame_shape[1]} grid, pitch {pitch:g} mm"
+            if len(frame_shape) == 2 else
+            f"{frame_shape[0]} taxels{' with layout ' + str(layout) if layout else ''}")
+    timing = ("timestamps from the files" if all(r.timestamps is not None for _, r in reads)
+              else f"{rate_hz:g} Hz{' (assumed)' if rate is None else ''}")
+    return Dataset(name or root.resolve().name, samples, class_names, lay, norm,
+                   description=f"{len(samples)} recordings ({kind}; {timing}) from {root}")
+
+
+def _check_frames(item: _Read, first: _Read | None, grid_shape: tuple[int, int] | None) -> None:
+    shape = item.values.shape
+    if item.values.ndim not in (2, 3):
+        raise InputError(f"{item.path}: array of shape {shape}; expected (T, H, W) grid "
+                         f"frames or (T, N) taxel vectors")
+    if shape[0] == 0 or 0 in shape[1:]:
+        raise InputError(f"{item.path}: no frames (shape {shape})")
+    if item.values.ndim == 2 and grid_shape is not None \
+            and shape[1] != grid_shape[0] * grid_shape[1]:
+        raise InputError(f"{item.path}: {shape[1]} values per frame, but grid="
+                         f"{grid_shape[0]}x{grid_shape[1]} needs {grid_shape[0] * grid_shape[1]}")
+    if first is not None and shape[1:] != first.values.shape[1:]:
+        def what(s: tuple[int, ...]) -> str:
+            return f"{s[1]}×{s[2]} grid" if len(s) == 3 else f"{s[1]} taxels"
+
+        raise InputError(f"{item.path}: frames of a {what(shape)}, but {first.path} (the "
+                         f"first recording) has frames of a {what(first.values.shape)}; "
+                         f"every recording must have the same frame shape")
+
+
+def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None,
+                   spec: str | None) -> str:
+    if spec is not None:
+        if vmin is not None or vmax is not None:
+            raise InputError("give vmin/vmax or normalisation=, not both")
+        return str(spec)
+    lo = vmin
+    hi = vmax
+    if lo is None or hi is None:
+        finite = [s.recording.values[np.isfinite(s.recording.values)] for s in samples]
+        values = np.concatenate([f for f in finite if f.size] or [np.zeros(1, np.float32)])
+        if lo is None:
+            lo = min(0.0, float(values.min()))
+        if hi is None:
+            hi = float(values.max())
+    for v, what in ((lo, "vmin"), (hi, "vmax")):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise InputError(f"{what} must be a finite number, got {v!r}")
+    if hi <= lo:
+        if vmin is not None and vmax is not None:
+            raise InputError(f"vmax ({vmax}) must be greater than vmin ({vmin})")
+        hi = lo + 1.0  # constant data: any scale maps it to one value
+    return f"fixed:offset={float(lo)!r},scale={float(hi - lo)!r}"
+
+
+class FolderDataset:
+    """Registered dataset ``folder``: ``folder:path=ROOT[,pitch_mm=5,users=prefix,...]``.
+
+    See :mod:`tactbench.datasets.folder` for every option.
+    """
+
+    def __init__(self, path: str, pitch_mm: float = DEFAULT_PITCH_MM, layout: str | None = None,
+                 rate: float | None = None, timestamp_column: str | int | None = None,
+                 users: str | None = None, users_sep: str = "_", grid: str | None = None,
+                 vmin: float | None = None, vmax: float | None = None,
+                 normalisation: str | None = None, classes: str | None = None,
+                 name: str | None = None) -> None:
+        self.path = str(path)
+        self.options = dict(pitch_mm=check_positive_float(pitch_mm, "folder option pitch_mm"),
+                            layout=layout, timestamp_column=timestamp_column, users=users,
+                            users_sep=str(users_sep), grid=grid, vmin=vmin, vmax=vmax,
+                            normalisation=normalisation, classes=classes, name=name,
+                            rate=None if rate is None
+                            else check_positive_float(rate, "folder option rate"))
+        if grid is not None:
+            _parse_grid(grid)
+
+    def load(self, progress: Callable[..., None] | None = None) -> Dataset:
+        return read_folder(self.path, progress=progress, **self.options)
+
+
+def looks_like_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder of class folders holding .npy/.npz/.csv recordings."""
+    return path.is_dir() and any(
+        p.is_file() and p.suffix.lower() in SUFFIXES
+        for sub in path.iterdir() if sub.is_dir() for p in sub.rglob("*"))
+
+
+__all__ = ["read_folder", "FolderDataset", "find_recordings", "read_array_file",
+           "looks_like_folder", "natural_key", "DEFAULT_PITCH_MM", "DEFAULT_RATE_HZ",
+           "USERS_FILE"]
