@@ -24,3 +24,7 @@ def register_classifiers(register):
     register("logreg", "tactbench.classifiers.classical:PooledLogReg",
              summary="floor: logistic regression on pooled per-frame statistics",
              requires=("torch",))
+    register("sklearn", "tactbench.classifiers.sklearn:SklearnClassifier",
+             summary="any scikit-learn classifier on pooled per-frame features: "
+                     "estimator=NAME and its parameters (optional extra 'sklearn')",
+             requires=("sklearn",))
