@@ -65,7 +65,10 @@ def users_split(users: Sequence[str], labels: Sequence[int], *, seed: int,
     labels = np.asarray(labels)
     unique = np.unique(users_arr)
     if len(unique) < 2:
-        raise InputError(f"a users split needs ≥ 2 users; the dataset has {len(unique)}")
+        raise InputError(f"a users split needs ≥ 2 users; the dataset has {len(unique)}"
+                         + (" (recordings without users: a folder of recordings takes them "
+                            "from users=prefix|folder|FILE.csv, see docs/own-data.md)"
+                            if unique.tolist() == [""] else ""))
     rng = np.random.default_rng(derive_seed(seed, "split", "users", test_fraction))
     n_test = min(len(unique) - 1, max(1, round(test_fraction * len(unique))))
     test_users = np.sort(rng.choice(unique, size=n_test, replace=False))
