@@ -32,7 +32,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
-from tactbench.integrity import check_budget
+from tactbench.integrity import check_budget, memory_budget_bytes
 
 SUFFIX = ".txt"
 #: CySkin text values are baseline-removed raw counts, non-negative; the scale
@@ -89,28 +89,70 @@ def _read(path: Path, held: int) -> Recording:
                  f"{path}: {n_rows} frames × {n} taxels")
     values = np.empty((n_rows, n), dtype=np.float32)
     ts = np.empty(n_rows, dtype=np.float64)
+    chunk_rows = max(1, _CHUNK_TOKENS // (n + 2))
     k = 0
+    linenos: list[int] = []
+    chunk: list[list[str]] = []
     for lineno, line in _lines(path):
         toks = line.split()
         if lineno == 1 or not toks:
             continue
-        if len(toks) != n + 2 or k == n_rows:
+        if len(toks) != n + 2 or k + len(chunk) == n_rows:
             raise InputError(f"{path}, line {lineno}: the file changed while it was read")
-        _parse_row(path, lineno, toks, ids, values[k], ts, k)
-        k += 1
-    if k != n_rows:
+        linenos.append(lineno)
+        chunk.append(toks)
+        if len(chunk) == chunk_rows:
+            _parse_rows(path, linenos, chunk, ids, values, ts, k)
+            k += len(chunk)
+            linenos, chunk = [], []
+    _parse_rows(path, linenos, chunk, ids, values, ts, k)
+    if k + len(chunk) != n_rows:
         raise InputError(f"{path}: the file changed while it was read")
     return Recording(values, ts, ids)
 
 
+#: Tokens parsed at once (rows are parsed in chunks of about this many numbers).
+_CHUNK_TOKENS = 1 << 18
+
+
+def _parse_rows(path: Path, linenos: list[int], rows: list[list[str]], ids: np.ndarray,
+                values: np.ndarray, ts: np.ndarray, k: int) -> None:
+    """Parse consecutive frame lines into ``values[k:]`` and ``ts[k:]``, all at once;
+    the first bad row is parsed alone by :func:`_parse_row` for its message."""
+    if not rows:
+        return
+    m, width = len(rows), len(rows[0])
+    try:
+        block = np.fromiter(map(float, (tok for toks in rows for tok in toks)),
+                            dtype=np.float64, count=m * width).reshape(m, width)
+        bad = np.zeros(m, dtype=bool)
+    except ValueError:
+        block, bad = None, None
+    if block is not None:
+        index, t, vals = block[:, 0], block[:, 1], block[:, 2:]
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(index) | (index != np.round(index)) | ~np.isfinite(t)
+            bad |= (np.abs(vals) > VALUE_MAX).any(axis=1)
+            prev = np.concatenate([[ts[k - 1] if k else -np.inf], t[:-1]])
+            bad |= t < prev
+    if block is None or bad.any():
+        for i in range(m):  # the first bad row raises
+            _parse_row(path, linenos[i], rows[i], ids, values[k + i], ts, k + i)
+        raise AssertionError("a chunk failed but none of its rows did")  # a bug, not input
+    values[k:k + m] = vals
+    ts[k:k + m] = t
+
+
 def _lines(path: Path) -> Iterator[tuple[int, str]]:
     """``(line number, text)`` for each line, streamed; a non-ASCII byte is an InputError."""
+    # One line's tokens are held at a time: refuse a line they would not fit.
+    longest = 2 * (memory_budget_bytes() // _TOKEN_BYTES)
     try:
         with open(path, encoding="ascii", errors="strict") as f:
             for lineno, line in enumerate(f, start=1):
-                # One line's tokens are held at a time: refuse a line they would not fit.
-                check_budget(_TOKEN_BYTES * (len(line) // 2 + 1),
-                             f"{path}, line {lineno}: a line of {len(line)} characters")
+                if len(line) > longest:
+                    check_budget(_TOKEN_BYTES * (len(line) // 2 + 1),
+                                 f"{path}, line {lineno}: a line of {len(line)} characters")
                 yield lineno, line
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a CySkin text file (non-ASCII byte at offset "
