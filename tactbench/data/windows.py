@@ -12,7 +12,10 @@ many overlapping training windows share memory; :meth:`Windows.batch`
 materialises a batch ``(B, L, *frame_shape)`` on demand. The sequences may be
 arrays or *stored sequences* (:func:`tactbench.runner.cache.load_encoding`: anything
 with ``shape`` and slicing that reads frames from disk on demand): a batch then reads
-only its windows' frames, so memory is O(batch), whatever the dataset's size.
+only its windows' frames, so memory is O(batch), whatever the dataset's size. A batch
+is estimated (windows × L × frame) before it is allocated, and one above the memory
+budget is refused (:func:`tactbench.integrity.check_budget`): ``L`` is the user's, and
+``L = 1000`` over 27-frame sequences would otherwise allocate mostly padding.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from tactbench.errors import InputError, check_positive_int
+from tactbench.integrity import check_budget
 
 
 @dataclass(frozen=True)
@@ -60,6 +64,10 @@ class Windows:
     def batch(self, index: Sequence[int] | np.ndarray | slice) -> np.ndarray:
         """Windows ``index`` as float32 ``(B, L, *frame_shape)``, zero-padded past the end."""
         idx = np.arange(len(self))[index] if isinstance(index, slice) else np.asarray(index)
+        frame = int(np.prod(self.frame_shape, dtype=np.int64)) if self.frame_shape else 1
+        check_budget(4 * len(idx) * self.length * frame,
+                     f"a batch of {len(idx)} windows of L={self.length} frames "
+                     f"{self.frame_shape}")
         out = np.zeros((len(idx), self.length, *self.frame_shape), dtype=np.float32)
         for row, j in enumerate(idx):
             seq = self.sequences[self.seq_index[j]]

@@ -15,7 +15,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+import os
+import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from tactbench.errors import (
@@ -24,7 +28,20 @@ from tactbench.errors import (
     check_positive_float,
     check_positive_int,
 )
-from tactbench.runner.scene import EXECUTORS, Scene
+from tactbench.runner.scene import EXECUTORS, Scene, check_scene
+
+#: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
+#: model, and a larger grid is a typo (its plan alone would grow without bound).
+MAX_CELLS = 10_000
+
+#: What tactbench writes at the top of an out folder (see :func:`check_out_folder`).
+OUT_FOLDERS = ("cells", "models")
+OUT_FILES = ("results.json", "results.csv", "report.md", "accuracy_vs_L.png",
+             "cost_vs_accuracy.png")
+_OUT_PATTERNS = (re.compile(r"confusion_.+\.png"),)
+_TEMPORARY = re.compile(r"^\.(.+)\.(?:tmp|bad)-")  # tactbench.paths.temp_name
+#: report.md begins with this line; a report.md without it is not tactbench's.
+REPORT_HEADER = "# tactbench report"
 
 #: Part of every cell's identity: bump it when a row's meaning changes, so that old
 #: rows are not taken for new ones.
@@ -108,10 +125,88 @@ def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dic
     return format_spec(name, merged), merged
 
 
+def _is_ours(name: str) -> bool:
+    """Whether ``name`` at the top of an out folder is one tactbench writes (temporary
+    files of an interrupted write included: ``.NAME.tmp-...``, ``.NAME.bad-...``)."""
+    temporary = _TEMPORARY.match(name)
+    if temporary:
+        name = temporary.group(1)
+    return (name in OUT_FOLDERS or name in OUT_FILES
+            or any(p.fullmatch(name) for p in _OUT_PATTERNS))
+
+
+def _probe_writable(folder: Path, out: Path) -> None:
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
+    except OSError as exc:
+        where = "" if folder == out else f" ({folder})"
+        raise InputError(f"out folder {out} cannot be written{where}: "
+                         f"{exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def check_out_folder(out: str | Path, *, models: bool = False) -> None:
+    """Refuse an out folder the run could not write, before any work.
+
+    ``out`` must be a folder (or not exist yet, under a folder), writable (a probe file
+    is created and removed: permissions alone do not tell, e.g. for root or a read-only
+    mount), and, when it exists, *tactbench's*: empty, or holding only what a run writes
+    (:data:`OUT_FOLDERS`, :data:`OUT_FILES`, ``confusion_*.png``, temporary
+    ``.NAME.tmp-*`` / ``.NAME.bad-*`` names of those), with a ``report.md`` that starts with
+    :data:`REPORT_HEADER`. A folder with anything else is refused, never overwritten.
+    """
+    out = Path(out)
+    try:
+        if out.exists():
+            if not out.is_dir():
+                raise InputError(f"out folder {out} is a file, not a folder; give a folder")
+            foreign = []
+            with os.scandir(out) as entries:
+                for entry in entries:
+                    if not _is_ours(entry.name):
+                        foreign.append(entry.name)
+                        if len(foreign) == 3:
+                            break
+                    elif entry.name in OUT_FOLDERS and not entry.is_dir():
+                        foreign.append(entry.name)
+            report = out / "report.md"
+            if report.is_file():
+                with open(report, "rb") as fh:
+                    if not fh.read(len(REPORT_HEADER)).startswith(REPORT_HEADER.encode()):
+                        foreign.append("report.md")
+            if foreign:
+                names = ", ".join(repr(n) for n in foreign[:3])
+                raise InputError(f"out folder {out} holds files tactbench did not write "
+                                 f"({names}); give a new or empty folder, or one an earlier "
+                                 f"run wrote")
+            _probe_writable(out, out)
+            for sub in ("cells", "models") if models else ("cells",):
+                if (out / sub).is_dir():
+                    _probe_writable(out / sub, out)
+            return
+        parent = out.absolute().parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise InputError(f"out folder {out} cannot be made: {parent} is a file, not a "
+                             f"folder")
+        _probe_writable(parent, out)
+    except ValueError as exc:  # InputError is one too
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"out folder {out!r} is not a usable path: {exc}") from None
+    except OSError as exc:  # a name too long, a loop of links, no permission to look
+        raise InputError(f"out folder {out} cannot be used: {exc.strerror or exc}") from None
+
+
 def _check_scene(scene: Scene) -> None:
     from tactbench.data.splits import SPLITS
     from tactbench.profiles import PRECISIONS, get_profile
 
+    check_scene(scene)  # every field's type, first
     get_profile(scene.profile)
     check_choice(scene.resolved_precision(), "precision", PRECISIONS)
     check_choice(scene.split, "split", tuple(SPLITS))
@@ -130,6 +225,12 @@ def _check_scene(scene: Scene) -> None:
     bank_budget_bytes()
     loader_workers(None)
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
+    n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
+               * len(set(scene.lengths)) * len(set(scene.seeds)))
+    if n_cells > MAX_CELLS:
+        raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
+                         f"seeds); a run takes at most {MAX_CELLS}")
+    check_out_folder(scene.out, models=scene.save_models)
 
 
 def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset) -> None:
@@ -151,6 +252,61 @@ def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset
                          f"dataset a layout")
     raise InputError(f"classifier '{clf}' takes taxel vectors, which only the 'raw' "
                      f"encoder passes through; got encoder '{enc}'")
+
+
+def _check_lengths(scene: Scene, dataset) -> None:
+    """Refuse window lengths longer than every sequence (all windows would be padding)."""
+    lengths = dataset.lengths()
+    if not len(lengths):
+        raise InputError(f"dataset '{dataset.name}' has no samples")
+    longest = int(lengths.max())
+    too_long = sorted({int(n) for n in scene.lengths if int(n) > longest})
+    if too_long:
+        shown = ", ".join(map(str, too_long[:5])) + (", …" if len(too_long) > 5 else "")
+        raise InputError(f"window length L = {shown} is longer than every sequence of "
+                         f"dataset '{dataset.name}': the longest (sample "
+                         f"{int(lengths.argmax())}) has {longest} frames; use L ≤ {longest}")
+
+
+def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[str, str],
+                  batch_sizes: dict[str, int]) -> None:
+    """Estimate the large steps' memory from the inputs and refuse, before any work, one
+    above the budget (:func:`tactbench.integrity.check_budget`): building the imaging
+    operator, a chunk of images and its encodings (two in flight), and a batch of windows
+    of the longest L. The same estimates guard the allocations themselves
+    (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
+    """
+    from tactbench.contracts import ENCODER
+    from tactbench.integrity import check_budget
+
+    channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
+    longest = int(dataset.lengths().max())
+    length = max(int(n) for n in scene.lengths)
+    frame_shape = {"vectors": (dataset.n_taxels,)}
+    if "images" in kinds.values():
+        from tactbench.data.imaging import image_shape, imager_build_bytes
+        from tactbench.runner.cache import CHUNK_BYTES
+
+        pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
+        h, w = image_shape(dataset.layout, pixel_mm)
+        frame_shape["images"] = (h, w)
+        what = f"tactile images at {pixel_mm:g} mm ({h}×{w} px)"
+        check_budget(imager_build_bytes(dataset.layout, pixel_mm, method),
+                     f"the imaging operator for {what}")
+        frames = max(CHUNK_BYTES // (4 * h * w), longest)  # a chunk holds ≥ 1 sample
+        c = sum(channels.values())
+        check_budget(2 * frames * 4 * h * w * (2 + c),
+                     f"imaging and encoding {what}, chunks of {frames} frames into {c} "
+                     f"channels")
+    for clf, kind in kinds.items():
+        for enc in encoders:
+            shape = (channels[enc], *frame_shape["images"]) if kind == "images" \
+                else frame_shape["vectors"]
+            per_frame = 4 * math.prod(shape)
+            batch = batch_sizes[clf]
+            check_budget(batch * length * per_frame,
+                         f"a batch of {batch} windows of L={length} frames {shape} "
+                         f"({enc} × {clf.split(':')[0]})")
 
 
 def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
@@ -180,12 +336,15 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         encoders[canonical] = encoder
         versions[canonical] = str(ENCODER.get(encoder, "version"))
     frame_ranks: dict[str, int | None] = {}  # canonical classifier spec → frame rank
+    batch_sizes: dict[str, int] = {}  # canonical classifier spec → windows per batch
     for spec in dict.fromkeys(scene.classifiers):
         name, _ = parse_spec(spec)
         canonical, _ = _canonical(spec, profile_options(scene.profile, name,
                                                         registry=registry))
         clf = registry.build("classifier", canonical)  # validates option names and values
         frame_ranks.setdefault(canonical, CLASSIFIER.get(clf, "frame_rank"))
+        size = getattr(clf, "batch_size", 1)
+        batch_sizes[canonical] = size if isinstance(size, int) and size > 0 else 1
     classifier_specs = list(frame_ranks)
 
     from tactbench.datasets.loading import load_dataset
@@ -196,6 +355,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     for clf in classifier_specs:
         for enc in encoders:
             _check_inputs(clf, enc, kinds[clf], frame_ranks[clf], dataset)
+    _check_lengths(scene, dataset)
+    _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
     from tactbench.data.splits import make_split
 
@@ -208,7 +369,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     for enc in encoders:
         for clf in classifier_specs:
             for length in scene.lengths:
-                for seed in scene.seeds:
+                for seed in dict.fromkeys(scene.seeds):  # a seed listed twice is one cell
                     identity = {
                         "schema": ROW_SCHEMA,
                         "dataset": dataset.name,

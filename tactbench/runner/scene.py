@@ -1,8 +1,11 @@
 """The run configuration (a *scene*): what to compare, on what, and how to run it.
 
-A scene file is TOML with the same fields as :class:`Scene`; ``encoder``,
-``classifier``, ``L`` and ``seed`` are accepted for their plural fields, and a single
-value for a list field.
+A scene file is TOML (or JSON, for a ``.json`` file) with the same fields as
+:class:`Scene`; ``encoder``, ``classifier``, ``L`` and ``seed`` are accepted for their
+plural fields, and a single value for a list field. Every field's type is checked
+(:func:`check_fields`): ``seeds = [1.5]``, ``encoders = [1]``, an unknown field or a field
+given twice (``seed`` and ``seeds``, or a JSON key twice) is refused in one line naming
+the file and the field.
 
 (The runner's scene is the run configuration; the synthetic flow scenes of
 :mod:`tactbench.encoders.flowbench` are a different thing with their own name.)
@@ -10,6 +13,7 @@ value for a list field.
 
 from __future__ import annotations
 
+import numbers
 import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -68,10 +72,27 @@ class Scene:
         return max(1, (os.cpu_count() or 1) // max(1, self.workers))
 
 
+#: At most this many window lengths in one run: a range of more (``-L 1-3000000``) is
+#: refused before it is expanded.
+MAX_LENGTHS = 1000
+#: At most this many workers or torch threads (more is a typo, and would start that many).
+MAX_WORKERS = 1024
+#: The longest text field (a dataset path, a component spec): about a path's limit.
+MAX_TEXT = 4096
+#: A scene file is a few lines; a larger file is refused before it is read.
+MAX_SCENE_FILE_BYTES = 1 << 20
+
+
 def parse_lengths(values: Iterable[str | int]) -> list[int]:
-    """``["5"]``, ``["1-6"]``, ``["2", "4-5"]`` → sorted unique window lengths."""
+    """``["5"]``, ``["1-6"]``, ``["2", "4-5"]`` → sorted unique window lengths.
+
+    At most :data:`MAX_LENGTHS` lengths; a range's size is checked before it is expanded.
+    """
     out: set[int] = set()
     for value in values:
+        if isinstance(value, bool) or not isinstance(value, (int, str)):
+            raise InputError(f"bad window length {_show(value)}: use a number (5) or a "
+                             f"range (1-6)")
         text = str(value).strip()
         try:
             if "-" in text.lstrip("-"):
@@ -79,35 +100,188 @@ def parse_lengths(values: Iterable[str | int]) -> list[int]:
                 start, stop = int(lo), int(hi)
                 if stop < start:
                     raise ValueError
-                out.update(range(start, stop + 1))
             else:
-                out.add(int(text))
+                start = stop = int(text)
         except ValueError:
-            raise InputError(f"bad window length '{value}': use a number (5) or a range "
-                             f"(1-6)") from None
+            raise InputError(f"bad window length {_show(value)}: use a number (5) or a "
+                             f"range (1-6)") from None
+        if stop - start + 1 + len(out) > MAX_LENGTHS:
+            raise InputError(f"too many window lengths: {_show(value)} is {stop - start + 1} "
+                             f"of them; a run takes at most {MAX_LENGTHS}")
+        out.update(range(start, stop + 1))
     return sorted(out)
 
 
 _ALIASES = {"encoder": "encoders", "classifier": "classifiers", "L": "lengths",
             "seed": "seeds"}
 
+#: What each field holds: text, optional text, list of text, list of integers, window
+#: lengths, integer ≥ 1 (optional), number > 0 (optional), or a boolean.
+_KINDS: dict[str, str] = {
+    "dataset": "text", "encoders": "texts", "classifiers": "texts", "lengths": "lengths",
+    "seeds": "ints", "split": "text", "test_per_class": "count", "profile": "text",
+    "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
+    "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
+    "out": "text", "rerun": "bool", "save_models": "bool",
+}
+
+
+def _show(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 5] + "…" + text[-4:]
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _check_text(value: Any, name: str) -> str:
+    if not isinstance(value, str):
+        raise InputError(f"{name} must be text, got {type(value).__name__} {_show(value)}")
+    if not value.strip():
+        raise InputError(f"{name} is empty")
+    if "\x00" in value:
+        raise InputError(f"{name} contains a NUL character: {_show(value)}")
+    if len(value) > MAX_TEXT:
+        raise InputError(f"{name} is {len(value)} characters long; at most {MAX_TEXT}")
+    return value
+
+
+def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
+    """``value`` of field ``name`` checked (and, for list fields, made a list)."""
+    kind = _KINDS[name]
+    if value is None and kind.endswith("?"):
+        return None
+    kind = kind.rstrip("?")
+    if kind == "text":
+        return _check_text(value, label)
+    if kind in ("texts", "ints", "lengths"):
+        if not isinstance(value, (list, tuple, dict)):
+            value = [value]  # a single value for a list field
+        if not isinstance(value, (list, tuple)):
+            raise InputError(f"{label} must be a list, got {type(value).__name__} "
+                             f"{_show(value)}")
+        if not value:
+            raise InputError(f"{label} is empty")
+        if len(value) > MAX_LENGTHS:
+            raise InputError(f"{label} has {len(value)} values; at most {MAX_LENGTHS}")
+        if kind == "texts":
+            return [_check_text(v, f"{label} entry {i + 1}") for i, v in enumerate(value)]
+        if kind == "ints":
+            for v in value:
+                if not _is_int(v):
+                    raise InputError(f"{label} must be whole numbers, got {_show(v)} "
+                                     f"({type(v).__name__})")
+                if abs(v) >= 2 ** 63:
+                    raise InputError(f"{label}: {_show(v)} is not a 64-bit integer")
+            return list(value)
+        for v in value:  # lengths: numbers, or in a file ranges as text
+            if not (_is_int(v) or (ranges and isinstance(v, str))):
+                raise InputError(f"{label} must be whole numbers or ranges such as "
+                                 f"\"1-6\", got {_show(v)} ({type(v).__name__})")
+        if not ranges:
+            return list(value)
+        try:
+            return parse_lengths(value)
+        except InputError as exc:
+            raise InputError(f"{label}: {exc}") from None
+    if kind in ("count", "workers"):
+        if not _is_int(value):
+            raise InputError(f"{label} must be a whole number, got {type(value).__name__} "
+                             f"{_show(value)}")
+        if ranges and value < 1:
+            raise InputError(f"{label} must be ≥ 1, got {value}")
+        if kind == "workers" and value > MAX_WORKERS:
+            raise InputError(f"{label} must be at most {MAX_WORKERS}, got {_show(value)}")
+        return value
+    if kind == "number":
+        import math
+
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise InputError(f"{label} must be a number, got {type(value).__name__} "
+                             f"{_show(value)}")
+        if ranges and not (math.isfinite(value) and value > 0):
+            raise InputError(f"{label} must be a finite number > 0, got {value}")
+        return value
+    assert kind == "bool", kind
+    if not isinstance(value, bool):
+        raise InputError(f"{label} must be true or false, got {type(value).__name__} "
+                         f"{_show(value)}")
+    return value
+
+
+def check_fields(values: dict[str, Any], where: str | None = None, *,
+                 ranges: bool = True) -> dict[str, Any]:
+    """Check the type of every field of a scene (a scene file's table, or a
+    :class:`Scene`'s fields) and return them normalised: single values of list fields
+    become lists, window lengths are parsed.
+
+    ``where`` (a scene file) starts every message. ``ranges=False`` checks types only,
+    leaving ranges to :func:`tactbench.runner.planning.plan` (which names the options of
+    the command line). Raises :class:`InputError` naming the field.
+    """
+    out: dict[str, Any] = {}
+    for name, value in values.items():
+        label = f"{where}: field '{name}'" if where else f"scene field '{name}'"
+        out[name] = _check_field(name, value, label, ranges=ranges)
+    return out
+
+
+def check_scene(scene: Scene) -> None:
+    """Check the types of every field of ``scene`` (see :func:`check_fields`)."""
+    check_fields({f.name: getattr(scene, f.name) for f in fields(Scene)}, ranges=False)
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    seen: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in seen:
+            raise InputError(f"key '{key}' is given twice")
+        seen[key] = value
+    return seen
+
 
 def load_scene_file(path: str | Path) -> dict[str, Any]:
-    """Read a TOML scene file into a dict of :class:`Scene` fields (validated names)."""
+    """Read a scene file (TOML, or JSON when it ends in ``.json``) into a dict of
+    :class:`Scene` fields: names, types and ranges checked (:func:`check_fields`)."""
     try:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
         import tomli as tomllib  # type: ignore[no-redef]
+    import json
 
     path = Path(path)
+    is_json = path.suffix.lower() == ".json"
     try:
-        data = tomllib.loads(path.read_text())
+        size = path.stat().st_size
+        if size > MAX_SCENE_FILE_BYTES:
+            raise InputError(f"{path}: a scene file of {size} bytes; scene files are a few "
+                             f"lines (at most {MAX_SCENE_FILE_BYTES} bytes)")
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise MissingFileError(f"scene file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text file (not UTF-8)") from None
+    except (OSError, ValueError) as exc:  # a folder, no permission, a NUL in the name
+        raise InputError(f"{path}: cannot read the scene file: "
+                         f"{getattr(exc, 'strerror', None) or exc}") from None
+    fmt = "JSON" if is_json else "TOML"
+    try:
+        if is_json:
+            data = json.loads(text, object_pairs_hook=_no_duplicate_keys)
+        else:
+            data = tomllib.loads(text)
+    except InputError as exc:
+        raise InputError(f"{path}: not valid {fmt}: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # TOMLDecodeError, JSONDecodeError: ValueErrors
+        raise InputError(f"{path}: not valid {fmt}: {str(exc).splitlines()[0][:200]}") \
+            from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: a scene file holds a table of fields, got "
+                         f"{type(data).__name__}")
     known = {f.name for f in fields(Scene)}
-    scene: dict[str, Any] = {}
+    raw: dict[str, Any] = {}
+    given_as: dict[str, str] = {}
     for key, value in data.items():
         name = _ALIASES.get(key, key)
         if name not in known:
@@ -115,10 +289,10 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
 
             close = difflib.get_close_matches(name, sorted(known), n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise InputError(f"{path}: unknown field '{key}'{hint}")
-        if name in ("encoders", "classifiers", "seeds") and not isinstance(value, list):
-            value = [value]
-        if name == "lengths":
-            value = parse_lengths(value if isinstance(value, list) else [value])
-        scene[name] = value
-    return scene
+            raise InputError(f"{path}: unknown field {_show(key)}{hint}")
+        if name in given_as:
+            raise InputError(f"{path}: field '{name}' is given twice (as "
+                             f"'{given_as[name]}' and '{key}')")
+        given_as[name] = key
+        raw[name] = value
+    return check_fields(raw, str(path))

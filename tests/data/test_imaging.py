@@ -207,3 +207,45 @@ def test_real_layouts_image_without_holes(shared_data, name, method):
     centre = im.coverage[h // 10:h - h // 10, w // 10:w - w // 10]
     assert np.all(centre > 0)
     assert (im.coverage > 0).mean() > 0.8
+
+
+# ------------------------------------------------------------- hardening (issue 11)
+
+
+def test_an_imager_above_the_memory_budget_is_refused_before_it_allocates(
+        forearm, monkeypatch, memory_cap):
+    from tactbench.data.imaging import imager_build_bytes
+    from tactbench.errors import BudgetError
+
+    estimate = imager_build_bytes(forearm, 0.5)  # measured peak: 125.5 MiB
+    assert 125 << 20 < estimate < 160 << 20
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "64")
+    with memory_cap(8):
+        with pytest.raises(BudgetError, match=r"imaging at 0\.5 mm \(714×668 px, linear, 1×1 "
+                                              r"sub-samples per pixel\) would need about "
+                                              r"1[45]\d\.\d MiB, more than the memory budget "
+                                              r"of 64\.0 MiB"):
+            Imager(forearm, pixel_mm=0.5)
+    # the study's 0.01 mm typo, under the default budget (half this machine's memory)
+    monkeypatch.delenv("TACTBENCH_MEMORY_MIB")
+    assert imager_build_bytes(forearm, 0.01) > 300 << 30
+    assert imager_build_bytes(forearm, 5.0) < 16 << 20
+
+
+def test_imaging_a_batch_above_the_memory_budget_is_refused(forearm, monkeypatch):
+    from tactbench.errors import BudgetError
+
+    imager = Imager(forearm, pixel_mm=5.0)
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "1")
+    with pytest.raises(BudgetError, match=r"imaging 100 frames at 5 mm \(72×67 px\)"):
+        imager.apply(np.zeros((100, 1558), np.float32))
+    assert imager.apply(np.zeros((2, 1558), np.float32)).shape == (2, 72, 67)
+    assert imager.apply(np.zeros(1558, np.float32)).shape == (72, 67)
+
+
+@pytest.mark.parametrize("pixel_mm", [1e-300, 5e-324])
+def test_a_pixel_size_far_too_small_is_one_clear_error(forearm, pixel_mm):
+    from tactbench.errors import InputError
+
+    with pytest.raises(InputError, match="is far too small for a layout of 334 × 357 mm"):
+        image_shape(forearm, pixel_mm)

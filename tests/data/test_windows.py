@@ -86,3 +86,20 @@ def test_a_batch_reads_only_its_windows_frames_from_stored_sequences():
     np.testing.assert_array_equal(w.batch([5, 2]), training_windows(seqs(), [0, 1, 2], 3)
                                   .batch([5, 2]))
     assert reads == [(2, 5), (1, 4)]  # window 5: frames 2..4 of seq 2; window 2: 1..3 of seq 1
+
+
+def test_a_batch_of_windows_above_the_memory_budget_is_refused_before_it_allocates(
+        monkeypatch, memory_cap):
+    """L = 1000 over sequences of ≤ 5 frames is almost all padding: a batch is estimated
+    (windows × L × frame) and refused before the zeros are allocated."""
+    from tactbench.errors import BudgetError
+
+    big = [np.zeros((5, 64, 64), np.float32) for _ in range(3)]
+    w = training_windows(big, [0, 1, 2], 1000)
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "16")
+    with memory_cap(4):
+        with pytest.raises(BudgetError, match=r"a batch of 3 windows of L=1000 frames "
+                                              r"\(64, 64\) would need about 46\.9 MiB, more "
+                                              r"than the memory budget of 16\.0 MiB"):
+            w.arrays()
+    assert w.batch([0]).shape == (1, 1000, 64, 64)  # 15.6 MiB: within the budget

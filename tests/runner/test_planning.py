@@ -98,3 +98,158 @@ def test_bad_training_memory_settings_are_refused_before_any_work(tmp_path, cach
     with pytest.raises(InputError, match=name):
         run(tiny_scene(), progress=False, cache=cache)
     assert not (tmp_path / "out").exists() and not any(cache.root.iterdir())
+
+
+# ------------------------------------------------------------- hardening (issue 11)
+
+
+def _nothing_done(tmp_path, cache, out=None):
+    out = out or tmp_path / "out"
+    assert not any(cache.root.iterdir())
+    assert not (out / "cells").exists()
+
+
+def test_an_out_folder_that_is_a_file_is_refused_before_any_work(tmp_path, cache, tiny_scene):
+    out = tmp_path / "out"
+    out.write_text("mine")
+    with pytest.raises(InputError, match=f"out folder {out} is a file, not a folder"):
+        run(tiny_scene(), progress=False, cache=cache)
+    assert out.read_text() == "mine" and not any(cache.root.iterdir())
+
+
+def test_an_out_folder_under_a_file_is_refused_before_any_work(tmp_path, cache, tiny_scene):
+    (tmp_path / "file").write_text("mine")
+    out = tmp_path / "file" / "sub" / "out"
+    with pytest.raises(InputError, match=f"out folder {out} cannot be made: "
+                                         f"{tmp_path / 'file'} is a file"):
+        run(tiny_scene(out=str(out)), progress=False, cache=cache)
+    assert not any(cache.root.iterdir())
+
+
+def test_an_out_folder_that_cannot_be_written_is_refused_before_any_work(
+        tmp_path, cache, tiny_scene, monkeypatch):
+    """Permissions alone do not tell (root writes anywhere): the probe file does. Here the
+    probe's creation fails as on a read-only mount, and the real check reports it."""
+    import errno
+    import tempfile
+
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    with pytest.raises(InputError, match=f"out folder {out} cannot be written: Read-only"):
+        run(tiny_scene(), progress=False, cache=cache)
+    _nothing_done(tmp_path, cache)
+
+
+def test_the_writability_probe_leaves_nothing_behind(tmp_path):
+    from tactbench.runner.planning import check_out_folder
+
+    check_out_folder(tmp_path / "new" / "out")
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "out").mkdir()
+    check_out_folder(tmp_path / "out")
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+@pytest.mark.parametrize("names", [["notes.txt"], ["results.csv", "thesis.tex"],
+                                   ["cells", "data"]])
+def test_an_out_folder_holding_files_tactbench_did_not_write_is_not_overwritten(
+        tmp_path, cache, tiny_scene, names):
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in names:
+        (out / name).mkdir() if name in ("cells", "data") else (out / name).write_text("x")
+    foreign = [n for n in names if n not in ("cells", "results.csv")][0]
+    with pytest.raises(InputError, match=f"out folder {out} holds files tactbench did not "
+                                         f"write \\('{foreign}'\\); give a new or empty"):
+        run(tiny_scene(), progress=False, cache=cache)
+    assert sorted(p.name for p in out.iterdir()) == sorted(names)
+    assert not any(cache.root.iterdir())
+
+
+def test_a_report_md_tactbench_did_not_write_is_not_overwritten(tmp_path, tiny_scene):
+    from tactbench.runner.planning import check_out_folder
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.md").write_text("# My thesis notes\n")
+    with pytest.raises(InputError, match="holds files tactbench did not write \\('report.md'"):
+        check_out_folder(out)
+    (out / "report.md").write_text("# tactbench report\n\n- dataset: x\n")
+    check_out_folder(out)  # an earlier run's
+
+
+def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_scene):
+    from tactbench.runner.planning import check_out_folder
+
+    scene = tiny_scene(encoders=["raw"], classifiers=["logreg:max_iter=20"], seeds=[0])
+    run(scene, progress=False, cache=cache)
+    from tactbench.runner.reports import write_reports
+
+    out = tmp_path / "out"
+    write_reports(out, [], meta={}, plots=False)
+    (out / "confusion_raw_logreg_L3.png").write_bytes(b"")
+    (out / ".results.json.tmp-123-abcdef01-xyz").write_text("")  # an interrupted write
+    check_out_folder(out, models=True)
+    assert run(scene, progress=False, cache=cache).skipped == 1
+
+
+def test_a_window_longer_than_every_sequence_is_refused_naming_the_longest(tiny_scene):
+    p = plan(tiny_scene(encoders=["raw"]))
+    lengths = p.dataset.lengths()
+    longest, where = int(lengths.max()), int(lengths.argmax())
+    with pytest.raises(InputError, match=f"window length L = {longest + 1}, 1000 is longer "
+                                         f"than every sequence of dataset .*the longest "
+                                         f"\\(sample {where}\\) has {longest} frames; "
+                                         f"use L ≤ {longest}"):
+        plan(tiny_scene(encoders=["raw"], lengths=[3, longest + 1, 1000]))
+    assert plan(tiny_scene(encoders=["raw"], lengths=[longest])).cells  # the longest is fine
+
+
+def test_a_tiny_pixel_size_is_refused_before_the_imaging_allocates(tiny_scene, tmp_path,
+                                                                 cache, memory_cap,
+                                                                 monkeypatch):
+    from tactbench.errors import BudgetError
+
+    plan(tiny_scene())  # the dataset made once, outside the cap
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "8192")
+    with memory_cap(64):
+        with pytest.raises(BudgetError, match=r"the imaging operator for tactile images at "
+                                              r"0\.01 mm \(35700×33400 px\) would need about "
+                                              r"[0-9.]+ GiB, more than the memory budget of "
+                                              r"8\.0 GiB; set TACTBENCH_MEMORY_MIB"):
+            plan(tiny_scene(pixel_mm=0.01))  # (the old plan passed; its run was OOM-killed)
+    _nothing_done(tmp_path, cache)
+
+
+def test_the_memory_budget_refuses_a_chunk_or_a_batch_that_would_not_fit(tiny_scene,
+                                                                        monkeypatch):
+    from tactbench.errors import BudgetError
+
+    plan(tiny_scene())
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "40")
+    # 1 mm: the operator fits (~32 MiB), a chunk of images and their encodings does not
+    with pytest.raises(BudgetError, match="imaging and encoding tactile images at 1 mm "
+                                          r"\(357×334 px\), chunks of"):
+        plan(tiny_scene(pixel_mm=1.0))
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "2")
+    clf = "taxel-lstm:batch_size=100000"  # taxel vectors: no imaging
+    with pytest.raises(BudgetError, match=r"a batch of 100000 windows of L=3 frames \(\d+,\) "
+                                          r"\(raw × taxel-lstm\) would need about"):
+        plan(tiny_scene(encoders=["raw"], classifiers=[clf]))
+    plan(tiny_scene(encoders=["raw"], classifiers=["taxel-lstm:batch_size=8"]))
+
+
+def test_a_grid_too_large_to_run_is_refused_before_it_is_expanded(tiny_scene, memory_cap):
+    with memory_cap(5):
+        with pytest.raises(InputError, match="the grid has 40000 cells .*at most 10000"):
+            plan(tiny_scene(dataset="no-such-dataset", seeds=list(range(1000)),
+                            lengths=list(range(1, 21))))
+
+
+def test_a_seed_listed_twice_is_one_cell(tiny_scene):
+    p = plan(tiny_scene(encoders=["raw"], seeds=[0, 1, 0]))
+    assert [c.seed for c in p.cells] == [0, 1]

@@ -76,3 +76,97 @@ def test_the_precision_is_in_the_cell_identity_except_float32():
         assert identities[p] == {**identities["float32"], "precision": p}
     assert len({pl.cells[0].key for pl in plans.values()}) == 3
     assert plans["float32"].cells[0].key == plan(Scene(**tiny)).cells[0].key
+
+
+# ------------------------------------------------------------- hardening (issue 11)
+
+
+@pytest.mark.parametrize("body, match", [
+    ("seeds = [1.5]", r"field 'seeds' must be whole numbers, got 1\.5"),
+    ("seeds = [true]", "field 'seeds' must be whole numbers, got True"),
+    ("seed = 1.0", "field 'seeds' must be whole numbers"),
+    ("encoders = [1]", "field 'encoders' entry 1 must be text, got int 1"),
+    ("encoders = [\"raw\", [\"x\"]]", "field 'encoders' entry 2 must be text, got list"),
+    ("classifiers = {name = \"logreg\"}", "field 'classifiers' must be a list, got dict"),
+    ("encoders = []", "field 'encoders' is empty"),
+    ("dataset = 3", "field 'dataset' must be text, got int 3"),
+    ("dataset = \"\"", "field 'dataset' is empty"),
+    ("out = [\"a\"]", "field 'out' must be text"),
+    ("threads = 0", "field 'threads' must be ≥ 1, got 0"),
+    ("threads = -3", "field 'threads' must be ≥ 1, got -3"),
+    ("threads = \"4\"", "field 'threads' must be a whole number, got str"),
+    ("workers = 100000000", "field 'workers' must be at most 1024"),
+    ("test_per_class = 2.5", "field 'test_per_class' must be a whole number"),
+    ("pixel_mm = \"5\"", "field 'pixel_mm' must be a number, got str"),
+    ("pixel_mm = nan", "field 'pixel_mm' must be a finite number > 0, got nan"),
+    ("pixel_mm = -inf", "field 'pixel_mm' must be a finite number > 0"),
+    ("rerun = 1", "field 'rerun' must be true or false, got int 1"),
+    ("save_models = \"yes\"", "field 'save_models' must be true or false"),
+    ("L = [1.5]", "field 'lengths' must be whole numbers or ranges"),
+    ("L = true", "field 'lengths' must be whole numbers or ranges"),
+    ("L = \"1-3000000\"", "field 'lengths': too many window lengths: '1-3000000' is "
+                          "3000000 of them; a run takes at most 1000"),
+    ("seeds = [9223372036854775807, -9223372036854775808]", "is not a 64-bit integer"),
+    ("seed = 1\nseeds = [2]", "field 'seeds' is given twice \\(as 'seed' and 'seeds'\\)"),
+    ("[dataset]\nname = \"x\"", "field 'dataset' must be text, got dict"),
+])
+def test_every_scene_file_field_has_its_type_checked(tmp_path, body, match):
+    path = tmp_path / "scene.toml"
+    path.write_text(body + "\n")
+    with pytest.raises(InputError, match=match) as info:
+        load_scene_file(path)
+    assert str(info.value).startswith(f"{path}: ") and "\n" not in str(info.value)
+
+
+def test_a_json_scene_file_is_read_and_checked_like_toml(tmp_path):
+    path = tmp_path / "scene.json"
+    path.write_text('{"dataset": "x", "encoder": "raw", "L": ["1-3"], "seeds": [4], '
+                    '"pixel_mm": 2.5, "threads": null, "rerun": true}')
+    assert load_scene_file(path) == {"dataset": "x", "encoders": ["raw"], "lengths": [1, 2, 3],
+                                     "seeds": [4], "pixel_mm": 2.5, "threads": None,
+                                     "rerun": True}
+    for body, match in [('{"seeds": [1], "seeds": [2]}', "key 'seeds' is given twice"),
+                        ('[1, 2]', "holds a table of fields, got list"),
+                        ('{"seeds": [1.5]}', "field 'seeds' must be whole numbers"),
+                        ('{"seeds": [' + "9" * 5000 + ']}', "not valid JSON"),
+                        ("[" * 100_000, "not valid JSON"),
+                        ('{"threads": 1e400}', "field 'threads' must be a whole number"),
+                        ('{"encoders": [null]}', "entry 1 must be text, got NoneType")]:
+        path.write_text(body)
+        with pytest.raises(InputError, match=match):
+            load_scene_file(path)
+
+
+def test_a_scene_file_that_is_no_text_or_too_large_is_refused_before_it_is_read(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_bytes(b"\xff\xfe\x00junk")
+    with pytest.raises(InputError, match="not a text file"):
+        load_scene_file(path)
+    path.write_text("# comment\n" * 200_000)
+    with pytest.raises(InputError, match="scene files are a few lines"):
+        load_scene_file(path)
+    with pytest.raises(InputError, match="cannot read the scene file"):
+        load_scene_file(tmp_path)  # a folder
+
+
+def test_a_range_of_lengths_is_refused_before_it_is_expanded(memory_cap):
+    with memory_cap(1):
+        with pytest.raises(InputError, match="too many window lengths: '1-3000000000000'"):
+            parse_lengths(["1-3000000000000"])
+    assert parse_lengths(["1-1000"]) == list(range(1, 1001))
+    with pytest.raises(InputError, match="too many window lengths"):
+        parse_lengths(["1-1000", "2000"])
+    for bad in (1.5, True, None, [3]):
+        with pytest.raises(InputError, match="bad window length"):
+            parse_lengths([bad])
+
+
+def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
+    from tactbench.runner import plan
+
+    for over, match in [({"seeds": [1.5]}, "scene field 'seeds' must be whole numbers"),
+                        ({"encoders": [1]}, "scene field 'encoders' entry 1 must be text"),
+                        ({"lengths": [True]}, "scene field 'lengths' must be whole numbers"),
+                        ({"rerun": "no"}, "scene field 'rerun' must be true or false")]:
+        with pytest.raises(InputError, match=match):
+            plan(Scene(dataset="no-such-dataset", **over))
