@@ -275,3 +275,178 @@ def test_a_run_at_uint8_completes_and_its_rows_record_the_precision(tiny_scene, 
     (entry,) = cache.entries()
     assert entry["precision"] == "uint8" and entry["encoder"] == "frame-diff"
     assert entry["scale"] == pytest.approx([1 / 255, 2 / 255]) and entry["offset"] == [0, -1]
+
+
+# ------------------------------------------------------- verification, races, orphans
+
+
+def test_an_entry_records_what_it_is_and_checksums_streamed_while_writing(tmp_path):
+    from tactbench.integrity import hash_file
+
+    cache = EncodingCache(tmp_path)
+    seqs = [np.full((t, 2, 3, 4), t, np.float32) for t in (3, 1, 5)]
+    cache.write("k1", seqs, {"encoder": "raw"}, precision="float16")
+    meta = json.loads((cache.path("k1") / "meta.json").read_text())
+    assert (meta["format"], meta["key"], meta["n_frames"], meta["n_sequences"],
+            meta["dtype"], meta["frame_shape"], meta["algorithm"]) == \
+        (3, "k1", 9, 3, "float16", [2, 3, 4], "sha256")
+    for name in ("frames.npy", "offsets.npy"):
+        path = cache.path("k1") / name
+        assert meta["files"][name] == {"bytes": path.stat().st_size,
+                                       "checksum": hash_file(path)}
+    assert cache.verify("k1")["meta_checksum"] == meta["meta_checksum"]
+
+
+def test_the_identity_recorded_in_an_entry_must_hash_to_its_key(tmp_path):
+    from tactbench.runner.cache import seal
+
+    cache = EncodingCache(tmp_path)
+    identity = cache.identity("h", {"kind": "vectors"}, "raw", "1")
+    key = cache.key("h", {"kind": "vectors"}, "raw", "1")
+    cache.write(key, [np.zeros((2, 3), np.float32)], {"identity": identity})
+    cache.verify(key)
+    meta = json.loads((cache.path(key) / "meta.json").read_text())
+    meta["identity"]["encoder"] = "frame-diff"  # re-sealed: only the identity gives it away
+    (cache.path(key) / "meta.json").write_text(json.dumps(seal(meta)))
+    with pytest.raises(CorruptArtefactError, match="identity does not hash to its key"):
+        cache.verify(key)
+
+
+def test_the_full_checksum_is_read_once_per_process_per_version_of_the_file(tmp_path,
+                                                                           monkeypatch):
+    import tactbench.integrity as integrity
+
+    cache = EncodingCache(tmp_path)
+    cache.write("k", [np.ones((4, 3), np.float32)], {})
+    calls = []
+    real = integrity.hash_file
+    monkeypatch.setattr(integrity, "hash_file", lambda *a, **k: calls.append(a) or real(*a, **k))
+    cache.verify("k")
+    cache.verify("k")
+    load_encoding(cache.path("k"))
+    assert len(calls) == 1  # then memoised
+    path = cache.path("k") / "frames.npy"
+    data = bytearray(path.read_bytes())
+    data[-1] ^= 0xFF  # same size, another version of the file
+    path.write_bytes(bytes(data))
+    with pytest.raises(CorruptArtefactError, match="frames.npy does not match its checksum"):
+        load_encoding(cache.path("k"))
+    assert len(calls) == 2
+    assert cache.verify("k", full=False)["key"] == "k"  # the cheap checks cannot see it
+
+
+def test_a_second_writer_of_a_key_drops_its_folder_and_verifies_the_winner(tmp_path):
+    cache = EncodingCache(tmp_path)
+    storage = Storage.for_channels("float32", 1)
+    with cache.entry("k", [2], (3,), storage) as writer:
+        writer.append(np.zeros((2, 3), np.float32))
+        cache.write("k", [np.ones((2, 3), np.float32)], {"who": "winner"})  # finishes first
+    loaded, meta = load_encoding(cache.path("k"))
+    assert meta["who"] == "winner" and np.asarray(loaded[0]).sum() == 6
+    assert [p.name for p in tmp_path.iterdir()] == ["k"]
+    # a winner that is damaged is not used: the loser says so
+    with pytest.raises(CorruptArtefactError, match="frames.npy is"):
+        with cache.entry("k", [2], (3,), storage) as writer:
+            writer.append(np.zeros((2, 3), np.float32))
+            with open(cache.path("k") / "frames.npy", "ab") as fh:
+                fh.write(b"x")
+    assert [p.name for p in tmp_path.iterdir()] == ["k"]
+
+
+RACER = """
+import sys, time, zlib
+from pathlib import Path
+import numpy as np
+from tactbench.runner.cache import EncodingCache, load_encoding
+root, go = sys.argv[1], Path(sys.argv[2])
+while not go.exists():
+    time.sleep(0.001)
+cache = EncodingCache(root)
+seqs = [np.full((10, 4, 64, 64), i, np.float32) for i in range(24)]
+cache.write("k", seqs, {"pid": __import__("os").getpid()})
+loaded, meta = load_encoding(cache.path("k"))
+print(sum(zlib.crc32(np.asarray(s).tobytes()) for s in loaded), meta["pid"])
+"""
+
+
+def test_two_processes_writing_one_key_both_use_the_winners_entry(tmp_path):
+    import subprocess
+    import sys
+
+    go = tmp_path / "go"
+    procs = [subprocess.Popen([sys.executable, "-c", RACER, str(tmp_path / "c"), str(go)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    go.touch()
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [err for _, err in outs]
+    (crc, winner), (crc2, winner2) = [out.split() for out, _ in outs]
+    assert crc == crc2 and winner == winner2  # one entry, read by both
+    assert winner in {str(p.pid) for p in procs}
+    cache = EncodingCache(tmp_path / "c")
+    assert [p.name for p in cache.root.iterdir()] == ["k"]  # no temporary left
+    assert cache.verify("k")["pid"] == int(winner)
+
+
+SLOW_WRITER = """
+import sys, time
+import numpy as np
+from tactbench.runner.cache import EncodingCache, Storage
+cache = EncodingCache(sys.argv[1])
+with cache.entry("k", [1] * 1000, (3,), Storage.for_channels("float32", 1)) as w:
+    for _ in range(1000):
+        w.append(np.zeros((1, 3), np.float32))
+        time.sleep(0.05)
+"""
+
+
+def _dead_pid() -> int:
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_writer_killed_mid_write_leaves_an_orphan_that_the_next_run_removes(
+        tmp_path, tiny_scene):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cache = EncodingCache(tmp_path / "c")
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITER, str(cache.root)])
+    deadline = time.time() + 60
+    while time.time() < deadline and not cache.temporaries():
+        time.sleep(0.02)
+    (live,) = cache.temporaries()
+    assert (live["key"], live["pid"], live["state"]) == ("k", proc.pid, "in progress")
+    assert cache.clean() == [] and cache.clear() == 0  # a running writer's folder is kept
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    (orphan,) = cache.temporaries()
+    assert (orphan["key"], orphan["pid"], orphan["state"]) == ("k", proc.pid, "orphaned")
+    assert cache.entries() == []  # not an entry
+    # the next run removes it before anything else
+    p = plan(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0]))
+    ensure_encodings(p, cache, p.cells)
+    assert cache.temporaries() == [] and [e["state"] for e in cache.entries()] == ["ok"]
+
+
+def test_clear_removes_entries_and_orphans_but_not_a_running_writers_folder(tmp_path):
+    from tactbench.paths import host_tag
+
+    cache = EncodingCache(tmp_path)
+    cache.write("k", [np.zeros((2, 3), np.float32)], {})
+    dead = tmp_path / f".k2.tmp-{_dead_pid()}-{host_tag()}-0a1b2c3d"
+    running = tmp_path / f".k3.tmp-{__import__('os').getpid()}-{host_tag()}-0a1b2c3d"
+    legacy = tmp_path / ".k4.tmp-x1y2z3_q"  # named by tactbench before pids were recorded
+    for folder in (dead, running, legacy):
+        folder.mkdir()
+        (folder / "frames.npy").write_bytes(b"12345")
+    states = {t["key"]: t["state"] for t in cache.temporaries()}
+    assert states == {"k2": "orphaned", "k3": "in progress", "k4": "orphaned"}
+    assert cache.clear() == 3
+    assert [p.name for p in tmp_path.iterdir()] == [running.name]
