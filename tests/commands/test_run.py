@@ -85,3 +85,80 @@ def test_a_failing_cell_is_reported_and_the_command_exits_1(tmp_path, monkeypatc
     doc = json.loads(second.stdout)
     assert (doc["meta"]["computed"], doc["meta"]["skipped"]) == (1, 1)  # only the failed one
     assert doc["failed"] == [] and len(doc["summary"]) == 2
+
+
+# ------------------------------------------------------------- hardening (issue 11)
+
+
+def _refused(tmp_path, monkeypatch, args, scene_text=None, scene_name="scene.toml"):
+    """Run ``tactbench run`` with ``args`` on the tiny grid: it must exit 2 with one
+    ``Error:`` line before any work (no encoding cached, no cell written)."""
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    base = ["run", "--dataset", TINY_DATASET, "--encoder", "raw", "--classifier", TINY_CLF,
+            "-L", "2", "--seed", "0", "--pixel-mm", "10", "--threads", "1", "--no-plots"]
+    if "--out" not in args:
+        base += ["--out", str(tmp_path / "out")]
+    if scene_text is not None:
+        scene = tmp_path / scene_name
+        scene.write_text(scene_text)
+        args = [*args, str(scene)]
+    result = CliRunner().invoke(cli, [*base, *args])
+    assert result.exit_code == 2, result.output
+    lines = [x for x in result.output.splitlines() if x.startswith("Error: ")]
+    assert len(lines) == 1 and "Traceback" not in result.output, result.output
+    cache = tmp_path / "cache"  # (a simulated dataset may be cached there: it is input)
+    assert not [p for p in cache.glob("*") if p.name != "datasets"]
+    assert not (tmp_path / "out" / "cells").exists()
+    return lines[0]
+
+
+def test_an_out_that_is_a_file_is_one_line_before_any_work(tmp_path, monkeypatch):
+    out = tmp_path / "taken"
+    out.write_text("mine")
+    line = _refused(tmp_path, monkeypatch, ["--out", str(out)])
+    assert line == f"Error: out folder {out} is a file, not a folder; give a folder"
+    assert out.read_text() == "mine"
+
+
+def test_an_out_under_a_file_is_one_line_before_any_work(tmp_path, monkeypatch):
+    (tmp_path / "f").write_text("mine")
+    line = _refused(tmp_path, monkeypatch, ["--out", str(tmp_path / "f" / "out")])
+    assert "cannot be made" in line and "is a file" in line
+
+
+def test_an_out_folder_of_someone_else_is_not_overwritten(tmp_path, monkeypatch):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "results.csv").write_text("my data\n")
+    (out / "notes.txt").write_text("notes\n")
+    line = _refused(tmp_path, monkeypatch, ["--out", str(out)])
+    assert "holds files tactbench did not write ('notes.txt')" in line
+    assert (out / "results.csv").read_text() == "my data\n"
+
+
+@pytest.mark.parametrize("args, scene_text, match", [
+    (["--threads", "0"], None, "--threads must be ≥ 1, got 0"),
+    (["--threads", "-4"], None, "--threads must be ≥ 1, got -4"),
+    (["--encoder", "farneback:winsize=9,winsize=11"], None,
+     "option 'winsize' is given twice in 'farneback:winsize=9,winsize=11'"),
+    (["-L", "1-3000000"], None, "too many window lengths: '1-3000000' is 3000000 of them"),
+    (["-L", "1000"], None, "window length L = 1000 is longer than every sequence"),
+    (["--pixel-mm", "0.01"], None, "the imaging operator for tactile images at 0.01 mm "
+                                   "(35700×33400 px) would need about"),
+    ([], "seeds = [1.5]\n", "field 'seeds' must be whole numbers, got 1.5"),
+    ([], "seeds = [true]\n", "field 'seeds' must be whole numbers, got True"),
+    ([], "encoders = [1]\n", "field 'encoders' entry 1 must be text, got int 1"),
+    ([], "threads = 0\n", "field 'threads' must be ≥ 1, got 0"),
+    ([], "colour = 1\n", "unknown field 'colour'"),
+])
+def test_bad_options_and_scene_files_are_one_line_before_any_work(tmp_path, monkeypatch, args,
+                                                                 scene_text, match):
+    if "--pixel-mm" in args:
+        monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "8192")
+    line = _refused(tmp_path, monkeypatch, args, scene_text)
+    assert match in line, line
+
+
+def test_a_json_scene_file_is_checked_too(tmp_path, monkeypatch):
+    line = _refused(tmp_path, monkeypatch, [], '{"seeds": [0], "seed": 1}', "scene.json")
+    assert "field 'seeds' is given twice (as 'seeds' and 'seed')" in line
