@@ -224,6 +224,7 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
     uncompressed size) and the members' total (plus the float32 copy of ``values``)
     against the memory budget. Other members are not decompressed."""
     import math
+    import struct
     import zipfile
     import zlib
 
@@ -236,8 +237,10 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
 
     try:
         archive = zipfile.ZipFile(path)
-    except zipfile.BadZipFile:
-        raise bad("not a valid .npz file (not a zip archive, or truncated)") from None
+    except (zipfile.BadZipFile, NotImplementedError, ValueError, EOFError,
+            struct.error) as exc:
+        raise bad(f"not a valid .npz file (not a zip archive, or truncated): "
+                  f"{str(exc)[:80]}") from None
     except OSError as exc:
         raise bad(f"cannot read the arrays: {exc}") from None
     with archive:
@@ -282,7 +285,8 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
             return arrays
         except TactbenchError:
             raise
-        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as exc:
+        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, struct.error,
+                OSError, RuntimeError) as exc:  # RuntimeError: "encrypted" flag set
             raise bad(f"cannot read the arrays (corrupt or truncated): "
                       f"{type(exc).__name__}: {str(exc)[:120]}") from None
         except ValueError as exc:  # read_array: data shorter than its header says

@@ -286,3 +286,20 @@ def test_a_deeply_nested_manifest_is_one_line(tmp_path, make_dataset):
     folder, _ = _saved(tmp_path, make_dataset)
     (folder / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
     _load_error(folder, "manifest.json: not valid JSON")
+
+
+@pytest.mark.parametrize("field, value, message", [
+    (6, 109, "not a valid .npz file"),  # "version needed to extract" 10.9: NotImplementedError
+    (8, 1, "cannot read the arrays .*encrypted"),  # the "encrypted" flag: RuntimeError
+])
+def test_zip_directory_fields_flipped(tmp_path, make_dataset, field, value, message):
+    """Found by the fuzz suite: zipfile raises NotImplementedError / RuntimeError on these."""
+    import struct
+
+    folder, _ = _saved(tmp_path, make_dataset)
+    data = bytearray((folder / "arrays.npz").read_bytes())
+    for start in range(len(data)):  # every central-directory entry
+        if data[start:start + 4] == b"PK\x01\x02":
+            struct.pack_into("<H", data, start + field, value)
+    (folder / "arrays.npz").write_bytes(bytes(data))
+    _load_error(folder, message)
