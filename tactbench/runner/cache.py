@@ -523,6 +523,8 @@ def check_entry(folder: str | Path, *, full: bool = True,
     channels = frame_shape[0] if len(frame_shape) == 3 else 1
     try:
         storage = Storage.from_meta(meta, channels)
+        _expect(folder, meta.get("dtype") == storage.dtype.name,
+                f"meta.json's dtype {str(meta.get('dtype'))[:20]!r} is not its precision's")
         _expect(folder, storage.scale.shape == storage.offset.shape == (channels,),
                 f"meta.json's scale and offset are not one number per channel ({channels})")
         header = _npy_header(folder / "frames.npy")

@@ -75,10 +75,24 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
         return f"is the row of cell {str(row.get('key'))[:40]!r}, not of this cell"
     if "checksum" in row and row["checksum"] != row_checksum(row):
         return "does not match its checksum (edited or damaged)"
+    for field, kind in (("encoder", str), ("classifier", str), ("L", int), ("seed", int)):
+        if not isinstance(row.get(field), kind) or isinstance(row.get(field), bool):
+            return f"has no {field} ({kind.__name__})"
     status = row.get("status", OK)
     if status == OK:
         if not _number(row.get("accuracy")) or not 0.0 <= row["accuracy"] <= 1.0:
             return f"has no accuracy in [0, 1] (got {str(row.get('accuracy'))[:40]})"
+        classes, confusion = row.get("classes"), row.get("confusion")
+        if not isinstance(classes, list) or not all(isinstance(c, str) for c in classes):
+            return "has no list of class names"
+        k = len(classes)
+        if not isinstance(confusion, list) or len(confusion) != k or not all(
+                isinstance(line, list) and len(line) == k and all(
+                    isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in line)
+                for line in confusion):
+            return f"has no {k} × {k} confusion matrix of counts"
+        if not isinstance(row.get("per_class_accuracy"), dict):
+            return "has no per-class accuracy"
     elif status == FAILED:
         if not isinstance(row.get("error"), dict):
             return "is a failed row without its error"

@@ -7,13 +7,17 @@ import pytest
 from tactbench.errors import CorruptArtefactError
 from tactbench.runner import ResultStore, failed_rows, ok_rows, row_status
 
+CELL = {"encoder": "raw", "classifier": "logreg", "L": 3, "seed": 0}
+RESULT = {**CELL, "classes": ["a", "b"], "confusion": [[1, 0], [1, 0]],
+          "per_class_accuracy": {"a": 1.0, "b": 0.0}}
+
 
 def test_rows_round_trip_and_failed_rows_are_not_finished(tmp_path):
     store = ResultStore(tmp_path)
     assert store.get("a") is None and not store.finished("a")
-    store.put({"key": "a", "status": "ok", "accuracy": 0.5})
-    store.put({"key": "b", "status": "failed", "error": {"type": "RuntimeError"}})
-    store.put({"key": "c", "accuracy": 0.7})  # a row from before status existed
+    store.put({**RESULT, "key": "a", "status": "ok", "accuracy": 0.5})
+    store.put({**CELL, "key": "b", "status": "failed", "error": {"type": "RuntimeError"}})
+    store.put({**RESULT, "key": "c", "accuracy": 0.7})  # a row from before status existed
     assert store.finished("a") and not store.finished("b") and store.finished("c")
     rows = store.rows(["c", "x", "b", "a"])
     assert [r["key"] for r in rows] == ["c", "b", "a"]
@@ -35,10 +39,10 @@ def test_each_row_records_its_key_and_a_checksum_checked_on_read(tmp_path, caplo
     import json
 
     store = ResultStore(tmp_path)
-    store.put({"key": "a", "status": "ok", "accuracy": 0.5, "seed": (1, 2)})
+    store.put({**RESULT, "key": "a", "status": "ok", "accuracy": 0.5, "split": ("u", 2)})
     row = json.loads(store.path("a").read_text())
     assert row["key"] == "a" and len(row["checksum"]) == 64
-    assert store.get("a", {"seed": [1, 2]})["accuracy"] == 0.5
+    assert store.get("a", {"split": ["u", 2]})["accuracy"] == 0.5
     good = store.path("a").read_text()
     for text, problem in ((good.replace('"accuracy": 0.5', '"accuracy": 0.6'),
                            "does not match its checksum"),
@@ -49,18 +53,27 @@ def test_each_row_records_its_key_and_a_checksum_checked_on_read(tmp_path, caplo
         assert problem in caplog.text and str(store.path("a")) in caplog.text, problem
     store.path("a").write_text(good)
     with pytest.raises(CorruptArtefactError, match="records seed"):
-        store.read("a", {"seed": [1, 3]})  # a row of another identity under this key
+        store.read("a", {"seed": 1})  # a row of another identity under this key
+
+
+def _row(**over):
+    import json
+
+    return json.dumps({**RESULT, "key": "a", "status": "ok", "accuracy": 0.5, **over})
 
 
 @pytest.mark.parametrize("text, problem", [
     ("{}", "is the row of cell 'None'"), ("[1]", "holds a JSON list"),
     ("null", "holds a JSON NoneType"), ('"x"', "holds a JSON str"),
     ('{"key": "a"', "is not valid JSON"), ("[" * 100_000, "is not valid JSON"),
-    ('{"key": "a", "status": "ok"}', "no accuracy"),
-    ('{"key": "a", "status": "ok", "accuracy": NaN}', "no accuracy"),
-    ('{"key": "a", "status": "ok", "accuracy": true}', "no accuracy"),
-    ('{"key": "a", "status": "failed"}', "without its error"),
-    ('{"key": "a", "status": 3, "accuracy": 1}', "unknown status"),
+    (_row(accuracy=None), "no accuracy"), (_row(accuracy=float("nan")), "no accuracy"),
+    (_row(accuracy=True), "no accuracy"), (_row(accuracy=1.5), "no accuracy"),
+    (_row(status="failed"), "without its error"), (_row(status=3), "unknown status"),
+    (_row(seed=1.5), "has no seed"), (_row(L=True), "has no L"),
+    (_row(encoder=None), "has no encoder"), (_row(classes="ab"), "class names"),
+    (_row(confusion=[[1, 0]]), "2 × 2 confusion"),
+    (_row(confusion=[[1, -1], [0, 0]]), "2 × 2 confusion"),
+    (_row(per_class_accuracy=[]), "per-class"),
 ])
 def test_anything_but_a_sound_row_is_a_damaged_row(tmp_path, text, problem):
     store = ResultStore(tmp_path)
@@ -77,7 +90,7 @@ def test_rows_written_before_checksums_are_still_read(tmp_path):
 
     store = ResultStore(tmp_path)
     store.path("a").parent.mkdir(parents=True)
-    store.path("a").write_text(json.dumps({"key": "a", "accuracy": 0.7}))
+    store.path("a").write_text(json.dumps({**RESULT, "key": "a", "accuracy": 0.7}))
     assert store.finished("a") and store.get("a")["accuracy"] == 0.7
 
 
@@ -89,7 +102,7 @@ def test_temporary_row_files_of_dead_processes_are_removed(tmp_path):
     from tactbench.paths import host_tag
 
     store = ResultStore(tmp_path)
-    store.put({"key": "a", "status": "ok", "accuracy": 0.5})
+    store.put({**RESULT, "key": "a", "status": "ok", "accuracy": 0.5})
     proc = subprocess.Popen([sys.executable, "-c", "pass"])
     proc.wait()
     dead = store.cells / f".b.json.tmp-{proc.pid}-{host_tag()}-0a0a0a0a"
