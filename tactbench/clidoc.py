@@ -1,0 +1,93 @@
+"""The CLI reference (``docs/cli.md``), generated from the click application itself.
+
+``python -m tactbench.clidoc --write`` regenerates ``docs/cli.md``; the test suite fails
+when the file is stale (``tests/test_docs.py``), so the reference cannot drift from the
+commands. Only built-in commands are listed (a plugin's commands depend on what is
+installed); the help text is rendered at a fixed width so the file does not depend on
+the terminal.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+WIDTH = 96
+HEADER = """# Command-line reference
+
+Generated from the click application by `python -m tactbench.clidoc --write`; the test
+suite fails when this file is stale. Every command also answers `-h`/`--help`. A user's
+mistake ends the command with one `Error: ...` line and exit status 2; a bug prints its
+traceback and exits with status 1.
+"""
+
+
+def _walk(command: click.Command, path: list[str], parent: click.Context | None):
+    ctx = click.Context(command, info_name=path[-1], parent=parent, terminal_width=WIDTH,
+                        max_content_width=WIDTH, **command.context_settings)
+    yield path, command, ctx
+    if isinstance(command, click.Group):
+        names = (list(_builtin_names()) if parent is None
+                 else sorted(command.list_commands(ctx)))
+        for name in names:
+            sub = command.get_command(ctx, name)
+            if sub is not None and not sub.hidden:
+                yield from _walk(sub, [*path, name], ctx)
+
+
+def _builtin_names():
+    from tactbench.cli import BUILTIN_COMMANDS
+
+    return sorted(BUILTIN_COMMANDS)
+
+
+def _builtin_cli() -> click.Group:
+    """A copy of the ``tactbench`` group that never loads plugin commands."""
+    from tactbench.cli import TactbenchGroup, cli
+
+    group = TactbenchGroup(name="tactbench", callback=cli.callback, params=cli.params,
+                           help=cli.help, context_settings=cli.context_settings)
+    group._plugin_commands_loaded = True  # built-ins only: the file must not vary
+    return group
+
+
+def render() -> str:
+    """The whole reference as Markdown."""
+    cli = _builtin_cli()
+    parts = [HEADER]
+    toc, sections = [], []
+    for path, command, ctx in _walk(cli, ["tactbench"], None):
+        title = " ".join(path)
+        anchor = "-".join(path)
+        if len(path) > 1:
+            toc.append(f"{'  ' * (len(path) - 2)}- [`{title}`](#{anchor})")
+        summary = command.get_short_help_str(limit=WIDTH)
+        sections.append(f"## {title}\n\n{summary}\n\n```text\n"
+                        f"{command.get_help(ctx).rstrip()}\n```\n")
+    parts.append("\n".join(toc) + "\n")
+    parts.extend(sections)
+    return "\n".join(parts)
+
+
+def reference_path() -> Path:
+    return Path(__file__).resolve().parents[1] / "docs" / "cli.md"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    text = render()
+    if argv == ["--write"]:
+        reference_path().write_text(text, encoding="utf-8")
+        print(f"wrote {reference_path()}", file=sys.stderr)
+        return 0
+    if argv:
+        print("usage: python -m tactbench.clidoc [--write]", file=sys.stderr)
+        return 2
+    sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
