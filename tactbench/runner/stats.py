@@ -26,6 +26,9 @@ from tactbench.errors import InputError
 
 #: Bootstrap resamples in :func:`paired_difference` unless told.
 N_RESAMPLES = 4000
+#: Fewer test sequences than this give an interval but no verdict: a percentile bootstrap
+#: of a handful of sequences is too narrow to call a winner.
+MIN_SEQUENCES_FOR_VERDICT = 10
 #: Resampled values held at once during the bootstrap (resamples × sequences).
 _BOOTSTRAP_BATCH_VALUES = 2_000_000
 
@@ -144,7 +147,8 @@ def paired_difference(y_true: Any, pred_a: Any, pred_b: Any, groups: Any, *,
     McNemar's exact test runs on the pooled rows: ``a_only`` rows only A got right,
     ``b_only`` rows only B got right, ``p = binomtest(b_only, a_only + b_only, 0.5)``
     two-sided, and 1 when no row is discordant. The verdict is "B better" when the
-    interval lies above zero, "A better" below, else "unresolved".
+    interval lies above zero, "A better" below, else "unresolved"; it is "unresolved"
+    too with fewer than :data:`MIN_SEQUENCES_FOR_VERDICT` test sequences (``note`` says so).
     """
     from scipy import stats
 
@@ -196,6 +200,10 @@ def paired_difference(y_true: Any, pred_a: Any, pred_b: Any, groups: Any, *,
     discordant = a_only + b_only
     p = 1.0 if discordant == 0 else float(stats.binomtest(b_only, discordant, 0.5).pvalue)
     verdict = "B better" if low > 0 else "A better" if high < 0 else "unresolved"
+    if units < MIN_SEQUENCES_FOR_VERDICT and verdict != "unresolved":
+        verdict = "unresolved"
+        note = note or (f"{units} test sequences: no verdict below "
+                        f"{MIN_SEQUENCES_FOR_VERDICT} (the interval is too narrow at this size)")
     return PairedDifference(
         difference=diff, low=low, high=high, confidence=conf, accuracy_a=acc_a,
         accuracy_b=acc_b, seeds=len(seeds), b_better_seeds=int(np.sum(per_seed > 0)),

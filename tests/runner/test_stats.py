@@ -165,6 +165,15 @@ def test_shared_test_sequences_are_resampled_jointly_and_still_cover():
     assert alone < 0.9 < joint  # each seed alone: ~0.83 in theory
 
 
+def test_a_handful_of_sequences_gives_an_interval_but_no_verdict():
+    outcomes = [(False, True)] * 9  # B right on all 9, A on none: the interval is [1, 1]
+    few = paired_difference(*_rows(outcomes), n_resamples=200)
+    assert few.low == few.high == 1.0 and few.verdict == "unresolved"
+    assert "9 test sequences: no verdict" in few.note
+    ten = paired_difference(*_rows(outcomes + [(False, True)]), n_resamples=200)
+    assert ten.verdict == "B better" and ten.note == ""
+
+
 def test_all_predictions_agreeing_give_a_zero_difference_and_p_1():
     y = np.arange(12) % 3
     r = paired_difference(y, y, y, np.repeat([0, 1], 6))
