@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
-from tactbench.errors import InputError, MissingFileError
+from tactbench.errors import BudgetError, InputError, MissingFileError
 from tactbench.plugins import load_registry
 
 SRC = Path(__file__).resolve().parents[1] / "plugins" / "tactbench-icub" / "src"
@@ -209,6 +209,16 @@ def test_missing_paths_and_bad_options(tmp_path):
         reader.ICubGrasp(path=str(tmp_path), joints="yes")
     with pytest.raises(InputError, match="needs path=FOLDER"):
         reader.ICubGrasp()
+
+
+def test_files_beyond_the_memory_budget_are_refused_before_reading(tmp_path, monkeypatch):
+    path = write(tmp_path / "set", "bear_1.txt", grasp_text(40))  # about 13 KiB
+    reader.read_icub_folder(tmp_path / "set")
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "0.02")  # 20 KiB: not 4 × the file
+    with pytest.raises(BudgetError, match=f"reading {path}"):
+        reader.read_icub_file(path)
+    with pytest.raises(BudgetError):
+        reader.read_icub_folder(tmp_path / "set")
 
 
 def test_the_cli_says_one_line_and_exits_2(installed, tmp_path):

@@ -32,7 +32,9 @@ rest value removed, one scale for all), applied to the joints too when they are 
 Reading is strict: a file that is empty, has no time slice, ends inside a slice, has a
 ``-10000`` inside a slice, a line with the wrong number of values, a value that is not a
 finite number, a reading outside 0–255, or text that is not ASCII raises
-:class:`tactbench.errors.InputError` naming the file and the line.
+:class:`tactbench.errors.InputError` naming the file and the line. A file (or folder)
+larger than the memory budget allows (:func:`tactbench.integrity.check_budget`) is
+refused before it is read, with a :class:`~tactbench.errors.BudgetError`.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
+from tactbench.integrity import check_budget
 
 FINGERS = ("thumb", "index", "middle", "ring", "little")
 TAXELS_PER_FINGER = 12
@@ -61,6 +64,8 @@ NORMALISATION = "baseline:high=99.9,low=5"
 FOLDER = "iCubGraspDataset"
 _NAME = re.compile(r"^(?P<object>.+)_(?P<trial>\d+)\.txt$")
 
+#: Memory while a file is parsed, per byte of text (the bytes, its lines, float64 values).
+PARSE_BYTES_PER_BYTE = 4
 #: What each line of a time slice holds, and how many values.
 _LINES = (("9 joint encoder values", JOINTS), ("5 per-finger maxima", len(FINGERS))) + tuple(
     (f"12 taxel readings of the {f}", TAXELS_PER_FINGER) for f in FINGERS)
@@ -78,6 +83,7 @@ def read_icub_file(path: str | Path, *, joints: bool = False) -> Recording:
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: no such file")
+    check_budget(path.stat().st_size * PARSE_BYTES_PER_BYTE, f"reading {path}")
     raw = path.read_bytes()
     if not raw.strip():
         raise InputError(f"{path}: empty file (expected '{SEPARATOR}' and time slices of "
@@ -186,6 +192,9 @@ def read_icub_folder(path: str | Path, *, joints: bool = False, full_coke: bool 
     if not found:
         raise InputError(f"{folder}: only {', '.join(left_out)} files, which are left out "
                          f"unless full_coke=true")
+    # The values held (float32) take less than the text; the text's size bounds them.
+    check_budget(sum(f.stat().st_size for _, _, f in found),
+                 f"reading {len(found)} grasp files in {folder}")
     classes = sorted({o for o, _, _ in found})
     samples = []
     for k, (obj, trial, f) in enumerate(found):
