@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import warnings
 from pathlib import Path
 from typing import Any, Iterator
@@ -56,8 +57,12 @@ HEADER_KEY = "tactbench"
 class ModelFileError(CorruptArtefactError, ValueError):
     """A model file that cannot be read back (corrupt, foreign, or mismatched).
 
-    ``ModelFileError(path, problem)``: the message is ``"<path>: <problem>"``.
+    ``ModelFileError(path, problem)``: the message is ``"<path>: <problem>"``, one line
+    (line breaks that came from the file are shown as ``\\n``).
     """
+
+    def __init__(self, artefact: Any, problem: str) -> None:
+        super().__init__(artefact, problem.replace("\r", "\\r").replace("\n", "\\n"))
 
 
 class UnverifiedModelWarning(UserWarning):
@@ -234,6 +239,8 @@ def _check_header(h: dict[str, Any], p: Path) -> None:
             raise ModelFileError(p, "header has no checksum ('checksum.digest')")
         from tactbench.integrity import ALGORITHM
 
+        if not re.fullmatch(r"[0-9a-f]{64}", check["digest"]):
+            raise ModelFileError(p, "header 'checksum.digest' is not a SHA-256 hex digest")
         if check.get("algorithm") != ALGORITHM:
             raise ModelFileError(p, f"checksum algorithm {check.get('algorithm')!r:.40} is "
                                     f"not {ALGORITHM!r}")
@@ -299,7 +306,7 @@ def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str
     try:
         cls = registry.get("classifier", name).load()
     except TactbenchError as exc:
-        raise ModelFileError(p, f"cannot rebuild classifier '{name}': {exc}") from None
+        raise ModelFileError(p, f"cannot rebuild classifier {name!r}: {exc}") from None
     try:
         tensors = load_file(str(p))
     except Exception as exc:  # noqa: BLE001 — safetensors raises several kinds
@@ -320,7 +327,7 @@ def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str
     try:
         clf = cls._restore(header["config"], tensors)
     except (ValueError, TypeError, KeyError) as exc:
-        raise ModelFileError(p, f"does not match classifier '{name}': "
+        raise ModelFileError(p, f"does not match classifier {name!r}: "
                                 f"{type(exc).__name__}: {exc}") from None
     return clf, header.get("metadata", {})
 
