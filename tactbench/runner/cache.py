@@ -399,6 +399,8 @@ class EncodingCache:
 
 #: Hex digits of an entry's key.
 KEY_DIGITS = 24
+#: A ``.npy`` header longer than this is not one tactbench wrote (they are 128 bytes).
+NPY_HEADER_MAX = 4096
 #: ``meta.json`` larger than this is not one tactbench wrote.
 META_MAX_BYTES = 1 << 20
 #: ``(folder, signature of its files)`` whose checksums this process verified.
@@ -525,6 +527,9 @@ def check_entry(folder: str | Path, *, full: bool = True,
         storage = Storage.from_meta(meta, channels)
         _expect(folder, meta.get("dtype") == storage.dtype.name,
                 f"meta.json's dtype {str(meta.get('dtype'))[:20]!r} is not its precision's")
+        _expect(folder, bool(np.isfinite(storage.scale).all() and np.isfinite(storage.offset)
+                             .all() and (storage.scale != 0).all()),
+                "meta.json's scale and offset are not finite numbers")
         _expect(folder, storage.scale.shape == storage.offset.shape == (channels,),
                 f"meta.json's scale and offset are not one number per channel ({channels})")
         header = _npy_header(folder / "frames.npy")
@@ -552,31 +557,48 @@ def check_entry(folder: str | Path, *, full: bool = True,
     return meta, offsets
 
 
-def _npy_header(path: Path) -> tuple[tuple[int, ...], bool, Any, int]:
-    import numpy as np
-
-    fmt = np.lib.format
-    with open(path, "rb") as fh:
-        version = fmt.read_magic(fh)
-        read_header = fmt.read_array_header_1_0 if version == (1, 0) \
-            else fmt.read_array_header_2_0
-        shape, fortran, dtype = read_header(fh, max_header_size=4096)
-        return tuple(shape), bool(fortran), dtype, fh.tell()
-
-
-def _offsets(folder: Path, data: bytes, n_sequences: int, n_frames: int) -> "np.ndarray":
+def _npy_header(path: Path, data: bytes | None = None,
+                ) -> tuple[tuple[int, ...], bool, Any, int]:
+    """``(shape, fortran_order, dtype, data offset)`` of a ``.npy`` file (or of its bytes,
+    ``data``), from its header alone; a header numpy cannot parse, or longer than
+    :data:`NPY_HEADER_MAX`, raises :class:`CorruptArtefactError`."""
     import io
 
     import numpy as np
 
-    try:
-        offsets = np.load(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise CorruptArtefactError(folder, f"offsets.npy is not a valid .npy ({exc})") \
-            from None
-    _expect(folder, offsets.dtype == np.int64 and offsets.shape == (n_sequences + 1,),
-            f"offsets.npy holds {offsets.dtype} {offsets.shape}, expected int64 "
-            f"({n_sequences + 1},)")
+    fmt = np.lib.format
+    with (open(path, "rb") if data is None else io.BytesIO(data)) as fh:
+        start = fh.read(12)
+        # the header's length, checked before numpy reads that many bytes
+        size = int.from_bytes(start[8:10] if start[6:7] == b"\x01" else start[8:12], "little")
+        if not start.startswith(b"\x93NUMPY") or start[6:8] not in (b"\x01\x00", b"\x02\x00",
+                                                                    b"\x03\x00") \
+                or size > NPY_HEADER_MAX:
+            raise CorruptArtefactError(path, "not a valid .npy header")
+        fh.seek(0)
+        try:
+            version = fmt.read_magic(fh)
+            read_header = fmt.read_array_header_1_0 if version == (1, 0) \
+                else fmt.read_array_header_2_0
+            shape, fortran, dtype = read_header(fh, max_header_size=NPY_HEADER_MAX)
+        except Exception as exc:  # noqa: BLE001 — numpy's parser raises ValueError,
+            # SyntaxError, tokenize.TokenError, ... on a damaged header: all mean that
+            raise CorruptArtefactError(path, f"not a valid .npy header "
+                                             f"({type(exc).__name__})") from None
+        return tuple(shape), bool(fortran), dtype, fh.tell()
+
+
+def _offsets(folder: Path, data: bytes, n_sequences: int, n_frames: int) -> "np.ndarray":
+    """The offsets in ``data`` (the bytes of ``offsets.npy``), checked against the entry:
+    int64 ``(n_sequences + 1,)`` from 0 up to ``n_frames``, never going down. The header
+    is checked before anything of the stated shape is made."""
+    import numpy as np
+
+    shape, fortran, dtype, start = _npy_header(folder / "offsets.npy", data)
+    _expect(folder, dtype == np.dtype("<i8") and shape == (n_sequences + 1,) and not fortran
+            and len(data) - start == 8 * (n_sequences + 1),
+            f"offsets.npy holds {dtype} {shape}, expected int64 ({n_sequences + 1},)")
+    offsets = np.frombuffer(data, dtype="<i8", offset=start).astype(np.int64)
     _expect(folder, offsets[0] == 0 and offsets[-1] == n_frames
             and bool(np.all(np.diff(offsets) >= 0)),
             f"offsets.npy does not run from 0 up to its {n_frames} frames")

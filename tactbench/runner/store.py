@@ -35,6 +35,9 @@ log = logging.getLogger("tactbench.runner.store")
 OK = "ok"
 FAILED = "failed"
 
+#: Costs a row may hold (numbers; reports average them).
+COST_FIELDS = ("encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb")
+
 #: A cell file larger than this is not a row tactbench wrote (rows are a few kB).
 ROW_MAX_BYTES = 16 << 20
 
@@ -78,6 +81,12 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
     for field, kind in (("encoder", str), ("classifier", str), ("L", int), ("seed", int)):
         if not isinstance(row.get(field), kind) or isinstance(row.get(field), bool):
             return f"has no {field} ({kind.__name__})"
+    for field in ("dataset", "split", "peak_step"):  # optional; text where present
+        if row.get(field) is not None and not isinstance(row[field], str):
+            return f"has a {field} that is not text"
+    for field in COST_FIELDS:
+        if row.get(field) is not None and not _number(row[field]):
+            return f"has a {field} that is not a finite number"
     status = row.get("status", OK)
     if status == OK:
         if not _number(row.get("accuracy")) or not 0.0 <= row["accuracy"] <= 1.0:
@@ -91,8 +100,10 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
                     isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in line)
                 for line in confusion):
             return f"has no {k} × {k} confusion matrix of counts"
-        if not isinstance(row.get("per_class_accuracy"), dict):
-            return "has no per-class accuracy"
+        per_class = row.get("per_class_accuracy")
+        if not isinstance(per_class, dict) or not all(
+                v is None or (_number(v) and 0.0 <= v <= 1.0) for v in per_class.values()):
+            return "has no per-class accuracy (a number in [0, 1] or null per class)"
     elif status == FAILED:
         if not isinstance(row.get("error"), dict):
             return "is a failed row without its error"
