@@ -42,7 +42,12 @@ import numpy as np
 
 from tactbench.contracts import CLASSIFIER, FRAME, SENSOR
 from tactbench.encoders.flow import flow_to_channels, is_flow_encoder
-from tactbench.errors import InputError, TactbenchError
+from tactbench.errors import (
+    InputError,
+    TactbenchError,
+    check_positive_float,
+    check_positive_int,
+)
 
 
 # ------------------------------------------------------------------ encoding
@@ -161,21 +166,26 @@ class LiveModel:
         if outputs is not None and len(classes) != outputs:
             raise TactbenchError(f"{where}: the metadata lists {len(classes)} classes, but "
                                  f"the classifier has {outputs} outputs")
-        L = int(length if length is not None else
-                (meta.get("length") or meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
-        if L < 1:
+        L = (length if length is not None else
+             (meta.get("length") or meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
+        if L == 0:
             raise TactbenchError(f"{where}: window length L unknown; give --length")
-        norm = meta.get("normalisation") or {}
+        L = check_positive_int(L, f"{where}: window length L")
+        norm = _dict_field(meta, "normalisation", where)
         offset = norm.get("offset", 0.0)
-        offset = np.asarray(offset, np.float32) if isinstance(offset, list) else float(offset)
-        scale = float(norm.get("scale", 65535.0))
+        if isinstance(offset, list):
+            offset = _numbers(offset, f"{where}: metadata 'normalisation.offset'", np.float32)
+        else:
+            offset = _finite(offset, f"{where}: metadata 'normalisation.offset'")
+        scale = check_positive_float(norm.get("scale", 65535.0),
+                                     f"{where}: metadata 'normalisation.scale'")
         frame_rank = CLASSIFIER.get(clf, "frame_rank")
         if frame_rank is None:  # images or vectors: what it was fitted on decides
             shape = CLASSIFIER.get(clf, "frame_shape")
             frame_rank = 3 if shape is None else len(shape)
         lay = _layout(layout if layout is not None else meta.get("layout"), where)
         ids = meta.get("taxel_ids")
-        ids = (np.asarray(ids, np.int64) if ids is not None
+        ids = (_numbers(ids, f"{where}: metadata 'taxel_ids'", np.int64) if ids is not None
                else (lay.ids if lay is not None else None))
         if ids is None:
             raise TactbenchError(f"{where}: the model's metadata has neither 'taxel_ids' nor "
@@ -196,12 +206,18 @@ class LiveModel:
                                  f"the metadata has none: give --layout")
         from tactbench.data.imaging import Imager
 
-        imaging = meta.get("imaging") or {}
-        px = float(pixel_mm if pixel_mm is not None else imaging.get("pixel_mm", 1.0))
+        imaging = _dict_field(meta, "imaging", where)
+        px = check_positive_float(pixel_mm if pixel_mm is not None
+                                  else imaging.get("pixel_mm", 1.0),
+                                  f"{where}: imaging pixel_mm")
+        if not isinstance(imaging.get("method", "linear"), str):
+            raise TactbenchError(f"{where}: metadata 'imaging.method' must be a name")
         if lay.n_taxels != ids.size or not np.array_equal(lay.ids, ids):
             lay = lay.subset(ids)
         model.imager = Imager(lay, pixel_mm=px, method=imaging.get("method", "linear"))
-        model.encoder_spec = str(encoder or need("encoder"))
+        model.encoder_spec = encoder or need("encoder")
+        if not isinstance(model.encoder_spec, str):
+            raise TactbenchError(f"{where}: metadata 'encoder' must be an encoder spec")
         if registry is None:
             from tactbench.plugins import load_registry
 
@@ -214,6 +230,41 @@ class LiveModel:
                                  f"but encoder '{model.encoder_spec}' on this layout at "
                                  f"{px:g} mm gives {expected}")
         return model
+
+
+def _dict_field(meta: dict[str, Any], key: str, where: str) -> dict[str, Any]:
+    value = meta.get(key) or {}
+    if not isinstance(value, dict):
+        raise TactbenchError(f"{where}: metadata '{key}' must be an object, got "
+                             f"{type(value).__name__}")
+    return value
+
+
+def _finite(value: Any, what: str) -> float:
+    import math
+
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(float(value)):
+        raise TactbenchError(f"{what} must be a finite number, got {value!r:.40}")
+    return float(value)
+
+
+def _numbers(values: Any, what: str, dtype: Any) -> np.ndarray:
+    """A list of finite numbers (whole ones for an integer ``dtype``) as a 1-D array."""
+    if not isinstance(values, list) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        raise TactbenchError(f"{what} must be a list of numbers")
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except OverflowError:
+        arr = np.array([np.inf])
+    if not np.all(np.isfinite(arr)):
+        raise TactbenchError(f"{what} must hold finite numbers")
+    if np.dtype(dtype).kind == "i":
+        if not np.all(arr == np.round(arr)) or np.any(np.abs(arr) > 2.0 ** 62):
+            raise TactbenchError(f"{what} must hold integer taxel ids")
+        return np.asarray(values, dtype=dtype)
+    return arr.astype(dtype)
 
 
 def _layout(obj: Any, where: str) -> Any:

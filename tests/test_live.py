@@ -490,3 +490,33 @@ def test_live_command_reads_a_format_1_model_with_one_warning_line(trained, tmp_
     warned = [line for line in res.stderr.splitlines() if "warning" in line]
     assert len(warned) == 1 and "has no checksum" in warned[0]
     assert len(res.stdout.strip().splitlines()) == 2
+
+
+@pytest.mark.parametrize("edit, message", [
+    ({"normalisation": "fixed"}, "metadata 'normalisation' must be an object, got str"),
+    ({"normalisation": {"offset": ["a"] * 64, "scale": 1.0}},
+     "'normalisation.offset' must be a list of numbers"),
+    ({"normalisation": {"offset": "0", "scale": 1.0}},
+     "'normalisation.offset' must be a finite number"),
+    ({"normalisation": {"offset": 0, "scale": 0}}, "'normalisation.scale' must be > 0"),
+    ({"normalisation": {"offset": 0, "scale": float("nan")}},
+     "'normalisation.scale' must be a finite number"),
+    ({"imaging": [5.0]}, "metadata 'imaging' must be an object, got list"),
+    ({"imaging": {"pixel_mm": "5"}}, "imaging pixel_mm must be a finite number"),
+    ({"imaging": {"pixel_mm": 5.0, "method": 3}}, "'imaging.method' must be a name"),
+    ({"length": "3"}, "window length L must be an integer"),
+    ({"length": -2}, "window length L must be ≥ 1"),
+    ({"encoder": 7}, "metadata 'encoder' must be an encoder spec"),
+    ({"taxel_ids": [1.5] * 64}, "'taxel_ids' must hold integer taxel ids"),
+    ({"taxel_ids": "0-63"}, "'taxel_ids' must be a list of numbers"),
+])
+def test_live_metadata_of_the_wrong_type_is_one_line(trained, edit, message):
+    """Files of format 1 carry no checksum: their metadata is checked field by field."""
+    from tactbench.errors import TactbenchError
+
+    _, _, path = trained
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    with pytest.raises(TactbenchError, match=message) as info:
+        LiveModel.from_parts(model.clf, {**model.info, **edit}, registry=REGISTRY,
+                             where="m.safetensors")
+    assert str(info.value).startswith("m.safetensors: ") and "\n" not in str(info.value)
