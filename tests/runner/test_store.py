@@ -39,10 +39,10 @@ def test_each_row_records_its_key_and_a_checksum_checked_on_read(tmp_path, caplo
     import json
 
     store = ResultStore(tmp_path)
-    store.put({**RESULT, "key": "a", "status": "ok", "accuracy": 0.5, "split": ("u", 2)})
+    store.put({**RESULT, "key": "a", "status": "ok", "accuracy": 0.5, "test_users": ("u", 2)})
     row = json.loads(store.path("a").read_text())
     assert row["key"] == "a" and len(row["checksum"]) == 64
-    assert store.get("a", {"split": ["u", 2]})["accuracy"] == 0.5
+    assert store.get("a", {"test_users": ["u", 2]})["accuracy"] == 0.5
     good = store.path("a").read_text()
     for text, problem in ((good.replace('"accuracy": 0.5', '"accuracy": 0.6'),
                            "does not match its checksum"),
