@@ -25,6 +25,16 @@ encoder's output exactly; ``float16`` rounds it (relative error ≤ 2⁻¹¹ ≈
 rounding, clipping values outside the range: the error is at most half a quantum,
 ``(high - low) / 510``, inside the range. ``meta.json`` records ``precision``,
 ``dtype`` and per-channel ``scale`` and ``offset`` (value = stored · scale + offset).
+
+Verification (:func:`check_entry`): ``meta.json`` also records what the entry is (its
+key and the identity the key is the digest of, encoder, versions, shapes) and the sizes
+and SHA-256 of ``frames.npy`` and ``offsets.npy`` (hashed while they are written), and
+seals itself with ``meta_checksum``. Every open checks the cheap part (identity, sizes,
+headers, offsets); the checksum of ``frames.npy`` is read once per process for each
+version of the file. :func:`ensure_encodings` reports a damaged entry in one warning
+line and encodes it again; :func:`load_encoding` raises :class:`CorruptArtefactError`.
+Writers of one key race safely: the first complete folder renamed into place wins, the
+others verify and use it; temporaries of dead writers are removed by the next run.
 """
 
 from __future__ import annotations
