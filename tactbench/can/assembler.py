@@ -151,6 +151,10 @@ class SweepAssembler:
         self._recent: dict[int, np.ndarray] = {}  # emitted seq → chunks received
         self._held = np.full(taxels.n_taxels, np.nan, dtype=np.float32)
         self._n_chunks = taxels.n_messages
+        # the chunk (message) that carries each taxel: lost taxels in one step
+        self._chunk_of = np.zeros(taxels.n_taxels, dtype=np.int64)
+        for i in range(self._n_chunks):
+            self._chunk_of[taxels.chunk_taxels(i)] = i
         self._base = 0  # public sequence = internal sequence + base (changes on resync)
         self._late_run = 0  # late or duplicate messages in a row
         self._resync_after = max(2, self._n_chunks)
@@ -257,7 +261,7 @@ class SweepAssembler:
         n_missing = 0
         if sweep.n_received < self._n_chunks:
             lost = np.flatnonzero(~sweep.received)
-            cols = np.concatenate([self.taxels.chunk_taxels(int(i)) for i in lost])
+            cols = np.flatnonzero(~sweep.received[self._chunk_of])
             n_missing = int(cols.size)
             if self.missing == "hold":
                 values[cols] = self._held[cols]

@@ -264,8 +264,11 @@ class TaxelMap:
                              f"; use a module_map or another id scheme")
         chunks: list[Chunk] = []
         index: dict[tuple[int, int], int] = {}
-        for module in np.unique(modules):
-            in_module = np.flatnonzero(modules == module)
+        order = np.argsort(modules, kind="stable")  # each module's columns, ascending
+        firsts, starts = np.unique(modules[order], return_index=True)
+        ends = np.append(starts[1:], order.size)
+        for module, a, b in zip(firsts, starts, ends):
+            in_module = order[a:b]
             # Classic frames start at fixed offsets (0, vpm, 2·vpm, ...): a lost
             # message then always loses the same slots, which keeps the rule simple.
             offsets = np.unique(slots[in_module] // vpm) * vpm

@@ -20,7 +20,8 @@ import numpy as np
 from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
 from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
-from tactbench.errors import InputError, MissingFileError
+from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.integrity import check_budget, memory_budget_bytes
 
 #: Class name of the samples of a log without label markers.
 UNLABELLED = "unlabelled"
@@ -28,6 +29,10 @@ UNLABELLED = "unlabelled"
 #: Suffixes of the CAN logs read and written here (python-can needs no extra package
 #: for them). python-can's ``.csv`` is left out: that suffix means CoST data here.
 LOG_SUFFIXES = (".blf", ".asc", ".log", ".trc")
+
+#: Bytes one python-can message read from a log holds (measured: 450 for .blf, 610 for
+#: .asc); a log's messages must fit the memory budget at this size.
+MESSAGE_BYTES = 640
 
 
 def is_can_log(path: str | Path) -> bool:
@@ -102,17 +107,24 @@ def read_messages(path: str | Path) -> Iterator[Any]:
     try:
         reader = can.LogReader(str(path))
     except Exception as exc:
-        raise InputError(f"{path}: cannot open as a CAN log: {type(exc).__name__}: {exc}") from exc
+        raise InputError(f"{path}: cannot open as a CAN log: {type(exc).__name__}: "
+                         f"{_one_line(exc)}") from None
     try:
         yield from reader
-    except ValueError:
+    except TactbenchError:
         raise
-    except Exception as exc:
-        raise InputError(f"{path}: unreadable CAN log: {type(exc).__name__}: {exc}") from exc
+    except Exception as exc:  # python-can's readers raise anything on a damaged file
+        raise InputError(f"{path}: unreadable CAN log: {type(exc).__name__}: "
+                         f"{_one_line(exc)}") from None
     finally:
         stop = getattr(reader, "stop", None)
         if stop is not None:
             stop()
+
+
+def _one_line(exc: BaseException, limit: int = 200) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[:limit] + "…"
 
 
 def infer_taxel_ids(messages: Iterable[Any], fmt: FrameFormat | None = None) -> np.ndarray:
@@ -265,10 +277,13 @@ class CanLog:
             raise InputError(f"{self.path}: no sweeps in the log")
         classes = _class_order(segments)
         samples = []
-        for seg in segments:
+        for k, seg in enumerate(segments):
             info = seg.info
-            rec = Recording(values=seg.values, timestamps=seg.timestamps - seg.timestamps[0],
-                            taxel_ids=self.taxel_ids)
+            try:
+                rec = Recording(values=seg.values, taxel_ids=self.taxel_ids,
+                                timestamps=seg.timestamps - seg.timestamps[0])
+            except InputError as exc:  # e.g. a damaged log whose clock goes backwards
+                raise InputError(f"{self.path}: sample {k} ({seg.label}): {exc}") from None
             samples.append(Sample(recording=rec, label=classes.index(seg.label),
                                   user=str(info.get("user", "")),
                                   position=str(info.get("position", "")),
@@ -322,21 +337,37 @@ class _SegmentBuilder:
             missing=np.array([s.missing for s in self.sweeps], dtype=np.int64))
 
 
-def segment_messages(messages: list[Any], taxels: TaxelMap, *, missing: str = "hold",
-                     meta_prefix: int = META_PREFIX) -> tuple[list[Segment], AssemblerStats, int]:
+def segment_messages(messages: Iterable[Any], taxels: TaxelMap, *, missing: str = "hold",
+                     meta_prefix: int = META_PREFIX, budget: int | None = None,
+                     ) -> tuple[list[Segment], AssemblerStats, int]:
     """Split a message stream at label markers and assemble each part's sweeps.
 
     Returns ``(segments, assembler stats, broken meta messages)``. Unlabelled
     stretches with no sweeps are dropped; labelled ones are kept even if empty.
+    The sweeps kept (each ``N`` float32 values, held twice while a segment is built)
+    must fit the memory budget (default :func:`tactbench.integrity.memory_budget_bytes`):
+    a few messages can start thousands of sweeps of 65 536 taxels.
     """
     asm = SweepAssembler(taxels, missing=missing)
     meta = MetaAssembler(meta_prefix)
     segments: list[Segment] = []
     current = _SegmentBuilder(None)
+    per_sweep = 2 * 4 * taxels.n_taxels + 200
+    limit = memory_budget_bytes() if budget is None else budget
+    held = 0
+
+    def keep(sweeps: list[Sweep]) -> None:
+        nonlocal held
+        if sweeps:
+            held += len(sweeps)
+            if held * per_sweep > limit:
+                check_budget(held * per_sweep, f"assembling more than {held - 1} sweeps of "
+                             f"{taxels.n_taxels} taxels", budget=limit)
+            current.sweeps.extend(sweeps)
 
     def close(next_info: dict[str, Any] | None) -> None:
         nonlocal current
-        current.sweeps.extend(asm.flush())
+        keep(asm.flush())
         if current.info is not None or current.sweeps:
             segments.append(current.build(taxels.n_taxels))
         current = _SegmentBuilder(next_info)
@@ -351,7 +382,7 @@ def segment_messages(messages: list[Any], taxels: TaxelMap, *, missing: str = "h
             elif current.info is not None:  # label_end of the open segment
                 close(None)
             continue
-        current.sweeps.extend(asm.feed(msg))
+        keep(asm.feed(msg))
     close(None)
     return segments, asm.stats, meta.broken
 
@@ -385,18 +416,26 @@ def read_log(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None
     """
     path = Path(path)
     fmt = fmt or FrameFormat()
-    messages = list(read_messages(path))
-    if taxel_ids is not None:
-        ids, source = np.asarray(taxel_ids, dtype=np.int64), "given"
-    else:
-        ids = announced_taxel_ids(messages)
-        source = "announced"
-        if ids is None:
-            try:
+    budget = memory_budget_bytes()
+    messages = []
+    most = budget // MESSAGE_BYTES
+    for msg in read_messages(path):
+        messages.append(msg)
+        if len(messages) > most:
+            check_budget(len(messages) * MESSAGE_BYTES, f"{path}: more than {most} messages",
+                         budget=budget)
+    try:
+        if taxel_ids is not None:
+            ids, source = np.asarray(taxel_ids, dtype=np.int64), "given"
+        else:
+            ids = announced_taxel_ids(messages)
+            source = "announced"
+            if ids is None:
                 ids = infer_taxel_ids(messages, fmt)
-            except ValueError as exc:
-                raise InputError(f"{path}: {exc}") from None
-            source = "inferred"
-    taxels = TaxelMap(ids, fmt)
-    segments, stats, broken = segment_messages(messages, taxels, missing=missing)
+                source = "inferred"
+        taxels = TaxelMap(ids, fmt)
+        segments, stats, broken = segment_messages(messages, taxels, missing=missing,
+                                                   budget=budget)
+    except InputError as exc:
+        raise type(exc)(f"{path}: {exc}") from None
     return CanLog(path, taxels.taxel_ids, source, segments, stats, fmt, broken)
