@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+from pathlib import Path
 
 import pytest
 
@@ -99,3 +100,22 @@ def test_the_memory_tracker_names_the_step_that_set_the_peak():
     mem.step("after")
     assert mem.peak_step == "big" and mem.peak_mb >= peak + 64
     assert mem.as_dict()["after"]["rss_mb"] < mem.as_dict()["big"]["rss_mb"]
+
+
+def test_an_entry_damaged_after_the_run_checked_it_fails_its_cell_and_is_rebuilt_next(
+        tiny_scene, cache, fake_registry):
+    """A cell reads only a verified entry: one cut short after the run's check fails the
+    cell with the one-line reason (not a crash, not garbage); the next run rebuilds it."""
+    p = plan(tiny_scene(encoders=["raw"], classifiers=["added-logreg"], seeds=[0]),
+             fake_registry)
+    folders = ensure_encodings(p, cache, p.cells)
+    (job,) = make_jobs(p, p.cells, folders)
+    frames = Path(job.encoding_dir) / "frames.npy"
+    with open(frames, "r+b") as fh:
+        fh.truncate(frames.stat().st_size - 1)
+    row = run_cell(job)
+    assert row["status"] == "failed" and row["error"]["type"] == "CorruptArtefactError"
+    assert row["error"]["message"].startswith(job.encoding_dir)
+    assert "truncated" in row["error"]["message"]
+    ensure_encodings(p, cache, p.cells)  # the next run
+    assert run_cell(job)["status"] == "ok"
