@@ -104,6 +104,8 @@ def read_messages(path: str | Path) -> Iterator[Any]:
     if not path.is_file():
         raise MissingFileError(f"{path}: no such CAN log")
     check_log_name(path)
+    if path.suffix.lower() == ".blf":
+        check_blf(path)
     try:
         reader = can.LogReader(str(path))
     except Exception as exc:
@@ -120,6 +122,84 @@ def read_messages(path: str | Path) -> Iterator[Any]:
         stop = getattr(reader, "stop", None)
         if stop is not None:
             stop()
+
+
+#: Bytes an object of a .blf may claim beyond the end of the file: a log cut short (a
+#: crash while recording) still reads up to its last whole message.
+BLF_SLACK = 1 << 20
+
+
+def check_blf(path: str | Path, *, budget: int | None = None) -> None:
+    """Walk a .blf's objects before python-can reads it, refusing what would make the
+    reader allocate without bound: a header or an object claiming far more bytes than the
+    file has (python-can allocates what is claimed), or containers that decompress to more
+    than the memory budget (python-can inflates each container whole: 3 MB of zlib can
+    hold 3 GB). Decompression here is streamed, 1 MiB at a time; it costs a fraction of
+    python-can's parsing. Anything else damaged is left to python-can to report.
+    """
+    import struct
+
+    path = Path(path)
+    limit = memory_budget_bytes() if budget is None else budget
+    size = path.stat().st_size
+    inflated = 0  # bytes of objects after decompression: python-can holds up to ~2× that
+
+    def refuse(offset: int, claimed: int) -> None:
+        raise InputError(f"{path}: damaged .blf: the object at byte {offset} claims {claimed} "
+                         f"bytes, but the file has {size}")
+
+    with open(path, "rb") as f:
+        head = f.read(48)
+        if len(head) < 48 or head[:4] != b"LOGG":
+            return  # python-can says what is wrong
+        header_size = struct.unpack_from("<L", head, 4)[0]
+        if header_size > size + BLF_SLACK:
+            refuse(0, header_size)
+        f.seek(header_size)
+        while True:
+            offset = f.tell()
+            base = f.read(16)
+            if len(base) < 16 or base[:4] != b"LOBJ":
+                return
+            obj_size, obj_type = struct.unpack_from("<LL", base, 8)
+            if obj_size - 16 > size - offset - 16 + BLF_SLACK:
+                refuse(offset, obj_size)
+            body = max(0, obj_size - 16)
+            if obj_type == 10 and body >= 16:  # LOG_CONTAINER: method, uncompressed size
+                container = f.read(16)
+                method = struct.unpack_from("<H", container)[0] if len(container) == 16 else -1
+                if method == 0:
+                    inflated += body - 16
+                elif method == 2:
+                    inflated = _inflate_count(f, body - 16, inflated, 2 * limit)
+                    if inflated < 0:
+                        return  # not zlib: python-can says what is wrong
+            check_budget(2 * inflated, f"{path}: {inflated} bytes of .blf objects once "
+                         f"decompressed", budget=limit)
+            f.seek(offset + 16 + body + obj_size % 4)
+
+
+def _inflate_count(f: Any, n: int, inflated: int, stop: int) -> int:
+    """``inflated`` plus the decompressed size of the next ``n`` bytes of ``f`` (zlib),
+    counted 1 MiB at a time and no further than ``stop``; -1 when they are not zlib."""
+    import zlib
+
+    d = zlib.decompressobj()
+    step = 1 << 20
+    try:
+        while n > 0 and not d.eof:
+            chunk = f.read(min(step, n))
+            if not chunk:
+                break
+            n -= len(chunk)
+            while chunk and not d.eof:
+                inflated += len(d.decompress(chunk, step))
+                if inflated > stop:
+                    return inflated  # the caller refuses it
+                chunk = d.unconsumed_tail
+    except zlib.error:
+        return -1
+    return inflated
 
 
 def _one_line(exc: BaseException, limit: int = 200) -> str:

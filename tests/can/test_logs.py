@@ -222,3 +222,67 @@ def test_a_log_under_a_file_or_onto_a_folder_is_one_clear_error(tmp_path):
     with pytest.raises(InputError, match=r"d.asc: is a folder"):
         write_log(tmp_path / "d.asc", [])
     assert (tmp_path / "f").read_text() == "x"
+
+
+def _blf_with(tmp_path, name: str, objects: bytes):
+    """A .blf: the header tactbench's writer makes, then ``objects``."""
+    import struct
+
+    base = tmp_path / "base.blf"
+    write_log(base, encode_sweep(np.arange(IDS.size), TaxelMap(IDS), 0))
+    header_size = struct.unpack_from("<L", base.read_bytes(), 4)[0]
+    path = tmp_path / name
+    path.write_bytes(base.read_bytes()[:header_size] + objects)
+    return path
+
+
+def _container(payload: bytes, method: int = 2) -> bytes:
+    import struct
+
+    body = struct.pack("<H6xL4x", method, 0) + payload
+    return struct.pack("<4sHHLL", b"LOBJ", 16, 1, 16 + len(body), 10) + body \
+        + b"\0" * ((16 + len(body)) % 4)
+
+
+def test_a_blf_decompression_bomb_is_refused_before_inflating(tmp_path, memory_cap,
+                                                              monkeypatch):
+    """260 kB of .blf holding 256 MiB of zlib-compressed zeros: python-can inflates a
+    container whole (256 MiB at once); check_blf counts it 1 MiB at a time first."""
+    import zlib
+
+    from tactbench.errors import BudgetError
+
+    z = zlib.compressobj(9)
+    zeros = bytes(1 << 20)
+    bomb = b"".join(z.compress(zeros) for _ in range(256)) + z.flush()
+    path = _blf_with(tmp_path, "bomb.blf", _container(bomb))
+    assert path.stat().st_size < 300_000
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "64")
+    with memory_cap(50), pytest.raises(BudgetError, match=r"bomb.blf: \d+ bytes of .blf "
+                                                          r"objects once decompressed"):
+        read_log(path)
+
+
+def test_a_blf_object_claiming_gigabytes_is_refused(tmp_path, memory_cap):
+    """An object header claiming 4 GB in a 1 kB file: python-can would allocate 4 GB."""
+    import struct
+
+    from tactbench.errors import InputError
+
+    good = tmp_path / "good.blf"
+    write_log(good, encode_sweep(np.arange(IDS.size), TaxelMap(IDS), 0))
+    data = bytearray(good.read_bytes())
+    first = struct.unpack_from("<L", data, 4)[0]  # the first object follows the header
+    struct.pack_into("<L", data, first + 8, 0xFFFFFFF0)
+    path = tmp_path / "claims.blf"
+    path.write_bytes(bytes(data))
+    with memory_cap(50), pytest.raises(InputError, match=rf"claims.blf: damaged .blf: the "
+                                                         rf"object at byte {first} claims"):
+        read_log(path)
+    # a log cut short (a crash while recording) still reads up to its last whole message
+    msgs = [m for k in range(200) for m in encode_sweep(np.full(IDS.size, k), TaxelMap(IDS), k,
+                                                        timestamp=0.1 * k)]
+    write_log(good, msgs)
+    cut = tmp_path / "cut.blf"
+    cut.write_bytes(good.read_bytes()[:-50])
+    assert len(read_log(cut, taxel_ids=IDS).segments[0]) > 0
