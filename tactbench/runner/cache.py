@@ -340,6 +340,8 @@ class EncodingCache:
             if (self.path(key) / "meta.json").is_file() else {}
         if meta.get("meta_checksum") != ours:  # another process's entry: verify it
             self.verify(key)
+        else:  # ours: its checksum was taken of the very bytes written, no need to reread
+            _VERIFIED.add((str(self.path(key)), _signature(self.path(key))))
 
     def write(self, key: str, sequences: Sequence[Any], meta: dict[str, Any], *,
               precision: str = "float32", ranges: Sequence[Sequence[float]] = ()) -> Path:

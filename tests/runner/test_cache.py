@@ -12,6 +12,7 @@ import pytest
 
 from tactbench.errors import CorruptArtefactError
 from tactbench.runner import EncodingCache, ensure_encodings, load_encoding, plan
+from tactbench.runner import cache as cache_module
 from tactbench.runner.cache import Storage, chunk_bounds
 
 
@@ -321,6 +322,9 @@ def test_the_full_checksum_is_read_once_per_process_per_version_of_the_file(tmp_
     calls = []
     real = integrity.hash_file
     monkeypatch.setattr(integrity, "hash_file", lambda *a, **k: calls.append(a) or real(*a, **k))
+    cache.verify("k")
+    assert calls == []  # the writer hashed the bytes as it wrote them: no second read
+    cache_module._VERIFIED.clear()  # as in another process
     cache.verify("k")
     cache.verify("k")
     load_encoding(cache.path("k"))
