@@ -465,7 +465,8 @@ def test_from_parts_refuses_class_names_that_do_not_fit_the_outputs(trained):
         LiveModel.from_parts(model.clf, dict(model.info, classes="rl"), registry=REGISTRY)
 
 
-def test_live_command_reads_a_format_1_model_with_one_warning_line(trained, tmp_path):
+def test_live_command_refuses_a_format_1_model(trained, tmp_path):
+    """A model without a checksum cannot be verified: live cannot rebuild it, so refuses."""
     import json
 
     from click.testing import CliRunner
@@ -485,11 +486,12 @@ def test_live_command_reads_a_format_1_model_with_one_warning_line(trained, tmp_
     save_file(t, str(old), metadata={"tactbench": json.dumps(h)})
     folder = dataset.save(tmp_path / "ds")
     res = CliRunner().invoke(cli, ["live", "--model", str(old), "--sensor", "replay",
-                                   str(folder), "--max-sweeps", "4"], catch_exceptions=False)
-    assert res.exit_code == 0, res.output
-    warned = [line for line in res.stderr.splitlines() if "warning" in line]
-    assert len(warned) == 1 and "has no checksum" in warned[0]
-    assert len(res.stdout.strip().splitlines()) == 2
+                                   str(folder), "--max-sweeps", "4"])
+    assert res.exit_code == 2, res.output
+    assert res.output.strip().splitlines() == [
+        f"Error: {old}: model file of format 1 has no checksum and cannot be verified; "
+        f"retrain it, or, if you trust it, read it with load_model(path, "
+        f"allow_unverified=True) and save it again"]
 
 
 @pytest.mark.parametrize("edit, message", [

@@ -27,10 +27,12 @@ fit the classifier's network, a checksum that does not match, a tensor holding N
 infinity, or class names whose number differs from the network's outputs. Nothing in
 the file is executed or unpickled.
 
-Files of format 1 (written before checksums existed) are still read, with every check
-but the checksum, and an :class:`UnverifiedModelWarning`: re-saving such a file would
-only bless whatever it holds, and every failure reported against them (NaN weights,
-class counts, truncation) is caught by the other checks; retraining gives a verified file.
+Files of format 1 (written before checksums existed) are refused: nothing can tell a
+corrupt one from a sound one, and a corrupt option in their header is not harmless (an
+``input_size`` of 100000 passes every other check and asks for tens of GB at the first
+prediction). A rerun rebuilds them; a Python caller who trusts one reads it with
+``load_model(path, allow_unverified=True)`` (every other check, an
+:class:`UnverifiedModelWarning`) and saves it again to get a verified file.
 
 What ``tactbench live`` needs in ``metadata`` is built by :func:`live_metadata`.
 """
@@ -285,7 +287,8 @@ def _check_finite(tensors: dict[str, Any], p: Path) -> None:
             raise ModelFileError(p, f"tensor '{name}' holds {bad} NaN or infinite value(s)")
 
 
-def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str, Any]]:
+def load_model(path: str | os.PathLike, *, registry=None,
+               allow_unverified: bool = False) -> tuple[Any, dict[str, Any]]:
     """Read and verify a model saved by ``clf.save(path, metadata)``: ``(clf, metadata)``.
 
     ``clf`` is ready to predict on the CPU (``clf.to("cuda")`` moves it);
@@ -293,6 +296,8 @@ def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str
     the registry (``registry`` or all installed plugins), so models of plugin
     classifiers load when the plugin is installed. Every check of the module
     docstring runs first; a failure raises :class:`ModelFileError` in one line.
+    ``allow_unverified`` reads a format-1 file (no checksum) with a warning instead of
+    refusing it.
     """
     from safetensors.torch import load_file
 
@@ -318,18 +323,52 @@ def load_model(path: str | os.PathLike, *, registry=None) -> tuple[Any, dict[str
             raise ModelFileError(p, f"checksum {digest[:12]}… does not match the recorded "
                                     f"{header['checksum']['digest'][:12]}…: the file was "
                                     f"modified or is corrupted")
+    elif not allow_unverified:
+        raise ModelFileError(p, f"model file of format {UNVERIFIED_VERSION} has no checksum "
+                                f"and cannot be verified; retrain it, or, if you trust it, "
+                                f"read it with load_model(path, allow_unverified=True) and "
+                                f"save it again")
     else:
         warnings.warn(f"{p}: model file of format {UNVERIFIED_VERSION} has no checksum; "
-                      f"read with every other check (retrain to get a verified file)",
+                      f"read with every other check (save it again to get a verified file)",
                       UnverifiedModelWarning, stacklevel=2)
     _check_agreement(header, p)
     _check_finite(tensors, p)
-    try:
-        clf = cls._restore(header["config"], tensors)
-    except (ValueError, TypeError, KeyError) as exc:
-        raise ModelFileError(p, f"does not match classifier {name!r}: "
-                                f"{type(exc).__name__}: {exc}") from None
+    if header["version"] < 2:  # a verified config came from a network that existed
+        _restore(cls, header["config"], tensors, p, name, probe=True)
+    clf = _restore(cls, header["config"], tensors, p, name)
     return clf, header.get("metadata", {})
+
+
+def _restore(cls, config: dict[str, Any], tensors: dict[str, Any], p: Path, name: str, *,
+             probe: bool = False) -> Any:
+    """``cls._restore``, its mismatches as :class:`ModelFileError`.
+
+    ``probe`` restores on torch's meta device (shapes only, no memory): options that ask
+    for a network far larger than the tensors (a corrupt ``layers`` or ``hidden`` in a file
+    without a checksum) are refused before a real network is built (it doubles the
+    building time, so only unverified files are probed). A classifier that
+    cannot be restored on the meta device is left to the real restore."""
+    import torch
+
+    try:
+        if not probe:
+            return cls._restore(config, tensors)
+        with torch.device("meta"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # torch: "copying ... to a meta parameter"
+            return cls._restore(config, tensors)
+    except (ValueError, TypeError, KeyError, OverflowError) as exc:
+        raise ModelFileError(p, f"does not match classifier {name!r}: "
+                                f"{type(exc).__name__}: {str(exc)[:300]}") from None
+    except RuntimeError as exc:
+        if probe:
+            # torch: sizes that overflow, or that the meta device cannot build
+            if "overflow" in str(exc).lower() or "size" in str(exc).lower():
+                raise ModelFileError(p, f"does not match classifier {name!r}: the options "
+                                        f"ask for an impossible network: "
+                                        f"{str(exc).splitlines()[0][:200]}") from None
+            return None
+        raise
 
 
 def verify_model(path: str | os.PathLike, *, registry=None) -> None:

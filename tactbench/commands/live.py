@@ -99,9 +99,6 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
 
 def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
           layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
-    import warnings
-
-    from tactbench.classifiers.io import UnverifiedModelWarning
     from tactbench.cli import get_registry
     from tactbench.contracts import SENSOR
     from tactbench.live import LiveClassifier, LiveModel, run_summary
@@ -110,12 +107,8 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     registry = get_registry(ctx, warn=not quiet)
     # The model is loaded and verified (checksum, finite weights, classes against the
     # network) before the sensor is opened: a bad model never sees a sweep.
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", UnverifiedModelWarning)
-        model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
-                                    pixel_mm=pixel_mm, registry=registry)
-    for w in caught:
-        click.echo(f"tactbench: warning: {w.message}", err=True)
+    model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
+                                pixel_mm=pixel_mm, registry=registry)
     live = LiveClassifier(model, warmup=warmup)
     bus = {"interface": interface, "channel": channel, "bitrate": bitrate,
            "format": format_spec}

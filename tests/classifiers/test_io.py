@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactbench.classifiers.io import live_metadata, load_model, read_header, save_model
+from tactbench.classifiers.io import (
+    ModelFileError,
+    live_metadata,
+    load_model,
+    read_header,
+    save_model,
+)
 from tactbench.plugins import load_registry
 
 REGISTRY = load_registry()
@@ -164,17 +170,29 @@ def _as_format_1(h):
         h.pop(key)
 
 
-def test_a_format_1_file_is_read_with_every_other_check_and_a_warning(fitted, tmp_path):
+def test_a_format_1_file_is_refused_unless_the_caller_trusts_it(fitted, tmp_path):
     from tactbench.classifiers.io import UnverifiedModelWarning
 
     clf, windows = fitted
     good = save_model(clf, tmp_path / "good.safetensors", {"classes": ["a", "b"]})
     old = _rewrite(good, tmp_path / "old.safetensors", header=_as_format_1)
+    _one_line_model_error(old, r"format 1 has no checksum and cannot be verified; retrain "
+                               r"it, or, if you trust it, read it with load_model\(path, "
+                               r"allow_unverified=True\) and save it again")
     with pytest.warns(UnverifiedModelWarning, match="has no checksum"):
-        back, meta = load_model(old, registry=REGISTRY)
+        back, meta = load_model(old, registry=REGISTRY, allow_unverified=True)
     assert meta == {"classes": ["a", "b"]}
     np.testing.assert_allclose(back.predict_proba(windows), clf.predict_proba(windows),
                                atol=1e-6)
+    resaved = save_model(back, tmp_path / "resaved.safetensors", meta)
+    assert load_model(resaved, registry=REGISTRY)[1] == meta
+
+
+def test_a_trusted_format_1_file_still_gets_every_other_check(fitted, tmp_path):
+    from tactbench.classifiers.io import UnverifiedModelWarning
+
+    clf, _ = fitted
+    good = save_model(clf, tmp_path / "good.safetensors", {"classes": ["a", "b"]})
 
     def three(h):
         _as_format_1(h)
@@ -183,12 +201,38 @@ def test_a_format_1_file_is_read_with_every_other_check_and_a_warning(fitted, tm
     def nan(t):
         t["bias"][1] = float("nan")
 
-    with pytest.warns(UnverifiedModelWarning):
-        _one_line_model_error(_rewrite(good, tmp_path / "c.safetensors", header=three),
-                              "lists 3 classes")
-    with pytest.warns(UnverifiedModelWarning):
-        _one_line_model_error(_rewrite(good, tmp_path / "n.safetensors", header=_as_format_1,
-                                       tensors=nan), "tensor 'bias' holds 1 NaN")
+    for path, match in [
+            (_rewrite(good, tmp_path / "c.safetensors", header=three), "lists 3 classes"),
+            (_rewrite(good, tmp_path / "n.safetensors", header=_as_format_1, tensors=nan),
+             "tensor 'bias' holds 1 NaN")]:
+        with pytest.warns(UnverifiedModelWarning), pytest.raises(ModelFileError, match=match):
+            load_model(path, registry=REGISTRY, allow_unverified=True)
+
+
+def test_options_asking_for_a_huge_network_are_refused_before_it_is_built(tmp_path,
+                                                                          one_torch_thread):
+    """A corrupt ``hidden`` in a file without a checksum: the network is first restored on
+    torch's meta device (no memory), so the 160 GB LSTM is never allocated."""
+    from tactbench.classifiers.io import UnverifiedModelWarning
+    from tactbench.data.windows import training_windows
+
+    rng = np.random.default_rng(0)
+    seqs = [rng.random((3, 1, 8, 8), dtype=np.float32) + label for label in (0, 1) * 2]
+    clf = REGISTRY.build("classifier", "small-cnn-lstm:epochs=1,windows_per_epoch=0,"
+                                       "input_size=8,width=2,layers=1,hidden=4,fc=4", classes=2)
+    clf.fit(training_windows(seqs, np.array([0, 1] * 2), 2), None, seed=0, device="cpu",
+            progress=None)
+    good = save_model(clf, tmp_path / "good.safetensors")
+
+    def huge(h):
+        _as_format_1(h)
+        h["config"]["options"]["hidden"] = 100_000
+
+    with pytest.warns(UnverifiedModelWarning), pytest.raises(
+            ModelFileError, match=r"does not match classifier 'small-cnn-lstm'.*"
+                                  r"lstm.weight_hh_l0 \(16, 4\) vs \(400000, 100000\)"):
+        load_model(_rewrite(good, tmp_path / "h.safetensors", header=huge),
+                   registry=REGISTRY, allow_unverified=True)
 
 
 @pytest.mark.parametrize("edit, message", [
