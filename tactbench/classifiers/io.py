@@ -51,7 +51,7 @@ from tactbench.errors import CorruptArtefactError, InputError, TactbenchError
 
 FORMAT = "tactbench-model"
 FORMAT_VERSION = 2
-#: The format before checksums (read with a warning, see the module docstring).
+#: The format before checksums (refused unless allow_unverified; see the module docstring).
 UNVERIFIED_VERSION = 1
 HEADER_KEY = "tactbench"
 
@@ -65,6 +65,9 @@ class ModelFileError(CorruptArtefactError, ValueError):
 
     def __init__(self, artefact: Any, problem: str) -> None:
         super().__init__(artefact, problem.replace("\r", "\\r").replace("\n", "\\n"))
+
+    def __reduce__(self):  # crosses process boundaries (runner workers) intact
+        return (type(self), (self.artefact, self.problem))
 
 
 class UnverifiedModelWarning(UserWarning):

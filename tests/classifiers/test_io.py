@@ -262,3 +262,13 @@ def test_a_truncated_file_is_one_line(fitted, tmp_path, keep):
     data = path.read_bytes()
     path.write_bytes(data[:keep] if keep >= 0 else data[:keep])
     _one_line_model_error(path, "corrupt|truncated")
+
+
+def test_the_error_survives_pickling_to_another_process():
+    import pickle
+
+    from tactbench.errors import CorruptArtefactError
+
+    err = pickle.loads(pickle.dumps(ModelFileError("m.safetensors", "checksum differs")))
+    assert isinstance(err, CorruptArtefactError) and str(err) == "m.safetensors: checksum differs"
+    assert (err.artefact, err.problem) == ("m.safetensors", "checksum differs")
