@@ -828,13 +828,8 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
         if (enc, kind) not in pending_pairs:
             continue
         if cache.path(key).exists() or cache.path(key).is_symlink():
-            try:
-                cache.verify(key)
+            if _usable(cache, key, enc, kind):
                 continue
-            except CorruptArtefactError as exc:
-                log.warning("tactbench: warning: cached encoding %s (%s, %s) is damaged: %s; "
-                            "encoding it again", key, enc, kind, exc.problem)
-                cache.discard(key)
         missing[kind][enc] = key
     if missing["vectors"]:
         _store_vectors(plan_, cache, missing["vectors"], precision, chunk_bytes, identities)
@@ -842,6 +837,25 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
         _encode_images(plan_, cache, missing["images"], precision, progress, chunk_bytes,
                        identities)
     return folders
+
+
+def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:
+    """Whether the entry ``key`` is sound; a damaged one is reported and removed. When
+    its files change while they are checked (another run replacing a damaged entry with
+    a new one), they are checked again rather than removed."""
+    for _ in range(3):
+        found = _signature(cache.path(key))
+        try:
+            cache.verify(key)
+            return True
+        except CorruptArtefactError as exc:
+            if _signature(cache.path(key)) != found:
+                continue  # replaced meanwhile: look at the new files
+            log.warning("tactbench: warning: cached encoding %s (%s, %s) is damaged: %s; "
+                        "encoding it again", key, enc, kind, exc.problem)
+            cache.discard(key)
+            return False
+    return False
 
 
 def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
