@@ -78,6 +78,8 @@ _SUBSAMPLES_PER_SPACING = 4.0
 BUILD_BYTES_PER_POINT = {"linear": 320, "gaussian": 900}
 #: The largest image, in pixels, :func:`image_shape` computes (far beyond any budget).
 _MAX_PIXELS = 2.0 ** 60
+#: The most sub-samples per pixel side :class:`Imager` chooses (also far beyond any budget).
+_MAX_SUPERSAMPLE = 2 ** 16
 
 
 class Imager:
@@ -256,8 +258,11 @@ def image_shape(layout: TaxelLayout, pixel_mm: float) -> tuple[int, int]:
 
 def _supersample(pixel_mm: float, spacing: float, supersample: int | None) -> int:
     if supersample is None:
-        supersample = max(1, math.ceil(pixel_mm / (spacing / _SUBSAMPLES_PER_SPACING)
-                                       - 1e-9))
+        ratio = pixel_mm / (spacing / _SUBSAMPLES_PER_SPACING)
+        if not ratio <= _MAX_SUPERSAMPLE:  # (beyond any budget; and no ceil of inf)
+            raise InputError(f"pixel size {pixel_mm:g} mm is far too large for taxels "
+                             f"{spacing:g} mm apart ({ratio:.3g} sub-samples per pixel side)")
+        supersample = max(1, math.ceil(ratio - 1e-9))
     return check_positive_int(supersample, "supersample")
 
 

@@ -230,6 +230,11 @@ def _check_scene(scene: Scene) -> None:
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
+    if scene.executor == "local" and scene.device.strip().lower() != "cpu":
+        # a device this machine lacks would fail every cell, after the encoding
+        from tactbench.classifiers.training import select_device
+
+        select_device(scene.device)
     check_out_folder(scene.out, models=scene.save_models)
 
 

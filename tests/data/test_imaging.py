@@ -249,3 +249,16 @@ def test_a_pixel_size_far_too_small_is_one_clear_error(forearm, pixel_mm):
 
     with pytest.raises(InputError, match="is far too small for a layout of 334 × 357 mm"):
         image_shape(forearm, pixel_mm)
+
+
+def test_a_pixel_size_far_too_large_is_one_clear_error(forearm, monkeypatch):
+    from tactbench.data.imaging import imager_build_bytes
+    from tactbench.errors import BudgetError, InputError
+
+    with pytest.raises(InputError, match=r"pixel size 1e\+155 mm is far too large for taxels"):
+        Imager(forearm, pixel_mm=1e155)
+    # 10 m pixels: one pixel of 5406 × 5406 sub-samples, ~8.7 GiB to build
+    assert imager_build_bytes(forearm, 10_000.0) > 8 << 30
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "4096")
+    with pytest.raises(BudgetError, match=r"imaging at 10000 mm \(1×1 px, linear, 5\d+×5\d+ "):
+        Imager(forearm, pixel_mm=10_000.0)

@@ -253,3 +253,12 @@ def test_a_grid_too_large_to_run_is_refused_before_it_is_expanded(tiny_scene, me
 def test_a_seed_listed_twice_is_one_cell(tiny_scene):
     p = plan(tiny_scene(encoders=["raw"], seeds=[0, 1, 0]))
     assert [c.seed for c in p.cells] == [0, 1]
+
+
+@pytest.mark.parametrize("device, match", [("gpu", "unknown device 'gpu'"),
+                                           ("cuda:99", "cuda:99")])
+def test_a_device_this_machine_lacks_is_refused_before_any_work(tmp_path, cache, tiny_scene,
+                                                                device, match):
+    with pytest.raises(InputError, match=match):
+        run(tiny_scene(device=device), progress=False, cache=cache)
+    _nothing_done(tmp_path, cache)
