@@ -32,25 +32,31 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 
     from tactbench.cli import get_registry
     from tactbench.contracts import ENCODER
+    from tactbench.integrity import check_budget
     from tactbench.paths import atomic_write_text
 
     src = Path(input_path)
     if not src.is_file():
         raise MissingFileError(f"{src}: no such file")
+    dst = Path(out_path)
+    _check_writable(dst)
+    encoder = get_registry(warn=not as_json).build("encoder", spec)
+    shape, dtype = _npy_header(src)
+    if len(shape) == 3:  # the input, its float32 copy, and the (T, C, H, W) output
+        t, h, w = shape
+        c = len(tuple(ENCODER.get(encoder, "channels")))
+        check_budget(dtype.itemsize * t * h * w + 4 * t * h * w * (1 + c),
+                     f"encoding {src} ({t} frames of {h}×{w} px into {c} channels)")
     try:
         seq = np.load(src, allow_pickle=False)
     except Exception as exc:  # numpy raises several types for a bad file
         raise InputError(f"{src}: not a readable .npy array ({type(exc).__name__}: {exc})")
-    if not isinstance(seq, np.ndarray):
-        raise InputError(f"{src}: holds several arrays (.npz); give one (T, H, W) .npy array")
-    encoder = get_registry(warn=not as_json).build("encoder", spec)
     t0 = time.perf_counter()
     try:
         out = encoder.encode(seq)
     except InputError as exc:  # the file's content is refused; any other error is a bug
         raise InputError(f"{src}: {exc}") from exc
     seconds = time.perf_counter() - t0
-    dst = Path(out_path)
     dst.parent.mkdir(parents=True, exist_ok=True)
     np.save(dst, out)
     metadata = ENCODER.get(encoder, "metadata")
@@ -68,3 +74,60 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     click.echo(f"{src} {tuple(seq.shape)} {seq.dtype} → {dst} {tuple(out.shape)} float32 "
                f"[{', '.join(meta.get('channels', []))}] in {seconds:.3f} s; "
                f"metadata: {meta_path}")
+
+
+def _check_writable(dst: Path) -> None:
+    """Refuse, before encoding, an output under a file or in a folder that cannot be
+    written (a probe file is made and removed: permissions alone do not tell)."""
+    import os
+    import tempfile
+
+    folder = dst.absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"--out {dst} cannot be written: {folder} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
+    except OSError as exc:
+        raise InputError(f"--out {dst} cannot be written: {exc.strerror or exc} "
+                         f"({folder})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _npy_header(src: Path):
+    """``(shape, dtype)`` from a .npy file's header, checked against the file's size, so
+    that a header claiming more than the file holds is refused before anything is read."""
+    import math
+
+    import numpy as np
+
+    fmt = np.lib.format
+    try:
+        with open(src, "rb") as fh:
+            if fh.read(4) == b"PK\x03\x04":
+                raise InputError(f"{src}: holds several arrays (.npz); give one (T, H, W) "
+                                 f".npy array")
+            fh.seek(0)
+            version = fmt.read_magic(fh)
+            read = fmt.read_array_header_1_0 if version == (1, 0) else \
+                fmt.read_array_header_2_0
+            shape, _, dtype = read(fh)
+            offset = fh.tell()
+        size = src.stat().st_size
+    except InputError:
+        raise
+    except Exception as exc:  # numpy raises ValueError and others for a bad header
+        raise InputError(f"{src}: not a readable .npy array ({type(exc).__name__}: "
+                         f"{exc})") from None
+    if dtype.hasobject:
+        raise InputError(f"{src}: holds Python objects, not numbers; give a numeric "
+                         f"(T, H, W) array")
+    if len(shape) != 3:
+        raise InputError(f"{src}: expected a (T, H, W) sequence, got shape {shape}")
+    need = math.prod(shape) * dtype.itemsize
+    if need > size - offset:
+        raise InputError(f"{src}: truncated: its header says shape {shape} {dtype} "
+                         f"({need} bytes) and the file holds {size - offset}")
+    return shape, dtype
