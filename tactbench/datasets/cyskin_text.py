@@ -24,6 +24,7 @@ against :func:`tactbench.integrity.check_budget` first (a
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -63,9 +64,17 @@ def _read(path: Path, held: int) -> Recording:
     ids: np.ndarray | None = None
     n_rows = 0
     blank: int | None = None  # first blank line after the last non-blank one
+    # A small file's rows are kept from the first pass (at most _CHUNK_TOKENS tokens)
+    kept: list[tuple[int, list[str]]] | None = []
+    kept_tokens = 0
     for lineno, line in _lines(path):
-        toks = line.split()
-        if not toks:
+        if ids is not None and kept is None:  # a large file: count, keep nothing
+            n_fields = _count_fields(line)
+            toks = None
+        else:
+            toks = line.split()
+            n_fields = len(toks)
+        if not n_fields:
             blank = blank or lineno
             continue
         if ids is None:
@@ -75,9 +84,14 @@ def _read(path: Path, held: int) -> Recording:
         else:
             if blank is not None:
                 _ragged(path, blank, 0, ids.size)
-            if len(toks) != ids.size + 2:
-                _ragged(path, lineno, len(toks), ids.size)
+            if n_fields != ids.size + 2:
+                _ragged(path, lineno, n_fields, ids.size)
             n_rows += 1
+            if kept is not None:
+                kept_tokens += n_fields
+                kept = kept if kept_tokens <= _CHUNK_TOKENS else None
+                if kept is not None:
+                    kept.append((lineno, toks))
         blank = None
     if ids is None:
         raise InputError(f"{path}: empty file (expected a line of taxel ids, then frames)")
@@ -93,8 +107,9 @@ def _read(path: Path, held: int) -> Recording:
     k = 0
     linenos: list[int] = []
     chunk: list[list[str]] = []
-    for lineno, line in _lines(path):
-        toks = line.split()
+    rows = kept if kept is not None else ((lineno, line.split()) for lineno, line in
+                                          _lines(path))
+    for lineno, toks in rows:
         if lineno == 1 or not toks:
             continue
         if len(toks) != n + 2 or k + len(chunk) == n_rows:
@@ -123,7 +138,7 @@ def _parse_rows(path: Path, linenos: list[int], rows: list[list[str]], ids: np.n
         return
     m, width = len(rows), len(rows[0])
     try:
-        block = np.fromiter(map(float, (tok for toks in rows for tok in toks)),
+        block = np.fromiter(map(float, itertools.chain.from_iterable(rows)),
                             dtype=np.float64, count=m * width).reshape(m, width)
         bad = np.zeros(m, dtype=bool)
     except ValueError:
@@ -159,6 +174,15 @@ def _lines(path: Path) -> Iterator[tuple[int, str]]:
                          f"{_first_non_ascii(path)})") from None
 
 
+def _count_fields(line: str) -> int:
+    """``len(line.split())`` without making the tokens (one field per single space when
+    the line has no other whitespace, else split)."""
+    text = line.strip()
+    if text.isprintable() and "  " not in text:
+        return text.count(" ") + 1 if text else 0
+    return len(text.split())
+
+
 def _first_non_ascii(path: Path) -> int:
     offset = 0
     with open(path, "rb") as f:
@@ -172,20 +196,24 @@ def _first_non_ascii(path: Path) -> int:
 
 def _header(path: Path, toks: list[str]) -> np.ndarray:
     """The taxel ids of line 1: integers in 0..2**63-1, unique."""
-    ids = []
-    for col, tok in enumerate(toks):
-        where = f"{path}, line 1, field {col + 1}"
-        try:
-            value = int(tok)
-        except ValueError:
-            if not tok.lstrip("+-").isdigit():  # else: too many digits for int()
-                raise InputError(f"{where}: the header must list integer taxel ids, found "
-                                 f"{_show(tok)}") from None
-            value = -1 if tok.startswith("-") else ID_MAX + 1
-        if not 0 <= value <= ID_MAX:
-            raise InputError(f"{where}: taxel id {_show(tok)} is out of range "
-                             f"(0 to 2**63-1)")
-        ids.append(value)
+    try:
+        ids = [int(tok) for tok in toks]
+        if min(ids) < 0 or max(ids) > ID_MAX:
+            raise ValueError
+    except ValueError:
+        for col, tok in enumerate(toks):  # the first bad field, for the message
+            where = f"{path}, line 1, field {col + 1}"
+            try:
+                value = int(tok)
+            except ValueError:
+                if not tok.lstrip("+-").isdigit():  # else: too many digits for int()
+                    raise InputError(f"{where}: the header must list integer taxel ids, "
+                                     f"found {_show(tok)}") from None
+                value = -1 if tok.startswith("-") else ID_MAX + 1
+            if not 0 <= value <= ID_MAX:
+                raise InputError(f"{where}: taxel id {_show(tok)} is out of range "
+                                 f"(0 to 2**63-1)") from None
+        raise  # not reached: some field failed above
     arr = np.array(ids, dtype=np.int64)
     uniq, counts = np.unique(arr, return_counts=True)
     if uniq.size != arr.size:
