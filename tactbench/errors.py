@@ -118,6 +118,9 @@ class CorruptArtefactError(TactbenchError):
         self.problem = problem
         super().__init__(f"{self.artefact}: {problem}")
 
+    def __reduce__(self):  # rebuilt from (artefact, problem) in a worker's parent process
+        return (type(self), (self.artefact, self.problem))
+
 
 class BudgetError(InputError):
     """A step would need more memory than the budget allows (see tactbench.integrity)."""

@@ -164,3 +164,13 @@ def test_check_shape_accepts_rank_sizes_and_kind():
 def test_check_shape_refuses_saying_expected_and_actual(arr, message):
     with pytest.raises(InputError, match=message):
         check_shape(arr, "T C H W", "encoded", C=3, dtype_kind="fiu")
+
+
+def test_corrupt_artefact_error_survives_pickling():
+    import pickle
+
+    from tactbench.errors import CorruptArtefactError
+
+    err = pickle.loads(pickle.dumps(CorruptArtefactError("/c/x.npy", "checksum differs")))
+    assert (err.artefact, err.problem, str(err)) == ("/c/x.npy", "checksum differs",
+                                                     "/c/x.npy: checksum differs")
