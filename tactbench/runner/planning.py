@@ -39,6 +39,8 @@ OUT_FOLDERS = ("cells", "models")
 OUT_FILES = ("results.json", "results.csv", "report.md", "accuracy_vs_L.png",
              "cost_vs_accuracy.png")
 _OUT_PATTERNS = (re.compile(r"confusion_.+\.png"),)
+#: What file managers leave in any folder they show (tactbench neither reads nor writes it).
+OUT_LITTER = (".DS_Store", "Thumbs.db", "desktop.ini")
 _TEMPORARY = re.compile(r"^\.(.+)\.(?:tmp|bad)-")  # tactbench.paths.temp_name
 #: report.md begins with this line; a report.md without it is not tactbench's.
 REPORT_HEADER = "# tactbench report"
@@ -131,7 +133,7 @@ def _is_ours(name: str) -> bool:
     temporary = _TEMPORARY.match(name)
     if temporary:
         name = temporary.group(1)
-    return (name in OUT_FOLDERS or name in OUT_FILES
+    return (name in OUT_FOLDERS or name in OUT_FILES or name in OUT_LITTER
             or any(p.fullmatch(name) for p in _OUT_PATTERNS))
 
 
@@ -155,8 +157,9 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
     is created and removed: permissions alone do not tell, e.g. for root or a read-only
     mount), and, when it exists, *tactbench's*: empty, or holding only what a run writes
     (:data:`OUT_FOLDERS`, :data:`OUT_FILES`, ``confusion_*.png``, temporary
-    ``.NAME.tmp-*`` / ``.NAME.bad-*`` names of those), with a ``report.md`` that starts with
-    :data:`REPORT_HEADER`. A folder with anything else is refused, never overwritten.
+    ``.NAME.tmp-*`` / ``.NAME.bad-*`` names of those; and :data:`OUT_LITTER`), with a
+    ``report.md`` that starts with :data:`REPORT_HEADER`. A folder with anything else is
+    refused, never overwritten.
     """
     out = Path(out)
     try:

@@ -193,6 +193,7 @@ def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_sc
     write_reports(out, [], meta={}, plots=False)
     (out / "confusion_raw_logreg_L3.png").write_bytes(b"")
     (out / ".results.json.tmp-123-abcdef01-xyz").write_text("")  # an interrupted write
+    (out / ".DS_Store").write_bytes(b"")  # a file manager's
     check_out_folder(out, models=True)
     assert run(scene, progress=False, cache=cache).skipped == 1
 
