@@ -213,6 +213,9 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
+        # per test sequence, for paired comparisons between cells (runner.reports)
+        "test_predictions": {"indices": [int(i) for i in split.test],
+                             "labels": truth.tolist(), "predictions": predicted.tolist()},
         # cost on one core: wall time × workers that shared the encoding, per frame
         "encode_ms_per_frame": 1e3 * float(meta.get("encode_seconds", 0.0))
         * int(meta.get("workers", 1)) / frames,

@@ -5,6 +5,13 @@ inference ms per sequence, peak memory): users choose on both.
 
 Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.store`) are left
 out of every accuracy table and plot, and listed on their own with their error.
+
+Cells that share a dataset and split are compared *paired* (:func:`comparisons`): every
+pair of summaries that differs in one factor (encoder, classifier or L) gets the mean
+difference of accuracy with a bootstrap interval over test sequences, the seeds agreeing
+on its sign and McNemar's exact p-value, from the per-sequence predictions each row keeps
+(``row["test_predictions"]``); see :mod:`tactbench.runner.stats` and
+``docs/statistics.md``.
 """
 
 from __future__ import annotations
@@ -21,6 +28,9 @@ from tactbench.paths import atomic_write_text
 from tactbench.runner.store import failed_rows, ok_rows, row_status
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
+#: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).
+FACTORS = ("encoder", "classifier", "L")
+CONFIDENCE = 0.95
 
 
 def _mean_std(values: Sequence[float]) -> tuple[float, float]:
@@ -62,9 +72,11 @@ def summarise(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
                 for j, v in enumerate(line):
                     confusion[i][j] += v / total / len(members)
         summary = dict(zip(GROUP_KEYS, key))
+        interval = _seed_interval([r["accuracy"] for r in members])
         summary.update({
             "seeds": [r["seed"] for r in members],
             "accuracy_mean": acc_mean, "accuracy_std": acc_std,
+            "accuracy_ci95": interval,
             "per_class_accuracy": per_class,
             "confusion_normalised": confusion,
             "classes": classes,
@@ -80,6 +92,153 @@ def summarise(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def _seed_interval(accuracies: Sequence[float]) -> list[float] | None:
+    """95 % t-interval of the mean accuracy over seeds (None for one seed)."""
+    from tactbench.runner.stats import seed_summary
+
+    vals = [float(a) for a in accuracies if a is not None and not math.isnan(a)]
+    if len(vals) < 2:
+        return None
+    res = seed_summary(vals, confidence=CONFIDENCE)
+    return None if res.low is None else [res.low, res.high]
+
+
+def comparisons(rows: Iterable[dict[str, Any]], *, n_resamples: int | None = None
+                ) -> list[dict[str, Any]]:
+    """Paired comparisons of every two summaries that differ in one of :data:`FACTORS`.
+
+    Only seeds both cells finished, and test sequences both predicted, are compared
+    (rows without ``test_predictions``, written before they were kept, are left out).
+    Each entry: ``factor``, ``a``/``b`` (the two cells' factor values), the shared
+    ``dataset``, ``split`` and other factors, and the fields of
+    :class:`tactbench.runner.stats.PairedDifference` (``difference`` = accuracy of B − A).
+    A is the cell that comes first in the run (the scene's order), so a run listing
+    ``raw`` before ``farneback`` reports farneback − raw.
+    """
+    import numpy as np
+
+    from tactbench.runner.stats import N_RESAMPLES, paired_difference, pairs_differing_in_one_factor
+
+    groups: dict[tuple, dict[int, dict[str, Any]]] = {}
+    for row in ok_rows(rows):
+        if not row.get("test_predictions"):
+            continue
+        groups.setdefault(tuple(row[k] for k in GROUP_KEYS), {})[int(row["seed"])] = row
+    blocks: dict[tuple, list[tuple]] = {}
+    for key in groups:  # first-appearance order within each (dataset, split)
+        blocks.setdefault(key[:2], []).append(key)
+    out = []
+    for (dataset, split), keys in blocks.items():
+        cells = [dict(zip(FACTORS, key[2:])) for key in keys]
+        for pair in pairs_differing_in_one_factor(cells):
+            ga, gb = groups[keys[pair.a]], groups[keys[pair.b]]
+            y, pa, pb, seeds, seqs = [], [], [], [], []
+            for seed in sorted(set(ga) & set(gb)):
+                ta, tb = _predictions(ga[seed]), _predictions(gb[seed])
+                for index in sorted(set(ta) & set(tb)):
+                    if ta[index][0] != tb[index][0]:  # same sequence, other label: not paired
+                        continue
+                    y.append(ta[index][0])
+                    pa.append(ta[index][1])
+                    pb.append(tb[index][1])
+                    seeds.append(seed)
+                    seqs.append(index)
+            if not y:
+                continue
+            res = paired_difference(np.asarray(y), np.asarray(pa), np.asarray(pb),
+                                    np.asarray(seeds), sequence_ids=np.asarray(seqs),
+                                    confidence=CONFIDENCE,
+                                    n_resamples=n_resamples or N_RESAMPLES, seed=0)
+            shared = {k: v for k, v in cells[pair.a].items() if k != pair.factor}
+            out.append({"dataset": dataset, "split": split, "factor": pair.factor,
+                        "a": pair.value_a, "b": pair.value_b, **shared, **res.as_dict()})
+    return out
+
+
+def _predictions(row: dict[str, Any]) -> dict[int, tuple[int, int]]:
+    """Test sequence index → (true label, predicted label) of one row."""
+    tp = row["test_predictions"]
+    return {int(i): (int(t), int(p))
+            for i, t, p in zip(tp["indices"], tp["labels"], tp["predictions"])}
+
+
+def _comparison_label(c: dict[str, Any], side: str) -> str:
+    value = c[side]
+    if c["factor"] == "classifier":
+        return short_name(str(value))
+    if c["factor"] == "L":
+        return f"L={value}"
+    return str(value)
+
+
+def _context(c: dict[str, Any]) -> str:
+    parts = []
+    for k in FACTORS:
+        if k == c["factor"] or k not in c:
+            continue
+        parts.append(f"L={c[k]}" if k == "L" else short_name(str(c[k])))
+    return " ".join(parts)
+
+
+def comparison_rows(comps: Sequence[dict[str, Any]]) -> list[list[str]]:
+    """Table cells: factor, A, B, where (the shared factors), B − A (points), interval,
+    seeds B>A/A>B/tied, McNemar p, verdict."""
+    rows = []
+    for c in comps:
+        verdict = c["verdict"]
+        if verdict == "B better":
+            verdict = f"{_comparison_label(c, 'b')} better"
+        elif verdict == "A better":
+            verdict = f"{_comparison_label(c, 'a')} better"
+        rows.append([
+            c["factor"], _comparison_label(c, "a"), _comparison_label(c, "b"), _context(c),
+            f"{100 * c['difference']:+.1f}",
+            f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]",
+            f"{c['b_better_seeds']}/{c['a_better_seeds']}/{c['tied_seeds']}",
+            _p_value(c["mcnemar_p"]), verdict])
+    return rows
+
+
+COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)", "95 % interval",
+                     "seeds B>A / A>B / tied", "McNemar p", "verdict"]
+
+
+def _p_value(p: float) -> str:
+    return "< 0.001" if p < 0.001 else f"{p:.3f}"
+
+
+def comparisons_markdown(comps: Sequence[dict[str, Any]]) -> str:
+    if not comps:
+        return ""
+    lines = ["| " + " | ".join(COMPARISON_HEADER) + " |",
+             "|" + "---|" * len(COMPARISON_HEADER)]
+    lines += ["| " + " | ".join(r) + " |" for r in comparison_rows(comps)]
+    return "\n".join(lines)
+
+
+def print_comparisons(comps: Sequence[dict[str, Any]], *,
+                      factors: Sequence[str] = ("encoder", "classifier")) -> None:
+    """The terminal's table of paired comparisons (by default of encoders and classifiers;
+    report.md and results.json hold every factor)."""
+    shown = [c for c in comps if c["factor"] in factors]
+    if not shown:
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="paired comparisons (B − A; an interval spanning 0 is unresolved)",
+                  title_justify="left")
+    for col in COMPARISON_HEADER:
+        table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
+                                                        "verdict") else "right")
+    for row in comparison_rows(shown):
+        table.add_row(*row)
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=160)
+    console.print(table)
+
+
 def peak_step(rows: Sequence[dict[str, Any]]) -> str:
     """The step that set the peak memory of most of ``rows`` (the first seed's on a tie);
     "-" for rows that do not say (written before steps were recorded)."""
@@ -87,6 +246,12 @@ def peak_step(rows: Sequence[dict[str, Any]]) -> str:
     if not steps:
         return "-"
     return max(dict.fromkeys(steps), key=steps.count)
+
+
+def _interval(ci: Sequence[float] | None) -> str:
+    if not ci:
+        return "-"
+    return f"{100 * ci[0]:.1f}–{100 * ci[1]:.1f}"
 
 
 def _pct(mean: float, std: float) -> str:
@@ -100,7 +265,8 @@ def table_rows(summaries: Sequence[dict[str, Any]]) -> list[list[str]]:
     for s in summaries:
         rows.append([
             s["encoder"], short_name(s["classifier"]), str(s["L"]),
-            _pct(s["accuracy_mean"], s["accuracy_std"]), str(len(s["seeds"])),
+            _pct(s["accuracy_mean"], s["accuracy_std"]), _interval(s.get("accuracy_ci95")),
+            str(len(s["seeds"])),
             f"{s['encode_ms_per_frame_mean']:.3f}",
             f"{s['train_s_mean']:.1f}",
             f"{s['inference_ms_per_sequence_mean']:.2f}",
@@ -110,7 +276,8 @@ def table_rows(summaries: Sequence[dict[str, Any]]) -> list[list[str]]:
     return rows
 
 
-TABLE_HEADER = ["encoder", "classifier", "L", "accuracy %", "seeds", "encode ms/frame",
+TABLE_HEADER = ["encoder", "classifier", "L", "accuracy %", "95 % CI of mean", "seeds",
+                "encode ms/frame",
                 "train s", "infer ms/seq", "peak MB", "peak step"]
 
 
@@ -218,21 +385,23 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summaries = summarise(rows)
+    comps = comparisons(rows)
     paths = {"json": out / "results.json", "csv": out / "results.csv",
              "markdown": out / "report.md"}
     atomic_write_text(paths["json"], json.dumps(
-        {"meta": meta or {}, "summary": summaries, "rows": list(rows)}, indent=2))
+        {"meta": meta or {}, "summary": summaries, "comparisons": comps,
+         "rows": list(rows)}, indent=2))
     atomic_write_text(paths["csv"], rows_csv(rows))
     figures: dict[str, Path] = {}
     if plots and summaries:
         figures = write_plots(out, summaries)
         paths.update(figures)
     atomic_write_text(paths["markdown"], markdown_report(summaries, rows, meta or {},
-                                                         figures))
+                                                         figures, comps))
     return paths
 
 
-def markdown_report(summaries, rows, meta, figures) -> str:
+def markdown_report(summaries, rows, meta, figures, comps=()) -> str:
     """report.md: run facts, the accuracy/cost table, per-class accuracy, failed cells,
     figures."""
     done = ok_rows(rows)
@@ -250,7 +419,8 @@ def markdown_report(summaries, rows, meta, figures) -> str:
         f"- git: `{meta.get('git')}`; versions: "
         + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
         "",
-        "Accuracy is mean ± standard deviation over seeds (test set: "
+        "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
+        "mean over seeds (test set: "
         f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "
         "core; train seconds are wall time; inference is per test sequence, batched. "
         "Peak MB is the peak resident memory of the process that ran the cell; peak step "
@@ -260,6 +430,14 @@ def markdown_report(summaries, rows, meta, figures) -> str:
         "", markdown_table(summaries), "", "## Per-class accuracy (%, mean over seeds)", "",
         per_class_markdown(summaries), "",
     ]
+    if comps:
+        lines += ["## Paired comparisons", "",
+                  "Every two cells that differ in one factor, compared on the same test "
+                  "sequences under the same seeds: the mean difference of accuracy B − A "
+                  "(points) with a 95 % bootstrap interval over test sequences, how many "
+                  "seeds agree on its sign, and McNemar's exact p-value on the pooled paired "
+                  "predictions. A difference whose interval spans zero is *unresolved*, not "
+                  "a win (see docs/statistics.md).", "", comparisons_markdown(comps), ""]
     if failed:
         lines += ["## Failed cells", "",
                   f"{n_failed} cell(s) raised; their rows (with the traceback's last frames) "

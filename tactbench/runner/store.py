@@ -104,6 +104,9 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
         if not isinstance(per_class, dict) or not all(
                 v is None or (_number(v) and 0.0 <= v <= 1.0) for v in per_class.values()):
             return "has no per-class accuracy (a number in [0, 1] or null per class)"
+        problem = _check_predictions(row.get("test_predictions"), k)
+        if problem is not None:
+            return problem
     elif status == FAILED:
         if not isinstance(row.get("error"), dict):
             return "is a failed row without its error"
@@ -112,6 +115,25 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
     for field, value in json.loads(json.dumps(identity or {})).items():
         if row.get(field) != value:
             return f"records {field} = {str(row.get(field))[:40]!r}, the cell has {value!r}"
+    return None
+
+
+def _check_predictions(tp: Any, k: int) -> str | None:
+    """Problems of a row's per-sequence predictions (optional: older rows lack them)."""
+    if tp is None:
+        return None
+    if not isinstance(tp, dict) or set(tp) != {"indices", "labels", "predictions"}:
+        return "has test_predictions that are not {indices, labels, predictions}"
+    lists = [tp["indices"], tp["labels"], tp["predictions"]]
+    if not all(isinstance(v, list) for v in lists) or len({len(v) for v in lists}) != 1:
+        return "has test_predictions that are not three lists of one length"
+    for name, values, top in (("indices", lists[0], None), ("labels", lists[1], k),
+                              ("predictions", lists[2], k)):
+        if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
+                   and (top is None or n < top) for n in values):
+            return f"has test_predictions {name} that are not class/sequence numbers"
+    if len(set(lists[0])) != len(lists[0]):
+        return "has test_predictions that name a test sequence twice"
     return None
 
 
