@@ -218,7 +218,11 @@ def _header(path: Path, toks: list[str]) -> np.ndarray:
     uniq, counts = np.unique(arr, return_counts=True)
     if uniq.size != arr.size:
         dup = uniq[counts > 1]
-        raise InputError(f"{path}, line 1: duplicate taxel id(s) "
+        first: dict[int, int] = {}
+        col, again = next((first[v], k) for k, v in enumerate(ids)
+                          if first.setdefault(v, k) != k)
+        raise InputError(f"{path}, line 1, field {again + 1}: duplicate taxel id "
+                         f"{ids[again]} (also field {col + 1}); duplicate id(s): "
                          f"{', '.join(map(str, dup[:8]))}")
     return arr
 

@@ -50,7 +50,7 @@ def test_write_and_read_back_is_exact(tmp_path):
     ("\n1 2 3\n0 0 1 2 3\n", "line 1: empty header"),
     ("frame timestamp a b\n0 0 1 2\n",
      r"line 1, field 1: the header must list integer taxel ids, found 'frame'"),
-    ("1 2 2\n0 0 1 2 3\n", "line 1: duplicate taxel id.s. 2"),
+    ("1 2 2\n0 0 1 2 3\n", r"line 1, field 3: duplicate taxel id 2 \(also field 2\)"),
     ("1 2 3\n", "no frames after the header"),
     ("1 2 3\n0 0 1 2 3\n1 0.1 1 2\n", "line 3: truncated or ragged row: expected 5 fields"),
     ("1 2 3\n0 0 1 2 3\n\n1 0.1 1 2 3\n", "line 3: truncated or ragged row: .* got 0"),
