@@ -127,7 +127,10 @@ _KINDS: dict[str, str] = {
 
 
 def _show(value: Any, limit: int = 60) -> str:
-    text = repr(value)
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long to print
+        return f"an integer of {value.bit_length()} bits"
     return text if len(text) <= limit else text[:limit - 5] + "…" + text[-4:]
 
 

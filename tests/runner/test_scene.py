@@ -167,6 +167,9 @@ def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
     for over, match in [({"seeds": [1.5]}, "scene field 'seeds' must be whole numbers"),
                         ({"encoders": [1]}, "scene field 'encoders' entry 1 must be text"),
                         ({"lengths": [True]}, "scene field 'lengths' must be whole numbers"),
-                        ({"rerun": "no"}, "scene field 'rerun' must be true or false")]:
+                        ({"rerun": "no"}, "scene field 'rerun' must be true or false"),
+                        ({"seeds": [10 ** 5000]}, "an integer of 16610 bits is not a 64-bit"),
+                        ({"workers": 10 ** 5000}, "'workers' must be at most 1024, got an "
+                                                  "integer of")]:
         with pytest.raises(InputError, match=match):
             plan(Scene(dataset="no-such-dataset", **over))
