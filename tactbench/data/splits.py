@@ -1,7 +1,14 @@
-"""Train/test splits: the study's per-class split and a leave-users-out split.
+"""Train/test splits: the study's per-class split, leave-users-out, and k-fold over users.
 
-Both are deterministic functions of the labels (and users) and a seed, so a split can
-be recorded by its name and seed and recomputed anywhere.
+Each is a deterministic function of the labels (and users) and a seed, so a split can
+be recorded by its spec and seed and recomputed anywhere. Specs:
+
+- ``paper``: ``test_per_class`` random samples of each class are the test set (the study's);
+- ``users``: a random fifth of the users (at least one) is the test set;
+- ``users:folds=K``: the users are dealt at random into ``K`` folds and each fold is the
+  test set once, training on the others (every user is tested exactly once), so a small
+  set of people still gives a figure over all of them. :func:`make_splits` returns the
+  ``K`` splits; a cell trains ``K`` models and pools their test predictions.
 """
 
 from __future__ import annotations
@@ -81,9 +88,85 @@ def users_split(users: Sequence[str], labels: Sequence[int], *, seed: int,
                  np.flatnonzero(is_test).astype(np.int64), tuple(test_users.tolist()))
 
 
+def user_folds(users: Sequence[str], labels: Sequence[int], *, seed: int, folds: int
+               ) -> list[Split]:
+    """``folds`` leave-users-out splits whose test sets partition the users (and so the
+    samples): users are shuffled by ``seed`` and dealt into folds of near-equal size."""
+    folds = check_positive_int(folds, "users split folds", minimum=2)
+    users_arr = np.asarray([str(u) for u in users])
+    labels = np.asarray(labels)
+    unique = np.unique(users_arr)
+    if len(unique) < folds:
+        raise InputError(f"users:folds={folds} needs ≥ {folds} users; the dataset has "
+                         f"{len(unique)}" + (" (recordings without users: see "
+                                             "docs/own-data.md)" if unique.tolist() == [""]
+                                             else ""))
+    rng = np.random.default_rng(derive_seed(seed, "split", "users-folds", folds))
+    order = rng.permutation(unique)
+    out = []
+    for k, fold_users in enumerate(np.array_split(order, folds)):
+        fold_users = np.sort(fold_users)
+        is_test = np.isin(users_arr, fold_users)
+        missing = sorted(set(np.unique(labels).tolist()) - set(labels[~is_test].tolist()))
+        if missing:
+            raise InputError(f"users:folds={folds}: fold {k + 1} (users "
+                             f"{', '.join(fold_users[:5])}) leaves no training sample for "
+                             f"class(es) {missing}; use fewer folds")
+        out.append(Split(f"users:folds={folds}", seed,
+                         np.flatnonzero(~is_test).astype(np.int64),
+                         np.flatnonzero(is_test).astype(np.int64), tuple(fold_users.tolist())))
+    return out
+
+
+def parse_split(spec: str) -> tuple[str, int | None]:
+    """``"paper"`` → ``("paper", None)``; ``"users:folds=5"`` → ``("users", 5)``."""
+    from tactbench.plugins import parse_spec
+
+    if not isinstance(spec, str):
+        raise InputError(f"split must be text such as 'paper', 'users' or 'users:folds=5', "
+                         f"got {spec!r}")
+    name, options = parse_spec(spec)
+    check_choice(name, "split", SPLITS)
+    unknown = sorted(set(options) - {"folds"})
+    if unknown or (options and name != "users"):
+        raise InputError(f"split {spec!r}: only 'users' takes an option, folds=K "
+                         f"(users:folds=5)")
+    folds = options.get("folds")
+    if folds is not None:
+        folds = check_positive_int(folds, f"split {spec!r}: folds", minimum=2)
+    return name, folds
+
+
+def canonical_split(spec: str) -> str:
+    """The split spec as recorded in a cell's identity (``users:folds=5``)."""
+    name, folds = parse_split(spec)
+    return name if folds is None else f"{name}:folds={folds}"
+
+
+def make_splits(spec: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
+                test_per_class: int = 30) -> list[Split]:
+    """Every split of ``spec``: one, or ``K`` folds for ``users:folds=K``."""
+    name, folds = parse_split(spec)
+    if folds is not None:
+        return user_folds(users, labels, seed=seed, folds=folds)
+    return [make_split(name, labels=labels, users=users, seed=seed,
+                       test_per_class=test_per_class)]
+
+
+def describe_splits(splits: Sequence[Split]) -> dict:
+    """What a cell's row records of its split(s): one split's fields, or the folds'
+    together (``n_train`` the mean per fold, ``n_test`` the total, every test user)."""
+    if len(splits) == 1:
+        return splits[0].describe()
+    return {"split": splits[0].name, "split_seed": splits[0].seed, "folds": len(splits),
+            "n_train": int(round(float(np.mean([len(s.train) for s in splits])))),
+            "n_test": int(sum(len(s.test) for s in splits)),
+            "test_users": [u for s in splits for u in s.test_users]}
+
+
 def make_split(name: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
                test_per_class: int = 30) -> Split:
-    """The split called ``name`` (one of :data:`SPLITS`) of these samples."""
+    """The split called ``name`` (``paper`` or ``users``) of these samples."""
     if check_choice(name, "split", SPLITS) == "paper":
         return paper_split(labels, seed=seed, test_per_class=test_per_class)
     return users_split(users, labels, seed=seed)

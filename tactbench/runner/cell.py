@@ -158,7 +158,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     import numpy as np
     import torch
 
-    from tactbench.data.splits import make_split
+    from tactbench.data.splits import describe_splits, make_splits
     from tactbench.data.windows import test_windows, training_windows
     from tactbench.plugins import Registry
     from tactbench.runner.cache import load_encoding
@@ -169,35 +169,51 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     cell = job.cell
     with memory.track("load encoding"):
         sequences, meta = load_encoding(job.encoding_dir)
-    with memory.track("windows"):
-        labels = np.asarray(job.labels, dtype=np.int64)
-        split = make_split(job.split, labels=labels, users=job.users, seed=cell.seed,
-                           test_per_class=job.test_per_class)
-        train = training_windows([sequences[i] for i in split.train], labels[split.train],
-                                 cell.length)
-        test = test_windows([sequences[i] for i in split.test], labels[split.test],
-                            cell.length)
-        # The planned component, not a fresh plugin lookup: see the module docstring.
-        clf = Registry([job.classifier]).build("classifier", cell.classifier,
-                                               classes=len(job.classes))
-    seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length)
-    rss0 = memory.peak_mb
-    with memory.track("fit"):
-        t0 = time.perf_counter()
-        fit_report = clf.fit(train, None, seed=seed, device=job.device, progress=progress)
-        train_s = time.perf_counter() - t0
-    with memory.track("predict"):
-        t0 = time.perf_counter()
-        predicted = clf.predict(test)
-        infer_s = time.perf_counter() - t0
-    if job.model_path:
+    labels = np.asarray(job.labels, dtype=np.int64)
+    splits = make_splits(job.split, labels=labels, users=job.users, seed=cell.seed,
+                         test_per_class=job.test_per_class)
+    rss0 = 0.0
+    train_s = infer_s = 0.0
+    n_train = n_test = 0
+    indices, truths, predictions, fits = [], [], [], []
+    for fold, split in enumerate(splits):
+        with memory.track("windows"):
+            train = training_windows([sequences[i] for i in split.train],
+                                     labels[split.train], cell.length)
+            test = test_windows([sequences[i] for i in split.test], labels[split.test],
+                                cell.length)
+            # The planned component, not a fresh plugin lookup: see the module docstring.
+            clf = Registry([job.classifier]).build("classifier", cell.classifier,
+                                                   classes=len(job.classes))
+        if fold == 0:
+            rss0 = memory.peak_mb
+        # one split keeps the seed it always had; the folds of a k-fold split differ
+        seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length,
+                           *(() if len(splits) == 1 else (f"fold {fold}",)))
+        with memory.track("fit"):
+            t0 = time.perf_counter()
+            fits.append(clf.fit(train, None, seed=seed, device=job.device,
+                                progress=progress))
+            train_s += time.perf_counter() - t0
+        with memory.track("predict"):
+            t0 = time.perf_counter()
+            predicted = np.asarray(clf.predict(test))
+            infer_s += time.perf_counter() - t0
+        indices.append(np.asarray(split.test))
+        truths.append(np.asarray(test.labels))
+        predictions.append(predicted)
+        n_train += len(train)
+        n_test += len(test)
+    test_index = np.concatenate(indices)
+    truth = np.concatenate(truths)
+    predicted = np.concatenate(predictions)
+    if job.model_path:  # planning allows saving only with one split (one model per cell)
         with memory.track("save model"):
             clf.save(job.model_path, {**(job.model_meta or {}), "classifier": cell.classifier,
                                       "seed": cell.seed, "cell": cell.key,
-                                      "test_accuracy": float((predicted == test.labels).mean())})
+                                      "test_accuracy": float((predicted == truth).mean())})
 
     k = len(job.classes)
-    truth = test.labels
     confusion = np.zeros((k, k), dtype=np.int64)
     np.add.at(confusion, (truth, predicted), 1)
     support = confusion.sum(axis=1)
@@ -208,26 +224,26 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "key": cell.key,
         **job.identity,
         "status": OK,
-        **split.describe(),
+        **describe_splits(splits),
         "classes": list(job.classes),
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
         # per test sequence, for paired comparisons between cells (runner.reports)
-        "test_predictions": {"indices": [int(i) for i in split.test],
+        "test_predictions": {"indices": test_index.tolist(),
                              "labels": truth.tolist(), "predictions": predicted.tolist()},
         # cost on one core: wall time × workers that shared the encoding, per frame
         "encode_ms_per_frame": 1e3 * float(meta.get("encode_seconds", 0.0))
         * int(meta.get("workers", 1)) / frames,
         "train_s": train_s,
-        "inference_ms_per_sequence": 1e3 * infer_s / max(1, len(test)),
+        "inference_ms_per_sequence": 1e3 * infer_s / max(1, n_test),
         "peak_rss_mb": memory.peak_mb,
         "peak_step": memory.peak_step,
         "memory": memory.as_dict(),
         "rss_before_fit_mb": rss0,
-        "n_train_windows": len(train),
-        "n_test": len(test),
-        "fit": _jsonable(fit_report),
+        "n_train_windows": n_train,
+        "n_test": n_test,
+        "fit": _jsonable(fits[0] if len(fits) == 1 else fits),
         "device": job.device,
         "threads": job.threads,
         "versions": versions(),

@@ -206,13 +206,16 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
 
 
 def _check_scene(scene: Scene) -> None:
-    from tactbench.data.splits import SPLITS
+    from tactbench.data.splits import parse_split
     from tactbench.profiles import PRECISIONS, get_profile
 
     check_scene(scene)  # every field's type, first
     get_profile(scene.profile)
     check_choice(scene.resolved_precision(), "precision", PRECISIONS)
-    check_choice(scene.split, "split", tuple(SPLITS))
+    if parse_split(scene.split)[1] is not None and scene.save_models:
+        raise InputError(f"--save-models keeps one model per cell, and split "
+                         f"{scene.split!r} trains one per fold; save models with "
+                         f"--split users or paper")
     check_choice(scene.executor, "executor", EXECUTORS)
     if not scene.encoders or not scene.classifiers or not scene.lengths or not scene.seeds:
         raise InputError("a run needs at least one encoder, classifier, L and seed")
@@ -366,10 +369,11 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     _check_lengths(scene, dataset)
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
-    from tactbench.data.splits import make_split
+    from tactbench.data.splits import canonical_split, make_splits
 
-    make_split(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
-               test_per_class=scene.test_per_class)  # fails early on an impossible split
+    make_splits(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
+                test_per_class=scene.test_per_class)  # fails early on an impossible split
+    split_spec = canonical_split(scene.split)
 
     cells: list[Cell] = []
     identities: dict[str, dict[str, Any]] = {}
@@ -382,7 +386,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                         "schema": ROW_SCHEMA,
                         "dataset": dataset.name,
                         "dataset_hash": dataset_hash,
-                        "split": scene.split,
+                        "split": split_spec,
                         "test_per_class": scene.test_per_class,
                         "imaging": imaging_identity(scene, kinds[clf]),
                         "encoder": enc,

@@ -7,6 +7,7 @@ import pytest
 
 from tactbench.classifiers.training import derive_seed
 from tactbench.data.splits import make_split, paper_split, users_split
+from tactbench.errors import InputError
 
 LABELS = np.repeat(np.arange(5), 76)  # 5 classes × 38 users × 2 positions
 USERS = np.tile(np.repeat([f"u{i:02d}" for i in range(38)], 2), 5)
@@ -60,3 +61,51 @@ def test_derived_seeds_are_stable_and_distinct():
     other = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                            env={"PYTHONHASHSEED": "12345", "PATH": ""}, check=True)
     assert int(other.stdout) == derive_seed(0, "farneback", 5)  # not salted per process
+
+
+def test_user_folds_test_every_user_exactly_once():
+    from tactbench.data.splits import describe_splits, make_splits
+
+    users = [f"u{i % 7}" for i in range(70)]
+    labels = [i % 5 for i in range(70)]
+    folds = make_splits("users:folds=3", labels=labels, users=users, seed=4)
+    assert len(folds) == 3
+    tested = np.concatenate([f.test for f in folds])
+    assert sorted(tested.tolist()) == list(range(70))  # every sample tested once
+    assert sorted(u for f in folds for u in f.test_users) == sorted(set(users))
+    for f in folds:
+        assert not set(f.train) & set(f.test)
+        assert not {users[i] for i in f.train} & set(f.test_users)
+    assert [len(f.test_users) for f in folds] == [3, 2, 2]
+    again = make_splits("users:folds=3", labels=labels, users=users, seed=4)
+    assert all(np.array_equal(a.test, b.test) for a, b in zip(folds, again))
+    other = make_splits("users:folds=3", labels=labels, users=users, seed=5)
+    assert any(not np.array_equal(a.test, b.test) for a, b in zip(folds, other))
+    d = describe_splits(folds)
+    assert (d["split"], d["folds"], d["n_test"]) == ("users:folds=3", 3, 70)
+    single = make_splits("users", labels=labels, users=users, seed=4)
+    assert len(single) == 1 and describe_splits(single)["split"] == "users"
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("users:folds=1", "folds must be ≥ 2"),
+    ("users:folds=8", "needs ≥ 8 users; the dataset has 7"),
+    ("paper:folds=2", "only 'users' takes an option"),
+    ("users:k=2", "only 'users' takes an option"),
+    ("user", "did you mean 'users'"),
+])
+def test_bad_split_specs_are_one_line(spec, message):
+    from tactbench.data.splits import make_splits
+
+    users = [f"u{i % 7}" for i in range(70)]
+    with pytest.raises(InputError, match=message):
+        make_splits(spec, labels=[i % 5 for i in range(70)], users=users, seed=0)
+
+
+def test_a_fold_that_leaves_a_class_untrained_is_refused():
+    from tactbench.data.splits import make_splits
+
+    users = ["a", "a", "b", "b", "c", "c"]
+    labels = [0, 1, 0, 1, 0, 2]  # class 2 only from user c
+    with pytest.raises(InputError, match=r"leaves no training sample for class\(es\) \[2\]"):
+        make_splits("users:folds=3", labels=labels, users=users, seed=0)

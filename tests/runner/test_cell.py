@@ -119,3 +119,20 @@ def test_an_entry_damaged_after_the_run_checked_it_fails_its_cell_and_is_rebuilt
     assert "truncated" in row["error"]["message"]
     ensure_encodings(p, cache, p.cells)  # the next run
     assert run_cell(job)["status"] == "ok"
+
+
+def test_a_k_fold_users_cell_tests_every_sample_once(tiny_scene, cache):
+    from tactbench.runner import run
+
+    result = run(tiny_scene(encoders=["raw"], seeds=[0], split="users:folds=2",
+                            classifiers=["logreg"]), progress=False, cache=cache)
+    [row] = result.rows
+    assert row["status"] == "ok", row.get("error")
+    assert (row["split"], row["folds"]) == ("users:folds=2", 2)
+    n = len(row["test_predictions"]["indices"])
+    assert sorted(row["test_predictions"]["indices"]) == list(range(n))
+    assert row["n_test"] == n and len(row["test_users"]) == len(set(row["test_users"])) == 2
+    from tactbench.errors import InputError
+
+    with pytest.raises(InputError, match="trains one per fold"):
+        run(tiny_scene(split="users:folds=2", save_models=True), progress=False, cache=cache)
