@@ -10,6 +10,7 @@ up as taxels that are always 0).
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -333,6 +334,7 @@ class CanLog:
             "frames_per_sample": ({"min": int(min(lengths)), "median": float(np.median(lengths)),
                                    "max": int(max(lengths))} if lengths else None),
             "assembler": self.stats.to_dict(), "broken_meta_messages": self.broken_meta,
+            "reader_skipped": len(self.extra.get("reader_skipped", ())),
         }
 
     def to_dataset(self, *, name: str | None = None, layout: Any = None,
@@ -499,11 +501,15 @@ def read_log(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None
     budget = memory_budget_bytes()
     messages = []
     most = budget // MESSAGE_BYTES
-    for msg in read_messages(path):
-        messages.append(msg)
-        if len(messages) > most:
-            check_budget(len(messages) * MESSAGE_BYTES, f"{path}: more than {most} messages",
-                         budget=budget)
+    with reader_warnings() as skipped:
+        try:
+            for msg in read_messages(path):
+                messages.append(msg)
+                if len(messages) > most:
+                    check_budget(len(messages) * MESSAGE_BYTES,
+                                 f"{path}: more than {most} messages", budget=budget)
+        except InputError as exc:
+            raise type(exc)(f"{exc}{_skipped(skipped)}") from None
     try:
         if taxel_ids is not None:
             ids, source = np.asarray(taxel_ids, dtype=np.int64), "given"
@@ -517,5 +523,44 @@ def read_log(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None
         segments, stats, broken = segment_messages(messages, taxels, missing=missing,
                                                    budget=budget)
     except InputError as exc:
-        raise type(exc)(f"{path}: {exc}") from None
-    return CanLog(path, taxels.taxel_ids, source, segments, stats, fmt, broken)
+        raise type(exc)(f"{path}: {exc}{_skipped(skipped)}") from None
+    return CanLog(path, taxels.taxel_ids, source, segments, stats, fmt, broken,
+                  extra={"reader_skipped": skipped} if skipped else {})
+
+
+#: python-can's loggers that report what a log reader skips.
+READER_LOGGERS = ("can.io.blf", "can.io.asc", "can.io.canutils", "can.io.trc")
+
+
+@contextlib.contextmanager
+def reader_warnings() -> Iterator[list[str]]:
+    """Gather what python-can's log readers warn about (through ``logging``: objects of a
+    damaged log they skip) instead of letting it print beside tactbench's one line; the
+    list is filled while the block runs."""
+    import logging
+
+    caught: list[str] = []
+
+    class _Catch(logging.Filter):
+        def filter(self, record: logging.LogRecord) -> bool:
+            if record.levelno >= logging.WARNING:
+                caught.append(record.getMessage())
+                return False
+            return True
+
+    catch = _Catch()
+    loggers = [logging.getLogger(name) for name in READER_LOGGERS]
+    for logger in loggers:
+        logger.addFilter(catch)
+    try:
+        yield caught
+    finally:
+        for logger in loggers:
+            logger.removeFilter(catch)
+
+
+def _skipped(warnings: list[str]) -> str:
+    if not warnings:
+        return ""
+    first = " ".join(warnings[0].split())[:80]
+    return f" (python-can skipped {len(warnings)} damaged part(s) of it: {first})"

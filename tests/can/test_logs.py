@@ -286,3 +286,40 @@ def test_a_blf_object_claiming_gigabytes_is_refused(tmp_path, memory_cap):
     cut = tmp_path / "cut.blf"
     cut.write_bytes(good.read_bytes()[:-50])
     assert len(read_log(cut, taxel_ids=IDS).segments[0]) > 0
+
+
+def test_what_python_can_skips_is_counted_not_printed(tmp_path):
+    """python-can logs a warning (a second line beside tactbench's) for each .blf
+    container it skips; it is gathered: counted in the summary, named in an error."""
+    import json
+    import struct
+
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+    from tactbench.errors import InputError
+
+    taxels = TaxelMap(IDS)
+    msgs = [m for k in range(1000) for m in encode_sweep(np.full(IDS.size, k % 500), taxels,
+                                                         k, timestamp=0.1 * k)]
+    path = tmp_path / "two.blf"
+    write_log(path, msgs)  # 4000 messages: python-can writes two containers
+    data = bytearray(path.read_bytes())
+    first = struct.unpack_from("<L", data, 4)[0]
+    second = first + struct.unpack_from("<L", data, first + 8)[0]
+    second += second % 4
+    assert data[second:second + 4] == b"LOBJ"
+    struct.pack_into("<H", data, second + 16, 77)  # an unknown compression method
+    path.write_bytes(bytes(data))
+    log = read_log(path, taxel_ids=IDS)
+    assert 0 < log.summary()["sweeps"] < 1000 and log.summary()["reader_skipped"] == 1
+    res = CliRunner().invoke(cli, ["can", "info", str(path), "--json"])
+    assert res.exit_code == 0 and "Unknown compression" not in res.output
+    assert json.loads(res.output)["reader_skipped"] == 1
+    struct.pack_into("<H", data, first + 16, 77)  # both: nothing left to read
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"two.blf: no CySkin data messages .*python-can "
+                                         r"skipped 2 damaged part.s. of it: Unknown compr"):
+        read_log(path)
+    res = CliRunner().invoke(cli, ["can", "info", str(path)])
+    assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1, res.output
