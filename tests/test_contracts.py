@@ -176,6 +176,7 @@ def _builtin_specs(registry, kind, tmp_path):
         ("sensor", "cyskin-can"): {"taxel_ids": "0-10,16-26", "channel": "tb-contracts"},
         ("dataset", "cyskin-text"): {"path": str(tmp_path)},
         ("dataset", "cost"): {"path": str(tmp_path / "cost.csv")},
+        ("dataset", "folder"): {"path": str(tmp_path)},
     }
     for comp in registry.components(kind):
         if comp.plugin.startswith("tactbench."):

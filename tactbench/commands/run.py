@@ -24,11 +24,16 @@ from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 @click.option("-L", "lengths", multiple=True,
               help="Window length in frames, repeatable or a range: -L 5, -L 1-6. "
                    "[default: 5]")
-@click.option("--seed", "seeds", multiple=True, type=int,
-              help="Seed, repeatable. [default: 0 1 2]")
-@click.option("--split", type=click.Choice(["paper", "users"]),
+@click.option("--seed", "seeds", multiple=True,
+              help="Seed, repeatable or a range: --seed 0-9. [default: 0 1 2]")
+@click.option("--split",
               help="paper: 30 random test samples per class (the study's); users: "
-                   "leave-users-out. [default: paper]")
+                   "leave a random fifth of the users out; users:folds=K: K-fold over "
+                   "users, every user tested once. [default: paper]")
+@click.option("--test-window", type=click.Choice(["first", "onset", "vote"]),
+              help="Which frames a test sequence is classified on: first (its first L "
+                   "frames, the study's), onset (L frames from contact onset) or vote "
+                   "(every window, probabilities averaged). [default: first]")
 @click.option("--profile", type=click.Choice(PROFILE_NAMES),
               help="quick: CPU-sized (default); paper: the study's settings (a GPU job).")
 @click.option("--pixel-mm", type=float, help="Tactile-image pixel size in mm "
@@ -49,7 +54,8 @@ from tactbench.profiles import PRECISIONS, PROFILE_NAMES
               help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
-def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, profile,
+def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, test_window,
+            profile,
             pixel_mm, precision, device, threads, executor, workers, scheduler, out, rerun,
             save_models, as_json, no_plots) -> None:
     """Run a benchmark grid and report accuracy beside its cost.
@@ -60,13 +66,21 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
     the failed cells.
     """
     from tactbench.runner import Scene, load_scene_file, parse_lengths, run
-    from tactbench.runner.reports import failed_cells, print_table, summarise, write_reports
+    from tactbench.runner.reports import (
+        failed_cells,
+        print_comparisons,
+        print_table,
+        summarise,
+        write_reports,
+    )
+    from tactbench.runner.scene import parse_seeds
 
     fields = load_scene_file(scene_file) if scene_file else {}
     given = {"dataset": dataset, "encoders": list(encoders) or None,
              "classifiers": list(classifiers) or None,
              "lengths": parse_lengths(lengths) if lengths else None,
-             "seeds": list(seeds) or None, "split": split, "profile": profile,
+             "seeds": parse_seeds(seeds) if seeds else None, "split": split,
+             "test_window": test_window, "profile": profile,
              "pixel_mm": pixel_mm, "precision": precision, "device": device,
              "threads": threads, "executor": executor, "workers": workers,
              "scheduler": scheduler, "out": out, "rerun": rerun, "save_models": save_models}
@@ -84,11 +98,14 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, p
     summaries = summarise(result.rows)
     failed = failed_cells(result.rows)
     if as_json:
-        click.echo(json.dumps({"meta": meta, "summary": summaries, "failed": failed,
+        comps = json.loads(paths["json"].read_text())["comparisons"]
+        click.echo(json.dumps({"meta": meta, "summary": summaries, "comparisons": comps,
+                               "failed": failed,
                                "files": {k: str(v) for k, v in paths.items()}}, indent=2))
     else:
-        print_table(summaries, title=f"{scene.dataset} · split {scene.split} · profile "
-                                     f"{scene.profile}")
+        print_table(summaries, title=f"{scene.dataset} · split {scene.split} · test window "
+                                     f"{scene.test_window} · profile {scene.profile}")
+        print_comparisons(json.loads(paths["json"].read_text())["comparisons"])
         click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
                    f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
                    f"results.csv, results.json, plots)")

@@ -1,11 +1,23 @@
 """Windows of L frames: how sequences become training and test examples.
 
-The study's protocol:
+The study's protocol (test window ``first``, the default):
 
 - training: every window of ``L`` consecutive frames of every training
   sequence (a sequence shorter than ``L`` gives one window, padded);
 - testing: only the first ``L`` frames of each test sequence;
 - padding: blank (all-zero) frames appended after the sequence's end.
+
+Testing on the first frames assumes that recordings start at contact. Where they start
+before it, two other test windows (:data:`TEST_WINDOWS`) are offered:
+
+- ``onset``: the ``L`` frames from the contact onset, :func:`onset_frame`: the first
+  frame whose total pressure (the sum of the normalised taxel values) reaches
+  :data:`ONSET_FRACTION` of that recording's peak total pressure (frame 0 for a
+  recording without pressure); the window is moved back to end at the last frame when
+  fewer than ``L`` frames follow the onset. Training then uses the windows starting at
+  or after each training sequence's own onset window, so that it sees what tests see;
+- ``vote``: every window of the test sequence is classified and the class
+  probabilities are averaged (training unchanged).
 
 A :class:`Windows` holds the sequences once and the window positions, so the
 many overlapping training windows share memory; :meth:`Windows.batch`
@@ -115,3 +127,75 @@ def test_windows(sequences: Sequence[np.ndarray], labels: Sequence[int],
 
 
 test_windows.__test__ = False  # not a pytest test, despite the name
+
+#: Where a sequence's test window starts: see the module docstring.
+TEST_WINDOWS = ("first", "onset", "vote")
+#: Contact onset: the first frame whose total pressure reaches this fraction of the peak.
+ONSET_FRACTION = 0.1
+
+
+def onset_frame(pressure: np.ndarray, fraction: float = ONSET_FRACTION) -> int:
+    """The first frame whose total pressure reaches ``fraction`` of the recording's peak.
+
+    ``pressure`` is the recording's normalised values ``(T, N)`` (or already summed,
+    ``(T,)``); NaN (a missing reading) counts as 0. A recording without any pressure has
+    its onset at frame 0.
+    """
+    p = np.asarray(pressure, dtype=np.float64)
+    total = np.nansum(p.reshape(p.shape[0], -1), axis=1) if p.ndim > 1 else np.nan_to_num(p)
+    peak = float(total.max()) if total.size else 0.0
+    if not peak > 0:
+        return 0
+    return int(np.argmax(total >= fraction * peak))
+
+
+def window_starts(n_frames: Sequence[int], length: int, onsets: Sequence[int]) -> np.ndarray:
+    """Start of each sequence's onset window: its onset, moved back so that the window
+    ends at the last frame when fewer than ``length`` frames follow (never before 0)."""
+    n = np.asarray(n_frames, dtype=np.int64)
+    on = np.asarray(onsets, dtype=np.int64)
+    return np.maximum(0, np.minimum(on, n - int(length))).astype(np.int64)
+
+
+def test_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequence[int],
+                     length: int, onsets: Sequence[int] | None = None) -> Windows:
+    """The test windows of ``mode`` (:data:`TEST_WINDOWS`): one per sequence for
+    ``first`` and ``onset`` (which needs ``onsets``), every window for ``vote``
+    (``seq_index`` says whose; the caller averages their probabilities)."""
+    from tactbench.errors import check_choice
+
+    check_choice(mode, "test window", TEST_WINDOWS)
+    if mode == "first":
+        return test_windows(sequences, labels, length)
+    if mode == "vote":
+        return training_windows(sequences, labels, length)
+    labels_arr = _check(sequences, labels)
+    if onsets is None or len(onsets) != len(sequences):
+        raise ValueError("onset test windows need one onset per sequence")  # a bug
+    starts = window_starts([s.shape[0] for s in sequences], length, onsets)
+    return Windows(list(sequences), np.arange(len(sequences), dtype=np.int64), starts,
+                   labels_arr, length)
+
+
+test_windows_for.__test__ = False
+
+
+def dataset_onsets(dataset) -> tuple[int, ...]:
+    """:func:`onset_frame` of every sample of a :class:`~tactbench.data.dataset.Dataset`,
+    on its normalised values (one recording at a time)."""
+    return tuple(onset_frame(dataset.normalise(s.recording.values)) for s in dataset.samples)
+
+
+def training_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequence[int],
+                         length: int, onsets: Sequence[int] | None = None) -> Windows:
+    """The training windows of ``mode``: every window, or for ``onset`` every window
+    starting at or after the sequence's onset window."""
+    windows = training_windows(sequences, labels, length)
+    if mode != "onset":
+        return windows
+    if onsets is None or len(onsets) != len(sequences):
+        raise ValueError("onset training windows need one onset per sequence")  # a bug
+    first = window_starts([s.shape[0] for s in sequences], length, onsets)
+    keep = windows.starts >= first[windows.seq_index]
+    return Windows(windows.sequences, windows.seq_index[keep], windows.starts[keep],
+                   windows.labels[keep], length)

@@ -45,6 +45,8 @@ class CellJob:
     threads: int  # torch threads
     model_path: str | None = None
     model_meta: dict[str, Any] | None = None
+    test_window: str = "first"  # tactbench.data.windows.TEST_WINDOWS
+    onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
 
 
 def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
@@ -52,8 +54,11 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
     """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.cache.ensure_encodings`;
     with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
     scene = p.scene
+    from tactbench.data.windows import dataset_onsets
+
     labels = tuple(int(x) for x in p.dataset.labels)  # once, shared by every job
     users = tuple(str(u) for u in p.dataset.users)
+    onsets = dataset_onsets(p.dataset) if scene.test_window == "onset" else None
     return [CellJob(cell=c, identity=p.identities[c.key],
                     classifier=p.classifier_component(c.classifier),
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
@@ -61,7 +66,8 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
                     split=scene.split, test_per_class=scene.test_per_class,
                     device=scene.device, threads=scene.resolved_threads(),
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
-                    model_meta=model_metadata(p, c) if models else None)
+                    model_meta=model_metadata(p, c) if models else None,
+                    test_window=scene.test_window, onsets=onsets)
             for c in cells]
 
 
@@ -159,7 +165,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     import torch
 
     from tactbench.data.splits import describe_splits, make_splits
-    from tactbench.data.windows import test_windows, training_windows
+    from tactbench.data.windows import test_windows_for, training_windows_for
     from tactbench.plugins import Registry
     from tactbench.runner.cache import load_encoding
     from tactbench.seeds import derive_seed
@@ -178,10 +184,13 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     indices, truths, predictions, fits = [], [], [], []
     for fold, split in enumerate(splits):
         with memory.track("windows"):
-            train = training_windows([sequences[i] for i in split.train],
-                                     labels[split.train], cell.length)
-            test = test_windows([sequences[i] for i in split.test], labels[split.test],
-                                cell.length)
+            mode, onsets = job.test_window, job.onsets
+            train = training_windows_for(
+                mode, [sequences[i] for i in split.train], labels[split.train], cell.length,
+                onsets=None if onsets is None else [onsets[i] for i in split.train])
+            test = test_windows_for(
+                mode, [sequences[i] for i in split.test], labels[split.test], cell.length,
+                onsets=None if onsets is None else [onsets[i] for i in split.test])
             # The planned component, not a fresh plugin lookup: see the module docstring.
             clf = Registry([job.classifier]).build("classifier", cell.classifier,
                                                    classes=len(job.classes))
@@ -197,13 +206,19 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
             train_s += time.perf_counter() - t0
         with memory.track("predict"):
             t0 = time.perf_counter()
-            predicted = np.asarray(clf.predict(test))
+            if mode == "vote":  # every window of a sequence; probabilities averaged
+                proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
+                summed = np.zeros((len(split.test), proba.shape[1]))
+                np.add.at(summed, test.seq_index, proba)
+                predicted = summed.argmax(axis=1)
+            else:
+                predicted = np.asarray(clf.predict(test))
             infer_s += time.perf_counter() - t0
         indices.append(np.asarray(split.test))
-        truths.append(np.asarray(test.labels))
+        truths.append(labels[split.test])
         predictions.append(predicted)
         n_train += len(train)
-        n_test += len(test)
+        n_test += len(split.test)
     test_index = np.concatenate(indices)
     truth = np.concatenate(truths)
     predicted = np.concatenate(predictions)
@@ -225,6 +240,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         **job.identity,
         "status": OK,
         **describe_splits(splits),
+        "test_window": job.test_window,
         "classes": list(job.classes),
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,

@@ -212,6 +212,9 @@ def _check_scene(scene: Scene) -> None:
     check_scene(scene)  # every field's type, first
     get_profile(scene.profile)
     check_choice(scene.resolved_precision(), "precision", PRECISIONS)
+    from tactbench.data.windows import TEST_WINDOWS
+
+    check_choice(scene.test_window, "test window", TEST_WINDOWS)
     if parse_split(scene.split)[1] is not None and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
                          f"{scene.split!r} trains one per fold; save models with "
@@ -387,6 +390,9 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                         "dataset": dataset.name,
                         "dataset_hash": dataset_hash,
                         "split": split_spec,
+                        # the study's test window keeps the keys cells always had
+                        **({} if scene.test_window == "first"
+                           else {"test_window": scene.test_window}),
                         "test_per_class": scene.test_per_class,
                         "imaging": imaging_identity(scene, kinds[clf]),
                         "encoder": enc,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numbers
 import os
+import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Iterable
@@ -34,7 +35,8 @@ class Scene:
     classifiers: list[str] = field(default_factory=lambda: ["small-cnn-lstm"])
     lengths: list[int] = field(default_factory=lambda: [5])  # window lengths L, frames
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
-    split: str = "paper"
+    split: str = "paper"  # paper, users, or users:folds=K
+    test_window: str = "first"  # first (the study's), onset or vote: see data/windows.py
     test_per_class: int = 30
     profile: str = "quick"
     pixel_mm: float | None = None  # None: the profile's
@@ -112,6 +114,36 @@ def parse_lengths(values: Iterable[str | int]) -> list[int]:
     return sorted(out)
 
 
+def parse_seeds(values: Iterable[str | int]) -> list[int]:
+    """``[0, 1]``, ``["0-9"]``, ``["3", "5-6"]`` → seeds in the order given, each once.
+
+    At most :data:`MAX_LENGTHS` seeds; a range's size is checked before it is expanded.
+    """
+    out: dict[int, None] = {}
+    for value in values:
+        if _is_int(value):
+            start = stop = int(value)
+        elif isinstance(value, str):
+            m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(\d+)\s*)?", value)
+            if not m:
+                raise InputError(f"bad seed {_show(value)}: use a whole number (3) or a "
+                                 f"range (0-9)")
+            start = int(m.group(1))
+            stop = int(m.group(2)) if m.group(2) is not None else start
+            if stop < start:
+                raise InputError(f"bad seed range {_show(value)}: the end is below the start")
+        else:
+            raise InputError(f"bad seed {_show(value)}: use a whole number (3) or a range "
+                             f"(0-9)")
+        if stop - start + 1 + len(out) > MAX_LENGTHS:
+            raise InputError(f"too many seeds: {_show(value)} is {stop - start + 1} of them; "
+                             f"a run takes at most {MAX_LENGTHS}")
+        if abs(start) >= 2 ** 63 or abs(stop) >= 2 ** 63:
+            raise InputError(f"seed {_show(value)} is not a 64-bit integer")
+        out.update(dict.fromkeys(range(start, stop + 1)))
+    return list(out)
+
+
 _ALIASES = {"encoder": "encoders", "classifier": "classifiers", "L": "lengths",
             "seed": "seeds"}
 
@@ -119,7 +151,7 @@ _ALIASES = {"encoder": "encoders", "classifier": "classifiers", "L": "lengths",
 #: lengths, integer ≥ 1 (optional), number > 0 (optional), or a boolean.
 _KINDS: dict[str, str] = {
     "dataset": "text", "encoders": "texts", "classifiers": "texts", "lengths": "lengths",
-    "seeds": "ints", "split": "text", "test_per_class": "count", "profile": "text",
+    "seeds": "seeds", "split": "text", "test_window": "text", "test_per_class": "count", "profile": "text",
     "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
     "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
     "out": "text", "rerun": "bool", "save_models": "bool",
@@ -158,6 +190,19 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
     kind = kind.rstrip("?")
     if kind == "text":
         return _check_text(value, label)
+    if kind == "seeds":
+        if not isinstance(value, (list, tuple)):
+            value = [value]
+        if not value:
+            raise InputError(f"{label} is empty")
+        for v in value:
+            if not (_is_int(v) or (ranges and isinstance(v, str))):
+                raise InputError(f"{label} must be whole numbers or ranges such as \"0-9\", "
+                                 f"got {_show(v)} ({type(v).__name__})")
+        try:
+            return parse_seeds(value)
+        except InputError as exc:
+            raise InputError(f"{label}: {exc}") from None
     if kind in ("texts", "ints", "lengths"):
         if not isinstance(value, (list, tuple, dict)):
             value = [value]  # a single value for a list field

@@ -145,8 +145,8 @@ def test_an_out_folder_of_someone_else_is_not_overwritten(tmp_path, monkeypatch)
     (["-L", "1000"], None, "window length L = 1000 is longer than every sequence"),
     (["--pixel-mm", "0.01"], None, "the imaging operator for tactile images at 0.01 mm "
                                    "(35700×33400 px) would need about"),
-    ([], "seeds = [1.5]\n", "field 'seeds' must be whole numbers, got 1.5"),
-    ([], "seeds = [true]\n", "field 'seeds' must be whole numbers, got True"),
+    ([], "seeds = [1.5]\n", "field 'seeds' must be whole numbers or ranges such as \"0-9\", got 1.5"),
+    ([], "seeds = [true]\n", "field 'seeds' must be whole numbers or ranges such as \"0-9\", got True"),
     ([], "encoders = [1]\n", "field 'encoders' entry 1 must be text, got int 1"),
     ([], "threads = 0\n", "field 'threads' must be ≥ 1, got 0"),
     ([], "colour = 1\n", "unknown field 'colour'"),
@@ -162,3 +162,34 @@ def test_bad_options_and_scene_files_are_one_line_before_any_work(tmp_path, monk
 def test_a_json_scene_file_is_checked_too(tmp_path, monkeypatch):
     line = _refused(tmp_path, monkeypatch, [], '{"seeds": [0], "seed": 1}', "scene.json")
     assert "field 'seeds' is given twice (as 'seeds' and 'seed')" in line
+
+
+def test_seed_ranges_k_fold_users_and_test_windows_from_the_command_line(tmp_path,
+                                                                          monkeypatch):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+
+    def go(out, *extra):
+        args = ["run", "--dataset", TINY_DATASET, "--encoder", "raw", "--classifier",
+                "logreg", "-L", "2", "--pixel-mm", "10", "--threads", "1", "--out",
+                str(tmp_path / out), "--json", "--no-plots", *extra]
+        result = CliRunner().invoke(cli, args, catch_exceptions=False)
+        assert result.exit_code == 0, result.output
+        return json.loads(result.stdout)
+
+    doc = go("a", "--seed", "0-2", "--split", "users:folds=2", "--test-window", "onset")
+    assert doc["summary"][0]["seeds"] == [0, 1, 2]
+    rows = json.loads((tmp_path / "a" / "results.json").read_text())["rows"]
+    assert {(r["split"], r["folds"], r["test_window"]) for r in rows} == \
+        {("users:folds=2", 2, "onset")}
+    first = go("b", "--seed", "0")
+    same = go("c", "--seed", "0", "--test-window", "first")
+    vote = go("d", "--seed", "0", "--test-window", "vote")
+    keys = [json.loads((tmp_path / o / "results.json").read_text())["rows"][0]["key"]
+            for o in ("b", "c", "d")]
+    # the study's window keeps the key a cell had before test windows existed
+    assert keys[0] == keys[1] != keys[2]
+    assert first["summary"][0]["accuracy_mean"] == same["summary"][0]["accuracy_mean"]
+    assert vote["meta"]["computed"] == 1
+    bad = CliRunner().invoke(cli, ["run", "--split", "users:folds=1", "--out",
+                                   str(tmp_path / "e")])
+    assert bad.exit_code == 2 and "folds must be ≥ 2" in bad.output

@@ -103,3 +103,48 @@ def test_a_batch_of_windows_above_the_memory_budget_is_refused_before_it_allocat
                                               r"than the memory budget of 16\.0 MiB"):
             w.arrays()
     assert w.batch([0]).shape == (1, 1000, 64, 64)  # 15.6 MiB: within the budget
+
+
+# ----------------------------------------------------------------- test windows
+
+
+def test_onset_is_the_first_frame_reaching_a_tenth_of_the_peak():
+    from tactbench.data.windows import onset_frame
+
+    pressure = np.zeros((8, 3))
+    pressure[3] = [0.01, 0.0, 0.0]  # 2 % of the peak: noise, not contact
+    pressure[4] = [0.05, 0.05, 0.0]  # 20 %
+    pressure[6] = [0.2, 0.2, 0.1]  # the peak, 0.5
+    assert onset_frame(pressure) == 4
+    assert onset_frame(pressure, fraction=0.5) == 6
+    assert onset_frame(np.zeros((5, 3))) == 0  # no contact at all
+    with_nan = pressure.copy()
+    with_nan[1, 0] = np.nan
+    assert onset_frame(with_nan) == 4
+
+
+def test_each_test_window_mode_picks_its_frames():
+    from tactbench.data.windows import test_windows_for, training_windows_for, window_starts
+
+    seqs = [np.arange(10, dtype=np.float32)[:, None] * np.ones((1, 2), np.float32),
+            np.arange(4, dtype=np.float32)[:, None] * np.ones((1, 2), np.float32)]
+    labels = [0, 1]
+    onsets = [6, 3]
+    # the onset window moves back to end at the last frame; never before frame 0
+    assert window_starts([10, 4], 3, onsets).tolist() == [6, 1]
+    assert window_starts([10, 2], 3, [9, 1]).tolist() == [7, 0]
+    first = test_windows_for("first", seqs, labels, 3)
+    assert first.starts.tolist() == [0, 0]
+    onset = test_windows_for("onset", seqs, labels, 3, onsets)
+    assert onset.starts.tolist() == [6, 1]
+    np.testing.assert_array_equal(onset.batch(np.arange(2))[0, :, 0], [6, 7, 8])
+    vote = test_windows_for("vote", seqs, labels, 3)
+    assert vote.seq_index.tolist() == [0] * 8 + [1] * 2
+    train = training_windows_for("onset", seqs, labels, 3, onsets)
+    assert list(zip(train.seq_index.tolist(), train.starts.tolist())) == \
+        [(0, 6), (0, 7), (1, 1)]
+    assert len(training_windows_for("vote", seqs, labels, 3)) == 10
+    from tactbench.errors import InputError
+
+    with pytest.raises(InputError, match="did you mean 'onset'"):
+        test_windows_for("onsets", seqs, labels, 3, onsets)

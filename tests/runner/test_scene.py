@@ -82,8 +82,8 @@ def test_the_precision_is_in_the_cell_identity_except_float32():
 
 
 @pytest.mark.parametrize("body, match", [
-    ("seeds = [1.5]", r"field 'seeds' must be whole numbers, got 1\.5"),
-    ("seeds = [true]", "field 'seeds' must be whole numbers, got True"),
+    ("seeds = [1.5]", r"field 'seeds' must be whole numbers or ranges .*, got 1\.5"),
+    ("seeds = [true]", "field 'seeds' must be whole numbers or ranges .*, got True"),
     ("seed = 1.0", "field 'seeds' must be whole numbers"),
     ("encoders = [1]", "field 'encoders' entry 1 must be text, got int 1"),
     ("encoders = [\"raw\", [\"x\"]]", "field 'encoders' entry 2 must be text, got list"),
@@ -173,3 +173,22 @@ def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
                                                   "integer of")]:
         with pytest.raises(InputError, match=match):
             plan(Scene(dataset="no-such-dataset", **over))
+
+
+def test_seeds_take_ranges_in_files_and_on_the_command_line(tmp_path):
+    from tactbench.runner.scene import parse_seeds
+
+    assert parse_seeds(["0-3"]) == [0, 1, 2, 3]
+    assert parse_seeds([5, "0-2", 1]) == [5, 0, 1, 2]  # the order given, each once
+    assert parse_seeds(["-3"]) == [-3]
+    for bad, message in [("3-1", "the end is below the start"), ("x", "bad seed"),
+                         ("0-99999999999", "too many seeds"), (1.5, "bad seed")]:
+        with pytest.raises(InputError, match=message):
+            parse_seeds([bad])
+    scene = tmp_path / "s.toml"
+    scene.write_text('seeds = ["0-4"]\ntest_window = "onset"\nsplit = "users:folds=2"\n')
+    fields = load_scene_file(scene)
+    assert fields["seeds"] == [0, 1, 2, 3, 4] and fields["test_window"] == "onset"
+    scene.write_text('seeds = [true]\n')
+    with pytest.raises(InputError, match="field 'seeds' must be whole numbers or ranges"):
+        load_scene_file(scene)
