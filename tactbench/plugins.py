@@ -176,6 +176,7 @@ class Registry:
         spec_options.update(options)
         comp = self.get(kind, name)
         factory = comp.load()
+        spec_options = _resolve_positional(comp, factory, spec_options, spec)
         _check_options(comp, factory, spec_options)
         from tactbench.contracts import check
 
@@ -189,6 +190,34 @@ class Registry:
                 exc.args = (f"{who}: {exc.args[0]}", *exc.args[1:])
             raise
         return check(kind, obj, name=comp.name, plugin=comp.plugin)
+
+
+    def resolve(self, kind: str, spec: str) -> str:
+        """``spec`` with a bare leading value given its option's name
+        (``sklearn:SVC,C=10`` → ``sklearn:C=10,estimator=SVC``), options sorted: the one
+        spelling a cell identity records."""
+        name, options = parse_spec(spec)
+        if POSITIONAL in options:
+            comp = self.get(kind, name)
+            options = _resolve_positional(comp, comp.load(), options, spec)
+        return format_spec(name, options)
+
+
+def _resolve_positional(comp: Component, factory: Any, options: dict[str, Any],
+                        spec: str) -> dict[str, Any]:
+    """``options`` with :data:`POSITIONAL` renamed to the factory's ``positional_option``."""
+    if POSITIONAL not in options:
+        return options
+    target = getattr(factory, "positional_option", None)
+    if not isinstance(target, str):
+        raise InputError(f"{comp.kind} '{comp.name}' takes no value without a name: write "
+                         f"key=value in '{spec}'")
+    if target in options:
+        raise InputError(f"option '{target}' is given twice in '{spec}' (once without its "
+                         f"name); give it once")
+    out = {k: v for k, v in options.items() if k != POSITIONAL}
+    out[target] = options[POSITIONAL]
+    return out
 
 
 def _check_kind(kind: str) -> str:
@@ -216,12 +245,20 @@ def _check_options(comp: Component, factory: Any, options: dict[str, Any]) -> No
             )
 
 
+#: Key under which :func:`parse_spec` keeps a leading value without ``key=``
+#: (``sklearn:SVC,C=10``); the component's ``positional_option`` names what it fills.
+POSITIONAL = "_"
+
+
 def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     """Split ``"farneback:winsize=9,levels=2"`` into a name and typed options.
 
     Values become ``int``, ``float``, ``bool`` (``true``/``false``), ``None``
     (``none``) or stay strings. An option given twice is refused (naming it), rather
-    than the last one winning silently.
+    than the last one winning silently. The first item may be a bare value
+    (``sklearn:SVC,C=10``): it is kept under :data:`POSITIONAL` and given to the option
+    the component's factory names in its ``positional_option`` attribute
+    (:meth:`Registry.resolve`).
     """
     if not isinstance(spec, str):
         raise InputError(f"a component is named by text such as 'farneback:winsize=9', "
@@ -232,9 +269,12 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
         raise InputError(f"empty component name in '{spec}'")
     options: dict[str, Any] = {}
     if rest.strip():
-        for item in rest.split(","):
+        for n, item in enumerate(rest.split(",")):
             key, eq, value = item.partition("=")
             key = key.strip()
+            if n == 0 and not eq and key:  # "sklearn:SVC,C=10": the positional value
+                options[POSITIONAL] = _coerce(key)
+                continue
             if not eq or not key.isidentifier():
                 raise InputError(
                     f"bad option '{item}' in '{spec}': expected key=value, as in "

@@ -276,7 +276,7 @@ def test_parse_spec(spec, expected):
     assert parse_spec(spec) == expected
 
 
-@pytest.mark.parametrize("spec", ["", ":a=1", "x:a", "x:1a=2", "x:a=1,,b=2"])
+@pytest.mark.parametrize("spec", ["", ":a=1", "x:a,b", "x:1a=2", "x:a=1,,b=2"])
 def test_parse_spec_rejects_malformed(spec):
     with pytest.raises(ValueError):
         parse_spec(spec)
@@ -330,3 +330,18 @@ def test_hook_reference_documents_every_hook_with_its_signature():
     for name in (n for n in dir(hookspecs) if n.startswith("register_")):
         params = ", ".join(inspect.signature(getattr(hookspecs, name)).parameters)
         assert f"### `{name}({params})`" in doc, f"docs/plugins.md lacks hook {name}"
+
+
+def test_a_bare_leading_value_fills_the_components_positional_option():
+    from tactbench.plugins import POSITIONAL, load_registry, parse_spec
+
+    assert parse_spec("sklearn:SVC,C=10") == ("sklearn", {POSITIONAL: "SVC", "C": 10})
+    with pytest.raises(InputError, match="bad option 'C' in"):
+        parse_spec("sklearn:SVC,C")  # only the first item may be bare
+    registry = load_registry()
+    assert registry.resolve("classifier", "sklearn:SVC,C=10") == "sklearn:C=10,estimator=SVC"
+    assert registry.resolve("encoder", "farneback:winsize=9") == "farneback:winsize=9"
+    with pytest.raises(InputError, match="encoder 'farneback' takes no value without a name"):
+        registry.build("encoder", "farneback:9")
+    with pytest.raises(InputError, match="option 'estimator' is given twice"):
+        registry.build("classifier", "sklearn:SVC,estimator=SVC")

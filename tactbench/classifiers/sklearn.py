@@ -136,6 +136,8 @@ class SklearnClassifier(SequenceClassifier):
 
     name: ClassVar[str] = "sklearn"
     frame_rank: ClassVar[int | None] = None
+    #: ``sklearn:SVC,C=10`` means ``sklearn:estimator=SVC,C=10`` (tactbench.plugins).
+    positional_option: ClassVar[str] = "estimator"
 
     def __init__(self, estimator: str = DEFAULT_ESTIMATOR, grid: int = 3,
                  classes: int | None = None, **params: Any) -> None:

@@ -343,7 +343,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     encoders: dict[str, Any] = {}
     versions: dict[str, str] = {}
     for spec in dict.fromkeys(scene.encoders):
-        canonical, _ = _canonical(spec)
+        canonical, _ = _canonical(registry.resolve("encoder", spec))
         if canonical in encoders:
             continue
         encoder = registry.build("encoder", canonical)
@@ -352,6 +352,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     frame_ranks: dict[str, int | None] = {}  # canonical classifier spec → frame rank
     batch_sizes: dict[str, int] = {}  # canonical classifier spec → windows per batch
     for spec in dict.fromkeys(scene.classifiers):
+        spec = registry.resolve("classifier", spec)  # "sklearn:SVC" → estimator=SVC
         name, _ = parse_spec(spec)
         canonical, _ = _canonical(spec, profile_options(scene.profile, name,
                                                         registry=registry))
