@@ -17,9 +17,10 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def test_reports_are_written(tmp_path, tiny_scene, cache):
     result = run(tiny_scene(seeds=[0]), progress=False, cache=cache)
     paths = write_reports(tmp_path / "out", result.rows, meta={"command": "test"})
-    for name in ("results.json", "results.csv", "report.md", "accuracy_vs_L.png",
-                 "cost_vs_accuracy.png"):
+    for name in ("results.json", "results.csv", "report.md", "cost_vs_accuracy.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0, name
+    # one L: no figure against L
+    assert "accuracy_vs_L" not in paths and "per_class_vs_L" not in paths
     assert len(list((tmp_path / "out").glob("confusion_*.png"))) == 2
     doc = json.loads(paths["json"].read_text())
     assert len(doc["rows"]) == 2 and len(doc["summary"]) == 2
@@ -193,3 +194,198 @@ def test_a_row_with_broken_predictions_is_a_damaged_row():
                 {"indices": [0, 1], "labels": [0, 1], "predictions": [0, True]}):
         row["test_predictions"] = bad
         assert "test_predictions" in check_row(row, "k")
+
+
+# ------------------------------------------------------------ plots
+
+
+def _scored(encoder, seed, L, wrong_a, wrong_b, *, cost=1.0, classifier="logreg"):
+    """A row of 10 + 10 test sequences, ``wrong_a`` / ``wrong_b`` of them misclassified."""
+    truth = [0] * 10 + [1] * 10
+    predicted = [1] * wrong_a + [0] * (10 - wrong_a) + [0] * wrong_b + [1] * (10 - wrong_b)
+    row = _row(encoder, seed, truth, predicted, L=L, classifier=classifier)
+    row["per_class_accuracy"] = {"a": 1 - wrong_a / 10, "b": 1 - wrong_b / 10}
+    row["confusion"] = [[10 - wrong_a, wrong_a], [wrong_b, 10 - wrong_b]]
+    row["encode_ms_per_frame"] = cost
+    return row
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures write_plots closes, by name (their label), to look at what was drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = {}
+    close = plt.close
+
+    def keep(fig=None):
+        figures[fig.get_label()] = fig
+        close(fig)
+
+    monkeypatch.setattr(plt, "close", keep)
+    return figures
+
+
+def _grid(seeds=(0, 1, 2), lengths=(3, 5)):
+    rows = []
+    for seed in seeds:
+        for L in lengths:
+            rows.append(_scored("raw", seed, L, 4 - L // 3 + seed % 2, 3, cost=0.01))
+            rows.append(_scored("farneback", seed, L, 1, 2 - L // 5 + seed % 2, cost=1.3))
+    return rows
+
+
+def test_pareto_front_by_hand():
+    from tactbench.runner.reports import pareto_front
+
+    points = [(1.0, 0.8),  # 0: front
+              (2.0, 0.9),  # 1: front
+              (0.5, 0.7),  # 2: front (cheapest)
+              (3.0, 0.85),  # 3: beaten by 1 (cheaper and better)
+              (2.0, 0.9),  # 4: equal to 1: both on the front
+              (1.0, 0.6),  # 5: same cost as 0, worse
+              (float("nan"), 0.99),  # 6: no cost, never on the front
+              (4.0, 0.95),  # 7: front (best)
+              (0.7, 0.7)]  # 8: same accuracy as 2, dearer
+    assert pareto_front(points) == [2, 0, 1, 4, 7]
+    assert pareto_front([]) == []
+    assert pareto_front([(0.0, 0.5)]) == [0]
+
+
+def test_accuracy_against_l_has_ci_bands_and_the_other_figures_apply(tmp_path, drawn):
+    from tactbench.runner.planning import check_out_folder
+
+    rows = _grid()
+    paths = write_reports(tmp_path / "out", rows)
+    names = sorted(p.name for p in (tmp_path / "out").glob("*.png"))
+    assert names == ["accuracy_vs_L.png", "confusion_farneback_logreg_L3.png",
+                     "confusion_farneback_logreg_L5.png", "confusion_raw_logreg_L3.png",
+                     "confusion_raw_logreg_L5.png", "cost_vs_accuracy.png",
+                     "per_class_vs_L.png"]
+    # one line per encoder with a band that is the 95 % CI of the mean over seeds
+    ax = drawn["accuracy_vs_L"].axes[0]
+    by_enc = {s["encoder"]: s for s in summarise(rows) if s["L"] == 3}
+    bands = {}
+    for line, band in zip(ax.get_lines(), ax.collections):
+        enc = line.get_label().split(" / ")[0]
+        bands[enc] = band.get_paths()[0].vertices[:, 1]
+        assert "3 seeds, band: 95 % CI of the mean over seeds" in line.get_label()
+    assert set(bands) == {"raw", "farneback"}
+    for enc, ys in bands.items():
+        low, high = by_enc[enc]["accuracy_ci95"]
+        assert low < high and ys.min() <= 100 * low + 1e-9 and ys.max() >= 100 * high - 1e-9
+    report = paths["markdown"].read_text()
+    for name in names:
+        assert f"({name})" in report
+    assert "every line: 3 seeds, band: 95 % CI of the mean over seeds" in report
+    # per-class accuracy against L: one panel per class, a line per encoder
+    panels = [a for a in drawn["per_class_vs_L"].axes if a.get_visible()]
+    assert [a.get_title() for a in panels] == ["a", "b"]
+    raw_b = [ln for ln in panels[1].get_lines() if ln.get_label().startswith("raw")][0]
+    assert list(raw_b.get_xdata()) == [3, 5]
+    assert list(raw_b.get_ydata()) == pytest.approx([70.0, 70.0])
+    far_b = [ln for ln in panels[1].get_lines() if ln.get_label().startswith("farneback")][0]
+    assert list(far_b.get_ydata()) == pytest.approx([100 - 100 * (2 + 1 / 3) / 10,
+                                                     100 - 100 * (1 + 1 / 3) / 10])
+    # the next run into the same folder is not refused for the new figures
+    check_out_folder(tmp_path / "out")
+
+
+def test_cost_against_accuracy_draws_the_pareto_front(tmp_path, drawn):
+    rows = [_scored("raw", 0, 5, 3, 3, cost=0.0),  # free, 70 %: front
+            _scored("farneback", 0, 5, 1, 1, cost=1.3),  # 90 %: front
+            _scored("tvl1", 0, 5, 2, 2, cost=40.0),  # dearer and worse than farneback
+            _scored("dis", 0, 5, 0, 1, cost=0.5)]  # cheaper and better than farneback
+    paths = write_reports(tmp_path, rows)
+    ax = drawn["cost_vs_accuracy"].axes[0]
+    [step] = [ln for ln in ax.get_lines() if ln.get_label().startswith("Pareto front")]
+    assert list(step.get_ydata()) == [70.0, 95.0]
+    assert list(step.get_xdata()) == [1e-4, 0.5]  # a cost of 0 drawn at the axis' floor
+    assert ax.get_xscale() == "log"
+    assert "error bars: no band" in ax.get_title()  # one seed
+    report = paths["markdown"].read_text()
+    assert "the Pareto front" in report and "raw / logreg L=5 (0 ms, 70.0 %), dis / logreg " \
+        "L=5 (0.5 ms, 95.0 %)." in report
+    # with one L there is no curve against L, nor any band
+    assert not (tmp_path / "accuracy_vs_L.png").exists()
+    assert not (tmp_path / "per_class_vs_L.png").exists()
+    assert "accuracy_vs_L" not in paths and "per_class_vs_L" not in paths
+
+
+def test_one_seed_gives_lines_without_bands(tmp_path, drawn):
+    rows = _grid(seeds=(0,))
+    paths = write_reports(tmp_path, rows)
+    ax = drawn["accuracy_vs_L"].axes[0]
+    assert len(ax.get_lines()) == 2 and not ax.collections
+    assert all("1 seed, no band" in ln.get_label() for ln in ax.get_lines())
+    assert "every line: 1 seed, no band" in paths["markdown"].read_text()
+
+
+def test_the_band_falls_back_to_the_std_and_then_to_none():
+    from tactbench.runner.reports import accuracy_band, band_note
+
+    s = {"seeds": [0, 1], "accuracy_mean": 0.8, "accuracy_std": 0.1,
+         "accuracy_ci95": [0.7, 0.9]}
+    assert accuracy_band(s) == (0.7, 0.9, "95 % CI of the mean over seeds")
+    no_ci = dict(s, accuracy_ci95=None)
+    assert accuracy_band(no_ci) == pytest.approx((0.7, 0.9, "± std over seeds"))
+    one = {"seeds": [0], "accuracy_mean": 0.8, "accuracy_std": 0.0, "accuracy_ci95": None}
+    assert accuracy_band(one) is None
+    assert band_note([s, one]) == ("1–2 seeds, band: 95 % CI of the mean over seeds, "
+                                   "none where one seed")
+
+
+def test_published_points_are_drawn_and_tabled_beside_ours(tmp_path, drawn):
+    rows = _grid()
+    reference = [{"label": "raw", "L": 5, "accuracy": 0.807},
+                 {"label": "farneback", "L": 5, "accuracy": 0.891, "err": 0.02},
+                 {"label": "farneback", "L": 3, "accuracy": 0.85},
+                 {"label": "tvl1", "L": 5, "accuracy": 0.5}]
+    paths = write_reports(tmp_path, rows, reference=reference)
+    ax = drawn["accuracy_vs_L"].axes[0]
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "study (published): raw" in legend and "study (published): farneback" in legend
+    published = {c.get_label(): list(c.lines[0].get_ydata()) for c in ax.containers}
+    assert published["study (published): farneback"] == pytest.approx([85.0, 89.1])
+    report = paths["markdown"].read_text()
+    section = report.split("## Published reference points", 1)[1]
+    ours = [s for s in summarise(rows) if s["encoder"] == "farneback" and s["L"] == 5][0]
+    assert (f"| farneback | 5 | 89.1 ± 2.0 | farneback / logreg | "
+            f"{100 * ours['accuracy_mean']:.1f} ± {100 * ours['accuracy_std']:.1f} |") in section
+    assert "| tvl1 | 5 | 50.0 | - | - | - |" in section  # nothing of ours to set beside it
+    assert "study (published)" in report
+    doc = json.loads(paths["json"].read_text())
+    assert doc["reference"][1] == {"label": "farneback", "L": 5, "accuracy": 0.891,
+                                   "err": 0.02}
+    # without plots the table is still there
+    assert "## Published reference points" in write_reports(
+        tmp_path / "np", rows, plots=False, reference=reference)["markdown"].read_text()
+
+
+@pytest.mark.parametrize("point, problem", [
+    ({"label": "raw", "L": 5, "accuracy": 80.7},
+     "reference point 1 (raw): accuracy must be a fraction in [0, 1], got 80.7 "
+     "(write 0.807 for 80.7 %)"),
+    ({"label": "raw", "accuracy": 0.8}, "reference point 1 lacks L"),
+    ({"label": "raw", "L": 0, "accuracy": 0.8}, "L must be a whole number ≥ 1, got 0"),
+    ({"label": "raw", "L": 5, "accuracy": 0.8, "err": -1}, "err must be a fraction"),
+    ({"label": "raw", "L": 5, "accuracy": 0.8, "sd": 1}, "unknown field(s) sd"),
+    ("raw", "must be a mapping"),
+])
+def test_a_wrong_reference_point_is_one_line_before_any_file(tmp_path, point, problem):
+    from tactbench.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        write_reports(tmp_path / "out", _grid(seeds=(0,)), reference=[point])
+    assert problem in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_failed_cells_only_draw_nothing(tmp_path):
+    rows = [dict(_scored("raw", 0, 5, 1, 1), status="failed",
+                 error={"type": "MemoryError", "message": "x"})]
+    write_reports(tmp_path, rows, reference=[{"label": "raw", "L": 5, "accuracy": 0.8}])
+    assert list(tmp_path.glob("*.png")) == []
