@@ -158,6 +158,9 @@ ENCODER = Contract("encoder", (
            "(None: not known)", default=None),
     Member("metadata", True, "metadata() → name, version, options, channels, ranges "
            "(None: built from channels)", default=None),
+    Member("encode_vectors", True, "encode_vectors(seq (T, N) float32 in [0, 1]) → (T, C·N) "
+           "float32, the channels side by side: the encoding of taxel vectors, for "
+           "layout-free classifiers (None: the encoder needs images)", default=None),
 ))
 
 #: Classifiers: ``fit`` on windows ``(B, L, C, H, W)`` or ``(B, L, N)``, then ``predict``.

@@ -17,6 +17,14 @@ class Raw(Encoder):
     def _encode(self, seq: np.ndarray) -> np.ndarray:
         return seq[:, None].copy()
 
+    def encode_vectors(self, seq: np.ndarray) -> np.ndarray:
+        """Taxel vectors ``(T, N)`` pass through (a float32 copy)."""
+        from tactbench.errors import check_shape
+
+        seq = np.array(seq, dtype=np.float32)
+        check_shape(seq, "T N", "taxel vectors", dtype_kind="f")
+        return seq
+
 
 class FrameDiff(Encoder):
     """Pressure and its signed change from the previous frame (2 channels).
@@ -33,3 +41,12 @@ class FrameDiff(Encoder):
         out[:, 0] = seq
         np.subtract(seq, previous_frames(seq), out=out[:, 1])
         return out
+
+    def encode_vectors(self, seq: np.ndarray) -> np.ndarray:
+        """Taxel vectors ``(T, N)`` → ``(T, 2N)``: the pressures, then their change
+        from the previous sweep (the same two channels, side by side)."""
+        from tactbench.errors import check_shape
+
+        seq = np.asarray(seq, dtype=np.float32)
+        check_shape(seq, "T N", "taxel vectors", dtype_kind="f")
+        return self._encode(seq).reshape(seq.shape[0], -1)

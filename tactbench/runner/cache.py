@@ -870,23 +870,40 @@ def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
 def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
                    precision: str, chunk_bytes: int,
                    identities: dict[str, dict[str, Any]]) -> None:
-    """The taxel-vector entries: no imaging and no encoder (raw passes vectors through;
-    planning refuses any other encoder on vectors). One channel, in [0, 1]."""
+    """The taxel-vector entries: no imaging; raw passes the vectors through, an encoder
+    with ``encode_vectors`` (frame-diff) gives ``(T, C·N)`` frames, its channels side by
+    side (planning refuses any other encoder on vectors). Stored as one channel whose
+    range spans every channel's."""
     from tactbench.contracts import ENCODER
+    from tactbench.plugins import parse_spec
 
     dataset = plan_.dataset
     lengths = dataset.lengths()
     for enc, key in keys.items():
-        ranges = tuple(ENCODER.get(plan_.encoders[enc], "ranges"))[:1]
+        encoder = plan_.encoders[enc]
+        ranges = tuple(ENCODER.get(encoder, "ranges"))
+        n_channels = max(1, len(ENCODER.get(encoder, "channels")))
+        if ranges:
+            ranges = ((min(lo for lo, _ in ranges), max(hi for _, hi in ranges)),)
+        encode = None if parse_spec(enc)[0] == "raw" else ENCODER.get(encoder, "encode_vectors")
+        width = dataset.n_taxels * (1 if encode is None else n_channels)
         storage = Storage.for_channels(precision, 1, ranges)
         t0 = time.perf_counter()
-        with cache.entry(key, lengths, (dataset.n_taxels,), storage) as writer:
-            for a, b in chunk_bounds(lengths, 4 * dataset.n_taxels, chunk_bytes):
+        encode_s = 0.0
+        with cache.entry(key, lengths, (width,), storage) as writer:
+            for a, b in chunk_bounds(lengths, 4 * width, chunk_bytes):
                 for vec in dataset.vectors(range(a, b)):
+                    if encode is not None:
+                        t1 = time.perf_counter()
+                        vec = encode(vec)
+                        encode_s += time.perf_counter() - t1
+                        if vec.shape != (len(vec), width):
+                            raise ValueError(f"encoder {enc!r}: encode_vectors gave frames of "
+                                             f"{vec.shape[1:]}, not ({width},)")  # a bug
                     writer.append(vec)
             writer.meta.update({**_common_meta(plan_, enc, "vectors"),
                                 "identity": identities[key],
-                                "encode_seconds": 0.0, "encode_cpu_seconds": 0.0,
+                                "encode_seconds": encode_s, "encode_cpu_seconds": encode_s,
                                 "imaging_seconds": 0.0, "workers": 1,
                                 "wall_seconds": time.perf_counter() - t0,
                                 "peak_rss_mb": peak_rss_mb()})

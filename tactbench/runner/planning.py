@@ -247,12 +247,13 @@ def _check_scene(scene: Scene) -> None:
     check_out_folder(scene.out, models=scene.save_models)
 
 
-def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset) -> None:
-    """Refuse an (encoder, classifier) pair whose classifier cannot be fed."""
-    from tactbench.plugins import parse_spec
+def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset, *,
+                  vectors_ok: bool = False) -> None:
+    """Refuse an (encoder, classifier) pair whose classifier cannot be fed.
 
-    is_raw = parse_spec(enc)[0] == "raw"
-    if kind == "images" or is_raw:
+    ``vectors_ok``: the encoder encodes taxel vectors too (``encode_vectors``: raw,
+    frame-diff), so it can feed a taxel-vector classifier."""
+    if kind == "images" or vectors_ok:
         if kind == "images" and dataset.layout is None:
             raise InputError(f"classifier '{clf}' works on tactile images, and dataset "
                              f"'{dataset.name}' has no taxel layout to make them; use "
@@ -262,10 +263,11 @@ def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset
     if frame_rank is None:  # could take images, but there is no layout to make them
         raise InputError(f"encoder '{enc}' works on tactile images, and dataset "
                          f"'{dataset.name}' has no taxel layout to make them; classifier "
-                         f"'{clf}' can take taxel vectors with --encoder raw, or give the "
+                         f"'{clf}' can take taxel vectors with --encoder raw (or "
+                         f"frame-diff), or give the "
                          f"dataset a layout")
-    raise InputError(f"classifier '{clf}' takes taxel vectors, which only the 'raw' "
-                     f"encoder passes through; got encoder '{enc}'")
+    raise InputError(f"classifier '{clf}' takes taxel vectors, and encoder '{enc}' only "
+                     f"encodes images; use an encoder of taxel vectors (raw, frame-diff)")
 
 
 def _check_lengths(scene: Scene, dataset) -> None:
@@ -369,7 +371,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     kinds = {clf: input_kind(rank, has_layout) for clf, rank in frame_ranks.items()}
     for clf in classifier_specs:
         for enc in encoders:
-            _check_inputs(clf, enc, kinds[clf], frame_ranks[clf], dataset)
+            _check_inputs(clf, enc, kinds[clf], frame_ranks[clf], dataset,
+                          vectors_ok=ENCODER.get(encoders[enc], "encode_vectors") is not None)
     _check_lengths(scene, dataset)
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()

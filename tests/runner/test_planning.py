@@ -46,16 +46,39 @@ def test_an_image_classifier_on_a_dataset_without_layout_is_refused(tiny_scene, 
 
 def test_a_flow_encoder_without_layout_is_refused_for_an_either_classifier(
         tiny_scene, nolayout_dataset):
-    scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["frame-diff"],
+    scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["farneback"],
                        classifiers=["logreg"])
-    with pytest.raises(InputError, match="encoder 'frame-diff' works on tactile images.*"
+    with pytest.raises(InputError, match="encoder 'farneback' works on tactile images.*"
                                          "'logreg.*can take taxel vectors with --encoder raw"):
         plan(scene)
 
 
 def test_a_vector_classifier_refuses_an_image_encoder(tiny_scene):
-    with pytest.raises(InputError, match="takes taxel vectors, which only the 'raw'"):
-        plan(tiny_scene(encoders=["frame-diff"], classifiers=["taxel-lstm"]))
+    with pytest.raises(InputError, match="encoder 'farneback' only encodes images; use an "
+                                         "encoder of taxel vectors"):
+        plan(tiny_scene(encoders=["farneback"], classifiers=["taxel-lstm"]))
+
+
+def test_frame_diff_encodes_taxel_vectors_for_a_vector_classifier(tiny_scene, cache,
+                                                                 nolayout_dataset):
+    import numpy as np
+
+    from tactbench.runner import run
+    from tactbench.runner.cache import load_encoding
+
+    scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["raw", "frame-diff"],
+                       classifiers=["logreg"], lengths=[3], seeds=[0], test_per_class=2)
+    result = run(scene, progress=False, cache=cache)
+    assert [r["status"] for r in result.rows] == ["ok", "ok"]
+    entries = {e["encoder"]: e for e in cache.entries() if e.get("encoder")}
+    raw, _ = load_encoding(cache.path(entries["raw"]["key"]))
+    diff, meta = load_encoding(cache.path(entries["frame-diff"]["key"]))
+    n = raw[0].shape[1]
+    assert diff[0].shape == (raw[0].shape[0], 2 * n)
+    first, second = np.asarray(raw[0][:]), np.asarray(diff[0][:])
+    np.testing.assert_allclose(second[:, :n], first)  # the pressures, then their change
+    np.testing.assert_allclose(second[1:, n:], first[1:] - first[:-1], atol=1e-6)
+    np.testing.assert_allclose(second[0, n:], first[0])
 
 
 def test_logreg_takes_taxel_vectors_on_a_dataset_without_layout(tiny_scene, cache,
