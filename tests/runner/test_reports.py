@@ -389,3 +389,15 @@ def test_failed_cells_only_draw_nothing(tmp_path):
                  error={"type": "MemoryError", "message": "x"})]
     write_reports(tmp_path, rows, reference=[{"label": "raw", "L": 5, "accuracy": 0.8}])
     assert list(tmp_path.glob("*.png")) == []
+
+
+def test_a_line_with_one_seed_at_some_l_says_where_it_has_no_band(tmp_path, drawn):
+    rows = [r for r in _grid(seeds=(0, 1), lengths=(3, 5, 7))
+            if r["seed"] == 0 or r["L"] != 7]
+    paths = write_reports(tmp_path, rows)
+    ax = drawn["accuracy_vs_L"].axes[0]
+    assert len(ax.collections) == 2  # a band for each line, where it has one
+    for line in ax.get_lines():
+        assert line.get_label().endswith(
+            "(1–2 seeds, band: 95 % CI of the mean over seeds, none where one seed)")
+    assert "none where one seed" in paths["markdown"].read_text()
