@@ -1,0 +1,192 @@
+"""Every code example in README.md and docs/*.md runs (or parses) as written.
+
+- each ```python block runs in a fresh interpreter in an empty temporary folder (the
+  session's private TACTBENCH_CACHE); a block that truly cannot run here (a SLURM cluster,
+  CAN hardware) is marked on the line before it with ``<!-- example: not run (reason) -->``
+  and is then only compiled;
+- each ``tactbench ...`` command line of the other blocks is resolved against the click
+  application: its subcommands must exist and every option it names must be one the
+  command has, and a concrete line (no ``[...]``, ``a|b``, ``...`` or ``<...>``) must
+  parse, so a renamed command or option fails here.
+
+docs/cli.md is generated from the click application and checked by tests/test_docs.py.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import click
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DOCS = sorted([REPO / "README.md",
+               *(p for p in (REPO / "docs").glob("*.md") if p.name != "cli.md")])
+FENCE = re.compile(r"^```([\w-]*)\n(.*?)^```", re.M | re.S)
+NOT_RUN = re.compile(r"<!-- example: not run \((.*)\) -->\s*$")
+COMMAND = re.compile(r"^(?:\$ )?(?:\.venv/bin/)?tactbench(?:\s|$)")
+SYNOPSIS = re.compile(r"\[|\]|\.\.\.|<[^>]*>|(?<=\w)\|(?=\w)")
+OPTIONAL = re.compile(r"\[|\]|\.\.\.|<[^>]*>")  # dropped before a synopsis is split
+
+
+@dataclass(frozen=True)
+class Block:
+    doc: str
+    line: int
+    lang: str
+    code: str
+    not_run: str | None  # the reason given, None when the block runs
+
+    @property
+    def id(self) -> str:
+        return f"{self.doc}:{self.line}"
+
+
+def blocks(paths=DOCS, root: Path = REPO) -> list[Block]:
+    found = []
+    for path in paths:
+        text = path.read_text()
+        for m in FENCE.finditer(text):
+            before = text[:m.start()].rstrip("\n").rsplit("\n", 1)[-1]
+            marker = NOT_RUN.search(before)
+            found.append(Block(path.relative_to(root).as_posix(),
+                               text.count("\n", 0, m.start()) + 1, m.group(1), m.group(2),
+                               marker.group(1).strip() if marker else None))
+    return found
+
+
+PYTHON = [b for b in blocks() if b.lang == "python"]
+
+
+def command_lines(block: Block) -> list[str]:
+    """The ``tactbench`` command lines of a shell or text block, continuations joined."""
+    lines, out = block.code.splitlines(), []
+    i = 0
+    while i < len(lines):
+        parts = [p.strip() for p in lines[i].split(" && ")]
+        command = next((p for p in parts if COMMAND.match(p)), None)
+        i += 1
+        if command is None:
+            continue
+        command = re.sub(r"^\$ |^\.venv/bin/", "", command)
+        # a continuation: a trailing backslash, or a synopsis's next line of [options]
+        while i < len(lines) and (command.endswith("\\") or
+                                  re.match(r"\s+\[", lines[i])):
+            command = command.rstrip("\\").rstrip() + " " + lines[i].strip()
+            i += 1
+        command = re.split(r"\s+#\s", command)[0]             # a trailing comment
+        if block.doc == "README.md":                          # README: "usage   summary"
+            command = re.split(r"\s{3,}(?![\[-])", command)[0]
+        out.append(command.strip())
+    return out
+
+
+COMMANDS = [(b, c) for b in blocks() if b.lang in ("", "bash", "sh", "console", "text")
+            for c in command_lines(b)]
+
+
+def _options(command: click.Command) -> set[str]:
+    names = {"--help", "-h"}
+    for param in command.params:
+        if isinstance(param, click.Option):
+            names.update(param.opts)
+            names.update(param.secondary_opts)
+    return names
+
+
+def check_command(line: str) -> None:
+    """Fail (AssertionError or click.UsageError) unless ``line`` fits the click app."""
+    from tactbench.cli import cli
+
+    concrete = not SYNOPSIS.search(line)
+    tokens = shlex.split(OPTIONAL.sub(" ", line) if not concrete else line)
+    assert tokens[0] == "tactbench", line
+    ctx = click.Context(cli, info_name="tactbench")
+    command: click.Command = cli
+    args = tokens[1:]
+    path = ["tactbench"]
+    while isinstance(command, click.Group) and args and not args[0].startswith("-"):
+        # "ls|clear": every alternative must exist; the first one is followed
+        names = re.split(r"\|", re.sub(r"[\[\]]", "", args[0]))
+        subs = [command.get_command(ctx, n) for n in names]
+        assert all(subs), f"{line!r}: no command {' '.join(path)} {args[0]}"
+        ctx = click.Context(subs[0], info_name=names[0], parent=ctx)
+        command, args = subs[0], args[1:]
+        path.append(names[0])
+    if line.split() == path and isinstance(command, click.Group):
+        return
+    known = _options(command)
+    for token in args:
+        if token.startswith("-") and not re.match(r"-\d", token) and token != "-":
+            name = token.split("=", 1)[0]
+            assert name in known, (f"{line!r}: {' '.join(path)} has no option {name} "
+                                   f"(it has {', '.join(sorted(known))})")
+    if concrete:
+        try:
+            command.make_context(path[-1], list(args), parent=ctx.parent,
+                                 resilient_parsing=False)
+        except click.BadParameter as e:  # a file the example names need not exist here
+            if "does not exist" not in str(e):
+                raise
+
+
+@pytest.mark.parametrize("block", PYTHON, ids=lambda b: b.id)
+def test_python_example_runs(block, tmp_path):
+    code = compile(block.code, block.id, "exec")
+    assert code is not None
+    if block.not_run is not None:
+        assert len(block.not_run) > 10, f"{block.id}: say why the example is not run"
+        return
+    env = dict(os.environ, OMP_NUM_THREADS="1", MPLBACKEND="Agg",
+               PYTHONPATH=os.pathsep.join([str(REPO), *filter(None, [
+                   os.environ.get("PYTHONPATH")])]))
+    done = subprocess.run([sys.executable, "-c", block.code], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, (f"{block.id} failed:\n{done.stdout[-2000:]}\n"
+                                  f"{done.stderr[-3000:]}")
+
+
+@pytest.mark.parametrize("block, line", COMMANDS, ids=lambda x: getattr(x, "id", x))
+def test_command_line_parses(block, line):
+    check_command(line)
+
+
+def test_the_examples_are_found():
+    # the documents' examples are all seen: a change of fence syntax would hide them
+    assert len(PYTHON) >= 12
+    assert len(COMMANDS) >= 40
+    assert {b.doc for b in PYTHON} >= {"README.md", "docs/classifiers.md", "docs/data.md",
+                                       "docs/runner.md", "docs/simulator.md"}
+    reasons = [b for b in blocks() if b.not_run]
+    assert len(reasons) <= 3, [b.id for b in reasons]
+
+
+def test_the_checker_catches_what_it_should(tmp_path):
+    check_command("tactbench run --encoder raw -L 5 --seed 0 --out x")
+    check_command("tactbench list [--kind encoder] [--json]")
+    check_command("tactbench cache ls|clear")
+    check_command("tactbench encode --encoder farneback --input seq.npy --out enc.npy")
+    with pytest.raises(AssertionError, match="no option --encoders"):
+        check_command("tactbench run --encoders raw")
+    with pytest.raises(AssertionError, match="no option --colour"):
+        check_command("tactbench list [--colour]")
+    with pytest.raises(AssertionError, match="no command"):
+        check_command("tactbench cache ls|purge")
+    with pytest.raises(click.UsageError):
+        check_command("tactbench run --threads many")
+    with pytest.raises(click.UsageError):
+        check_command("tactbench run --test-window middle")
+    doc = tmp_path / "x.md"
+    doc.write_text("text\n<!-- example: not run (needs a SLURM cluster) -->\n```python\n"
+                   "import nowhere\n```\n\n```console\n$ tactbench run \\\n"
+                   "    --seed 1  # a comment\n$ python x.py\n```\n")
+    python, console = blocks([doc], root=tmp_path)
+    assert (python.lang, python.not_run, python.line) == ("python", "needs a SLURM cluster", 3)
+    assert console.not_run is None
+    assert command_lines(console) == ["tactbench run --seed 1"]
