@@ -53,3 +53,27 @@ def test_the_link_checker_catches_what_it_should(tmp_path):
     assert slug("The encoding cache") == "the-encoding-cache"
     assert slug("`tactbench run` — options") == "tactbench-run--options"
     assert "flow-error-against-run-time" in anchors(REPO / "docs" / "encoders.md")
+
+
+def test_every_test_named_in_the_reliability_table_exists():
+    """docs/reliability.md cites tests as `tests/x/test_y.py::name`, `test_y.py::name` or
+    `::name` (the file named last on that line); each must be a test in that file."""
+    text = (REPO / "docs" / "reliability.md").read_text()
+    cited, missing = 0, []
+    for line in text.splitlines():
+        current = None
+        for m in re.finditer(r"`((?:tests/)?[\w/]*test_\w+\.py)?(?:::(\w+))?(?:\[[^\]]*\])?`",
+                             line):
+            path, name = m.group(1), m.group(2)
+            if path:
+                found = [REPO / path] if path.startswith("tests/") else \
+                    sorted((REPO / "tests").rglob(Path(path).name))
+                assert len(found) == 1 and found[0].is_file(), \
+                    f"{path}: no such test file, or several (give its folder)"
+                current = found[0]
+            if name:
+                assert current is not None, f"`::{name}` names no file before it"
+                cited += 1
+                if not re.search(rf"^def {name}\(", current.read_text(), re.M):
+                    missing.append(f"{current.relative_to(REPO)}::{name}")
+    assert cited > 40 and not missing, missing
