@@ -413,7 +413,8 @@ def which_classifier(root: Path, m: dict) -> str:
         lines += figures(part, Path("which-classifier")) + [""]
     lines += ["## What it shows", ""]
     res = images["results"]
-    for clf in ("logreg", "small-cnn-lstm", "cnn-lstm", "sklearn"):
+    for clf in ("logreg", "small-cnn-lstm", "cnn-lstm", "sklearn:HistGradientBoostingClassifier",
+                "sklearn:SVC"):
         c = comp(res, "encoder", "raw", "farneback", classifier=clf)
         if c is not None:
             lines.append(f"- {clf}: {say(c, 'raw', 'farneback')}")
@@ -424,8 +425,8 @@ def which_classifier(root: Path, m: dict) -> str:
               "compared with the quick profile (and far from the study's), so their rank "
               "against the classical models may change with more training; `cnn-lstm` at "
               "32 px is not the study's 224-px network.",
-              "- The two `sklearn` rows are shown under one name in the tables' classifier "
-              "column; their full specs are in `which-classifier/images/results.json`.", ""]
+              "- Full classifier specs (every option) are in "
+              "`which-classifier/*/results.json`.", ""]
     return "\n".join(lines)
 
 
@@ -481,9 +482,9 @@ def real_data(root: Path, m: dict) -> str:
                          + ["The data were absent, so nothing was run.", ""])
     grid = ["--encoder", "raw", "--encoder", "frame-diff", "--classifier", "logreg",
             "--classifier", "taxel-lstm:epochs=1", "--classifier",
-            "sklearn:HistGradientBoostingClassifier", "--seed", "0-9", "--split", "paper"]
+            "sklearn:HistGradientBoostingClassifier", "--seed", SEEDS, "--split", "paper"]
     parts = [run_grid("real-data", "cyskin-fingers",
-                      ["--dataset", str(fingers), *grid, "-L", "5", "-L", "10"], root),
+                      ["--dataset", str(fingers), *grid, "-L", "5"], root),
              run_grid("real-data", "icub-grasp",
                       ["--dataset", f"icub-grasp:path={icub}", *grid, "-L", "4"], root)]
     lines = header("Real data: CySkin fingers and iCub grasps", "real-data",
@@ -495,7 +496,7 @@ def real_data(root: Path, m: dict) -> str:
                    "flags it; © Harold Soh 2012, free to use with the notice kept; cite Soh, "
                    "Su, Demiris, IROS 2012). No layouts and no user ids: taxel vectors, "
                    "layout-free classifiers, the study's per-class split repeated over "
-                   "10 seeds (each seed a new random stratified test set).", parts, m)
+                   f"seeds {SEEDS} (each seed a new random stratified test set).", parts, m)
     for part in parts:
         results = part["results"]
         lines += [f"## {part['part']}", "", summary_table(results), "",
@@ -503,11 +504,13 @@ def real_data(root: Path, m: dict) -> str:
                   comparison_table([c for c in results["comparisons"]
                                     if c["factor"] == "encoder"]), ""]
         lines += figures(part, Path("real-data")) + [""]
+    from tactbench.runner.reports import short_name
+
     lines += ["## What it shows", ""]
     for part in parts:
         for c in part["results"]["comparisons"]:
             if c["factor"] == "encoder":
-                lines.append(f"- {part['part']}, {c['classifier'].split(':')[0]}, "
+                lines.append(f"- {part['part']}, {short_name(c['classifier'])}, "
                              f"L = {c['L']}: {say(c, 'raw', 'frame-diff')}")
     lines += ["", "## What it does not show", "",
               "- Neither set has user ids, so every split mixes recordings of the same "

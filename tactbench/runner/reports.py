@@ -44,8 +44,15 @@ def _mean_std(values: Sequence[float]) -> tuple[float, float]:
 
 
 def short_name(spec: str) -> str:
-    """``small-cnn-lstm:epochs=4,...`` → ``small-cnn-lstm``."""
-    return spec.split(":", 1)[0]
+    """``small-cnn-lstm:epochs=4,...`` → ``small-cnn-lstm``; a component's ``estimator``
+    stays in the name (``sklearn:C=10,estimator=SVC`` → ``sklearn:SVC``), as it says what
+    the component is."""
+    name, _, rest = spec.partition(":")
+    for item in rest.split(","):
+        key, _, value = item.partition("=")
+        if key.strip() == "estimator" and value.strip():
+            return f"{name}:{value.strip()}"
+    return name
 
 
 def summarise(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -401,3 +401,11 @@ def test_a_line_with_one_seed_at_some_l_says_where_it_has_no_band(tmp_path, draw
         assert line.get_label().endswith(
             "(1–2 seeds, band: 95 % CI of the mean over seeds, none where one seed)")
     assert "none where one seed" in paths["markdown"].read_text()
+
+
+def test_short_names_keep_the_estimator():
+    from tactbench.runner.reports import short_name
+
+    assert short_name("small-cnn-lstm:epochs=4,width=16") == "small-cnn-lstm"
+    assert short_name("sklearn:C=10,estimator=SVC") == "sklearn:SVC"
+    assert short_name("logreg") == "logreg"
