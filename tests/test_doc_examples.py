@@ -190,3 +190,28 @@ def test_the_checker_catches_what_it_should(tmp_path):
     assert (python.lang, python.not_run, python.line) == ("python", "needs a SLURM cluster", 3)
     assert console.not_run is None
     assert command_lines(console) == ["tactbench run --seed 1"]
+
+
+@pytest.mark.parametrize("block", [b for b in blocks() if b.lang == "toml"],
+                         ids=lambda b: b.id)
+def test_toml_example_parses(block, tmp_path):
+    tomllib = pytest.importorskip("tomllib")  # Python ≥ 3.11
+    data = tomllib.loads(block.code)
+    if "encoders" in data:  # a scene file: its fields are checked, and it makes a Scene
+        from tactbench.runner import Scene, load_scene_file
+
+        scene_file = tmp_path / "scene.toml"
+        scene_file.write_text(block.code)
+        Scene(**load_scene_file(scene_file))
+
+
+def test_the_concepts_figure_is_made_by_its_script(tmp_path):
+    text = (REPO / "docs" / "concepts.md").read_text()
+    assert "](img/concepts-path.png)" in text and "benchmarks/concepts_figure.py" in text
+    assert (REPO / "docs" / "img" / "concepts-path.png").stat().st_size > 10_000
+    out = tmp_path / "figure.png"
+    done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "concepts_figure.py"),
+                           "--out", str(out)], env=dict(os.environ, MPLBACKEND="Agg"),
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
