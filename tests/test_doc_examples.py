@@ -61,7 +61,23 @@ def blocks(paths=DOCS, root: Path = REPO) -> list[Block]:
     return found
 
 
-PYTHON = [b for b in blocks() if b.lang == "python"]
+HEREDOC = re.compile(r"^python3? - <<'?(\w+)'?\n(.*?)\n\1$", re.M | re.S)
+
+
+def python_examples(found: list[Block]) -> list[Block]:
+    """The ```python blocks, and the Python of ``python - <<'PY'`` in shell blocks."""
+    out = []
+    for b in found:
+        if b.lang == "python":
+            out.append(b)
+        elif b.lang in ("", "bash", "sh", "console"):
+            for m in HEREDOC.finditer(b.code):
+                out.append(Block(b.doc, b.line + b.code.count("\n", 0, m.start(2)) + 1,
+                                 "python", m.group(2) + "\n", b.not_run))
+    return out
+
+
+PYTHON = python_examples(blocks())
 
 
 def command_lines(block: Block) -> list[str]:
@@ -146,8 +162,14 @@ def test_python_example_runs(block, tmp_path):
     env = dict(os.environ, OMP_NUM_THREADS="1", MPLBACKEND="Agg",
                PYTHONPATH=os.pathsep.join([str(REPO), *filter(None, [
                    os.environ.get("PYTHONPATH")])]))
-    done = subprocess.run([sys.executable, "-c", block.code], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=120)
+    if re.search(r"^def test_", block.code, re.M):  # a test file: run it under pytest
+        (tmp_path / "test_example.py").write_text(block.code)
+        argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                "test_example.py"]
+    else:
+        argv = [sys.executable, "-c", block.code]
+    done = subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=120)
     assert done.returncode == 0, (f"{block.id} failed:\n{done.stdout[-2000:]}\n"
                                   f"{done.stderr[-3000:]}")
 
@@ -155,6 +177,27 @@ def test_python_example_runs(block, tmp_path):
 @pytest.mark.parametrize("block, line", COMMANDS, ids=lambda x: getattr(x, "id", x))
 def test_command_line_parses(block, line):
     check_command(line)
+
+
+SCRIPTS = [(b, line.strip()) for b in blocks() if b.lang in ("", "bash", "sh", "console")
+           for line in b.code.splitlines() if re.match(r"\s*(\$ )?python3? benchmarks/", line)]
+
+
+def check_script_line(line: str, repo: Path = REPO) -> None:
+    """A ``python benchmarks/X.py --opt ...`` line names a script that has those options."""
+    tokens = shlex.split(re.split(r"\s+#\s", line)[0].removeprefix("$ "))
+    script = repo / tokens[1]
+    assert script.is_file(), f"{line!r}: no such script {tokens[1]}"
+    source = script.read_text()
+    for token in tokens[2:]:
+        if token.startswith("--"):
+            name = token.split("=", 1)[0]
+            assert f'"{name}"' in source, f"{line!r}: {tokens[1]} has no option {name}"
+
+
+@pytest.mark.parametrize("block, line", SCRIPTS, ids=lambda x: getattr(x, "id", x))
+def test_benchmark_command_names_real_options(block, line):
+    check_script_line(line)
 
 
 def test_the_examples_are_found():
@@ -165,6 +208,8 @@ def test_the_examples_are_found():
                                        "docs/runner.md", "docs/simulator.md"}
     reasons = [b for b in blocks() if b.not_run]
     assert len(reasons) <= 3, [b.id for b in reasons]
+    assert any(b.doc == "docs/runner.md" and "verify_entry" in b.code for b in PYTHON)
+    assert len(SCRIPTS) >= 4
 
 
 def test_the_checker_catches_what_it_should(tmp_path):
@@ -186,6 +231,10 @@ def test_the_checker_catches_what_it_should(tmp_path):
     doc.write_text("text\n<!-- example: not run (needs a SLURM cluster) -->\n```python\n"
                    "import nowhere\n```\n\n```console\n$ tactbench run \\\n"
                    "    --seed 1  # a comment\n$ python x.py\n```\n")
+    with pytest.raises(AssertionError, match="has no option --sweep"):
+        check_script_line("python benchmarks/live_latency.py --sweep 10")
+    with pytest.raises(AssertionError, match="no such script"):
+        check_script_line("python benchmarks/nowhere.py")
     python, console = blocks([doc], root=tmp_path)
     assert (python.lang, python.not_run, python.line) == ("python", "needs a SLURM cluster", 3)
     assert console.not_run is None
