@@ -123,7 +123,9 @@ def check_command(line: str) -> None:
     concrete = not SYNOPSIS.search(line)
     tokens = shlex.split(OPTIONAL.sub(" ", line) if not concrete else line)
     assert tokens[0] == "tactbench", line
-    ctx = click.Context(cli, info_name="tactbench")
+    # the group's own settings (-h): click caches a command's help option from the first
+    # context it sees, so a bare Context here would change what --help shows later
+    ctx = click.Context(cli, info_name="tactbench", **cli.context_settings)
     command: click.Command = cli
     args = tokens[1:]
     path = ["tactbench"]
