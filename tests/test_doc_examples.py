@@ -266,3 +266,15 @@ def test_the_concepts_figure_is_made_by_its_script(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-3000:]
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_runner_synopsis_lists_every_run_option():
+    from tactbench.cli import cli
+
+    synopsis = next(b for b in blocks([REPO / "docs" / "runner.md"])
+                    if b.code.startswith("tactbench run ["))
+    ctx = click.Context(cli, info_name="tactbench", **cli.context_settings)
+    run = cli.get_command(ctx, "run")
+    missing = [p.opts[0] for p in run.params if isinstance(p, click.Option)
+               and not any(re.search(rf"\[{re.escape(o)}\b", synopsis.code) for o in p.opts)]
+    assert not missing, f"docs/runner.md's synopsis lacks {missing}"
