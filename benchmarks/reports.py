@@ -442,7 +442,7 @@ def flow_error(root: Path, m: dict) -> str:
     out = root / "flow-error"
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    doc, wall_f, cmd_f = tactbench("flowbench", "--out", str(out), "--json")
+    doc, wall_f, cmd_f = tactbench("flowbench", "--out", str(out), "--repeats", "3", "--json")
     stab, wall_s, cmd_s = tactbench("stability", "--json")
     (out / "stability.json").write_text(json.dumps(stab, indent=2) + "\n")
     total = time.perf_counter() - t0
@@ -545,7 +545,7 @@ def cost(root: Path, m: dict) -> str:
           "--skip", "flowbench", "kornia", "--repeats", "3"]),
         ("training per profile",
          [sys.executable, "benchmarks/training.py", "--out", str(out / "training.json"),
-          "--skip", "quick", "--repeats", "2"]),
+          "--skip", "quick", "--repeats", "2", "--sequences", "600"]),
         ("live latency over a virtual CAN bus",
          [sys.executable, "benchmarks/live_latency.py", "--sweeps", "300", "--json",
           str(out / "live_latency.json")]),
@@ -554,8 +554,7 @@ def cost(root: Path, m: dict) -> str:
                    "the generated CySkin-like forearm (1558 taxels) and the simulator's "
                    "frames; each section is one script of `benchmarks/`, its output below "
                    "as printed.", [], m,
-                   [" ".join(Path(a).name if a == sys.executable else a for a in argv)
-                    .replace(Path(sys.executable).name, "python", 1) for _, argv in runs])
+                   [" ".join(["python", *[_rel(a) for a in argv[1:]]]) for _, argv in runs])
     total = 0.0
     for title, argv in runs:
         t0 = time.perf_counter()
