@@ -460,8 +460,27 @@ def flow_error(root: Path, m: dict) -> str:
         lines.append(f"| {r['encoder']} | {r['resolution']} | {r['epe_px']:.2f} | "
                      f"{r['angular_deg']:.1f} | {r['natural_epe_px']:.2f} | "
                      f"{r['ms_per_pair']:.2f} | {'✓' if r.get('pareto') else ''} |")
+    motions = sorted({k for r in doc["results"] for k in r.get("epe_by_motion_px", {})})
     lines += ["", "![flow error against run time](flow-error/flow_error_vs_time.png)", "",
-              "## Stability", "",
+              "Endpoint error by motion (px; `pressure` has no motion, so any flow is "
+              "error):", "",
+              "| encoder | size | " + " | ".join(motions) + " |",
+              "|---|---|" + "---|" * len(motions)]
+    for r in doc["results"]:
+        by = r.get("epe_by_motion_px", {})
+        lines.append(f"| {r['encoder']} | {r['resolution']} | "
+                     + " | ".join(f"{by[k]:.2f}" if k in by else "-" for k in motions) + " |")
+    lines.append("")
+    for size in sorted({r["resolution"] for r in doc["results"]}):
+        rows = [r for r in doc["results"] if r["resolution"] == size]
+        best = min(rows, key=lambda r: r["epe_px"])
+        fast = min(rows, key=lambda r: r["ms_per_pair"])
+        front = [r["encoder"] for r in rows if r.get("pareto")]
+        lines.append(f"- {size}: lowest endpoint error {best['encoder']} "
+                     f"({best['epe_px']:.2f} px), fastest {fast['encoder']} "
+                     f"({fast['ms_per_pair']:.2f} ms per pair); Pareto front (no encoder both "
+                     f"faster and more accurate): {', '.join(front)}.")
+    lines += ["", "## Stability", "",
               f"{stab['total'] - stab['failed']} of {stab['total']} case × encoder checks "
               "pass (finite, in range, deterministic, the documented result).", ""]
     failed = [r for r in stab["results"] if not r["passed"]]
