@@ -1,7 +1,7 @@
 """The encoders' performance goals and the flow error against run time, measured.
 
     python benchmarks/encoders.py [--out docs/encoders-benchmark.json]
-                                  [--flowbench-out docs/flowbench] [--skip SECTION ...]
+                                  [--flowbench-out docs/reports/flow-error] [--skip SECTION ...]
 
 Sections (all run by default):
 
@@ -256,7 +256,7 @@ def machine() -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="docs/encoders-benchmark.json")
-    parser.add_argument("--flowbench-out", default="docs/flowbench")
+    parser.add_argument("--flowbench-out", default="docs/reports/flow-error")
     parser.add_argument("--skip", nargs="*", default=[], choices=SECTIONS)
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args()
