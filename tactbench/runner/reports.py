@@ -427,7 +427,9 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=()) -
         "# tactbench report", "",
         f"- dataset: `{first.get('dataset', '?')}` (content hash "
         f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
-        f"- split: `{first.get('split', '?')}`; profile: `{first.get('profile', '?')}`; "
+        f"- split: `{first.get('split', '?')}`; test window: "
+        f"`{first.get('test_window', 'first')}` (the L frames each test sequence is "
+        f"classified on); profile: `{first.get('profile', '?')}`; "
         f"device: `{first.get('device', '?')}`",
         f"- cells: {len(rows)}" + (f" ({n_failed} failed, listed below)" if n_failed else "")
         + f"; command: `{meta.get('command', '')}`",

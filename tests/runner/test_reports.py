@@ -146,6 +146,7 @@ def test_a_difference_whose_interval_spans_zero_is_unresolved_in_every_output(tm
     paths = write_reports(tmp_path / "out", rows, plots=False)
     report = paths["markdown"].read_text()
     assert "## Paired comparisons" in report and "| unresolved |" in report
+    assert "test window: `first`" in report
     assert json.loads(paths["json"].read_text())["comparisons"][0]["verdict"] == "unresolved"
 
 
