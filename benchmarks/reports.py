@@ -145,7 +145,8 @@ def header(title: str, name: str, what: str, parts: list[dict], m: dict,
     for p in parts:
         t = p["timing"]
         walls.append(f"`{p['part']}` {t['wall_s'] / 60:.1f} min ({t['computed']} cells "
-                     f"computed on {t['date']})")
+                     f"computed on {t['date']}" + (f"; {t['note']}" if t.get("note") else "")
+                     + ")")
     lines = [f"# {title}", "",
              f"**Regenerate**: `python benchmarks/reports.py {name}`. It runs:", "", "```"]
     lines += cmds + ["```", ""]
