@@ -28,6 +28,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.recording import Recording, Sample
+from tactbench.datasets.folder import is_number
 from tactbench.errors import InputError, MissingFileError, check_positive_float
 
 RATE_HZ = 135.0
@@ -59,7 +60,7 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
         raise InputError(f"{path}: empty file (expected CoST rows: {', '.join(COLUMNS[:5])}, "
                          f"…, ch64)")
     first = [c.strip().lower() for c in rows[0]]
-    if first and not _is_number(first[3] if len(first) > 3 else ""):
+    if first and not is_number(first[3] if len(first) > 3 else ""):
         if first != COLUMNS:
             raise InputError(f"{path}, line 1: header must be {','.join(COLUMNS[:5])},…,ch64 "
                              f"({len(COLUMNS)} columns); got {len(first)} columns starting "
@@ -86,7 +87,7 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
         try:
             vals = np.array([float(c) for c in row[4:]], dtype=np.float64)
         except ValueError:
-            bad = next(i for i, c in enumerate(row[4:]) if not _is_number(c))
+            bad = next(i for i, c in enumerate(row[4:]) if not is_number(c))
             raise InputError(f"{path}, line {lineno}: ch{bad + 1} value {row[4 + bad]!r} is "
                              f"not a number") from None
         if not np.all(np.isfinite(vals)):
@@ -136,14 +137,6 @@ def write_cost_csv(dataset: Dataset, path: str | Path) -> None:
 
 def _fmt(v: float) -> str:
     return str(int(v)) if float(v).is_integer() else repr(v)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 class CoST:

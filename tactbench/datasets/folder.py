@@ -199,7 +199,7 @@ def _read_csv(path: Path, timestamp_column: str | int | None
     rows = [(n, [c.strip() for c in row]) for (n, _), row in
             zip(lines, csv.reader([line for _, line in lines], delimiter=delimiter))]
     header = None
-    if any(not _is_number(c) for c in rows[0][1]):
+    if any(not is_number(c) for c in rows[0][1]):
         header = rows[0][1]
         rows = rows[1:]
         if not rows:
@@ -215,7 +215,7 @@ def _read_csv(path: Path, timestamp_column: str | int | None
         try:
             out[k] = [float(c) for c in row]
         except ValueError:
-            col = next(i for i, c in enumerate(row) if not _is_number(c))
+            col = next(i for i, c in enumerate(row) if not is_number(c))
             name = header[col] if header is not None else f"column {col}"
             raise InputError(f"{path}, line {lineno}: {name} is {row[col]!r}, not a number"
                              ) from None
@@ -241,7 +241,8 @@ def _timestamp_index(column: str | int | None, header: list[str] | None, width: 
     raise InputError(f"{path}: no column {column!r} in the {where} for timestamp_column")
 
 
-def _is_number(text: str) -> bool:
+def is_number(text: str) -> bool:
+    """Whether ``text`` reads as a float (``nan`` and ``inf`` do)."""
     try:
         float(text)
     except ValueError:

@@ -5,7 +5,6 @@ original did (nothing corrupt is used silently)."""
 
 from __future__ import annotations
 
-import copy
 import json
 import struct
 import tempfile
@@ -18,6 +17,8 @@ from hypothesis import strategies as st
 
 from tactbench.classifiers.io import load_model
 from tactbench.errors import TactbenchError
+from tactbench.fuzzing import json_mutation as _json_mutation
+from tactbench.fuzzing import json_values
 from tactbench.integrity import hash_file
 from tactbench.plugins import load_registry
 
@@ -27,39 +28,11 @@ FUZZ = settings(max_examples=60, deadline=None, database=None,
                                        HealthCheck.too_slow])
 CAP_MIB = 200
 
-JSON_VALUES = st.one_of(
-    st.none(), st.booleans(), st.integers(-2**70, 2**70),
-    st.sampled_from([0, -1, 1, 2, 3, 2**63, 10**30]),
-    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8),
-    st.sampled_from(["F32", "F16", "I64", "BF16", "U8", "small-cnn-lstm", "logreg"]),
-    st.lists(st.integers(-3, 2**40), max_size=4), st.builds(lambda: [[[]]]),
-    st.dictionaries(st.text(max_size=3), st.integers(), max_size=2))
+JSON_VALUES = json_values(["F32", "F16", "I64", "BF16", "U8", "small-cnn-lstm", "logreg"])
 
 
-def _paths(doc, prefix=()):
-    """Paths to every node of a JSON document (the first 3 items of each list)."""
-    yield prefix
-    if isinstance(doc, dict):
-        for key, value in doc.items():
-            yield from _paths(value, prefix + (key,))
-    elif isinstance(doc, list):
-        for i, value in enumerate(doc[:3]):
-            yield from _paths(value, prefix + (i,))
-
-
-@st.composite
-def json_mutation(draw, doc):
-    """``doc`` with one node replaced by a JSON value, or removed."""
-    doc = copy.deepcopy(doc)
-    path = draw(st.sampled_from(list(_paths(doc))[1:]))
-    parent = doc
-    for key in path[:-1]:
-        parent = parent[key]
-    if draw(st.booleans()):
-        parent[path[-1]] = draw(JSON_VALUES)
-    else:
-        del parent[path[-1]]
-    return doc
+def json_mutation(doc):
+    return _json_mutation(doc, values=JSON_VALUES, at_most=1)
 
 
 def _split(data: bytes) -> tuple[dict, bytes]:

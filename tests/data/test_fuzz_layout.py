@@ -4,7 +4,6 @@ and are never changed by the failed read."""
 
 from __future__ import annotations
 
-import copy
 import json
 import tempfile
 from pathlib import Path
@@ -16,6 +15,8 @@ from hypothesis import strategies as st
 
 from tactbench.data.layout_io import load_layout, write_layout_csv
 from tactbench.errors import TactbenchError
+from tactbench.fuzzing import json_mutation as _json_mutation
+from tactbench.fuzzing import json_values
 from tactbench.integrity import hash_file
 
 FUZZ = settings(max_examples=80, deadline=None, database=None,
@@ -23,42 +24,11 @@ FUZZ = settings(max_examples=80, deadline=None, database=None,
                                        HealthCheck.too_slow])
 CAP_MIB = 200
 
-JSON_VALUES = st.one_of(
-    st.none(), st.booleans(), st.integers(-2**70, 2**70),
-    st.sampled_from([0, -1, 2**63, 10**30, 10**400]),
-    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8),
-    st.lists(st.one_of(st.integers(-3, 3), st.floats(), st.text(max_size=2)), max_size=4),
-    st.builds(lambda: [[[]]]), st.dictionaries(st.text(max_size=3), st.integers(), max_size=2))
+JSON_VALUES = json_values([10 ** 400])
 
 
-def _paths(doc, prefix=()):
-    """Paths to every node of a JSON document (the first 3 items of each list)."""
-    yield prefix
-    if isinstance(doc, dict):
-        for key, value in doc.items():
-            yield from _paths(value, prefix + (key,))
-    elif isinstance(doc, list):
-        for i, value in enumerate(doc[:3]):
-            yield from _paths(value, prefix + (i,))
-
-
-@st.composite
-def json_mutation(draw, doc):
-    """``doc`` with one to three nodes replaced by JSON values, or removed."""
-    doc = copy.deepcopy(doc)
-    for _ in range(draw(st.integers(1, 3))):
-        paths = list(_paths(doc))[1:]
-        if not paths:
-            break
-        path = draw(st.sampled_from(paths))
-        parent = doc
-        for key in path[:-1]:
-            parent = parent[key]
-        if draw(st.booleans()):
-            parent[path[-1]] = draw(JSON_VALUES)
-        else:
-            del parent[path[-1]]
-    return doc
+def json_mutation(doc):
+    return _json_mutation(doc, values=JSON_VALUES, at_most=3)
 
 
 def _calibration() -> dict:
