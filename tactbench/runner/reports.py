@@ -108,7 +108,8 @@ def _seed_interval(accuracies: Sequence[float]) -> list[float] | None:
     if len(vals) < 2:
         return None
     res = seed_summary(vals, confidence=CONFIDENCE)
-    return None if res.low is None else [res.low, res.high]
+    # an accuracy lies in [0, 1]; the t-interval of a mean near either end can pass it
+    return None if res.low is None else [max(0.0, res.low), min(1.0, res.high)]
 
 
 def comparisons(rows: Iterable[dict[str, Any]], *, n_resamples: int | None = None

@@ -180,6 +180,9 @@ def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
     assert f"{100 * low:.1f}–{100 * high:.1f}" in markdown_table([summary])
     one_seed = summarise([rows[0]])[0]
     assert one_seed["accuracy_ci95"] is None
+    near_one = summarise([_row("raw", s, [0, 1] * 10, [0, 1] * 10 if s else [0, 1] * 9 + [0, 0])
+                          for s in (0, 1, 2)])[0]
+    assert near_one["accuracy_ci95"][1] == 1.0  # clipped: a mean accuracy is at most 1
 
 
 def test_a_row_with_broken_predictions_is_a_damaged_row():
