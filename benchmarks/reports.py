@@ -595,7 +595,11 @@ def cost(root: Path, m: dict) -> str:
         total += wall
         text = (done.stdout + ("\n" + done.stderr if done.returncode else "")).strip()
         lines += [f"## {title}", "", f"{wall / 60:.1f} min; exit status {done.returncode}.",
-                  "", "```text", text[-6000:], "```", ""]
+                  ""]
+        if "encoders.py" in argv[1] and (out / "encoders.json").is_file():
+            lines += _encoder_tables(json.loads((out / "encoders.json").read_text()))
+        else:
+            lines += ["```text", text[-6000:], "```", ""]
     gpu = m["gpu"]
     lines += [f"Wall time of the whole report: {total / 60:.1f} min.", "",
               "## GPU", "",
@@ -636,6 +640,39 @@ def write_index(root: Path) -> None:
         mark = "" if (root / f"{name}.md").is_file() else " (not generated yet)"
         lines.append(f"- [{name}]({name}.md): {TITLES[name]}{mark}")
     (root / "README.md").write_text("\n".join(lines) + "\n")
+
+
+def _encoder_tables(d: dict) -> list[str]:
+    """benchmarks/encoders.py's JSON as tables (it prints the JSON itself)."""
+    lines = ["Farnebäck encoder against a bare `cv2.calcOpticalFlowFarneback` loop (ms per "
+             "frame pair, median; goal: ratio ≤ 1.10):", "",
+             "| size | bare | encoder | ratio (wall) | ratio (CPU) |", "|---|---|---|---|---|"]
+    for size, o in d.get("overhead", {}).items():
+        lines.append(f"| {size} | {o['bare_ms_per_pair']:.2f} | {o['encoder_ms_per_pair']:.2f} "
+                     f"| {o['ratio']:.2f} | {o.get('cpu_ratio', float('nan')):.2f} |")
+    par = {k: v for k, v in d.get("parallel", {}).items() if isinstance(v, dict)}
+    what = d.get("parallel", {}).get("sequences", "one batch of sequences")
+    lines += ["", f"Encoding {what} with 1 worker, 2 threads or 2 processes "
+              "(seconds; speed-up against 1 worker):", "",
+              "| encoder | 1 worker | 2 threads | 2 processes | speed-up, threads | "
+              "speed-up, processes |", "|---|---|---|---|---|---|"]
+    for enc, p in par.items():
+        lines.append(f"| {enc} | {p['1 worker_s']:.2f} | {p['2 threads_s']:.2f} | "
+                     f"{p['2 processes_s']:.2f} | {p['speedup_threads']:.2f}× | "
+                     f"{p['speedup_processes']:.2f}× |")
+    lines += ["", "Lucas–Kanade variants (endpoint error on flowbench's scenes, ms per pair):",
+              "", "| size | variant | EPE px | ms / pair |", "|---|---|---|---|"]
+    for size, variants in d.get("lucas_kanade", {}).items():
+        if not isinstance(variants, dict):
+            continue
+        for name, v in variants.items():
+            if not isinstance(v, dict):
+                continue
+            if "error" in v:
+                lines.append(f"| {size} | {name} | failed: {str(v['error'])[:80]} | |")
+            else:
+                lines.append(f"| {size} | {name} | {v['epe_px']:.2f} | {v['ms_per_pair']:.1f} |")
+    return lines + [""]
 
 
 REPORTS = {"study": study, "which-flow": which_flow, "which-classifier": which_classifier,
