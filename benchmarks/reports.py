@@ -464,8 +464,8 @@ def flow_error(root: Path, m: dict) -> str:
                    "translating, twisting, pushing, pulling at 0.25–8 px/frame, a pressure "
                    "change without motion; a natural image warped by a smooth flow) and the "
                    "stability suite's stiff and extreme inputs.", [], m, [cmd_f, cmd_s])
-    lines.insert(lines.index("") + 1, f"Wall time: flowbench {wall_f / 60:.1f} min, stability "
-                                      f"{wall_s / 60:.1f} min ({total / 60:.1f} min in all).")
+    lines.insert(len(lines) - 1, f"- **Wall time**: flowbench {wall_f / 60:.1f} min, "
+                                 f"stability {wall_s / 60:.1f} min ({total / 60:.1f} min in all)")
     lines += ["## Flow error against run time", "",
               "| encoder | size | endpoint error (px) | angular error (°) | natural image EPE "
               "(px) | ms per frame pair | Pareto |", "|---|---|---|---|---|---|---|"]
