@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 from tactbench.errors import BudgetError, CorruptArtefactError, InputError
 
@@ -70,6 +70,59 @@ def verify_file(path: str | Path, expected: str, *, what: str = "payload") -> No
     if got != expected:
         raise CorruptArtefactError(path, f"{what} checksum {got[:12]}… does not match the "
                                          f"recorded {str(expected)[:12]}…")
+
+
+# ------------------------------------------------------------------------ npy headers
+
+#: The longest ``.npy`` header read. numpy writes a few hundred bytes; a larger length
+#: field is damage (a flipped version byte once claimed a 630 MB header), refused before
+#: that many bytes are read.
+NPY_HEADER_MAX = 1 << 16
+
+
+def read_npy_header(fh: Any, *, max_header: int = NPY_HEADER_MAX
+                    ) -> tuple[tuple[int, ...], bool, Any]:
+    """``(shape, fortran_order, dtype)`` of the ``.npy`` array starting at ``fh``'s position,
+    leaving ``fh`` at the first byte of its data; ``fh`` may be a stream (a zip member).
+
+    Raises ``ValueError`` with a short reason for anything but a sound header: wrong magic
+    or version (1.0, 2.0 and 3.0 are read), a length field beyond ``max_header`` bytes, a
+    header cut short, anything numpy's own parser raises on it (``ValueError``,
+    ``SyntaxError``, ``tokenize.TokenError``, ...), or a shape that is not whole numbers
+    ≥ 0. Callers turn it into their own error naming the file. Object dtypes are returned
+    as they are: whether they are refused is the caller's to say.
+    """
+    import io
+
+    from numpy.lib import format as npy
+
+    start = fh.read(8)
+    if len(start) < 8 or start[:6] != b"\x93NUMPY":
+        raise ValueError("no .npy magic string")
+    major = start[6]
+    if major not in (1, 2, 3) or start[7] != 0:
+        raise ValueError(f"npy format version {major}.{start[7]} is not read")
+    length_field = fh.read(2 if major == 1 else 4)
+    if len(length_field) < (2 if major == 1 else 4):
+        raise ValueError("cut short in its header")
+    length = int.from_bytes(length_field, "little")
+    if length > max_header:
+        raise ValueError(f"a header of {length} bytes (at most {max_header})")
+    header = fh.read(length)
+    if len(header) < length:
+        raise ValueError("cut short in its header")
+    copy = io.BytesIO(start + length_field + header)
+    try:
+        npy.read_magic(copy)
+        reader = npy.read_array_header_1_0 if major == 1 else npy.read_array_header_2_0
+        shape, fortran, dtype = reader(copy, max_header_size=max(max_header, 10_000))
+    except Exception as exc:  # noqa: BLE001 - see the docstring: all mean a bad header
+        first = str(exc).splitlines()[0][:120] if str(exc) else ""
+        raise ValueError(f"{type(exc).__name__}: {first}") from None
+    if not isinstance(shape, tuple) or any(
+            not isinstance(n, int) or isinstance(n, bool) or n < 0 for n in shape):
+        raise ValueError(f"shape {shape!r}")
+    return shape, bool(fortran), dtype
 
 
 # ----------------------------------------------------------------------- memory budget

@@ -101,26 +101,23 @@ def _npy_header(src: Path):
     that a header claiming more than the file holds is refused before anything is read."""
     import math
 
-    import numpy as np
+    from tactbench.integrity import read_npy_header
 
-    fmt = np.lib.format
     try:
         with open(src, "rb") as fh:
             if fh.read(4) == b"PK\x03\x04":
                 raise InputError(f"{src}: holds several arrays (.npz); give one (T, H, W) "
                                  f".npy array")
             fh.seek(0)
-            version = fmt.read_magic(fh)
-            read = fmt.read_array_header_1_0 if version == (1, 0) else \
-                fmt.read_array_header_2_0
-            shape, _, dtype = read(fh)
+            shape, _, dtype = read_npy_header(fh)
             offset = fh.tell()
         size = src.stat().st_size
-    except InputError:
+    except InputError:  # an InputError is a ValueError too: keep its message
         raise
-    except Exception as exc:  # numpy raises ValueError and others for a bad header
-        raise InputError(f"{src}: not a readable .npy array ({type(exc).__name__}: "
-                         f"{exc})") from None
+    except ValueError as exc:
+        raise InputError(f"{src}: not a readable .npy array ({exc})") from None
+    except OSError as exc:
+        raise InputError(f"{src}: cannot read it ({exc.strerror or exc})") from None
     if dtype.hasobject:
         raise InputError(f"{src}: holds Python objects, not numbers; give a numeric "
                          f"(T, H, W) array")

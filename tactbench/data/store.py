@@ -230,7 +230,7 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
 
     from numpy.lib import format as npy
 
-    from tactbench.integrity import _human, check_budget
+    from tactbench.integrity import _human, check_budget, read_npy_header
 
     def bad(problem: str) -> InputError:
         return InputError(f"{path}: {problem}")
@@ -256,15 +256,9 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
             for key, info in infos.items():
                 with archive.open(info) as fh:
                     try:
-                        version = npy.read_magic(fh)
-                        if version not in ((1, 0), (2, 0)):
-                            raise ValueError(f"npy format version {version} is not read")
-                        read_header = (npy.read_array_header_1_0 if version == (1, 0)
-                                       else npy.read_array_header_2_0)
-                        shape, fortran, dtype = read_header(fh)
+                        shape, fortran, dtype = read_npy_header(fh)
                     except ValueError as exc:
-                        raise bad(f"member {key!r} is not a valid .npy array: "
-                                  f"{str(exc).splitlines()[0][:120]}") from None
+                        raise bad(f"member {key!r} is not a valid .npy array: {exc}") from None
                     if dtype.hasobject:
                         raise bad(f"member {key!r} holds Python objects, which would need "
                                   f"allow_pickle; refused")

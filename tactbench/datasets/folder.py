@@ -102,30 +102,17 @@ def read_array_file(path: Path, *, timestamp_column: str | int | None = None
 
 def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
     """An npy array from ``fh``, its header checked (and its size budgeted) before reading."""
-    from numpy.lib import format as npformat
-
-    from tactbench.integrity import check_budget
+    from tactbench.integrity import check_budget, read_npy_header
 
     try:
-        version = npformat.read_magic(fh)
-        if version == (1, 0):
-            shape, fortran, dtype = npformat.read_array_header_1_0(fh)
-        elif version == (2, 0):
-            shape, fortran, dtype = npformat.read_array_header_2_0(fh)
-        else:  # 3.0 (UTF-8 field names) has no public reader
-            shape, fortran, dtype = npformat._read_array_header(fh, version)
-    except Exception as exc:  # noqa: BLE001 - numpy's header parser raises many kinds
-        # (ValueError, SyntaxError, tokenize.TokenError, ...) on foreign bytes; every one
-        # means the same thing here: the file's header is not an npy header
-        raise InputError(f"{path}: {what} is not a valid .npy array "
-                         f"({type(exc).__name__}: {exc})") from None
+        shape, fortran, dtype = read_npy_header(fh)
+    except ValueError as exc:
+        raise InputError(f"{path}: {what} is not a valid .npy array ({exc})") from None
     if dtype.hasobject:
         raise InputError(f"{path}: {what} holds Python objects (a ragged array of "
                          f"recordings or frames of different sizes?), not numbers")
     if dtype.kind not in "biuf":
         raise InputError(f"{path}: {what} holds {dtype} values; expected numbers")
-    if any(not isinstance(n, int) or n < 0 for n in shape):
-        raise InputError(f"{path}: {what} is not a valid .npy array (shape {shape})")
     count = math.prod(shape)
     nbytes = count * dtype.itemsize
     check_budget(nbytes, f"reading {path} ({'×'.join(map(str, shape))} {dtype})")

@@ -576,27 +576,13 @@ def _npy_header(path: Path, data: bytes | None = None,
     :data:`NPY_HEADER_MAX`, raises :class:`CorruptArtefactError`."""
     import io
 
-    import numpy as np
+    from tactbench.integrity import read_npy_header
 
-    fmt = np.lib.format
     with (open(path, "rb") if data is None else io.BytesIO(data)) as fh:
-        start = fh.read(12)
-        # the header's length, checked before numpy reads that many bytes
-        size = int.from_bytes(start[8:10] if start[6:7] == b"\x01" else start[8:12], "little")
-        if not start.startswith(b"\x93NUMPY") or start[6:8] not in (b"\x01\x00", b"\x02\x00",
-                                                                    b"\x03\x00") \
-                or size > NPY_HEADER_MAX:
-            raise CorruptArtefactError(path, "not a valid .npy header")
-        fh.seek(0)
         try:
-            version = fmt.read_magic(fh)
-            read_header = fmt.read_array_header_1_0 if version == (1, 0) \
-                else fmt.read_array_header_2_0
-            shape, fortran, dtype = read_header(fh, max_header_size=NPY_HEADER_MAX)
-        except Exception as exc:  # noqa: BLE001 — numpy's parser raises ValueError,
-            # SyntaxError, tokenize.TokenError, ... on a damaged header: all mean that
-            raise CorruptArtefactError(path, f"not a valid .npy header "
-                                             f"({type(exc).__name__})") from None
+            shape, fortran, dtype = read_npy_header(fh, max_header=NPY_HEADER_MAX)
+        except ValueError as exc:
+            raise CorruptArtefactError(path, f"not a valid .npy header ({exc})") from None
         return tuple(shape), bool(fortran), dtype, fh.tell()
 
 
