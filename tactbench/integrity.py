@@ -125,6 +125,19 @@ def read_npy_header(fh: Any, *, max_header: int = NPY_HEADER_MAX
     return shape, bool(fortran), dtype
 
 
+def zip_read_errors() -> tuple[type[BaseException], ...]:
+    """What reading a damaged zip archive (an ``.npz``) can raise, from the standard
+    library: a bad archive or member, inflating damaged data (``zlib.error``), a header
+    cut short (``struct.error``, ``EOFError``), an unknown compression or version
+    (``NotImplementedError``), an "encrypted" flag (``RuntimeError``), the file itself."""
+    import struct
+    import zipfile
+    import zlib
+
+    return (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, struct.error, EOFError,
+            NotImplementedError, RuntimeError, OSError)
+
+
 # ----------------------------------------------------------------------- memory budget
 
 

@@ -224,25 +224,22 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
     uncompressed size) and the members' total (plus the float32 copy of ``values``)
     against the memory budget. Other members are not decompressed."""
     import math
-    import struct
     import zipfile
-    import zlib
 
     from numpy.lib import format as npy
 
-    from tactbench.integrity import _human, check_budget, read_npy_header
+    from tactbench.integrity import _human, check_budget, read_npy_header, zip_read_errors
 
     def bad(problem: str) -> InputError:
         return InputError(f"{path}: {problem}")
 
     try:
         archive = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, NotImplementedError, ValueError, EOFError,
-            struct.error) as exc:
+    except OSError as exc:  # before the others: BadZipFile is not an OSError
+        raise bad(f"cannot read the arrays: {exc}") from None
+    except (*zip_read_errors(), ValueError) as exc:
         raise bad(f"not a valid .npz file (not a zip archive, or truncated): "
                   f"{str(exc)[:80]}") from None
-    except OSError as exc:
-        raise bad(f"cannot read the arrays: {exc}") from None
     with archive:
         infos: dict[str, zipfile.ZipInfo] = {}
         for info in archive.infolist():
@@ -279,8 +276,7 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
             return arrays
         except TactbenchError:
             raise
-        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, struct.error,
-                OSError, RuntimeError) as exc:  # RuntimeError: "encrypted" flag set
+        except zip_read_errors() as exc:
             raise bad(f"cannot read the arrays (corrupt or truncated): "
                       f"{type(exc).__name__}: {str(exc)[:120]}") from None
         except ValueError as exc:  # read_array: data shorter than its header says

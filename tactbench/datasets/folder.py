@@ -133,9 +133,11 @@ def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
 
 
 def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    from tactbench.integrity import zip_read_errors
+
     try:
         zf = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+    except (*zip_read_errors(), ValueError) as exc:
         raise InputError(f"{path}: not a valid .npz file (not a zip archive: {exc})") from None
     with zf:
         members = {Path(i.filename).stem: i for i in zf.infolist()
@@ -158,10 +160,12 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.ndarray:
+    from tactbench.integrity import zip_read_errors
+
     try:
         with zf.open(info) as fh:
             return _read_npy(fh, path, info.file_size, f"member {info.filename!r}")
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError) as exc:
+    except zip_read_errors() as exc:
         raise InputError(f"{path}: member {info.filename!r} cannot be read "
                          f"(damaged .npz: {exc})") from None
 

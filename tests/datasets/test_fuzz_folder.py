@@ -31,6 +31,8 @@ def _make(root: Path) -> None:
         np.save(root / cls / "u1_0.npy", rng.integers(0, 99, (4, 3, 3)).astype(np.uint16))
         np.savez(root / cls / "u2_0.npz", values=rng.random((5, 3, 3)),
                  timestamps=np.arange(5) * 0.1)
+    # a compressed member: damage then reaches zlib
+    np.savez_compressed(root / "a" / "u3_0.npz", values=rng.random((6, 3, 3)))
     (root / "c").mkdir()
     rows = rng.integers(0, 99, (3, 9))
     (root / "c" / "u1_0.csv").write_text(
@@ -53,7 +55,7 @@ def _read(root: Path, memory_cap) -> None:
     assert _snapshot(root) == before
 
 
-FILES = ["a/u1_0.npy", "a/u2_0.npz", "b/u1_0.npy", "c/u1_0.csv"]
+FILES = ["a/u1_0.npy", "a/u2_0.npz", "a/u3_0.npz", "b/u1_0.npy", "c/u1_0.csv"]
 
 
 @FUZZ
