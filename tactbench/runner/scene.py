@@ -124,7 +124,7 @@ def parse_seeds(values: Iterable[str | int]) -> list[int]:
         if _is_int(value):
             start = stop = int(value)
         elif isinstance(value, str):
-            m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(\d+)\s*)?", value)
+            m = re.fullmatch(r"\s*(-?\d{1,20})\s*(?:-\s*(\d{1,20})\s*)?", value)
             if not m:
                 raise InputError(f"bad seed {_show(value)}: use a whole number (3) or a "
                                  f"range (0-9)")

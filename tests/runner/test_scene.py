@@ -182,7 +182,8 @@ def test_seeds_take_ranges_in_files_and_on_the_command_line(tmp_path):
     assert parse_seeds([5, "0-2", 1]) == [5, 0, 1, 2]  # the order given, each once
     assert parse_seeds(["-3"]) == [-3]
     for bad, message in [("3-1", "the end is below the start"), ("x", "bad seed"),
-                         ("0-99999999999", "too many seeds"), (1.5, "bad seed")]:
+                         ("0-99999999999", "too many seeds"), (1.5, "bad seed"),
+                         ("9" * 5000, "bad seed"), ("99999999999999999999", "not a 64-bit")]:
         with pytest.raises(InputError, match=message):
             parse_seeds([bad])
     scene = tmp_path / "s.toml"
