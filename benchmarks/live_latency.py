@@ -52,7 +52,7 @@ def train_quick_model(dataset, encoder_spec: str, length: int, pixel_mm: float, 
     options.update(epochs=1, windows_per_epoch=256)  # latency depends on size, not training
     clf = registry.build("classifier", "small-cnn-lstm", classes=len(dataset.classes), **options)
     clf.fit(train, None, seed=0, device="cpu", progress=None)
-    clf.save(out, live_metadata(dataset, encoder=encoder_spec, length=length, pixel_mm=pixel_mm))
+    clf.save(out, live_metadata(dataset, encoder=encoder_spec, L=length, pixel_mm=pixel_mm))
     return out
 
 

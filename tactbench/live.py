@@ -20,7 +20,7 @@ normalised vectors ``(L, N)`` (missing readings as 0, as in training).
 
 What a model file must carry for this (its ``metadata``, see
 :func:`tactbench.classifiers.io.live_metadata`):
-``classes``, ``encoder`` (spec), ``length`` (L), ``imaging`` (``pixel_mm``,
+``classes``, ``encoder`` (spec), ``L`` (the window length), ``imaging`` (``pixel_mm``,
 ``method``), ``layout`` (``ids``, ``positions`` in mm, ``bounds``),
 ``normalisation`` (``offset`` scalar or per taxel, ``scale``) and ``taxel_ids``
 (the order of the values the classifier was trained on).
@@ -124,7 +124,7 @@ class LiveModel:
 
     @classmethod
     def from_file(cls, path: str | Path, *, layout: Any = None, encoder: str | None = None,
-                  length: int | None = None, pixel_mm: float | None = None,
+                  L: int | None = None, pixel_mm: float | None = None,
                   registry: Any = None) -> "LiveModel":
         """Load a model file saved with :func:`~tactbench.classifiers.io.live_metadata`'s
         metadata.
@@ -139,12 +139,12 @@ class LiveModel:
 
             registry = load_registry()
         clf, meta = load_model(path, registry=registry)
-        return cls.from_parts(clf, meta, layout=layout, encoder=encoder, length=length,
+        return cls.from_parts(clf, meta, layout=layout, encoder=encoder, L=L,
                               pixel_mm=pixel_mm, registry=registry, where=str(path))
 
     @classmethod
     def from_parts(cls, clf: Any, meta: dict[str, Any], *, layout: Any = None,
-                   encoder: str | None = None, length: int | None = None,
+                   encoder: str | None = None, L: int | None = None,
                    pixel_mm: float | None = None, registry: Any = None,
                    where: str = "model") -> "LiveModel":
         """The live model of a loaded classifier and its metadata (see the module
@@ -166,10 +166,10 @@ class LiveModel:
         if outputs is not None and len(classes) != outputs:
             raise TactbenchError(f"{where}: the metadata lists {len(classes)} classes, but "
                                  f"the classifier has {outputs} outputs")
-        L = (length if length is not None else
-             (meta.get("length") or meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
+        L = (L if L is not None else
+             (meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
         if L == 0:
-            raise TactbenchError(f"{where}: window length L unknown; give --length")
+            raise TactbenchError(f"{where}: window length L unknown; give -L")
         L = check_positive_int(L, f"{where}: window length L")
         norm = _dict_field(meta, "normalisation", where)
         offset = norm.get("offset", 0.0)

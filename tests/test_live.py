@@ -93,7 +93,7 @@ def trained(tmp_path_factory):
                                        "layers=2,hidden=8,fc=16", classes=2)
     clf.fit(train, None, seed=0, device="cpu", progress=None)
     path = tmp_path_factory.mktemp("model") / "tiny.safetensors"
-    clf.save(path, live_metadata(dataset, encoder=encoder_spec, length=L, pixel_mm=px))
+    clf.save(path, live_metadata(dataset, encoder=encoder_spec, L=L, pixel_mm=px))
     return dataset, encoded, path
 
 
@@ -249,7 +249,7 @@ def test_a_vector_model_of_either_rank_runs_live(tmp_path):
     clf.fit(training_windows(vectors, dataset.labels, 3), None, seed=0, device="cpu",
             progress=None)
     path = tmp_path / "vectors.safetensors"
-    clf.save(path, live_metadata(dataset, encoder="raw", length=3, pixel_mm=5.0))
+    clf.save(path, live_metadata(dataset, encoder="raw", L=3, pixel_mm=5.0))
     model = LiveModel.from_file(path, registry=REGISTRY)
     assert not model.uses_images
     preds = [p for p in LiveClassifier(model).run(
@@ -279,7 +279,7 @@ def test_live_metadata_records_what_live_needs(trained):
 
     dataset, _, path = trained
     _, meta = load_model(path, registry=REGISTRY)
-    assert meta["classes"] == ["right", "left"] and meta["length"] == 3
+    assert meta["classes"] == ["right", "left"] and meta["L"] == 3
     assert meta["encoder"] == "frame-diff" and meta["imaging"] == {"pixel_mm": 5.0,
                                                                    "method": "linear"}
     assert meta["taxel_ids"] == dataset.taxel_ids.tolist() and meta["dataset"] == "tiny"
@@ -320,6 +320,14 @@ def test_live_command_on_a_can_log(trained, tmp_path):
     res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor", "replay", str(log),
                                    "--max-sweeps", "4"], catch_exceptions=False)
     assert res.exit_code == 0 and len(res.stdout.strip().splitlines()) == 2
+    # The window length is -L, as in `run`; the old --length is refused, naming it.
+    res = CliRunner().invoke(cli, ["live", "--model", str(path), "--sensor", "replay", str(log),
+                                   "-L", "2", "--json"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    assert doc["L"] == 2 and doc["summary"]["predictions"] == n - 1
+    res = CliRunner().invoke(cli, ["live", "--model", str(path), "--length", "2"])
+    assert res.exit_code == 2 and res.output.splitlines() == ["Error: --length is now -L"]
 
 
 def test_live_command_on_the_virtual_bus(trained):
@@ -506,8 +514,8 @@ def test_live_command_refuses_a_format_1_model(trained, tmp_path):
     ({"imaging": [5.0]}, "metadata 'imaging' must be an object, got list"),
     ({"imaging": {"pixel_mm": "5"}}, "imaging pixel_mm must be a finite number"),
     ({"imaging": {"pixel_mm": 5.0, "method": 3}}, "'imaging.method' must be a name"),
-    ({"length": "3"}, "window length L must be an integer"),
-    ({"length": -2}, "window length L must be ≥ 1"),
+    ({"L": "3"}, "window length L must be an integer"),
+    ({"L": -2}, "window length L must be ≥ 1"),
     ({"encoder": 7}, "metadata 'encoder' must be an encoder spec"),
     ({"taxel_ids": [1.5] * 64}, "'taxel_ids' must hold integer taxel ids"),
     ({"taxel_ids": "0-63"}, "'taxel_ids' must be a list of numbers"),

@@ -191,7 +191,7 @@ class SequenceClassifier:
 
     def _base_config(self) -> dict[str, Any]:
         return {"options": self.options(), "n_classes": self.n_classes,
-                "frame_shape": list(self.frame_shape or ()), "length": self.length,
+                "frame_shape": list(self.frame_shape or ()), "L": self.length,
                 "fit_report": self.fit_report}
 
 
@@ -660,7 +660,7 @@ class TorchSequenceClassifier(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("length")
+        clf.length = config.get("L")
         clf.fit_report = config.get("fit_report")
         net = clf._build_net(clf.frame_shape, clf.n_classes, pretrained=False)
         expected = net.state_dict()

@@ -245,7 +245,7 @@ class PooledLogReg(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("length")
+        clf.length = config.get("L")
         clf.fit_report = config.get("fit_report")
         need = {"weight", "bias", "feat_mean", "feat_std"}
         if set(tensors) != need:

@@ -3,10 +3,10 @@
 A model file is one safetensors file: the network's tensors, and in the
 header's metadata (key ``tactbench``) a JSON document::
 
-    {"format": "tactbench-model", "version": 2,
+    {"format": "tactbench-model", "version": 3,
      "classifier": "small-cnn-lstm",          # registry name, used to rebuild it
      "config": {"options": {...}, "n_classes": 5, "frame_shape": [3, 60, 70],
-                "length": 5, "fit_report": {...}},
+                "L": 5, "fit_report": {...}},
      "classes": ["Grasp", ...],                # or null: the class names, if given
      "cell": "3f2a…",                          # or null: the run cell that produced it
      "metadata": {...},                        # what the caller passed to save()
@@ -14,7 +14,7 @@ header's metadata (key ``tactbench``) a JSON document::
      "checksum": {"algorithm": "sha256", "digest": "…"}}
 
 What the model is (classifier, options, classes, input shape ``frame_shape`` and window
-length, producing version and cell) is recorded beside the tensors, and ``checksum``
+length ``L``, producing version and cell) is recorded beside the tensors, and ``checksum``
 is a SHA-256 over that record (every header field but ``checksum``, as canonical JSON)
 and every tensor (name, dtype, shape, bytes, in name order): a flipped bit or an
 edited header field is detected.
@@ -35,6 +35,13 @@ prediction). A rerun rebuilds them; a Python caller who trusts one reads it with
 :class:`UnverifiedModelWarning`) and saves it again to get a verified file.
 
 What ``tactbench live`` needs in ``metadata`` is built by :func:`live_metadata`.
+
+Format 3 spells the window length ``L`` (in ``config`` and in the live ``metadata``), as
+the ``-L`` option, scene files and cell identities do, and the image classifiers' option
+``normalisation`` as the datasets do. Format 2 wrote ``length`` and ``normalize``: a
+format-2 file is verified against its own checksum as written, then read as format 3
+(:func:`migrate_header`, the only translation, documented in docs/classifiers.md); it
+keeps loading unchanged on disk, and saving it again writes format 3.
 """
 
 from __future__ import annotations
@@ -50,7 +57,7 @@ from tactbench import __version__
 from tactbench.errors import CorruptArtefactError, InputError, TactbenchError
 
 FORMAT = "tactbench-model"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: The format before checksums (refused unless allow_unverified; see the module docstring).
 UNVERIFIED_VERSION = 1
 HEADER_KEY = "tactbench"
@@ -137,7 +144,7 @@ def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = N
     return dest
 
 
-def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
+def live_metadata(dataset: Any, *, encoder: str, L: int, pixel_mm: float,
                   method: str = "linear") -> dict[str, Any]:
     """The metadata to save with a model so ``tactbench live`` can use it (JSON-ready).
 
@@ -145,7 +152,7 @@ def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
     on: its ``classes``, ``taxel_ids`` (the order of the values), normalisation
     (``offset`` scalar or per taxel, ``scale``, in raw sensor units) and layout
     (:func:`tactbench.data.layout_io.layout_to_dict`, positions in mm) are recorded,
-    with the ``encoder`` spec, the window ``length`` L (frames) and the imaging
+    with the ``encoder`` spec, the window length ``L`` (frames) and the imaging
     (``pixel_mm`` in mm per pixel, ``method``). :class:`tactbench.live.LiveModel`
     reads it back.
     """
@@ -153,7 +160,7 @@ def live_metadata(dataset: Any, *, encoder: str, length: int, pixel_mm: float,
 
     offset, scale = dataset.normalisation_params()
     meta: dict[str, Any] = {
-        "classes": list(dataset.classes), "encoder": encoder, "length": int(length),
+        "classes": list(dataset.classes), "encoder": encoder, "L": int(L),
         "imaging": {"pixel_mm": float(pixel_mm), "method": method},
         "taxel_ids": [int(i) for i in dataset.taxel_ids],
         "normalisation": {"spec": dataset.normalisation.spec,
@@ -228,8 +235,9 @@ def _check_header(h: dict[str, Any], p: Path) -> None:
     shape = config.get("frame_shape")
     if not isinstance(shape, list) or not shape or not all(_is_count(s) for s in shape):
         raise bad("config.frame_shape", "a list of positive integers")
-    if config.get("length") is not None and not _is_count(config["length"]):
-        raise bad("config.length", "a positive integer or null")
+    length_key = "L" if h["version"] >= 3 else "length"
+    if config.get(length_key) is not None and not _is_count(config[length_key]):
+        raise bad(f"config.{length_key}", "a positive integer or null")
     if not isinstance(h.get("metadata", {}), dict):
         raise bad("metadata", "an object")
     classes = h.get("classes")
@@ -267,10 +275,10 @@ def _check_agreement(header: dict[str, Any], p: Path) -> None:
     if header.get("classes") is not None and meta.get("classes") is not None \
             and [str(c) for c in meta["classes"]] != header["classes"]:
         raise ModelFileError(p, "metadata 'classes' differ from the header's")
-    length = meta.get("length")
-    if length is not None and config.get("length") is not None and length != config["length"]:
-        raise ModelFileError(p, f"metadata 'length' {length!r:.20} differs from the network's "
-                                f"window length {config['length']}")
+    length = meta.get("L")
+    if length is not None and config.get("L") is not None and length != config["L"]:
+        raise ModelFileError(p, f"metadata 'L' {length!r:.20} differs from the network's "
+                                f"window length {config['L']}")
     ids = meta.get("taxel_ids")
     shape = config["frame_shape"]
     if ids is not None and len(shape) == 1 and (not isinstance(ids, list)
@@ -335,12 +343,47 @@ def load_model(path: str | os.PathLike, *, registry=None,
         warnings.warn(f"{p}: model file of format {UNVERIFIED_VERSION} has no checksum; "
                       f"read with every other check (save it again to get a verified file)",
                       UnverifiedModelWarning, stacklevel=2)
+    verified = header["version"] >= 2
+    header = migrate_header(header, cls)
     _check_agreement(header, p)
     _check_finite(tensors, p)
-    if header["version"] < 2:  # a verified config came from a network that existed
+    if not verified:  # a verified config came from a network that existed
         _restore(cls, header["config"], tensors, p, name, probe=True)
     clf = _restore(cls, header["config"], tensors, p, name)
     return clf, header.get("metadata", {})
+
+
+#: What format 3 renamed: ``config`` keys, live ``metadata`` keys, and the options of
+#: classifiers that have the new option (see the module docstring).
+RENAMED_IN_3 = {"config": {"length": "L"}, "metadata": {"length": "L"},
+                "options": {"normalize": "normalisation"}}
+
+
+def migrate_header(header: dict[str, Any], cls: Any = None) -> dict[str, Any]:
+    """A header of format 1 or 2 read as format 3 (a copy; format 3 is returned as is):
+    ``length`` becomes ``L`` in ``config`` and ``metadata``, and the option ``normalize``
+    becomes ``normalisation`` for a classifier ``cls`` whose options include it. Called
+    after the file's checksum was verified against the header as written."""
+    if header["version"] >= FORMAT_VERSION:
+        return header
+    import copy
+    from dataclasses import fields, is_dataclass
+
+    out = copy.deepcopy(header)
+    for part in ("config", "metadata"):
+        table = out.get(part)
+        if isinstance(table, dict):
+            for old, new in RENAMED_IN_3[part].items():
+                if old in table and new not in table:
+                    table[new] = table.pop(old)
+    options = out["config"].get("options")
+    known = {f.name for f in fields(cls)} if cls is not None and is_dataclass(cls) else set()
+    if isinstance(options, dict):
+        for old, new in RENAMED_IN_3["options"].items():
+            if old in options and new in known and new not in options:
+                options[new] = options.pop(old)
+    out["version"] = FORMAT_VERSION
+    return out
 
 
 def _restore(cls, config: dict[str, Any], tensors: dict[str, Any], p: Path, name: str, *,

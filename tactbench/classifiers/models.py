@@ -19,29 +19,29 @@ class ImageSequenceClassifier(TorchSequenceClassifier):
     """Image frames ``(C, H, W)``, resized to ``input_size`` and normalised."""
 
     input_size: int = 32  # frames are resized to input_size × input_size
-    normalize: str = "data"  # data (training statistics), imagenet (3 channels) or none
+    normalisation: str = "data"  # data (training statistics), imagenet (3 channels) or none
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_positive_int(self.input_size, "input_size (px)", minimum=8)
-        check_choice(self.normalize, "normalize", ["data", "imagenet", "none"])
+        check_choice(self.normalisation, "normalisation", ["data", "imagenet", "none"])
 
     def _wrap(self, encoder, frame_shape, n_classes):
         import torch
 
         from tactbench.classifiers.nets import IMAGENET_MEAN, IMAGENET_STD, SequenceNet
 
-        if self.normalize == "imagenet" and frame_shape[0] != 3:
-            raise InputError(f"normalize=imagenet needs 3 channels; frames have {frame_shape[0]}")
+        if self.normalisation == "imagenet" and frame_shape[0] != 3:
+            raise InputError(f"normalisation=imagenet needs 3 channels; frames have {frame_shape[0]}")
         net = SequenceNet(encoder, frame_shape=frame_shape, n_classes=n_classes,
                           hidden=self.hidden, fc=self.fc, dropout=self.dropout,
                           input_size=self.input_size)
-        if self.normalize == "imagenet":
+        if self.normalisation == "imagenet":
             net.normalize.set(torch.tensor(IMAGENET_MEAN), torch.tensor(IMAGENET_STD))
         return net
 
     def _set_normalization(self, net, train, seed) -> None:
-        if self.normalize == "data":  # the fixed choices were set when the net was built
+        if self.normalisation == "data":  # the fixed choices were set when the net was built
             super()._set_normalization(net, train, seed)
 
 

@@ -14,7 +14,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-#: ImageNet channel statistics (RGB), for ``normalize="imagenet"``.
+#: ImageNet channel statistics (RGB), for ``normalisation="imagenet"``.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 

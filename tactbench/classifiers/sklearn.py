@@ -325,7 +325,7 @@ class SklearnClassifier(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("length")
+        clf.length = config.get("L")
         clf.fit_report = config.get("fit_report")
         feats = tensors["features"].numpy()
         labels = tensors["labels"].numpy().astype(np.int64)

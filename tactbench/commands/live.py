@@ -35,6 +35,18 @@ def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
     return get_registry(ctx).build("sensor", name, **options)
 
 
+def _renamed(old: str, new: str):
+    """A hidden option ``old`` that refuses itself, naming ``new`` (no silent aliases)."""
+    def refuse(ctx: click.Context, param: click.Parameter, value: Any) -> None:
+        if value is not None:
+            from tactbench.errors import InputError
+
+            raise InputError(f"{old} is now {new}")
+
+    return click.option(old, hidden=True, expose_value=False, callback=refuse,
+                        help=f"Renamed: {new}.")
+
+
 def _print_prediction(pred: Any, classes: list[str]) -> None:
     """One human-readable line: time, class, confidence, runner-up, latency, marker."""
     import numpy as np
@@ -61,7 +73,8 @@ def _print_prediction(pred: Any, classes: list[str]) -> None:
 @click.option("--layout", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Layout file, when the model's metadata has none.")
 @click.option("--encoder", default=None, help="Override the model's encoder spec.")
-@click.option("--length", "length", type=int, default=None, help="Override the window length L.")
+@click.option("-L", "L", type=int, default=None, help="Override the window length L (frames).")
+@_renamed("--length", "-L")
 @click.option("--pixel-mm", type=float, default=None, help="Override the image pixel size.")
 @click.option("--warmup", type=click.Choice(["wait", "pad"]), default="wait", show_default=True,
               help="Before L sweeps: predict nothing, or pad with blank frames.")
@@ -76,7 +89,7 @@ def _print_prediction(pred: Any, classes: list[str]) -> None:
 def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str | None,
              interface: str | None, channel: str | None, bitrate: int | None,
              format_spec: str | None, layout: str | None, encoder: str | None,
-             length: int | None, pixel_mm: float | None, warmup: str, max_sweeps: int | None,
+             L: int | None, pixel_mm: float | None, warmup: str, max_sweeps: int | None,
              threads: int, jsonl: bool, as_json: bool) -> None:
     """Classify gestures live: each sweep is encoded once and the last L frames classified.
 
@@ -92,13 +105,13 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
     torch.set_num_threads(max(1, threads))
     try:
         _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
-              layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json)
+              layout, encoder, L, pixel_mm, warmup, max_sweeps, jsonl, as_json)
     finally:  # the command may run inside another program (tests, notebooks)
         torch.set_num_threads(previous_threads)
 
 
 def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
-          layout, encoder, length, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
+          layout, encoder, L, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
     from tactbench.cli import get_registry
     from tactbench.contracts import SENSOR
     from tactbench.live import LiveClassifier, LiveModel, run_summary
@@ -107,7 +120,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     registry = get_registry(ctx, warn=not quiet)
     # The model is loaded and verified (checksum, finite weights, classes against the
     # network) before the sensor is opened: a bad model never sees a sweep.
-    model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, length=length,
+    model = LiveModel.from_file(model_path, layout=layout, encoder=encoder, L=L,
                                 pixel_mm=pixel_mm, registry=registry)
     live = LiveClassifier(model, warmup=warmup)
     bus = {"interface": interface, "channel": channel, "bitrate": bitrate,
@@ -138,7 +151,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     summary = run_summary(live, latencies, sensor)
     if as_json:
         click.echo(json.dumps({"model": model_path, "classes": model.classes,
-                               "length": model.length, "encoder": model.encoder_spec,
+                               "L": model.length, "encoder": model.encoder_spec,
                                "predictions": rows, "summary": summary}, indent=2))
     elif not jsonl and latencies:
         lat = summary["latency_ms"]

@@ -21,7 +21,7 @@ from tactbench.profiles import PRECISIONS, PROFILE_NAMES
                    "[default: raw, farneback]")
 @click.option("--classifier", "classifiers", multiple=True,
               help="Classifier, repeatable, with options. [default: small-cnn-lstm]")
-@click.option("-L", "lengths", multiple=True,
+@click.option("-L", "L", multiple=True,
               help="Window length in frames, repeatable or a range: -L 5, -L 1-6. "
                    "[default: 5]")
 @click.option("--seed", "seeds", multiple=True,
@@ -54,7 +54,7 @@ from tactbench.profiles import PRECISIONS, PROFILE_NAMES
               help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
-def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, test_window,
+def run_cmd(scene_file, dataset, encoders, classifiers, L, seeds, split, test_window,
             profile,
             pixel_mm, precision, device, threads, executor, workers, scheduler, out, rerun,
             save_models, as_json, no_plots) -> None:
@@ -78,7 +78,7 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
     fields = load_scene_file(scene_file) if scene_file else {}
     given = {"dataset": dataset, "encoders": list(encoders) or None,
              "classifiers": list(classifiers) or None,
-             "lengths": parse_lengths(lengths) if lengths else None,
+             "L": parse_lengths(L) if L else None,
              "seeds": parse_seeds(seeds) if seeds else None, "split": split,
              "test_window": test_window, "profile": profile,
              "pixel_mm": pixel_mm, "precision": precision, "device": device,

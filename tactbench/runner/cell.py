@@ -75,7 +75,7 @@ def model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
     """What `tactbench live` needs to use a cell's model: classes, layout, imaging, encoder."""
     from tactbench.classifiers.io import live_metadata
 
-    return live_metadata(p.dataset, encoder=cell.encoder, length=cell.length,
+    return live_metadata(p.dataset, encoder=cell.encoder, L=cell.length,
                          pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
 
 
@@ -83,7 +83,7 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
     """What is wrong with the saved model of ``cell`` at ``path``, or None when it is
     sound: it must load (:func:`~tactbench.classifiers.io.load_model`, whose errors
     name checksum, truncation and header problems), be this cell's (its metadata's
-    ``cell``, ``encoder``, ``length``, ``classes``) and hold only finite weights."""
+    ``cell``, ``encoder``, ``L``, ``classes``) and hold only finite weights."""
     import torch
 
     from tactbench.classifiers.io import load_model, read_header
@@ -94,7 +94,7 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
         config = read_header(path).get("config", {})
     except TactbenchError as exc:  # ModelFileError is a CorruptArtefactError: a problem
         return getattr(exc, "problem", None) or str(exc)
-    want = {"cell": cell.key, "encoder": cell.encoder, "length": cell.length,
+    want = {"cell": cell.key, "encoder": cell.encoder, "L": cell.length,
             "classes": list(p.dataset.classes)}
     for field, value in want.items():
         if meta.get(field) != value:

@@ -220,9 +220,9 @@ def _check_scene(scene: Scene) -> None:
                          f"{scene.split!r} trains one per fold; save models with "
                          f"--split users or paper")
     check_choice(scene.executor, "executor", EXECUTORS)
-    if not scene.encoders or not scene.classifiers or not scene.lengths or not scene.seeds:
+    if not scene.encoders or not scene.classifiers or not scene.L or not scene.seeds:
         raise InputError("a run needs at least one encoder, classifier, L and seed")
-    bad_l = [n for n in scene.lengths if int(n) < 1]
+    bad_l = [n for n in scene.L if int(n) < 1]
     if bad_l:
         raise InputError(f"window length L must be ≥ 1, got {bad_l}")
     check_positive_int(scene.workers, "--workers")
@@ -235,7 +235,7 @@ def _check_scene(scene: Scene) -> None:
     loader_workers(None)
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
-               * len(set(scene.lengths)) * len(set(scene.seeds)))
+               * len(set(scene.L)) * len(set(scene.seeds)))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
@@ -276,7 +276,7 @@ def _check_lengths(scene: Scene, dataset) -> None:
     if not len(lengths):
         raise InputError(f"dataset '{dataset.name}' has no samples")
     longest = int(lengths.max())
-    too_long = sorted({int(n) for n in scene.lengths if int(n) > longest})
+    too_long = sorted({int(n) for n in scene.L if int(n) > longest})
     if too_long:
         shown = ", ".join(map(str, too_long[:5])) + (", …" if len(too_long) > 5 else "")
         raise InputError(f"window length L = {shown} is longer than every sequence of "
@@ -297,7 +297,7 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
 
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
     longest = int(dataset.lengths().max())
-    length = max(int(n) for n in scene.lengths)
+    length = max(int(n) for n in scene.L)
     frame_shape = {"vectors": (dataset.n_taxels,)}
     if "images" in kinds.values():
         from tactbench.data.imaging import image_shape, imager_build_bytes
@@ -387,7 +387,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     storage = storage_identity(scene.resolved_precision())
     for enc in encoders:
         for clf in classifier_specs:
-            for length in scene.lengths:
+            for length in scene.L:
                 for seed in dict.fromkeys(scene.seeds):  # a seed listed twice is one cell
                     identity = {
                         "schema": ROW_SCHEMA,

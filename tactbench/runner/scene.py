@@ -1,8 +1,10 @@
 """The run configuration (a *scene*): what to compare, on what, and how to run it.
 
 A scene file is TOML (or JSON, for a ``.json`` file) with the same fields as
-:class:`Scene`; ``encoder``, ``classifier``, ``L`` and ``seed`` are accepted for their
-plural fields, and a single value for a list field. Every field's type is checked
+:class:`Scene`; ``encoder``, ``classifier`` and ``seed`` are accepted for their plural
+fields, and a single value for a list field. The window length is ``L`` everywhere (the
+``-L`` option, this field, cell identities, model metadata); a name that changed
+(``lengths``) is refused with a line naming the new one. Every field's type is checked
 (:func:`check_fields`): ``seeds = [1.5]``, ``encoders = [1]``, an unknown field or a field
 given twice (``seed`` and ``seeds``, or a JSON key twice) is refused in one line naming
 the file and the field.
@@ -33,7 +35,7 @@ class Scene:
     dataset: str = "synthetic-forearm"
     encoders: list[str] = field(default_factory=lambda: ["raw", "farneback"])
     classifiers: list[str] = field(default_factory=lambda: ["small-cnn-lstm"])
-    lengths: list[int] = field(default_factory=lambda: [5])  # window lengths L, frames
+    L: list[int] = field(default_factory=lambda: [5])  # window lengths, frames
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     split: str = "paper"  # paper, users, or users:folds=K
     test_window: str = "first"  # first (the study's), onset or vote: see data/windows.py
@@ -144,13 +146,14 @@ def parse_seeds(values: Iterable[str | int]) -> list[int]:
     return list(out)
 
 
-_ALIASES = {"encoder": "encoders", "classifier": "classifiers", "L": "lengths",
-            "seed": "seeds"}
+_ALIASES = {"encoder": "encoders", "classifier": "classifiers", "seed": "seeds"}
+#: Field names that changed: refused with a line naming the new one (no silent aliases).
+RENAMED = {"lengths": "L"}
 
 #: What each field holds: text, optional text, list of text, list of integers, window
 #: lengths, integer ≥ 1 (optional), number > 0 (optional), or a boolean.
 _KINDS: dict[str, str] = {
-    "dataset": "text", "encoders": "texts", "classifiers": "texts", "lengths": "lengths",
+    "dataset": "text", "encoders": "texts", "classifiers": "texts", "L": "lengths",
     "seeds": "seeds", "split": "text", "test_window": "text", "test_per_class": "count", "profile": "text",
     "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
     "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
@@ -331,6 +334,8 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
     raw: dict[str, Any] = {}
     given_as: dict[str, str] = {}
     for key, value in data.items():
+        if key in RENAMED:
+            raise InputError(f"{path}: field '{key}' is now '{RENAMED[key]}'")
         name = _ALIASES.get(key, key)
         if name not in known:
             import difflib

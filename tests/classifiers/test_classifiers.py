@@ -287,15 +287,24 @@ def test_reading_per_batch_gives_the_same_model_as_the_frame_bank(monkeypatch, n
 
 def test_imagenet_and_no_normalisation():
     train, test = data_for("small-cnn-lstm", channels=3)
-    clf = build("small-cnn-lstm", normalize="imagenet")
+    clf = build("small-cnn-lstm", normalisation="imagenet")
     clf.fit(train, None, seed=0)
     assert torch.allclose(clf.net.normalize.mean.flatten(), torch.tensor([0.485, 0.456, 0.406]))
     with pytest.raises(ValueError, match="needs 3 channels"):
-        build("small-cnn-lstm", normalize="imagenet").fit(data_for("small-cnn-lstm")[0], None,
-                                                          seed=0)
-    clf = build("small-cnn-lstm", normalize="none")
+        build("small-cnn-lstm", normalisation="imagenet").fit(data_for("small-cnn-lstm")[0],
+                                                              None, seed=0)
+    clf = build("small-cnn-lstm", normalisation="none")
     clf.fit(train, None, seed=0)
     assert float(clf.net.normalize.std.min()) == 1.0
+
+
+def test_the_old_option_name_normalize_is_refused_naming_the_new_one():
+    """One spelling with the datasets' ``normalisation=``: no silent alias."""
+    from tactbench.errors import InputError
+
+    with pytest.raises(InputError, match="has no option 'normalize'; did you mean "
+                                         "'normalisation'"):
+        build("small-cnn-lstm", normalize="imagenet")
 
 
 # ----------------------------------------------------------------------------- save / load

@@ -66,7 +66,7 @@ def models(tmp_path_factory, one_torch_thread):
                 progress=None)
         windows = np.stack([s[:2] for s in seqs])
         path = clf.save(folder / f"{name}.safetensors",
-                        {"classes": ["a", "b"], "length": 2, "cell": name})
+                        {"classes": ["a", "b"], "L": 2, "cell": name})
         out[name] = (path, clf.predict_proba(windows), windows)
     return out
 

@@ -55,8 +55,8 @@ def test_live_metadata_without_a_layout():
 
     rec = Recording(np.ones((3, 2), np.float32), 0.1 * np.arange(3), [4, 9])
     dataset = Dataset("flat", [Sample(rec, 0)], ("touch",), normalisation="fixed:scale=100")
-    meta = live_metadata(dataset, encoder="raw", length=2, pixel_mm=1.5, method="nearest")
-    assert "layout" not in meta
+    meta = live_metadata(dataset, encoder="raw", L=2, pixel_mm=1.5, method="nearest")
+    assert "layout" not in meta and meta["L"] == 2
     assert meta["taxel_ids"] == [4, 9] and meta["classes"] == ["touch"]
     assert meta["imaging"] == {"pixel_mm": 1.5, "method": "nearest"}
     assert meta["normalisation"]["scale"] == 100.0
@@ -106,10 +106,10 @@ def test_the_header_records_what_the_model_is_and_a_checksum(fitted, tmp_path):
     clf, _ = fitted
     path = save_model(clf, tmp_path / "m.safetensors", {"classes": ["a", "b"], "cell": "k1"})
     h = read_header(path)
-    assert h["version"] == 2 and h["classifier"] == "logreg"
+    assert h["version"] == 3 and h["classifier"] == "logreg"
     assert h["classes"] == ["a", "b"] and h["cell"] == "k1" and h["tactbench"] == __version__
     assert h["config"]["n_classes"] == 2 and h["config"]["frame_shape"] == [5]
-    assert h["config"]["length"] == 2
+    assert h["config"]["L"] == 2
     assert h["checksum"]["algorithm"] == "sha256" and len(h["checksum"]["digest"]) == 64
     assert verify_model(path, registry=REGISTRY) is None
 
@@ -235,17 +235,60 @@ def test_options_asking_for_a_huge_network_are_refused_before_it_is_built(tmp_pa
                    registry=REGISTRY, allow_unverified=True)
 
 
+def _as_format_2(h):
+    """What save_model wrote before format 3: ``length`` for L, option ``normalize``."""
+    h["version"] = 2
+    h["config"]["length"] = h["config"].pop("L")
+    h["metadata"]["length"] = h["metadata"].pop("L")
+    if "normalisation" in h["config"]["options"]:
+        h["config"]["options"]["normalize"] = h["config"]["options"].pop("normalisation")
+
+
+def test_a_format_2_file_is_verified_as_written_then_read_as_format_3(tmp_path,
+                                                                      one_torch_thread):
+    """The one documented migration (docs/classifiers.md): the checksum covers the old
+    header; the caller sees ``L`` and ``normalisation``. An edited old header is refused."""
+    from tactbench.data.windows import training_windows
+
+    rng = np.random.default_rng(0)
+    seqs = [rng.random((3, 1, 8, 8), dtype=np.float32) + label for label in (0, 1) * 2]
+    clf = REGISTRY.build("classifier", "small-cnn-lstm:epochs=1,windows_per_epoch=0,"
+                                       "input_size=8,width=2,layers=1,hidden=4,fc=4",
+                         classes=2)
+    clf.fit(training_windows(seqs, np.array([0, 1] * 2), 2), None, seed=0, device="cpu",
+            progress=None)
+    good = save_model(clf, tmp_path / "good.safetensors", {"L": 2, "classes": ["a", "b"]})
+    old = _rewrite(good, tmp_path / "old.safetensors", header=_as_format_2)
+    h = read_header(old)
+    assert h["version"] == 2 and h["config"]["length"] == 2 and "L" not in h["config"]
+    back, meta = load_model(old, registry=REGISTRY)
+    assert meta == {"L": 2, "classes": ["a", "b"]}
+    assert back.length == 2 and back.normalisation == "data"
+    x = np.stack([s[:2] for s in seqs])
+    np.testing.assert_allclose(back.predict_proba(x), clf.predict_proba(x), atol=1e-6)
+    assert read_header(save_model(back, tmp_path / "new.safetensors", meta))["version"] == 3
+
+    def edited(h):
+        _as_format_2(h)
+        h["metadata"]["length"] = 3
+
+    _one_line_model_error(_rewrite(good, tmp_path / "e.safetensors", header=edited,
+                                   resign=False), "checksum")
+    _one_line_model_error(_rewrite(good, tmp_path / "m.safetensors", header=edited),
+                          "metadata 'L' 3 differs from the network's window length 2")
+
+
 @pytest.mark.parametrize("edit, message", [
     (lambda h: h.pop("checksum"), "has no checksum"),
     (lambda h: h["checksum"].update(algorithm="md5"), "checksum algorithm 'md5'"),
     (lambda h: h["config"].update(n_classes="2"), "'config.n_classes' must be a positive"),
     (lambda h: h["config"].update(frame_shape=[]), "'config.frame_shape' must be a list"),
-    (lambda h: h["config"].update(length=0), "'config.length' must be a positive"),
+    (lambda h: h["config"].update(L=0), "'config.L' must be a positive"),
     (lambda h: h.update(metadata=[1]), "'metadata' must be an object"),
     (lambda h: h.update(classes="ab"), "'classes' must be a list of names"),
     (lambda h: h.update(version=True), "'version' must be a positive integer"),
     (lambda h: h.update(classifier=7), "'classifier' must be a classifier name"),
-    (lambda h: h["metadata"].update(length=9), "metadata 'length' 9 differs"),
+    (lambda h: h["metadata"].update(L=9), "metadata 'L' 9 differs"),
     (lambda h: h["metadata"].update(taxel_ids=[1, 2]), "names 2 taxels, but the network "
                                                        "takes vectors of 5"),
 ])

@@ -19,7 +19,7 @@ def _extra_and_failing(tiny_scene, **over):
     # "added-logreg" and "failing" exist only in the fake registry (make_plugin_manager
     # extra=...): the workers must build them from the job, not from installed plugins
     return tiny_scene(encoders=["raw"], classifiers=["added-logreg:max_iter=20", "failing"],
-                      seeds=[0], lengths=[2, 3], **over)
+                      seeds=[0], L=[2, 3], **over)
 
 
 def test_worker_processes_use_the_planned_plugins_and_record_failures(

@@ -41,7 +41,7 @@ BASE = {
     "save_models": False,
 }
 FIELDS = [*BASE, "dataset", "out", "scheduler"]
-ALIASES = {"encoders": "encoder", "classifiers": "classifier", "lengths": "L", "L": "lengths",
+ALIASES = {"encoders": "encoder", "classifiers": "classifier", "L": "lengths",
            "seeds": "seed"}
 
 EXTREME_INTS = [0, -1, 1, 2, 7, 1000, 10**6, 2**31, 2**63 - 1, -2**63, 2**63, 10**30]

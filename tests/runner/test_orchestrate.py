@@ -101,7 +101,7 @@ def test_saved_models_work_with_live(tmp_path, tiny_scene, cache):
     (row,) = result.rows
     path = tmp_path / "out" / "models" / f"{row['key']}.safetensors"
     clf, meta = load_model(path)
-    assert meta["encoder"] == "frame-diff" and meta["length"] == 3
+    assert meta["encoder"] == "frame-diff" and meta["L"] == 3
     assert meta["classes"] == row["classes"] and "layout" in meta
     assert meta["test_accuracy"] == row["accuracy"]
     # a finished run asked for models later computes only the cells without one

@@ -12,7 +12,7 @@ from tactbench.runner.planning import input_kind
 @pytest.mark.parametrize("over, error, match", [
     ({"encoders": ["farnback"]}, UnknownComponentError, "did you mean 'farneback'"),
     ({"classifiers": ["small-cnn"]}, UnknownComponentError, "unknown classifier"),
-    ({"lengths": [0, 5]}, InputError, "L must be ≥ 1"),
+    ({"L": [0, 5]}, InputError, "L must be ≥ 1"),
     ({"encoders": ["raw:winsize=3"]}, InputError, "no option 'winsize'"),
     ({"split": "random"}, InputError, "unknown split"),
     ({"profile": "fast"}, InputError, "unknown profile 'fast'"),
@@ -67,7 +67,7 @@ def test_frame_diff_encodes_taxel_vectors_for_a_vector_classifier(tiny_scene, ca
     from tactbench.runner.cache import load_encoding
 
     scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["raw", "frame-diff"],
-                       classifiers=["logreg"], lengths=[3], seeds=[0], test_per_class=2)
+                       classifiers=["logreg"], L=[3], seeds=[0], test_per_class=2)
     result = run(scene, progress=False, cache=cache)
     assert [r["status"] for r in result.rows] == ["ok", "ok"]
     entries = {e["encoder"]: e for e in cache.entries() if e.get("encoder")}
@@ -85,7 +85,7 @@ def test_logreg_takes_taxel_vectors_on_a_dataset_without_layout(tiny_scene, cach
                                                                nolayout_dataset):
     # logreg declares frame_rank = None (either); it used to be refused here
     scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["raw"],
-                       classifiers=["logreg"], lengths=[3], seeds=[0], test_per_class=2)
+                       classifiers=["logreg"], L=[3], seeds=[0], test_per_class=2)
     p = plan(scene)
     assert list(p.input_kind.values()) == ["vectors"]
     assert p.identities[p.cells[0].key]["imaging"] == {"kind": "vectors"}
@@ -105,7 +105,7 @@ def test_logreg_on_the_real_fingers_set_without_layout(shared_data, tmp_path, ca
     from tactbench.runner import Scene
 
     scene = Scene(dataset=str(shared_data / "cyskin-fingers"), encoders=["raw"],
-                  classifiers=["logreg"], lengths=[3], seeds=[0], threads=1,
+                  classifiers=["logreg"], L=[3], seeds=[0], threads=1,
                   out=str(tmp_path / "out"))
     p = plan(scene)
     assert p.dataset.layout is None and list(p.input_kind.values()) == ["vectors"]
@@ -229,8 +229,8 @@ def test_a_window_longer_than_every_sequence_is_refused_naming_the_longest(tiny_
                                          f"than every sequence of dataset .*the longest "
                                          f"\\(sample {where}\\) has {longest} frames; "
                                          f"use L ≤ {longest}"):
-        plan(tiny_scene(encoders=["raw"], lengths=[3, longest + 1, 1000]))
-    assert plan(tiny_scene(encoders=["raw"], lengths=[longest])).cells  # the longest is fine
+        plan(tiny_scene(encoders=["raw"], L=[3, longest + 1, 1000]))
+    assert plan(tiny_scene(encoders=["raw"], L=[longest])).cells  # the longest is fine
 
 
 def test_a_tiny_pixel_size_is_refused_before_the_imaging_allocates(tiny_scene, tmp_path,
@@ -271,7 +271,7 @@ def test_a_grid_too_large_to_run_is_refused_before_it_is_expanded(tiny_scene, me
     with memory_cap(5):
         with pytest.raises(InputError, match="the grid has 40000 cells .*at most 10000"):
             plan(tiny_scene(dataset="no-such-dataset", seeds=list(range(1000)),
-                            lengths=list(range(1, 21))))
+                            L=list(range(1, 21))))
 
 
 def test_a_seed_listed_twice_is_one_cell(tiny_scene):

@@ -19,7 +19,7 @@ def test_parse_lengths():
 def test_scene_file_fields_and_typos(tmp_path):
     path = tmp_path / "scene.toml"
     path.write_text('dataset = "x"\nencoder = "raw"\nL = ["1-3"]\nseeds = [4]\n')
-    assert load_scene_file(path) == {"dataset": "x", "encoders": ["raw"], "lengths": [1, 2, 3],
+    assert load_scene_file(path) == {"dataset": "x", "encoders": ["raw"], "L": [1, 2, 3],
                                      "seeds": [4]}
     path.write_text('encoderz = ["raw"]\n')
     with pytest.raises(InputError, match="unknown field 'encoderz'; did you mean 'encoders'"):
@@ -29,6 +29,17 @@ def test_scene_file_fields_and_typos(tmp_path):
         load_scene_file(path)
     with pytest.raises(MissingFileError, match="scene file not found"):
         load_scene_file(tmp_path / "absent.toml")
+
+
+def test_the_window_length_is_L_and_the_old_field_name_is_refused_naming_it(tmp_path):
+    """One spelling: -L, the scene's field L, cell identities' "L", model metadata's "L"."""
+    assert Scene(L=[2, 3]).L == [2, 3]
+    for name, body in [("scene.toml", 'lengths = [5]\n'), ("scene.json", '{"lengths": [5]}')]:
+        path = tmp_path / name
+        path.write_text(body)
+        with pytest.raises(InputError, match=r"^.*scene\.(toml|json): field 'lengths' is "
+                                             r"now 'L'$"):
+            load_scene_file(path)
 
 
 def test_pixel_size_comes_from_the_profile_unless_given():
@@ -67,7 +78,7 @@ def test_the_precision_is_in_the_cell_identity_except_float32():
     from tactbench.runner import plan
 
     tiny = dict(dataset="synthetic-forearm:users=2,repetitions=1", encoders=["raw"],
-                classifiers=["logreg"], lengths=[3], seeds=[0], test_per_class=1,
+                classifiers=["logreg"], L=[3], seeds=[0], test_per_class=1,
                 pixel_mm=10.0)
     plans = {p: plan(Scene(**tiny, precision=p)) for p in ("float32", "float16", "uint8")}
     identities = {p: pl.identities[pl.cells[0].key] for p, pl in plans.items()}
@@ -102,9 +113,9 @@ def test_the_precision_is_in_the_cell_identity_except_float32():
     ("pixel_mm = -inf", "field 'pixel_mm' must be a finite number > 0"),
     ("rerun = 1", "field 'rerun' must be true or false, got int 1"),
     ("save_models = \"yes\"", "field 'save_models' must be true or false"),
-    ("L = [1.5]", "field 'lengths' must be whole numbers or ranges"),
-    ("L = true", "field 'lengths' must be whole numbers or ranges"),
-    ("L = \"1-3000000\"", "field 'lengths': too many window lengths: '1-3000000' is "
+    ("L = [1.5]", "field 'L' must be whole numbers or ranges"),
+    ("L = true", "field 'L' must be whole numbers or ranges"),
+    ("L = \"1-3000000\"", "field 'L': too many window lengths: '1-3000000' is "
                           "3000000 of them; a run takes at most 1000"),
     ("seeds = [9223372036854775807, -9223372036854775808]", "is not a 64-bit integer"),
     ("seed = 1\nseeds = [2]", "field 'seeds' is given twice \\(as 'seed' and 'seeds'\\)"),
@@ -122,7 +133,7 @@ def test_a_json_scene_file_is_read_and_checked_like_toml(tmp_path):
     path = tmp_path / "scene.json"
     path.write_text('{"dataset": "x", "encoder": "raw", "L": ["1-3"], "seeds": [4], '
                     '"pixel_mm": 2.5, "threads": null, "rerun": true}')
-    assert load_scene_file(path) == {"dataset": "x", "encoders": ["raw"], "lengths": [1, 2, 3],
+    assert load_scene_file(path) == {"dataset": "x", "encoders": ["raw"], "L": [1, 2, 3],
                                      "seeds": [4], "pixel_mm": 2.5, "threads": None,
                                      "rerun": True}
     for body, match in [('{"seeds": [1], "seeds": [2]}', "key 'seeds' is given twice"),
@@ -166,7 +177,7 @@ def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
 
     for over, match in [({"seeds": [1.5]}, "scene field 'seeds' must be whole numbers"),
                         ({"encoders": [1]}, "scene field 'encoders' entry 1 must be text"),
-                        ({"lengths": [True]}, "scene field 'lengths' must be whole numbers"),
+                        ({"L": [True]}, "scene field 'L' must be whole numbers"),
                         ({"rerun": "no"}, "scene field 'rerun' must be true or false"),
                         ({"seeds": [10 ** 5000]}, "an integer of 16610 bits is not a 64-bit"),
                         ({"workers": 10 ** 5000}, "'workers' must be at most 1024, got an "
