@@ -76,8 +76,8 @@ class Scene:
         return max(1, (os.cpu_count() or 1) // max(1, self.workers))
 
 
-#: At most this many window lengths in one run: a range of more (``-L 1-3000000``) is
-#: refused before it is expanded.
+#: At most this many window lengths, or seeds, in one run: a range of more
+#: (``-L 1-3000000``) is refused before it is expanded.
 MAX_LENGTHS = 1000
 #: At most this many workers or torch threads (more is a typo, and would start that many).
 MAX_WORKERS = 1024
@@ -86,72 +86,64 @@ MAX_TEXT = 4096
 #: A scene file is a few lines; a larger file is refused before it is read.
 MAX_SCENE_FILE_BYTES = 1 << 20
 
-
-def parse_lengths(values: Iterable[str | int]) -> list[int]:
-    """``["5"]``, ``["1-6"]``, ``["2", "4-5"]`` → sorted unique window lengths.
-
-    At most :data:`MAX_LENGTHS` lengths; a range's size is checked before it is expanded.
-    """
-    out: set[int] = set()
-    for value in values:
-        if isinstance(value, bool) or not isinstance(value, (int, str)):
-            raise InputError(f"bad window length {_show(value)}: use a number (5) or a "
-                             f"range (1-6)")
-        text = str(value).strip()
-        try:
-            if "-" in text.lstrip("-"):
-                lo, hi = text.split("-", 1)
-                start, stop = int(lo), int(hi)
-                if stop < start:
-                    raise ValueError
-            else:
-                start = stop = int(text)
-        except ValueError:
-            raise InputError(f"bad window length {_show(value)}: use a number (5) or a "
-                             f"range (1-6)") from None
-        if stop - start + 1 + len(out) > MAX_LENGTHS:
-            raise InputError(f"too many window lengths: {_show(value)} is {stop - start + 1} "
-                             f"of them; a run takes at most {MAX_LENGTHS}")
-        out.update(range(start, stop + 1))
-    return sorted(out)
+#: "N" or "A-B" (both ends included), spaces allowed around the numbers; at most 20
+#: digits each, so that a number of thousands of digits is refused before ``int()``.
+_NUMBER_OR_RANGE = re.compile(r"\s*(-?\d{1,20})\s*(?:-\s*(-?\d{1,20})\s*)?")
 
 
-def parse_seeds(values: Iterable[str | int]) -> list[int]:
-    """``[0, 1]``, ``["0-9"]``, ``["3", "5-6"]`` → seeds in the order given, each once.
+def parse_numbers(values: Iterable[str | int], what: str, example: str) -> list[int]:
+    """The one reader of the "N or A-B" syntax of ``-L`` and ``--seed`` (and of the scene
+    file's ``L`` and ``seeds``): ``[5]``, ``["5"]``, ``["1-6"]``, ``["3", "5-6"]`` → the
+    numbers in the order given, each once.
 
-    At most :data:`MAX_LENGTHS` seeds; a range's size is checked before it is expanded.
+    A value is a whole number (an ``int``, not a ``bool``, or its text) or a range
+    ``"A-B"`` with ``A ≤ B``, both ends included; every number fits in 64 bits; all of
+    them together are at most :data:`MAX_LENGTHS`, a range's size checked before it is
+    expanded. ``what`` names a value in the messages (``"seed"``), ``example`` is a range
+    to show (``"0-9"``). Raises :class:`InputError` in one line naming the value.
     """
     out: dict[int, None] = {}
     for value in values:
+        m = _NUMBER_OR_RANGE.fullmatch(value) if isinstance(value, str) else None
         if _is_int(value):
             start = stop = int(value)
-        elif isinstance(value, str):
-            m = re.fullmatch(r"\s*(-?\d{1,20})\s*(?:-\s*(\d{1,20})\s*)?", value)
-            if not m:
-                raise InputError(f"bad seed {_show(value)}: use a whole number (3) or a "
-                                 f"range (0-9)")
+        elif m is not None:
             start = int(m.group(1))
             stop = int(m.group(2)) if m.group(2) is not None else start
-            if stop < start:
-                raise InputError(f"bad seed range {_show(value)}: the end is below the start")
         else:
-            raise InputError(f"bad seed {_show(value)}: use a whole number (3) or a range "
-                             f"(0-9)")
-        if stop - start + 1 + len(out) > MAX_LENGTHS:
-            raise InputError(f"too many seeds: {_show(value)} is {stop - start + 1} of them; "
-                             f"a run takes at most {MAX_LENGTHS}")
+            raise InputError(f"bad {what} {_show(value)}: use a whole number or a range "
+                             f"such as {example}")
+        if stop < start:
+            raise InputError(f"bad {what} range {_show(value)}: the end is below the start")
         if abs(start) >= 2 ** 63 or abs(stop) >= 2 ** 63:
-            raise InputError(f"seed {_show(value)} is not a 64-bit integer")
+            raise InputError(f"{what} {_show(value)} is not a 64-bit integer")
+        if stop - start + 1 + len(out) > MAX_LENGTHS:
+            raise InputError(f"too many {what}s: {_show(value)} is {stop - start + 1} of "
+                             f"them; a run takes at most {MAX_LENGTHS}")
         out.update(dict.fromkeys(range(start, stop + 1)))
     return list(out)
+
+
+def parse_lengths(values: Iterable[str | int]) -> list[int]:
+    """Window lengths (:func:`parse_numbers`), sorted: a grid's L are a set, shown in order.
+
+    ``["1-3", "6", "2"]`` → ``[1, 2, 3, 6]``.
+    """
+    return sorted(parse_numbers(values, "window length", "1-6"))
+
+
+def parse_seeds(values: Iterable[str | int]) -> list[int]:
+    """Seeds (:func:`parse_numbers`) in the order given: ``[5, "0-2", 1]`` → ``[5, 0, 1, 2]``."""
+    return parse_numbers(values, "seed", "0-9")
 
 
 _ALIASES = {"encoder": "encoders", "classifier": "classifiers", "seed": "seeds"}
 #: Field names that changed: refused with a line naming the new one (no silent aliases).
 RENAMED = {"lengths": "L"}
 
-#: What each field holds: text, optional text, list of text, list of integers, window
-#: lengths, integer ≥ 1 (optional), number > 0 (optional), or a boolean.
+#: What each field holds: text, optional text, list of text, window lengths or seeds
+#: ("N or A-B", :func:`parse_numbers`), integer ≥ 1 (optional), number > 0 (optional),
+#: or a boolean.
 _KINDS: dict[str, str] = {
     "dataset": "text", "encoders": "texts", "classifiers": "texts", "L": "lengths",
     "seeds": "seeds", "split": "text", "test_window": "text", "test_per_class": "count", "profile": "text",
@@ -193,20 +185,21 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
     kind = kind.rstrip("?")
     if kind == "text":
         return _check_text(value, label)
-    if kind == "seeds":
+    if kind in ("lengths", "seeds"):  # "N or A-B", one reader (parse_numbers)
         if not isinstance(value, (list, tuple)):
-            value = [value]
+            value = [value]  # a single value for a list field
         if not value:
             raise InputError(f"{label} is empty")
+        example = "1-6" if kind == "lengths" else "0-9"
         for v in value:
             if not (_is_int(v) or (ranges and isinstance(v, str))):
-                raise InputError(f"{label} must be whole numbers or ranges such as \"0-9\", "
-                                 f"got {_show(v)} ({type(v).__name__})")
+                raise InputError(f"{label} must be whole numbers or ranges such as "
+                                 f"\"{example}\", got {_show(v)} ({type(v).__name__})")
         try:
-            return parse_seeds(value)
+            return parse_lengths(value) if kind == "lengths" else parse_seeds(value)
         except InputError as exc:
             raise InputError(f"{label}: {exc}") from None
-    if kind in ("texts", "ints", "lengths"):
+    if kind == "texts":
         if not isinstance(value, (list, tuple, dict)):
             value = [value]  # a single value for a list field
         if not isinstance(value, (list, tuple)):
@@ -216,26 +209,7 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
             raise InputError(f"{label} is empty")
         if len(value) > MAX_LENGTHS:
             raise InputError(f"{label} has {len(value)} values; at most {MAX_LENGTHS}")
-        if kind == "texts":
-            return [_check_text(v, f"{label} entry {i + 1}") for i, v in enumerate(value)]
-        if kind == "ints":
-            for v in value:
-                if not _is_int(v):
-                    raise InputError(f"{label} must be whole numbers, got {_show(v)} "
-                                     f"({type(v).__name__})")
-                if abs(v) >= 2 ** 63:
-                    raise InputError(f"{label}: {_show(v)} is not a 64-bit integer")
-            return list(value)
-        for v in value:  # lengths: numbers, or in a file ranges as text
-            if not (_is_int(v) or (ranges and isinstance(v, str))):
-                raise InputError(f"{label} must be whole numbers or ranges such as "
-                                 f"\"1-6\", got {_show(v)} ({type(v).__name__})")
-        if not ranges:
-            return list(value)
-        try:
-            return parse_lengths(value)
-        except InputError as exc:
-            raise InputError(f"{label}: {exc}") from None
+        return [_check_text(v, f"{label} entry {i + 1}") for i, v in enumerate(value)]
     if kind in ("count", "workers"):
         if not _is_int(value):
             raise InputError(f"{label} must be a whole number, got {type(value).__name__} "

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from tactbench.errors import InputError, MissingFileError
@@ -184,6 +186,32 @@ def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
                                                   "integer of")]:
         with pytest.raises(InputError, match=match):
             plan(Scene(dataset="no-such-dataset", **over))
+
+
+@pytest.mark.parametrize("parse, what", [(parse_lengths, "window length"),
+                                         ("seeds", "seed")])
+def test_window_lengths_and_seeds_are_read_by_one_rule(parse, what):
+    """-L and --seed (and a scene file's L and seeds) share one "N or A-B" reader: the same
+    ranges, bounds and messages; only the order differs (lengths sorted, seeds as given)."""
+    from tactbench.runner.scene import parse_numbers, parse_seeds
+
+    parse = parse_seeds if parse == "seeds" else parse
+    assert parse([7, " 2 - 4 ", "3", 2]) == (sorted if what != "seed" else list)([7, 2, 3, 4])
+    assert parse(["-3--2"]) == [-3, -2]
+    for bad, message in [("4-2", f"bad {what} range '4-2': the end is below the start"),
+                         ("1-", f"bad {what} '1-': use a whole number or a range such as"),
+                         ("x", f"bad {what} 'x'"), (1.5, f"bad {what} 1.5"),
+                         (True, f"bad {what} True"), ("9" * 5000, f"bad {what} '999"),
+                         ("99999999999999999999", f"{what} '99999999999999999999' is not a "
+                                                  f"64-bit integer"),
+                         (2 ** 63, f"{what} 9223372036854775808 is not a 64-bit integer"),
+                         ("0-99999999999", f"too many {what}s: '0-99999999999' is "
+                                           f"100000000000 of them; a run takes at most 1000")]:
+        with pytest.raises(InputError, match=f"^{re.escape(message)}"):
+            parse([bad])
+    with pytest.raises(InputError, match=f"too many {what}s"):
+        parse(["1-1000", "2000"])
+    assert parse_numbers(["1-3", 2, "0"], what, "1-6") == [1, 2, 3, 0]
 
 
 def test_seeds_take_ranges_in_files_and_on_the_command_line(tmp_path):
