@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any, Callable
 
 import click
 
@@ -12,52 +13,137 @@ from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 
 
+class SceneOption(click.Option):
+    """An option that sets the :class:`~tactbench.runner.scene.Scene` field ``field``.
+
+    Its help ends in ``[default: ...]`` read from the Scene's own field default when the
+    help is shown (:func:`scene_default`), so the help cannot drift from the dataclass; a
+    field whose default is ``None`` (decided later, by the profile or the machine) says
+    what decides it in ``none``. ``convert`` turns the option's value into the field's
+    (``-L 1-3`` → ``[1, 2, 3]``). The option's own default stays ``None``: not given, so
+    a scene file's value or the Scene's default applies.
+    """
+
+    def __init__(self, *args: Any, field: str, none: str | Callable[[], str] | None = None,
+                 convert: Callable[[Any], Any] | None = None, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.field, self.none, self.convert = field, none, convert
+
+    def get_help_record(self, ctx: click.Context) -> tuple[str, str] | None:
+        record = super().get_help_record(ctx)
+        if record is None:
+            return None
+        shown = scene_default(self.field, self.none)
+        return record if shown is None else (record[0], f"{record[1]} [default: {shown}]")
+
+    def field_value(self, value: Any) -> Any:
+        """The Scene field's value for what was given, or None when it was not."""
+        if value is None or value == ():
+            return None
+        if self.multiple:
+            value = list(value)
+        return self.convert(value) if self.convert is not None else value
+
+
+def scene_default(name: str, none: str | Callable[[], str] | None = None) -> str | None:
+    """The Scene field ``name``'s default as help shows it (lists joined by ", "); for a
+    default of ``None``, ``none`` (text, or a function giving it); a flag's ``False`` is
+    not shown (None)."""
+    from dataclasses import MISSING, fields
+
+    from tactbench.runner.scene import Scene
+
+    (f,) = [f for f in fields(Scene) if f.name == name]
+    value = f.default_factory() if f.default is MISSING else f.default  # type: ignore[misc]
+    if value is None:
+        if none is None:
+            raise TypeError(f"scene field {name!r} defaults to None: its option must say "
+                            f"what decides it (none=...)")
+        return none() if callable(none) else none
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, list):
+        return ", ".join(str(v) for v in value)
+    return str(value)
+
+
+def _by_profile(attribute: str) -> Callable[[], str]:
+    """``"the profile's: quick 5, paper 1"``: a profile setting, read from the profiles."""
+    def text() -> str:
+        from tactbench.profiles import PROFILE_NAMES, get_profile
+
+        return "the profile's: " + ", ".join(
+            f"{n} {getattr(get_profile(n), attribute):g}" if attribute == "pixel_mm"
+            else f"{n} {getattr(get_profile(n), attribute)}" for n in PROFILE_NAMES)
+
+    return text
+
+
+def _lengths(values: list[str]) -> list[int]:
+    from tactbench.runner.scene import parse_lengths
+
+    return parse_lengths(values)
+
+
+def _seeds(values: list[str]) -> list[int]:
+    from tactbench.runner.scene import parse_seeds
+
+    return parse_seeds(values)
+
+
+def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]:
+    """``click.option`` for the Scene field ``field`` (see :class:`SceneOption`)."""
+    return click.option(*decls, cls=SceneOption, field=field, **kwargs)
+
+
 @click.command("run")
 @click.argument("scene_file", required=False, type=click.Path(dir_okay=False))
-@click.option("--dataset", help="Registered dataset (with options) or a dataset path. "
-              "[default: synthetic-forearm]")
-@click.option("--encoder", "encoders", multiple=True,
-              help="Encoder, repeatable, with options: farneback:winsize=9. "
-                   "[default: raw, farneback]")
-@click.option("--classifier", "classifiers", multiple=True,
-              help="Classifier, repeatable, with options. [default: small-cnn-lstm]")
-@click.option("-L", "L", multiple=True,
-              help="Window length in frames, repeatable or a range: -L 5, -L 1-6. "
-                   "[default: 5]")
-@click.option("--seed", "seeds", multiple=True,
-              help="Seed, repeatable or a range: --seed 0-9. [default: 0 1 2]")
-@click.option("--split",
+@scene_option("--dataset", field="dataset",
+              help="Registered dataset (with options) or a dataset path.")
+@scene_option("--encoder", "encoders", field="encoders", multiple=True,
+              help="Encoder, repeatable, with options: farneback:winsize=9.")
+@scene_option("--classifier", "classifiers", field="classifiers", multiple=True,
+              help="Classifier, repeatable, with options.")
+@scene_option("-L", "L", field="L", multiple=True, convert=_lengths,
+              help="Window length in frames, repeatable or a range: -L 5, -L 1-6.")
+@scene_option("--seed", "seeds", field="seeds", multiple=True, convert=_seeds,
+              help="Seed, repeatable or a range: --seed 0-9.")
+@scene_option("--split", field="split",
               help="paper: 30 random test samples per class (the study's); users: "
                    "leave a random fifth of the users out; users:folds=K: K-fold over "
-                   "users, every user tested once. [default: paper]")
-@click.option("--test-window", type=click.Choice(["first", "onset", "vote"]),
+                   "users, every user tested once.")
+@scene_option("--test-window", field="test_window",
+              type=click.Choice(["first", "onset", "vote"]),
               help="Which frames a test sequence is classified on: first (its first L "
                    "frames, the study's), onset (L frames from contact onset) or vote "
-                   "(every window, probabilities averaged). [default: first]")
-@click.option("--profile", type=click.Choice(PROFILE_NAMES),
-              help="quick: CPU-sized (default); paper: the study's settings (a GPU job).")
-@click.option("--pixel-mm", type=float, help="Tactile-image pixel size in mm "
-              "[default: the profile's: quick 5, paper 1].")
-@click.option("--precision", type=click.Choice(PRECISIONS),
+                   "(every window, probabilities averaged).")
+@scene_option("--profile", field="profile", type=click.Choice(PROFILE_NAMES),
+              help="quick: CPU-sized; paper: the study's settings (a GPU job).")
+@scene_option("--pixel-mm", field="pixel_mm", type=float, none=_by_profile("pixel_mm"),
+              help="Tactile-image pixel size in mm.")
+@scene_option("--precision", field="precision", type=click.Choice(PRECISIONS),
+              none=_by_profile("precision"),
               help="How cached encodings are stored: float32 (exact), float16, or uint8 "
                    "(8 bits per channel value, as the study's images; a quarter of the "
-                   "disk). [default: the profile's: quick float32, paper uint8]")
-@click.option("--device", help="cpu, cuda, cuda:N or auto. [default: cpu]")
-@click.option("--threads", type=int, help="torch threads per cell [default: cores/workers].")
-@click.option("--executor", type=click.Choice(["local", "dask"]), help="[default: local]")
-@click.option("--workers", type=int, help="Parallel cells (processes). [default: 1]")
-@click.option("--scheduler", help="dask scheduler address tcp://HOST:PORT (with "
-              "--executor dask); default: a local cluster.")
-@click.option("--out", help="Output folder. [default: tactbench-out]")
-@click.option("--rerun", is_flag=True, default=None, help="Recompute finished cells.")
-@click.option("--save-models", is_flag=True, default=None,
+                   "disk).")
+@scene_option("--device", field="device", help="cpu, cuda, cuda:N or auto.")
+@scene_option("--threads", field="threads", type=int, none="cores/workers",
+              help="torch threads per cell.")
+@scene_option("--executor", field="executor", type=click.Choice(["local", "dask"]),
+              help="Where cells run: this machine, or a dask cluster.")
+@scene_option("--workers", field="workers", type=int, help="Parallel cells (processes).")
+@scene_option("--scheduler", field="scheduler", none="a local cluster",
+              help="dask scheduler address tcp://HOST:PORT (with --executor dask).")
+@scene_option("--out", field="out", help="Output folder.")
+@scene_option("--rerun", field="rerun", is_flag=True, default=None,
+              help="Recompute finished cells.")
+@scene_option("--save-models", field="save_models", is_flag=True, default=None,
               help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
-def run_cmd(scene_file, dataset, encoders, classifiers, L, seeds, split, test_window,
-            profile,
-            pixel_mm, precision, device, threads, executor, workers, scheduler, out, rerun,
-            save_models, as_json, no_plots) -> None:
+@click.pass_context
+def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots: bool,
+            **options: Any) -> None:
     """Run a benchmark grid and report accuracy beside its cost.
 
     Finished cells are kept in OUT/cells and skipped when the same command runs again;
@@ -65,7 +151,7 @@ def run_cmd(scene_file, dataset, encoders, classifiers, L, seeds, split, test_wi
     others go on; the command then exits with status 1, and running it again retries
     the failed cells.
     """
-    from tactbench.runner import Scene, load_scene_file, parse_lengths, run
+    from tactbench.runner import Scene, load_scene_file, run
     from tactbench.runner.reports import (
         failed_cells,
         print_comparisons,
@@ -73,18 +159,13 @@ def run_cmd(scene_file, dataset, encoders, classifiers, L, seeds, split, test_wi
         summarise,
         write_reports,
     )
-    from tactbench.runner.scene import parse_seeds
 
     fields = load_scene_file(scene_file) if scene_file else {}
-    given = {"dataset": dataset, "encoders": list(encoders) or None,
-             "classifiers": list(classifiers) or None,
-             "L": parse_lengths(L) if L else None,
-             "seeds": parse_seeds(seeds) if seeds else None, "split": split,
-             "test_window": test_window, "profile": profile,
-             "pixel_mm": pixel_mm, "precision": precision, "device": device,
-             "threads": threads, "executor": executor, "workers": workers,
-             "scheduler": scheduler, "out": out, "rerun": rerun, "save_models": save_models}
-    fields.update({k: v for k, v in given.items() if v is not None})
+    for param in ctx.command.params:  # command-line values override the file
+        if isinstance(param, SceneOption):
+            value = param.field_value(options[param.name])
+            if value is not None:
+                fields[param.field] = value
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
     scene = Scene(**fields)
@@ -116,4 +197,4 @@ def run_cmd(scene_file, dataset, encoders, classifiers, L, seeds, split, test_wi
                        f"seed={f['seed']}: {f['error']} ({cells / f['key']}.json)", err=True)
         click.echo(f"{len(failed)} cell(s) failed; their rows are in {cells}/ and running "
                    f"the same command again retries them", err=True)
-        click.get_current_context().exit(1)
+        ctx.exit(1)

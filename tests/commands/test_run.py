@@ -193,3 +193,38 @@ def test_seed_ranges_k_fold_users_and_test_windows_from_the_command_line(tmp_pat
     bad = CliRunner().invoke(cli, ["run", "--split", "users:folds=1", "--out",
                                    str(tmp_path / "e")])
     assert bad.exit_code == 2 and "folds must be ≥ 2" in bad.output
+
+
+def test_the_run_help_shows_the_scene_defaults(monkeypatch):
+    """The help's ``[default: ...]`` is read from Scene's fields, not written by hand: each
+    option of a Scene field shows what Scene() has, and a changed default shows."""
+    from dataclasses import fields
+
+    import click
+
+    from tactbench.commands.run import SceneOption, run_cmd
+    from tactbench.profiles import PROFILE_NAMES, get_profile
+    from tactbench.runner.scene import Scene
+
+    ctx = click.Context(run_cmd, info_name="run")
+    options = {p.field: p for p in run_cmd.params if isinstance(p, SceneOption)}
+    # every Scene field has its option, but for the two that only scene files set
+    assert set(options) == {f.name for f in fields(Scene)} - {"test_per_class", "imaging"}
+    scene = Scene()
+    for name, param in options.items():
+        text = param.get_help_record(ctx)[1]
+        value = getattr(scene, name)
+        if isinstance(value, bool):  # a flag: off unless given
+            assert "[default:" not in text, name
+        elif value is None:  # decided later: the option says by what
+            assert text.count("[default: ") == 1 and text.endswith("]"), name
+        else:
+            shown = ", ".join(map(str, value)) if isinstance(value, list) else str(value)
+            assert text.count("[default:") == 1 and text.endswith(f"[default: {shown}]"), \
+                (name, text)
+    pixel = options["pixel_mm"].get_help_record(ctx)[1]
+    for profile in PROFILE_NAMES:
+        assert f"{profile} {get_profile(profile).pixel_mm:g}" in pixel
+    monkeypatch.setattr(Scene.__dataclass_fields__["out"], "default", "elsewhere")
+    help_text = CliRunner().invoke(cli, ["run", "--help"]).output
+    assert "Output folder. [default: elsewhere]" in " ".join(help_text.split())
