@@ -77,3 +77,69 @@ def test_every_test_named_in_the_reliability_table_exists():
                 if not re.search(rf"^def {name}\(", current.read_text(), re.M):
                     missing.append(f"{current.relative_to(REPO)}::{name}")
     assert cited > 40 and not missing, missing
+
+
+def test_the_api_reference_is_current():
+    from tactbench.apidoc import reference_path, render
+
+    assert reference_path().read_text() == render(), \
+        "docs/api.md is stale: run `python -m tactbench.apidoc --write`"
+
+
+def test_the_api_reference_covers_what_a_plugin_uses():
+    """Every hook, every contract member, every tactbench.testing name and the data types
+    a plugin builds have their entry (found independently of the generator)."""
+    import pluggy
+
+    import tactbench.testing
+    from tactbench import contracts, hookspecs
+    from tactbench.contracts import CONTRACTS, FRAME
+
+    text = (REPO / "docs" / "api.md").read_text()
+    headings = set(re.findall(r"^### `([^`]+)`$", text, re.M))
+    pm = pluggy.PluginManager("tactbench")
+    pm.add_hookspecs(hookspecs)
+    hooks = {name for name in dir(pm.hook) if name.startswith("register_")}
+    assert len(hooks) >= 5 and hooks <= headings
+    assert set(tactbench.testing.__all__) <= headings
+    assert {"Recording", "Frame", "Sample", "Dataset", "Normalisation"} <= headings
+    for contract in (*CONTRACTS.values(), FRAME):
+        names = {name for name, value in vars(contracts).items() if value is contract}
+        assert names & headings, contract.kind
+        for member in contract.members:
+            assert f"| `{member.name}` |" in text, (contract.kind, member.name)
+    for doc in ("plugins.md", "../README.md"):
+        assert "api.md" in (REPO / "docs" / doc).read_text()
+
+
+def test_docstrings_become_markdown():
+    from tactbench.apidoc import markdown, signature
+
+    doc = '''Read :class:`~tactbench.data.recording.Recording` from ``path``.
+
+    :func:`tactbench.contracts.check` is called; a sensor's __enter__ returns it::
+
+        with sensor:
+            pass
+
+    ``name``
+        the name, over
+        two lines.
+
+    Parameters
+    ----------
+    - a list stays a list
+      with its continuation.
+    '''
+    assert markdown(doc).splitlines() == [
+        "Read `Recording` from `path`.", "",
+        "`tactbench.contracts.check` is called; a sensor's `__enter__` returns it:", "",
+        "```text", "with sensor:", "    pass", "```", "",
+        "- `name`: the name, over two lines.", "",
+        "**Parameters**", "- a list stays a list", "  with its continuation."]
+
+    def f(x: "np.ndarray", *, sentinel=object(), n: int = 3) -> "list[int]":
+        """Nothing."""
+
+    assert signature(f, "f") == "f(x: np.ndarray, *, sentinel=<object>, n: int = 3) -> " \
+                                "list[int]"
