@@ -72,9 +72,9 @@ def _by_profile(attribute: str) -> Callable[[], str]:
     def text() -> str:
         from tactbench.profiles import PROFILE_NAMES, get_profile
 
+        values = {n: getattr(get_profile(n), attribute) for n in PROFILE_NAMES}
         return "the profile's: " + ", ".join(
-            f"{n} {getattr(get_profile(n), attribute):g}" if attribute == "pixel_mm"
-            else f"{n} {getattr(get_profile(n), attribute)}" for n in PROFILE_NAMES)
+            f"{n} {v:g}" if isinstance(v, float) else f"{n} {v}" for n, v in values.items())
 
     return text
 
