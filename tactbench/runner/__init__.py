@@ -31,7 +31,8 @@ memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
 """
 
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
-from tactbench.runner.cache import EncodingCache, ensure_encodings, load_encoding
+from tactbench.runner.cache import EncodingCache, ensure_encodings
+from tactbench.runner.entries import load_encoding
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
 from tactbench.runner.orchestrate import RunResult, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan

@@ -167,7 +167,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     from tactbench.data.splits import describe_splits, make_splits
     from tactbench.data.windows import test_windows_for, training_windows_for
     from tactbench.plugins import Registry
-    from tactbench.runner.cache import load_encoding
+    from tactbench.runner.entries import load_encoding
     from tactbench.seeds import derive_seed
 
     memory = memory if memory is not None else MemoryTracker()

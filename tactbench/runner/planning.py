@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import (
     InputError,
     check_choice,
@@ -301,7 +302,6 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     frame_shape = {"vectors": (dataset.n_taxels,)}
     if "images" in kinds.values():
         from tactbench.data.imaging import image_shape, imager_build_bytes
-        from tactbench.runner.cache import CHUNK_BYTES
 
         pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
         h, w = image_shape(dataset.layout, pixel_mm)

@@ -12,8 +12,8 @@ import pytest
 
 from tactbench.errors import CorruptArtefactError
 from tactbench.runner import EncodingCache, ensure_encodings, load_encoding, plan
-from tactbench.runner import cache as cache_module
-from tactbench.runner.cache import Storage, chunk_bounds
+from tactbench.encoders.encoding import Storage, chunk_bounds
+from tactbench.runner import entries as entries_module
 
 
 def test_write_and_load_round_trip(tmp_path):
@@ -299,7 +299,7 @@ def test_an_entry_records_what_it_is_and_checksums_streamed_while_writing(tmp_pa
 
 
 def test_the_identity_recorded_in_an_entry_must_hash_to_its_key(tmp_path):
-    from tactbench.runner.cache import seal
+    from tactbench.runner.entries import seal
 
     cache = EncodingCache(tmp_path)
     identity = cache.identity("h", {"kind": "vectors"}, "raw", "1")
@@ -324,7 +324,7 @@ def test_the_full_checksum_is_read_once_per_process_per_version_of_the_file(tmp_
     monkeypatch.setattr(integrity, "hash_file", lambda *a, **k: calls.append(a) or real(*a, **k))
     cache.verify("k")
     assert calls == []  # the writer hashed the bytes as it wrote them: no second read
-    cache_module._VERIFIED.clear()  # as in another process
+    entries_module._VERIFIED.clear()  # as in another process
     cache.verify("k")
     cache.verify("k")
     load_encoding(cache.path("k"))
@@ -361,7 +361,8 @@ RACER = """
 import sys, time, zlib
 from pathlib import Path
 import numpy as np
-from tactbench.runner.cache import EncodingCache, load_encoding
+from tactbench.runner.cache import EncodingCache
+from tactbench.runner.entries import load_encoding
 root, go = sys.argv[1], Path(sys.argv[2])
 while not go.exists():
     time.sleep(0.001)
@@ -395,7 +396,8 @@ def test_two_processes_writing_one_key_both_use_the_winners_entry(tmp_path):
 SLOW_WRITER = """
 import sys, time
 import numpy as np
-from tactbench.runner.cache import EncodingCache, Storage
+from tactbench.encoders.encoding import Storage
+from tactbench.runner.cache import EncodingCache
 cache = EncodingCache(sys.argv[1])
 with cache.entry("k", [1] * 1000, (3,), Storage.for_channels("float32", 1)) as w:
     for _ in range(1000):
