@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from tactbench.contracts import CLASSIFIER
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.store import FAILED, OK
 from tactbench.runner.system import MemoryTracker, host, now, versions
@@ -103,9 +104,12 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
     n_classes = config.get("n_classes") if isinstance(config, dict) else None
     if n_classes is not None and n_classes != len(want["classes"]):
         return f"a {n_classes}-class network for {len(want['classes'])} classes"
+    export = CLASSIFIER.get(clf, "export")
+    if export is None:  # a classifier without tensors to check
+        return None
     try:
-        _, tensors = clf._export()
-    except Exception:  # noqa: BLE001 — a classifier without tensors to check
+        _, tensors = export()
+    except Exception:  # noqa: BLE001 — it cannot export its tensors: nothing to check
         return None
     for name, tensor in tensors.items():
         if isinstance(tensor, torch.Tensor) and tensor.is_floating_point() \

@@ -229,22 +229,12 @@ def _check_scene(scene: Scene) -> None:
     check_positive_int(scene.workers, "--workers")
     if scene.threads is not None:  # torch refuses 0 only inside the cell, after the work
         check_positive_int(scene.threads, "--threads")
-    # the training memory settings come from the environment: read them now, not in a cell
-    from tactbench.classifiers.base import bank_budget_bytes, loader_workers
-
-    bank_budget_bytes()
-    loader_workers(None)
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
                * len(set(scene.lengths)) * len(set(scene.seeds)))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
-    if scene.executor == "local" and scene.device.strip().lower() != "cpu":
-        # a device this machine lacks would fail every cell, after the encoding
-        from tactbench.classifiers.training import select_device
-
-        select_device(scene.device)
     check_out_folder(scene.out, models=scene.save_models)
 
 
@@ -360,8 +350,10 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                                                         registry=registry))
         clf = registry.build("classifier", canonical)  # validates option names and values
         frame_ranks.setdefault(canonical, CLASSIFIER.get(clf, "frame_rank"))
-        size = getattr(clf, "batch_size", 1)
-        batch_sizes[canonical] = size if isinstance(size, int) and size > 0 else 1
+        batch_sizes[canonical] = CLASSIFIER.get(clf, "batch_size")
+        preflight = CLASSIFIER.get(clf, "preflight")
+        if preflight is not None:  # a device this machine lacks would fail every cell
+            preflight(scene.device if scene.executor == "local" else "cpu")
     classifier_specs = list(frame_ranks)
 
     from tactbench.datasets.loading import load_dataset
