@@ -6,7 +6,7 @@
 plugins the run was planned with, not from whatever is installed where it runs.
 
 A cell that raises (a bug in a plugin, a classifier that fails in ``fit``, out of memory)
-returns a *failed* row instead (see :mod:`tactbench.runner.store`): no exception object
+returns a *failed* row instead (see :mod:`tactbench.runner.results`): no exception object
 crosses a process boundary, and the rest of the grid goes on. Ctrl-C
 (``KeyboardInterrupt``) is not a failure: it stops the run.
 """
@@ -22,7 +22,8 @@ from typing import Any, Callable, Sequence
 
 from tactbench.contracts import CLASSIFIER
 from tactbench.runner.planning import Cell, Plan
-from tactbench.runner.store import FAILED, OK
+from tactbench.runner.scene import Scene
+from tactbench.runner.results import FAILED, OK
 from tactbench.runner.system import MemoryTracker, host, now, versions
 
 #: How many of the innermost traceback frames a failed row keeps.
@@ -30,24 +31,40 @@ TRACEBACK_FRAMES = 5
 
 
 @dataclass(frozen=True)
+class DatasetFacts:
+    """What a cell needs of the dataset besides its encoding, made once per run and shared
+    by every job."""
+
+    labels: tuple[int, ...]  # class index of every sample
+    users: tuple[str, ...]  # user of every sample
+    classes: tuple[str, ...]
+    onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
+
+    @classmethod
+    def of(cls, dataset: Any, *, onsets: bool = False) -> "DatasetFacts":
+        """The facts of ``dataset`` (its samples' onsets too, with ``onsets``)."""
+        from tactbench.data.windows import dataset_onsets
+
+        return cls(labels=tuple(int(x) for x in dataset.labels),
+                   users=tuple(str(u) for u in dataset.users),
+                   classes=tuple(dataset.classes),
+                   onsets=dataset_onsets(dataset) if onsets else None)
+
+
+@dataclass(frozen=True)
 class CellJob:
-    """Everything a worker needs to run a cell, picklable and small."""
+    """Everything a worker needs to run a cell, picklable and small: the cell, the scene
+    it belongs to, the dataset's facts and where its encoding is."""
 
     cell: Cell
     identity: dict[str, Any]
     classifier: Any  # tactbench.plugins.Component of the cell's classifier (picklable)
     encoding_dir: str
-    labels: tuple[int, ...]  # class index of every sample of the dataset
-    users: tuple[str, ...]  # user of every sample
-    classes: tuple[str, ...]
-    split: str
-    test_per_class: int
-    device: str
-    threads: int  # torch threads
+    scene: Scene
+    data: DatasetFacts
+    threads: int  # torch threads, as the planning machine resolved them
     model_path: str | None = None
     model_meta: dict[str, Any] | None = None
-    test_window: str = "first"  # tactbench.data.windows.TEST_WINDOWS
-    onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
 
 
 def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
@@ -55,20 +72,13 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
     """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.cache.ensure_encodings`;
     with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
     scene = p.scene
-    from tactbench.data.windows import dataset_onsets
-
-    labels = tuple(int(x) for x in p.dataset.labels)  # once, shared by every job
-    users = tuple(str(u) for u in p.dataset.users)
-    onsets = dataset_onsets(p.dataset) if scene.test_window == "onset" else None
+    data = DatasetFacts.of(p.dataset, onsets=scene.test_window == "onset")  # shared by all
     return [CellJob(cell=c, identity=p.identities[c.key],
                     classifier=p.classifier_component(c.classifier),
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
-                    labels=labels, users=users, classes=tuple(p.dataset.classes),
-                    split=scene.split, test_per_class=scene.test_per_class,
-                    device=scene.device, threads=scene.resolved_threads(),
+                    scene=scene, data=data, threads=scene.resolved_threads(),
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
-                    model_meta=model_metadata(p, c) if models else None,
-                    test_window=scene.test_window, onsets=onsets)
+                    model_meta=model_metadata(p, c) if models else None)
             for c in cells]
 
 
@@ -144,8 +154,8 @@ def failed_row(job: CellJob, exc: BaseException,
         "status": FAILED,
         "error": {"type": type(exc).__name__, "message": str(exc) or repr(exc),
                   "traceback": "".join(frames)},
-        "classes": list(job.classes),
-        "device": job.device,
+        "classes": list(job.data.classes),
+        "device": job.scene.device,
         "threads": job.threads,
         "peak_rss_mb": memory.peak_mb,
         "peak_step": memory.peak_step,
@@ -179,16 +189,17 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     cell = job.cell
     with memory.track("load encoding"):
         sequences, meta = load_encoding(job.encoding_dir)
-    labels = np.asarray(job.labels, dtype=np.int64)
-    splits = make_splits(job.split, labels=labels, users=job.users, seed=cell.seed,
-                         test_per_class=job.test_per_class)
+    scene, data = job.scene, job.data
+    labels = np.asarray(data.labels, dtype=np.int64)
+    splits = make_splits(scene.split, labels=labels, users=data.users, seed=cell.seed,
+                         test_per_class=scene.test_per_class)
     rss0 = 0.0
     train_s = infer_s = 0.0
     n_train = n_test = 0
     indices, truths, predictions, fits = [], [], [], []
     for fold, split in enumerate(splits):
         with memory.track("windows"):
-            mode, onsets = job.test_window, job.onsets
+            mode, onsets = scene.test_window, data.onsets
             train = training_windows_for(
                 mode, [sequences[i] for i in split.train], labels[split.train], cell.length,
                 onsets=None if onsets is None else [onsets[i] for i in split.train])
@@ -197,7 +208,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                 onsets=None if onsets is None else [onsets[i] for i in split.test])
             # The planned component, not a fresh plugin lookup: see the module docstring.
             clf = Registry([job.classifier]).build("classifier", cell.classifier,
-                                                   classes=len(job.classes))
+                                                   classes=len(data.classes))
         if fold == 0:
             rss0 = memory.peak_mb
         # one split keeps the seed it always had; the folds of a k-fold split differ
@@ -205,7 +216,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                            *(() if len(splits) == 1 else (f"fold {fold}",)))
         with memory.track("fit"):
             t0 = time.perf_counter()
-            fits.append(clf.fit(train, None, seed=seed, device=job.device,
+            fits.append(clf.fit(train, None, seed=seed, device=scene.device,
                                 progress=progress))
             train_s += time.perf_counter() - t0
         with memory.track("predict"):
@@ -232,11 +243,11 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                                       "seed": cell.seed, "cell": cell.key,
                                       "test_accuracy": float((predicted == truth).mean())})
 
-    k = len(job.classes)
+    k = len(data.classes)
     confusion = np.zeros((k, k), dtype=np.int64)
     np.add.at(confusion, (truth, predicted), 1)
     support = confusion.sum(axis=1)
-    per_class = {job.classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
+    per_class = {data.classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
                  for i in range(k)}
     frames = max(1, int(meta.get("frames", 1)))
     return {
@@ -244,8 +255,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         **job.identity,
         "status": OK,
         **describe_splits(splits),
-        "test_window": job.test_window,
-        "classes": list(job.classes),
+        "test_window": scene.test_window,
+        "classes": list(data.classes),
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
@@ -264,7 +275,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "n_train_windows": n_train,
         "n_test": n_test,
         "fit": _jsonable(fits[0] if len(fits) == 1 else fits),
-        "device": job.device,
+        "device": scene.device,
         "threads": job.threads,
         "versions": versions(),
         "host": host(),

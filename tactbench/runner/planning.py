@@ -18,7 +18,7 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +29,7 @@ from tactbench.errors import (
     check_positive_float,
     check_positive_int,
 )
-from tactbench.runner.scene import EXECUTORS, Scene, check_scene
+from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
 #: model, and a larger grid is a typo (its plan alone would grow without bound).
@@ -206,11 +206,16 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
         raise InputError(f"out folder {out} cannot be used: {exc.strerror or exc}") from None
 
 
-def _check_scene(scene: Scene) -> None:
+def check_scene(scene: Scene) -> None:
+    """Check ``scene`` before any work: every field's type first
+    (:func:`~tactbench.runner.scene.check_fields`), then each value's range and what the
+    values need together (a profile, split and test window that exist, one model per
+    cell when models are saved, a grid of at most :data:`MAX_CELLS`, a usable out
+    folder). Raises :class:`InputError` naming the field or option."""
     from tactbench.data.splits import parse_split
     from tactbench.profiles import PRECISIONS, get_profile
 
-    check_scene(scene)  # every field's type, first
+    check_fields({f.name: getattr(scene, f.name) for f in fields(Scene)}, ranges=False)
     get_profile(scene.profile)
     check_choice(scene.resolved_precision(), "precision", PRECISIONS)
     from tactbench.data.windows import TEST_WINDOWS
@@ -329,7 +334,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     from tactbench.profiles import profile_options
 
     registry = registry or load_registry()
-    _check_scene(scene)
+    check_scene(scene)
 
     # Names and options first (cheap), so a typo fails before a dataset is loaded.
     encoders: dict[str, Any] = {}

@@ -23,7 +23,7 @@ from tactbench.integrity import hash_file
 from tactbench.runner import EncodingCache, ResultStore, ensure_encodings, load_encoding, plan
 from tactbench.runner import entries as entries_module
 from tactbench.runner.entries import seal
-from tactbench.runner.store import check_row, row_checksum
+from tactbench.runner.results import check_row, row_checksum
 
 FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
