@@ -229,3 +229,64 @@ def test_sensors_know_their_taxels_when_built():
         assert SENSOR.get(sensor, "stats") is not None
     with registry.build("sensor", "replay", path=TINY_SYNTHETIC) as sensor:
         assert SENSOR.get(sensor, "bus_load") is None  # a replay reads no bus
+
+
+# ----------------------------------------------------------------------------- the rules
+
+PACKAGE = __import__("pathlib").Path(contracts.__file__).parent
+
+
+def _calls_and_imports(path):
+    import ast
+
+    tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):
+        yield node
+
+
+def test_optional_members_are_read_through_their_contract_only():
+    """No ``getattr(x, "<member>", default)`` outside contracts.py: the default of an
+    optional member is written once, in its contract."""
+    import ast
+
+    members = {m.name for c in CONTRACTS.values() for m in c.members}
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "contracts.py":
+            continue
+        for node in _calls_and_imports(path):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id == "getattr" and len(node.args) == 3
+                    and isinstance(node.args[1], ast.Constant)
+                    and node.args[1].value in members):
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno} "
+                             f"{node.args[1].value}")
+    assert not found, found
+
+
+#: What the runner and live may import of the component stages: the encoding pass and
+#: shared encoder helpers, and the model files; never a component's module.
+RUNNER_MAY_IMPORT = {"tactbench.encoders.encoding", "tactbench.encoders.parallel",
+                     "tactbench.encoders.flow", "tactbench.encoders.base",
+                     "tactbench.classifiers.io"}
+
+
+def test_the_runner_and_live_know_components_only_through_registry_and_contracts():
+    import ast
+
+    paths = sorted((PACKAGE / "runner").glob("*.py")) + [PACKAGE / "live.py"]
+    wrong = []
+    for path in paths:
+        for node in _calls_and_imports(path):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith(
+                    ("tactbench.encoders", "tactbench.classifiers")) \
+                    and node.module not in RUNNER_MAY_IMPORT:
+                wrong.append(f"{path.relative_to(PACKAGE)} imports {node.module}")
+            # a component's private member (clf._export(), clf._device)
+            if (isinstance(node, ast.Attribute) and node.attr.startswith("_")
+                    and not node.attr.startswith("__")
+                    and isinstance(node.value, ast.Name)
+                    and node.value.id in ("clf", "encoder", "enc", "classifier")):
+                wrong.append(f"{path.relative_to(PACKAGE)}:{node.lineno} reads "
+                             f"{node.value.id}.{node.attr}")
+    assert not wrong, wrong
