@@ -26,7 +26,8 @@ Modules, one job each: :mod:`~tactbench.runner.scene` (run configuration, scene 
 :mod:`~tactbench.runner.cache` (the cache folder; filling it for a plan),
 :mod:`~tactbench.runner.entries` (one cache entry: files, verification, reading; the pass
 that encodes a dataset is :mod:`tactbench.encoders.encoding`),
-:mod:`~tactbench.runner.cell` (train and test one cell), :mod:`~tactbench.runner.executors` (local, processes, dask),
+:mod:`~tactbench.runner.cell` (train and test one cell),
+:mod:`~tactbench.runner.executors` (local, processes, dask),
 :mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
 memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
 :mod:`~tactbench.runner.reports` (tables, files, plots).

@@ -22,8 +22,8 @@ from typing import Any, Callable, Sequence
 
 from tactbench.contracts import CLASSIFIER
 from tactbench.runner.planning import Cell, Plan
-from tactbench.runner.scene import Scene
 from tactbench.runner.results import FAILED, OK
+from tactbench.runner.scene import Scene
 from tactbench.runner.system import MemoryTracker, host, now, versions
 
 #: How many of the innermost traceback frames a failed row keeps.
