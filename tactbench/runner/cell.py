@@ -18,13 +18,16 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from tactbench.contracts import CLASSIFIER
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
 from tactbench.runner.system import MemoryTracker, host, now, versions
+
+if TYPE_CHECKING:
+    import numpy as np
 
 #: How many of the innermost traceback frames a failed row keeps.
 TRACEBACK_FRAMES = 5
@@ -221,13 +224,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
             train_s += time.perf_counter() - t0
         with memory.track("predict"):
             t0 = time.perf_counter()
-            if mode == "vote":  # every window of a sequence; probabilities averaged
-                proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
-                summed = np.zeros((len(split.test), proba.shape[1]))
-                np.add.at(summed, test.seq_index, proba)
-                predicted = summed.argmax(axis=1)
-            else:
-                predicted = np.asarray(clf.predict(test))
+            predicted = _predict(clf, test, mode, len(split.test))
             infer_s += time.perf_counter() - t0
         indices.append(np.asarray(split.test))
         truths.append(labels[split.test])
@@ -243,12 +240,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                                       "seed": cell.seed, "cell": cell.key,
                                       "test_accuracy": float((predicted == truth).mean())})
 
-    k = len(data.classes)
-    confusion = np.zeros((k, k), dtype=np.int64)
-    np.add.at(confusion, (truth, predicted), 1)
-    support = confusion.sum(axis=1)
-    per_class = {data.classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
-                 for i in range(k)}
+    confusion, per_class = _confusion(data.classes, truth, predicted)
     frames = max(1, int(meta.get("frames", 1)))
     return {
         "key": cell.key,
@@ -281,6 +273,34 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "host": host(),
         "finished": now(),
     }
+
+
+def _predict(clf: Any, test: Any, mode: str, n_sequences: int) -> "np.ndarray":
+    """The predicted class of each test sequence: of its one window, or with ``mode``
+    ``"vote"`` of every window of it (probabilities averaged)."""
+    import numpy as np
+
+    if mode != "vote":
+        return np.asarray(clf.predict(test))
+    proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
+    summed = np.zeros((n_sequences, proba.shape[1]))
+    np.add.at(summed, test.seq_index, proba)
+    return summed.argmax(axis=1)
+
+
+def _confusion(classes: Sequence[str], truth: "np.ndarray", predicted: "np.ndarray",
+               ) -> tuple["np.ndarray", dict[str, float | None]]:
+    """The confusion matrix (rows: true class) and each class's accuracy (None for a
+    class without test sequences)."""
+    import numpy as np
+
+    k = len(classes)
+    confusion = np.zeros((k, k), dtype=np.int64)
+    np.add.at(confusion, (truth, predicted), 1)
+    support = confusion.sum(axis=1)
+    per_class = {classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
+                 for i in range(k)}
+    return confusion, per_class
 
 
 def _jsonable(obj: Any) -> Any:

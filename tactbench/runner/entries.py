@@ -241,8 +241,6 @@ def verify_entry(folder: str | Path, *, full: bool = True,
     for its cost). Returns ``(meta, offsets)``; raises :class:`CorruptArtefactError`
     (the entry and the problem, in one line).
     """
-    import numpy as np
-
     from tactbench.integrity import hash_bytes, hash_file
 
     folder = Path(folder)
@@ -256,6 +254,26 @@ def verify_entry(folder: str | Path, *, full: bool = True,
     if identity is not None:
         _expect(folder, digest(identity, len(folder.name)) == folder.name,
                 "its recorded identity does not hash to its key")
+    files = _check_sizes(folder, meta)
+    _check_frames_header(folder, meta, files["frames.npy"]["bytes"])
+    data = (folder / "offsets.npy").read_bytes()  # its size was checked: (n + 1) × 8 + header
+    _expect(folder, hash_bytes(data) == files["offsets.npy"]["checksum"],
+            "offsets.npy does not match its checksum")
+    offsets = _offsets(folder, data, meta["n_sequences"], meta["n_frames"])
+    key = (str(folder), before)
+    if full and key not in _VERIFIED:
+        got = hash_file(folder / "frames.npy")
+        _expect(folder, got == files["frames.npy"]["checksum"],
+                f"frames.npy does not match its checksum ({got[:12]}…, recorded "
+                f"{files['frames.npy']['checksum'][:12]}…)")
+        if signature(folder) == before:  # unchanged while it was read
+            _VERIFIED.add(key)
+    return meta, offsets
+
+
+def _check_sizes(folder: Path, meta: dict[str, Any]) -> dict[str, Any]:
+    """``meta.json``'s ``files`` (the size and checksum of each), after checking that both
+    files are there with the recorded sizes."""
     files = meta.get("files")
     _expect(folder, isinstance(files, dict) and all(
         isinstance(files.get(n), dict) and isinstance(files[n].get("bytes"), int)
@@ -269,6 +287,14 @@ def verify_entry(folder: str | Path, *, full: bool = True,
         _expect(folder, size == files[name]["bytes"],
                 f"{name} is {size} bytes, meta.json records {files[name]['bytes']} "
                 f"({'truncated' if size < files[name]['bytes'] else 'grown'})")
+    return files
+
+
+def _check_frames_header(folder: Path, meta: dict[str, Any], size: int) -> None:
+    """``meta.json``'s counts and storage are sound, and the header of ``frames.npy``
+    (``size`` bytes) states ``(n_frames, *frame_shape)`` of the storage's dtype."""
+    import numpy as np
+
     frame_shape, n_frames = meta.get("frame_shape"), meta.get("n_frames")
     n_sequences = meta.get("n_sequences")
     _expect(folder, isinstance(frame_shape, list) and 1 <= len(frame_shape) <= 3
@@ -295,20 +321,7 @@ def verify_entry(folder: str | Path, *, full: bool = True,
             f"frames.npy holds {dtype} {shape}, meta.json says {storage.dtype} "
             f"{(n_frames, *frame_shape)}")
     _expect(folder, data_offset + n_frames * int(np.prod(frame_shape)) * dtype.itemsize
-            == files["frames.npy"]["bytes"], "frames.npy's size does not fit its header")
-    data = (folder / "offsets.npy").read_bytes()  # its size was checked: (n + 1) × 8 + header
-    _expect(folder, hash_bytes(data) == files["offsets.npy"]["checksum"],
-            "offsets.npy does not match its checksum")
-    offsets = _offsets(folder, data, n_sequences, n_frames)
-    key = (str(folder), before)
-    if full and key not in _VERIFIED:
-        got = hash_file(folder / "frames.npy")
-        _expect(folder, got == files["frames.npy"]["checksum"],
-                f"frames.npy does not match its checksum ({got[:12]}…, recorded "
-                f"{files['frames.npy']['checksum'][:12]}…)")
-        if signature(folder) == before:  # unchanged while it was read
-            _VERIFIED.add(key)
-    return meta, offsets
+            == size, "frames.npy's size does not fit its header")
 
 
 def _npy_header(path: Path, data: bytes | None = None,

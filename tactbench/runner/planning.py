@@ -320,23 +320,11 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
                          f"({enc} × {clf.split(':')[0]})")
 
 
-def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
-    """Check the whole grid before any work: names, options, L, layout needs, split.
+def _build_encoders(scene: Scene, registry) -> tuple[dict[str, Any], dict[str, str]]:
+    """Every encoder of the scene built once: ``(canonical spec → encoder, canonical spec
+    → version)``."""
+    from tactbench.contracts import ENCODER
 
-    ``registry`` (default: every installed plugin) is the one the cells will use too.
-    ``progress(done, total)`` hears from a dataset that takes a while to make (the
-    simulator's first run).
-    Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
-    computed or written.
-    """
-    from tactbench.contracts import CLASSIFIER, ENCODER
-    from tactbench.plugins import load_registry, parse_spec
-    from tactbench.profiles import profile_options
-
-    registry = registry or load_registry()
-    check_scene(scene)
-
-    # Names and options first (cheap), so a typo fails before a dataset is loaded.
     encoders: dict[str, Any] = {}
     versions: dict[str, str] = {}
     for spec in dict.fromkeys(scene.encoders):
@@ -346,8 +334,19 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         encoder = registry.build("encoder", canonical)
         encoders[canonical] = encoder
         versions[canonical] = str(ENCODER.get(encoder, "version"))
-    frame_ranks: dict[str, int | None] = {}  # canonical classifier spec → frame rank
-    batch_sizes: dict[str, int] = {}  # canonical classifier spec → windows per batch
+    return encoders, versions
+
+
+def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], dict[str, int]]:
+    """Every classifier of the scene built once with its profile's options (which checks
+    option names and values) and preflighted: ``(canonical spec → frame rank, canonical
+    spec → windows per batch)``."""
+    from tactbench.contracts import CLASSIFIER
+    from tactbench.plugins import parse_spec
+    from tactbench.profiles import profile_options
+
+    frame_ranks: dict[str, int | None] = {}
+    batch_sizes: dict[str, int] = {}
     for spec in dict.fromkeys(scene.classifiers):
         spec = registry.resolve("classifier", spec)  # "sklearn:SVC" → estimator=SVC
         name, _ = parse_spec(spec)
@@ -359,9 +358,54 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         preflight = CLASSIFIER.get(clf, "preflight")
         if preflight is not None:  # a device this machine lacks would fail every cell
             preflight(scene.device if scene.executor == "local" else "cpu")
-    classifier_specs = list(frame_ranks)
+    return frame_ranks, batch_sizes
 
+
+def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
+                  encoder_version: str, classifier: str, length: int,
+                  seed: int) -> dict[str, Any]:
+    """Everything that decides a cell's result; its :func:`digest` is the cell's key."""
+    from tactbench.data.splits import canonical_split
+
+    return {
+        "schema": ROW_SCHEMA,
+        "dataset": dataset.name,
+        "dataset_hash": dataset_hash,
+        "split": canonical_split(scene.split),
+        # the study's test window keeps the keys cells always had
+        **({} if scene.test_window == "first" else {"test_window": scene.test_window}),
+        "test_per_class": scene.test_per_class,
+        "imaging": imaging_identity(scene, kind),
+        "encoder": encoder,
+        "encoder_version": encoder_version,
+        **storage_identity(scene.resolved_precision()),
+        "classifier": classifier,
+        "profile": scene.profile,
+        "L": int(length),
+        "seed": int(seed),
+    }
+
+
+def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
+    """Check the whole grid before any work: names, options, L, layout needs, split.
+
+    ``registry`` (default: every installed plugin) is the one the cells will use too.
+    ``progress(done, total)`` hears from a dataset that takes a while to make (the
+    simulator's first run).
+    Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
+    computed or written.
+    """
+    from tactbench.contracts import ENCODER
+    from tactbench.data.splits import make_splits
     from tactbench.datasets.loading import load_dataset
+    from tactbench.plugins import load_registry
+
+    registry = registry or load_registry()
+    check_scene(scene)
+    # Names and options first (cheap), so a typo fails before a dataset is loaded.
+    encoders, versions = _build_encoders(scene, registry)
+    frame_ranks, batch_sizes = _build_classifiers(scene, registry)
+    classifier_specs = list(frame_ranks)
 
     dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
     has_layout = dataset.layout is not None
@@ -373,37 +417,17 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     _check_lengths(scene, dataset)
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
-    from tactbench.data.splits import canonical_split, make_splits
-
     make_splits(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
                 test_per_class=scene.test_per_class)  # fails early on an impossible split
-    split_spec = canonical_split(scene.split)
 
     cells: list[Cell] = []
     identities: dict[str, dict[str, Any]] = {}
-    storage = storage_identity(scene.resolved_precision())
     for enc in encoders:
         for clf in classifier_specs:
             for length in scene.lengths:
                 for seed in dict.fromkeys(scene.seeds):  # a seed listed twice is one cell
-                    identity = {
-                        "schema": ROW_SCHEMA,
-                        "dataset": dataset.name,
-                        "dataset_hash": dataset_hash,
-                        "split": split_spec,
-                        # the study's test window keeps the keys cells always had
-                        **({} if scene.test_window == "first"
-                           else {"test_window": scene.test_window}),
-                        "test_per_class": scene.test_per_class,
-                        "imaging": imaging_identity(scene, kinds[clf]),
-                        "encoder": enc,
-                        "encoder_version": versions[enc],
-                        **storage,
-                        "classifier": clf,
-                        "profile": scene.profile,
-                        "L": int(length),
-                        "seed": int(seed),
-                    }
+                    identity = cell_identity(scene, dataset, dataset_hash, kinds[clf], enc,
+                                             versions[enc], clf, length, seed)
                     key = digest(identity)
                     cells.append(Cell(enc, clf, int(length), int(seed), key))
                     identities[key] = identity
