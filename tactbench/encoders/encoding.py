@@ -23,7 +23,10 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Mapping, Sequence
 
+from tactbench.contracts import ENCODER
+from tactbench.encoders.parallel import default_workers, encode_chunks
 from tactbench.errors import InputError, check_choice
+from tactbench.profiles import PRECISIONS
 
 if TYPE_CHECKING:
     import numpy as np
@@ -49,8 +52,6 @@ class Storage:
 
     def __init__(self, precision: str, scale: Sequence[float], offset: Sequence[float]):
         import numpy as np
-
-        from tactbench.profiles import PRECISIONS
 
         self.precision = check_choice(precision, "precision", PRECISIONS)
         self.dtype = np.dtype(precision)
@@ -122,8 +123,6 @@ class Storage:
 
 def image_storage(encoder: Any, precision: str) -> Storage:
     """The storage of ``encoder``'s images: one scale and offset per channel."""
-    from tactbench.contracts import ENCODER
-
     return Storage.for_channels(precision, len(tuple(ENCODER.get(encoder, "channels"))),
                                 tuple(ENCODER.get(encoder, "ranges")))
 
@@ -131,8 +130,6 @@ def image_storage(encoder: Any, precision: str) -> Storage:
 def vector_storage(encoder: Any, precision: str) -> Storage:
     """The storage of ``encoder``'s taxel vectors ``(T, C·N)``: one channel whose range
     spans every channel's."""
-    from tactbench.contracts import ENCODER
-
     ranges = tuple(ENCODER.get(encoder, "ranges"))
     if ranges:
         ranges = ((min(lo for lo, _ in ranges), max(hi for _, hi in ranges)),)
@@ -141,8 +138,6 @@ def vector_storage(encoder: Any, precision: str) -> Storage:
 
 def vector_width(encoder: Any, n_taxels: int) -> int:
     """The width ``C·N`` of ``encoder``'s encoding of ``n_taxels``-taxel vectors."""
-    from tactbench.contracts import ENCODER
-
     return n_taxels * max(1, len(ENCODER.get(encoder, "channels")))
 
 
@@ -181,8 +176,6 @@ def encode_vectors(dataset: Any, name: str, encoder: Any, sink: Sink, *,
     (``(T, N)`` → ``(T, C·N)``, see :data:`~tactbench.contracts.ENCODER`) into ``sink``, a
     chunk of samples at a time; returns the seconds spent encoding. ``name`` (the
     encoder's spec) names it in messages."""
-    from tactbench.contracts import ENCODER
-
     encode = ENCODER.get(encoder, "encode_vectors")
     if encode is None:
         raise InputError(f"encoder '{name}' encodes only images, not taxel vectors")
@@ -209,8 +202,6 @@ def encode_images(dataset: Any, encoders: Mapping[str, Any], sinks: Mapping[str,
     threads (:func:`~tactbench.encoders.parallel.encode_chunks`), hand each encoded
     sequence to the encoder's sink; ``progress`` shows a bar for the imaging and one per
     encoder."""
-    from tactbench.encoders.parallel import default_workers, encode_chunks
-
     lengths = dataset.lengths()
     n = len(lengths)
     h, w = dataset.image_shape(pixel_mm, method)

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence
 
+from tactbench.contracts import ENCODER
 from tactbench.encoders.encoding import (
     CHUNK_BYTES,
     Storage,
@@ -272,8 +273,6 @@ def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:
 
 
 def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
-    from tactbench.contracts import ENCODER
-
     return {"encoder": enc, "encoder_version": plan_.encoder_versions[enc],
             "channels": list(ENCODER.get(plan_.encoders[enc], "channels")),
             "imaging": imaging_identity(plan_.scene, kind),
@@ -309,8 +308,6 @@ def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], preci
     """One streaming pass (:func:`~tactbench.encoders.encoding.encode_images`) appends
     every encoder's encoding of each chunk to its entry; all entries appear together at
     the end."""
-    from tactbench.contracts import ENCODER
-
     scene, dataset = plan_.scene, plan_.dataset
     pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
     h, w = dataset.image_shape(pixel_mm, method)

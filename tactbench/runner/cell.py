@@ -20,11 +20,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
+from tactbench.classifiers.io import live_metadata, load_model, read_header
 from tactbench.contracts import CLASSIFIER
+from tactbench.data.splits import describe_splits, make_splits
+from tactbench.data.windows import dataset_onsets, test_windows_for, training_windows_for
+from tactbench.errors import TactbenchError
+from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
 from tactbench.runner.system import MemoryTracker, host, now, versions
+from tactbench.seeds import derive_seed
 
 if TYPE_CHECKING:
     import numpy as np
@@ -46,8 +52,6 @@ class DatasetFacts:
     @classmethod
     def of(cls, dataset: Any, *, onsets: bool = False) -> "DatasetFacts":
         """The facts of ``dataset`` (its samples' onsets too, with ``onsets``)."""
-        from tactbench.data.windows import dataset_onsets
-
         return cls(labels=tuple(int(x) for x in dataset.labels),
                    users=tuple(str(u) for u in dataset.users),
                    classes=tuple(dataset.classes),
@@ -87,8 +91,6 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
 
 def model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
     """What `tactbench live` needs to use a cell's model: classes, layout, imaging, encoder."""
-    from tactbench.classifiers.io import live_metadata
-
     return live_metadata(p.dataset, encoder=cell.encoder, length=cell.length,
                          pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
 
@@ -99,9 +101,6 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
     name checksum, truncation and header problems), be this cell's (its metadata's
     ``cell``, ``encoder``, ``length``, ``classes``) and hold only finite weights."""
     import torch
-
-    from tactbench.classifiers.io import load_model, read_header
-    from tactbench.errors import TactbenchError
 
     try:
         clf, meta = load_model(path, registry=p.registry)
@@ -181,11 +180,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     import numpy as np
     import torch
 
-    from tactbench.data.splits import describe_splits, make_splits
-    from tactbench.data.windows import test_windows_for, training_windows_for
     from tactbench.plugins import Registry
-    from tactbench.runner.entries import load_encoding
-    from tactbench.seeds import derive_seed
 
     memory = memory if memory is not None else MemoryTracker()
     torch.set_num_threads(job.threads)

@@ -22,6 +22,11 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from tactbench.contracts import CLASSIFIER, ENCODER
+from tactbench.data.imaging import image_shape, imager_build_bytes
+from tactbench.data.splits import canonical_split, make_splits, parse_split
+from tactbench.data.windows import TEST_WINDOWS
+from tactbench.datasets.loading import load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import (
     InputError,
@@ -29,6 +34,7 @@ from tactbench.errors import (
     check_positive_float,
     check_positive_int,
 )
+from tactbench.profiles import PRECISIONS, get_profile, profile_options
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
@@ -212,14 +218,9 @@ def check_scene(scene: Scene) -> None:
     values need together (a profile, split and test window that exist, one model per
     cell when models are saved, a grid of at most :data:`MAX_CELLS`, a usable out
     folder). Raises :class:`InputError` naming the field or option."""
-    from tactbench.data.splits import parse_split
-    from tactbench.profiles import PRECISIONS, get_profile
-
     check_fields({f.name: getattr(scene, f.name) for f in fields(Scene)}, ranges=False)
     get_profile(scene.profile)
     check_choice(scene.resolved_precision(), "precision", PRECISIONS)
-    from tactbench.data.windows import TEST_WINDOWS
-
     check_choice(scene.test_window, "test window", TEST_WINDOWS)
     if parse_split(scene.split)[1] is not None and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
@@ -288,7 +289,6 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     of the longest L. The same estimates guard the allocations themselves
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
     """
-    from tactbench.contracts import ENCODER
     from tactbench.integrity import check_budget
 
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
@@ -296,8 +296,6 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     length = max(int(n) for n in scene.lengths)
     frame_shape = {"vectors": (dataset.n_taxels,)}
     if "images" in kinds.values():
-        from tactbench.data.imaging import image_shape, imager_build_bytes
-
         pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
         h, w = image_shape(dataset.layout, pixel_mm)
         frame_shape["images"] = (h, w)
@@ -323,8 +321,6 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
 def _build_encoders(scene: Scene, registry) -> tuple[dict[str, Any], dict[str, str]]:
     """Every encoder of the scene built once: ``(canonical spec → encoder, canonical spec
     → version)``."""
-    from tactbench.contracts import ENCODER
-
     encoders: dict[str, Any] = {}
     versions: dict[str, str] = {}
     for spec in dict.fromkeys(scene.encoders):
@@ -341,9 +337,7 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
     """Every classifier of the scene built once with its profile's options (which checks
     option names and values) and preflighted: ``(canonical spec → frame rank, canonical
     spec → windows per batch)``."""
-    from tactbench.contracts import CLASSIFIER
     from tactbench.plugins import parse_spec
-    from tactbench.profiles import profile_options
 
     frame_ranks: dict[str, int | None] = {}
     batch_sizes: dict[str, int] = {}
@@ -365,8 +359,6 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
                   encoder_version: str, classifier: str, length: int,
                   seed: int) -> dict[str, Any]:
     """Everything that decides a cell's result; its :func:`digest` is the cell's key."""
-    from tactbench.data.splits import canonical_split
-
     return {
         "schema": ROW_SCHEMA,
         "dataset": dataset.name,
@@ -395,9 +387,6 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
     computed or written.
     """
-    from tactbench.contracts import ENCODER
-    from tactbench.data.splits import make_splits
-    from tactbench.datasets.loading import load_dataset
     from tactbench.plugins import load_registry
 
     registry = registry or load_registry()
