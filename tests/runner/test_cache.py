@@ -112,17 +112,6 @@ def test_float16_is_within_a_thousandth_relative(tmp_path):
         np.testing.assert_allclose(np.asarray(got), want, rtol=1e-3, atol=1e-7)
 
 
-def test_taxel_vectors_are_one_channel():
-    storage = Storage.for_channels("uint8", 1)
-    vectors = np.linspace(0, 1, 12, dtype=np.float32).reshape(3, 4)
-    back = storage.decode(storage.encode(vectors))
-    assert back.shape == (3, 4) and np.abs(back - vectors).max() <= 0.5 / 255 + 1e-7
-    with pytest.raises(ValueError, match="2 value ranges for 3 channels"):
-        Storage.for_channels("uint8", 3, ((0, 1), (0, 1)))
-    with pytest.raises(ValueError, match="precision"):
-        Storage.for_channels("int4", 1)
-
-
 # ------------------------------------------------------------------------ reader
 
 
@@ -219,13 +208,6 @@ def test_an_entry_of_an_older_format_is_refused_and_rebuilt(tiny_scene, cache, c
 
 
 # --------------------------------------------------------------------- streaming
-
-
-def test_chunk_bounds_respect_the_budget_and_take_every_sample():
-    assert chunk_bounds([3, 3, 3, 3], 10, budget=60) == [(0, 2), (2, 4)]
-    assert chunk_bounds([3, 9, 1], 10, budget=40) == [(0, 1), (1, 2), (2, 3)]  # a long one
-    assert chunk_bounds([2] * 5, 1, budget=1000) == [(0, 5)]
-    assert chunk_bounds([], 4) == []
 
 
 def test_streaming_writes_exactly_what_the_in_memory_path_wrote(tiny_scene, cache):
