@@ -150,8 +150,6 @@ class EntryWriter:
 
 #: Hex digits of an entry's key.
 KEY_DIGITS = 24
-#: A ``.npy`` header longer than this is not one tactbench wrote (they are 128 bytes).
-NPY_HEADER_MAX = 4096
 #: ``meta.json`` larger than this is not one tactbench wrote.
 META_MAX_BYTES = 1 << 20
 #: ``(folder, signature of its files)`` whose checksums this process verified.
@@ -328,14 +326,14 @@ def _npy_header(path: Path, data: bytes | None = None,
                 ) -> tuple[tuple[int, ...], bool, Any, int]:
     """``(shape, fortran_order, dtype, data offset)`` of a ``.npy`` file (or of its bytes,
     ``data``), from its header alone; a header numpy cannot parse, or longer than
-    :data:`NPY_HEADER_MAX`, raises :class:`CorruptArtefactError`."""
+    :data:`tactbench.integrity.NPY_HEADER_MAX`, raises :class:`CorruptArtefactError`."""
     import io
 
     from tactbench.integrity import read_npy_header
 
     with (open(path, "rb") if data is None else io.BytesIO(data)) as fh:
         try:
-            shape, fortran, dtype = read_npy_header(fh, max_header=NPY_HEADER_MAX)
+            shape, fortran, dtype = read_npy_header(fh)
         except ValueError as exc:
             raise CorruptArtefactError(path, f"not a valid .npy header ({exc})") from None
         return tuple(shape), bool(fortran), dtype, fh.tell()
