@@ -194,6 +194,9 @@ CLASSIFIER = Contract("classifier", (
            "None before fit", default=None),
     Member("length", False, "the window length L it was fitted on; None before fit",
            default=None),
+    Member("classes", False, "the number of classes K it was built for: each cell of a run "
+           "builds its classifier with the option classes=K (None: learnt from the labels "
+           "in fit)", default=None, check=_optional_count),
     Member("n_classes", False, "the number of classes it outputs; None before fit",
            default=None, check=_optional_count),
     Member("batch_size", False, "windows per training batch (the runner's memory "

@@ -150,6 +150,7 @@ def test_a_documented_protocol_classifier_builds_fits_and_predicts(registry):
     assert CLASSIFIER.get(clf, "frame_shape") is None
     # what the runner and live read of it: the contract's defaults
     assert CLASSIFIER.get(clf, "batch_size") == 1 and CLASSIFIER.get(clf, "n_classes") is None
+    assert CLASSIFIER.get(clf, "classes") is None
     for member in ("preflight", "export", "frame_features", "window_proba"):
         assert CLASSIFIER.get(clf, member) is None, member
     train, test = tiny_windows(3)
@@ -167,8 +168,9 @@ def test_a_declared_member_wins_over_the_default():
 def test_the_builtin_classifiers_expose_what_the_runner_and_live_use():
     from tactbench.classifiers.models import SmallCnnLstm
 
-    clf = SmallCnnLstm(batch_size=8)
+    clf = SmallCnnLstm(batch_size=8, classes=3)
     assert CLASSIFIER.get(clf, "batch_size") == 8 and CLASSIFIER.get(clf, "n_classes") is None
+    assert CLASSIFIER.get(clf, "classes") == 3  # as the runner builds a cell's classifier
     for member in ("preflight", "export", "frame_features", "window_proba"):
         assert callable(CLASSIFIER.get(clf, member)), member
     with pytest.raises(InputError, match="unknown device 'gpu7'"):
