@@ -238,12 +238,11 @@ def test_sensors_know_their_taxels_when_built():
 PACKAGE = __import__("pathlib").Path(contracts.__file__).parent
 
 
-def _calls_and_imports(path):
+def _nodes(path):
+    """Every node of the module at ``path``'s syntax tree."""
     import ast
 
-    tree = ast.parse(path.read_text())
-    for node in ast.walk(tree):
-        yield node
+    return ast.walk(ast.parse(path.read_text()))
 
 
 def test_optional_members_are_read_through_their_contract_only():
@@ -256,7 +255,7 @@ def test_optional_members_are_read_through_their_contract_only():
     for path in sorted(PACKAGE.rglob("*.py")):
         if path.name == "contracts.py":
             continue
-        for node in _calls_and_imports(path):
+        for node in _nodes(path):
             if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
                     and node.func.id == "getattr" and len(node.args) == 3
                     and isinstance(node.args[1], ast.Constant)
@@ -279,7 +278,7 @@ def test_the_runner_and_live_know_components_only_through_registry_and_contracts
     paths = sorted((PACKAGE / "runner").glob("*.py")) + [PACKAGE / "live.py"]
     wrong = []
     for path in paths:
-        for node in _calls_and_imports(path):
+        for node in _nodes(path):
             if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith(
                     ("tactbench.encoders", "tactbench.classifiers")) \
                     and node.module not in RUNNER_MAY_IMPORT:
