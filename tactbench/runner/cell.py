@@ -197,13 +197,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     indices, truths, predictions, fits = [], [], [], []
     for fold, split in enumerate(splits):
         with memory.track("windows"):
-            mode, onsets = scene.test_window, data.onsets
-            train = training_windows_for(
-                mode, [sequences[i] for i in split.train], labels[split.train], cell.length,
-                onsets=None if onsets is None else [onsets[i] for i in split.train])
-            test = test_windows_for(
-                mode, [sequences[i] for i in split.test], labels[split.test], cell.length,
-                onsets=None if onsets is None else [onsets[i] for i in split.test])
+            train, test = _windows(job, sequences, labels, split)
             # The planned component, not a fresh plugin lookup: see the module docstring.
             clf = Registry([job.classifier]).build("classifier", cell.classifier,
                                                    classes=len(data.classes))
@@ -219,7 +213,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
             train_s += time.perf_counter() - t0
         with memory.track("predict"):
             t0 = time.perf_counter()
-            predicted = _predict(clf, test, mode, len(split.test))
+            predicted = _predict(clf, test, scene.test_window, len(split.test))
             infer_s += time.perf_counter() - t0
         indices.append(np.asarray(split.test))
         truths.append(labels[split.test])
@@ -268,6 +262,21 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "host": host(),
         "finished": now(),
     }
+
+
+def _windows(job: CellJob, sequences: Sequence[Any], labels: "np.ndarray",
+             split: Any) -> tuple[Any, Any]:
+    """The training and test windows of one split, as the scene's test window says."""
+    mode, onsets, length = job.scene.test_window, job.data.onsets, job.cell.length
+
+    def onsets_of(indices: Any) -> list[int] | None:
+        return None if onsets is None else [onsets[i] for i in indices]
+
+    train = training_windows_for(mode, [sequences[i] for i in split.train],
+                                 labels[split.train], length, onsets=onsets_of(split.train))
+    test = test_windows_for(mode, [sequences[i] for i in split.test], labels[split.test],
+                            length, onsets=onsets_of(split.test))
+    return train, test
 
 
 def _predict(clf: Any, test: Any, mode: str, n_sequences: int) -> "np.ndarray":
