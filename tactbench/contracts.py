@@ -20,12 +20,9 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Protocol, runtime_checkable
+from typing import Any, Callable
 
 from tactbench.errors import ContractError
-
-if TYPE_CHECKING:  # numpy stays out of import time
-    import numpy as np
 
 _REQUIRED = object()
 
@@ -125,6 +122,16 @@ def _text(value: Any) -> str | None:
     return None
 
 
+def _count(value: Any) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        return f"must be a positive integer, got {value!r}"
+    return None
+
+
+def _optional_count(value: Any) -> str | None:
+    return None if value is None else _count(value)
+
+
 def _profiles(value: Any) -> str | None:
     if not isinstance(value, dict) or not all(isinstance(k, str) and isinstance(v, dict)
                                               for k, v in value.items()):
@@ -143,7 +150,7 @@ def _taxel_ids(value: Any) -> str | None:
 
 #: Encoders: ``(T, H, W)`` float32 in [0, 1] → ``(T, C, H, W)`` float32.
 #: A plugin needs only ``channels`` and ``encode``; :class:`tactbench.encoders.base.Encoder`
-#: fills in the rest (and the shared input checks). Flow encoders add ``flow``,
+#: fills in the rest (and the shared input checks). Flow encoders have ``flow``,
 #: ``max_flow`` and ``min_magnitude``: see :func:`tactbench.encoders.flow.is_flow_encoder`.
 ENCODER = Contract("encoder", (
     Member("channels", False, "names of the C output channels", check=_channels),
@@ -161,10 +168,17 @@ ENCODER = Contract("encoder", (
     Member("encode_vectors", True, "encode_vectors(seq (T, N) float32 in [0, 1]) → (T, C·N) "
            "float32, the channels side by side: the encoding of taxel vectors, for "
            "layout-free classifiers (None: the encoder needs images)", default=None),
+    Member("flow", True, "flow(prev, curr) → (N, H, W, 2) px/frame, of a dense-flow "
+           "encoder (None: not a flow encoder; see is_flow_encoder)", default=None),
+    Member("max_flow", False, "a flow encoder's flow (px/frame) that maps to magnitude 1",
+           default=None),
+    Member("min_magnitude", False, "a flow encoder's smallest magnitude kept (below it: 0)",
+           default=None),
 ))
 
 #: Classifiers: ``fit`` on windows ``(B, L, C, H, W)`` or ``(B, L, N)``, then ``predict``.
-#: ``frame_shape`` and ``length`` are state a fitted (or loaded) classifier knows.
+#: ``frame_shape``, ``length`` and ``n_classes`` are state a fitted (or loaded) classifier
+#: knows.
 CLASSIFIER = Contract("classifier", (
     Member("fit", True, "fit(train, val, *, seed, device, progress) → JSON-ready report"),
     Member("predict", True, "predict(batch) → class indices (B,)"),
@@ -180,6 +194,27 @@ CLASSIFIER = Contract("classifier", (
            "None before fit", default=None),
     Member("length", False, "the window length L it was fitted on; None before fit",
            default=None),
+    Member("classes", False, "the number of classes K it was built for: each cell of a run "
+           "builds its classifier with the option classes=K (None: learnt from the labels "
+           "in fit)", default=None, check=_optional_count),
+    Member("n_classes", False, "the number of classes it outputs; None before fit",
+           default=None, check=_optional_count),
+    Member("batch_size", False, "windows per training batch (the runner's memory "
+           "estimate)", default=1, check=_count),
+    Member("preflight", True, "preflight(device) raises a TactbenchError naming the "
+           "problem when the classifier could not run here on device (one this machine "
+           "lacks; a bad setting in the environment): called when a run is planned, "
+           "before any work (None: nothing to check)", default=None),
+    Member("export", True, "export() → (config, tensors): its JSON-ready configuration and "
+           "named tensors, for checking a saved model (None: nothing to export)",
+           default=None),
+    Member("frame_features", True, "frame_features(frame (C, H, W) or (N,)) → the frame's "
+           "features, computed once per frame by live classification; with window_proba "
+           "(None: live classification calls predict_proba on each whole window)",
+           default=None),
+    Member("window_proba", True, "window_proba(features of L frames) → (n_classes,) "
+           "probabilities, as predict_proba gives for the window of those frames (None: "
+           "see frame_features)", default=None),
 ))
 
 #: Sensors: live sources of frames, used as context managers (``with sensor:``).
@@ -226,52 +261,3 @@ def check(kind: str, obj: Any, *, name: str = "", plugin: str = "") -> Any:
         raise ContractError(f"{who}{where} breaks the {kind} contract: "
                             f"{'; '.join(problems)}. See tactbench.contracts.")
     return obj
-
-
-# ----------------------------------------------------------------------------- typing
-
-
-@runtime_checkable
-class Encoder(Protocol):
-    """Static face of :data:`ENCODER` (built with keyword options)."""
-
-    channels: tuple[str, ...]
-
-    def encode(self, seq: "np.ndarray") -> "np.ndarray": ...
-
-
-class Frame(Protocol):
-    """One sweep of a sensor: ``timestamp`` in seconds, ``values`` float32 ``(N,)``."""
-
-    timestamp: float
-    values: "np.ndarray"
-
-
-@runtime_checkable
-class Sensor(Protocol):
-    """Static face of :data:`SENSOR`; sensors are also context managers."""
-
-    taxel_ids: "np.ndarray"
-
-    def frames(self) -> Iterator[Frame]: ...
-
-    def close(self) -> None: ...
-
-
-@runtime_checkable
-class Classifier(Protocol):
-    """Static face of :data:`CLASSIFIER`.
-
-    ``train``/``val`` hold windows ``(B, L, C, H, W)`` (or ``(B, L, N)`` for taxel
-    vectors) with integer labels ``(B,)``; ``val`` may be ``None``; ``progress`` is a
-    callable ``progress(done, total, **info)`` or ``None``.
-    """
-
-    def fit(self, train: Any, val: Any, *, seed: int, device: str,
-            progress: Callable[..., None] | None) -> Any: ...
-
-    def predict(self, batch: "np.ndarray") -> "np.ndarray": ...
-
-    def predict_proba(self, batch: "np.ndarray") -> "np.ndarray": ...
-
-    def save(self, path: Any, metadata: dict[str, Any] | None = None) -> Any: ...

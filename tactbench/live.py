@@ -162,7 +162,7 @@ class LiveModel:
         if not isinstance(classes, list) or not classes:
             raise TactbenchError(f"{where}: the metadata's 'classes' must be a list of names")
         classes = [str(c) for c in classes]
-        outputs = getattr(clf, "n_classes", None)
+        outputs = CLASSIFIER.get(clf, "n_classes")
         if outputs is not None and len(classes) != outputs:
             raise TactbenchError(f"{where}: the metadata lists {len(classes)} classes, but "
                                  f"the classifier has {outputs} outputs")
@@ -283,37 +283,26 @@ def _layout(obj: Any, where: str) -> Any:
 
 # ------------------------------------------------------------------ cached features
 class _FeatureWindow:
-    """Per-frame CNN features kept across predictions (each frame goes through the CNN once).
-
-    The built-in torch classifiers are "frame encoder → LSTM over the window → head"
-    (:class:`tactbench.classifiers.nets.SequenceNet`): only the LSTM and head need the
-    whole window. This is used only after :meth:`check` has shown, on the loaded model,
-    that it gives the same probabilities as ``predict_proba``; otherwise the live loop
-    calls ``predict_proba`` on the whole window.
+    """Per-frame features kept across predictions (each frame goes through the frame
+    encoder once), for a classifier with the contract's ``frame_features`` and
+    ``window_proba`` (the built-in torch classifiers: "frame encoder → LSTM over the
+    window → head", :class:`tactbench.classifiers.nets.SequenceNet`). This is used only
+    after :meth:`check` has shown, on the loaded model, that it gives the same
+    probabilities as ``predict_proba``; otherwise the live loop calls ``predict_proba``
+    on the whole window.
     """
 
     def __init__(self, clf: Any, length: int) -> None:
         self.clf = clf
-        self.net = clf.net
-        self.net.eval()  # a live model only predicts (batch norm, dropout in eval mode)
+        self.features = CLASSIFIER.get(clf, "frame_features")
+        self.window_proba = CLASSIFIER.get(clf, "window_proba")
         self.feats: deque[Any] = deque(maxlen=length)
         self.length = length
 
     @staticmethod
     def supported(clf: Any) -> bool:
-        net = getattr(clf, "net", None)
-        return all(hasattr(net, a) for a in ("prepare", "normalize", "encoder", "lstm", "head"))
-
-    def features(self, frame: np.ndarray) -> Any:
-        import torch
-
-        x = torch.from_numpy(np.ascontiguousarray(frame, dtype=np.float32))[None]
-        dev = getattr(self.clf, "_device", None)
-        if dev is not None:
-            x = x.to(dev)
-        net = self.net
-        with torch.inference_mode():
-            return net.encoder(net.normalize(net.prepare(x)))[0]
+        return (CLASSIFIER.get(clf, "frame_features") is not None
+                and CLASSIFIER.get(clf, "window_proba") is not None)
 
     def push(self, frame: np.ndarray) -> None:
         self.feats.append(self.features(frame))
@@ -323,16 +312,10 @@ class _FeatureWindow:
 
     def proba(self, padded_blank: Any = None) -> np.ndarray:
         """Probabilities for the window (padded with blank-frame features to L)."""
-        import torch
-
         feats = list(self.feats)
         if len(feats) < self.length:
             feats += [padded_blank] * (self.length - len(feats))
-        net = self.net
-        with torch.inference_mode():
-            out, _ = net.lstm(torch.stack(feats)[None])
-            logits = net.head(out[:, -1])
-            return torch.softmax(logits.float(), dim=1)[0].cpu().numpy()
+        return np.asarray(self.window_proba(feats))
 
     def check(self, frame_shape: tuple[int, ...], seed: int = 0) -> bool:
         """Whether this path matches ``predict_proba`` on a random window (then use it)."""

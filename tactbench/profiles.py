@@ -13,7 +13,7 @@
     in the paper), and for ``cnn-lstm`` EfficientNet-B0 at 224 px.
 
 Each profile also names the storage precision of its cached encodings (one of
-:data:`PRECISIONS`, see :mod:`tactbench.runner.cache`): ``quick`` keeps float32 (exactly
+:data:`PRECISIONS`, see :mod:`tactbench.encoders.encoding`): ``quick`` keeps float32 (exactly
 today's numbers); ``paper`` stores 8 bits per channel value, as the study fed 8-bit images
 to its network, in a quarter of the disk (~9 GB instead of ~37 GB for a 3-channel
 encoding of the simulated forearm at 1 mm).
@@ -32,7 +32,7 @@ from typing import Any, Mapping
 
 from tactbench.errors import InputError
 
-#: How cached encodings may be stored (see :mod:`tactbench.runner.cache`): ``float32``
+#: How cached encodings may be stored (see :mod:`tactbench.encoders.encoding`): ``float32``
 #: exactly as encoded, ``float16``, or ``uint8`` (each channel mapped linearly from its
 #: declared range onto 0..255).
 PRECISIONS: tuple[str, ...] = ("float32", "float16", "uint8")

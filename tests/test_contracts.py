@@ -11,7 +11,7 @@ import pytest
 
 from tactbench import contracts, hookimpl
 from tactbench.contracts import CLASSIFIER, CONTRACTS, ENCODER, SENSOR
-from tactbench.errors import ContractError, PluginError
+from tactbench.errors import ContractError, InputError, PluginError
 from tactbench.plugins import KINDS, collect_registry, make_plugin_manager
 
 MODULE = "tb_contract_plugins"  # where the tiny plugin classes below are importable from
@@ -66,12 +66,16 @@ class BadRank(MinimalClassifier):
     frame_rank = 2
 
 
+class NoBatch(MinimalClassifier):
+    batch_size = 0
+
+
 @pytest.fixture
 def registry(monkeypatch):
     """Built-ins plus a plugin ``tiny`` registering the classes above by target."""
     module = types.ModuleType(MODULE)
     for cls in (MinimalEncoder, MinimalClassifier, NoEncode, NoProba, NamelessChannels,
-                BadRank):
+                BadRank, NoBatch):
         setattr(module, cls.__name__, cls)
     monkeypatch.setitem(sys.modules, MODULE, module)
 
@@ -84,7 +88,7 @@ def registry(monkeypatch):
     @hookimpl
     def register_classifiers(register):
         for name, cls in (("minimal", "MinimalClassifier"), ("no-proba", "NoProba"),
-                          ("rank-2", "BadRank")):
+                          ("rank-2", "BadRank"), ("no-batch", "NoBatch")):
             register(name, f"{MODULE}:{cls}", summary=name)
 
     tiny = types.SimpleNamespace(register_encoders=register_encoders,
@@ -100,6 +104,7 @@ def registry(monkeypatch):
     ("encoder", "string-channels", "'channels' must be a non-empty sequence"),
     ("classifier", "no-proba", "'predict_proba' is not callable"),
     ("classifier", "rank-2", "'frame_rank' must be 3 (images), 1 (taxel vectors) or None"),
+    ("classifier", "no-batch", "'batch_size' must be a positive integer, got 0"),
 ])
 def test_a_component_breaking_its_contract_is_refused_at_build(registry, kind, name, missing):
     with pytest.raises(ContractError) as err:
@@ -143,6 +148,11 @@ def test_a_documented_protocol_classifier_builds_fits_and_predicts(registry):
     assert CLASSIFIER.get(type(clf), "frame_rank") == 3  # the class answers too (planning)
     assert CLASSIFIER.get(clf, "version") == "1" and CLASSIFIER.get(clf, "profiles") == {}
     assert CLASSIFIER.get(clf, "frame_shape") is None
+    # what the runner and live read of it: the contract's defaults
+    assert CLASSIFIER.get(clf, "batch_size") == 1 and CLASSIFIER.get(clf, "n_classes") is None
+    assert CLASSIFIER.get(clf, "classes") is None
+    for member in ("preflight", "export", "frame_features", "window_proba"):
+        assert CLASSIFIER.get(clf, member) is None, member
     train, test = tiny_windows(3)
     clf.fit(train, None, seed=0, device="cpu", progress=None)
     assert clf.predict(test).shape == (len(test),)
@@ -153,6 +163,18 @@ def test_a_declared_member_wins_over_the_default():
 
     assert CLASSIFIER.get(PooledLogReg, "frame_rank") is None  # images or vectors
     assert CLASSIFIER.get(PooledLogReg(), "frame_rank") is None
+
+
+def test_the_builtin_classifiers_expose_what_the_runner_and_live_use():
+    from tactbench.classifiers.models import SmallCnnLstm
+
+    clf = SmallCnnLstm(batch_size=8, classes=3)
+    assert CLASSIFIER.get(clf, "batch_size") == 8 and CLASSIFIER.get(clf, "n_classes") is None
+    assert CLASSIFIER.get(clf, "classes") == 3  # as the runner builds a cell's classifier
+    for member in ("preflight", "export", "frame_features", "window_proba"):
+        assert callable(CLASSIFIER.get(clf, member)), member
+    with pytest.raises(InputError, match="unknown device 'gpu7'"):
+        clf.preflight("gpu7")  # refused when planned, not in every cell
 
 
 def test_get_refuses_names_outside_the_contract_and_missing_required_members():
@@ -209,3 +231,63 @@ def test_sensors_know_their_taxels_when_built():
         assert SENSOR.get(sensor, "stats") is not None
     with registry.build("sensor", "replay", path=TINY_SYNTHETIC) as sensor:
         assert SENSOR.get(sensor, "bus_load") is None  # a replay reads no bus
+
+
+# ----------------------------------------------------------------------------- the rules
+
+PACKAGE = __import__("pathlib").Path(contracts.__file__).parent
+
+
+def _nodes(path):
+    """Every node of the module at ``path``'s syntax tree."""
+    import ast
+
+    return ast.walk(ast.parse(path.read_text()))
+
+
+def test_optional_members_are_read_through_their_contract_only():
+    """No ``getattr(x, "<member>", default)`` outside contracts.py: the default of an
+    optional member is written once, in its contract."""
+    import ast
+
+    members = {m.name for c in CONTRACTS.values() for m in c.members}
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "contracts.py":
+            continue
+        for node in _nodes(path):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id == "getattr" and len(node.args) == 3
+                    and isinstance(node.args[1], ast.Constant)
+                    and node.args[1].value in members):
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno} "
+                             f"{node.args[1].value}")
+    assert not found, found
+
+
+#: What the runner and live may import of the component stages: the encoding pass and
+#: shared encoder helpers, and the model files; never a component's module.
+RUNNER_MAY_IMPORT = {"tactbench.encoders.encoding", "tactbench.encoders.parallel",
+                     "tactbench.encoders.flow", "tactbench.encoders.base",
+                     "tactbench.classifiers.io"}
+
+
+def test_the_runner_and_live_know_components_only_through_registry_and_contracts():
+    import ast
+
+    paths = sorted((PACKAGE / "runner").glob("*.py")) + [PACKAGE / "live.py"]
+    wrong = []
+    for path in paths:
+        for node in _nodes(path):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith(
+                    ("tactbench.encoders", "tactbench.classifiers")) \
+                    and node.module not in RUNNER_MAY_IMPORT:
+                wrong.append(f"{path.relative_to(PACKAGE)} imports {node.module}")
+            # a component's private member (clf._export(), clf._device)
+            if (isinstance(node, ast.Attribute) and node.attr.startswith("_")
+                    and not node.attr.startswith("__")
+                    and isinstance(node.value, ast.Name)
+                    and node.value.id in ("clf", "encoder", "enc", "classifier")):
+                wrong.append(f"{path.relative_to(PACKAGE)}:{node.lineno} reads "
+                             f"{node.value.id}.{node.attr}")
+    assert not wrong, wrong

@@ -530,3 +530,12 @@ def test_live_metadata_of_the_wrong_type_is_one_line(trained, edit, message):
         LiveModel.from_parts(model.clf, {**model.info, **edit}, registry=REGISTRY,
                              where="m.safetensors")
     assert str(info.value).startswith("m.safetensors: ") and "\n" not in str(info.value)
+
+
+def test_frame_features_are_cached_only_for_a_classifier_whose_contract_offers_them():
+    from tactbench.classifiers.classical import PooledLogReg
+    from tactbench.classifiers.models import SmallCnnLstm
+    from tactbench.live import _FeatureWindow
+
+    assert _FeatureWindow.supported(SmallCnnLstm())
+    assert not _FeatureWindow.supported(PooledLogReg())  # predict_proba on each window

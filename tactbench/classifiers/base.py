@@ -179,9 +179,18 @@ class SequenceClassifier:
 
         return save_model(self, path, metadata or {})
 
+    def preflight(self, device: str) -> None:
+        """Refuse, before any work, a ``device`` this machine lacks and bad training
+        memory settings in the environment (see ``preflight`` in
+        :data:`tactbench.contracts.CLASSIFIER`)."""
+        bank_budget_bytes()
+        loader_workers(None)
+        if device.strip().lower() != "cpu":
+            select_device(device)
+
     # -- what io needs -----------------------------------------------------------------
 
-    def _export(self) -> tuple[dict[str, Any], dict[str, Any]]:
+    def export(self) -> tuple[dict[str, Any], dict[str, Any]]:
         """``(config, tensors)``: JSON-ready configuration and named torch tensors."""
         raise NotImplementedError
 
@@ -647,7 +656,7 @@ class TorchSequenceClassifier(SequenceClassifier):
 
     # -- save / load -------------------------------------------------------------------
 
-    def _export(self) -> tuple[dict[str, Any], dict[str, Any]]:
+    def export(self) -> tuple[dict[str, Any], dict[str, Any]]:
         if self.net is None:
             raise RuntimeError(f"{self.name} is not fitted: nothing to save")
         tensors = {k: v.detach().cpu() for k, v in self.net.state_dict().items()}
@@ -687,6 +696,34 @@ class TorchSequenceClassifier(SequenceClassifier):
         self._device = dev
         self._precision = precision_for(dev, self.amp)
         return self
+
+    # -- live classification: one frame at a time (see tactbench.contracts.CLASSIFIER) ---
+
+    def frame_features(self, frame: np.ndarray):
+        """One frame's features (a tensor on the model's device), from the frame encoder
+        of the :class:`~tactbench.classifiers.nets.SequenceNet`; the network is put in
+        evaluation mode (a live model only predicts)."""
+        import torch
+
+        net = self.net
+        if net.training:
+            net.eval()
+        x = torch.from_numpy(np.ascontiguousarray(frame, dtype=np.float32))[None]
+        if self._device is not None:
+            x = x.to(self._device)
+        with torch.inference_mode():
+            return net.encoder(net.normalize(net.prepare(x)))[0]
+
+    def window_proba(self, features: Sequence[Any]) -> np.ndarray:
+        """Probabilities ``(n_classes,)`` of the window whose frames have ``features``
+        (:meth:`frame_features`): the LSTM and head over them."""
+        import torch
+
+        net = self.net
+        with torch.inference_mode():
+            out, _ = net.lstm(torch.stack(list(features))[None])
+            logits = net.head(out[:, -1])
+            return torch.softmax(logits.float(), dim=1)[0].cpu().numpy()
 
 
 def n_params(module) -> int:

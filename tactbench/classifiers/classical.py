@@ -233,7 +233,7 @@ class PooledLogReg(SequenceClassifier):
             p = parts[0] if len(parts) == 1 else torch.cat(parts)
         return p.float().numpy()
 
-    def _export(self):
+    def export(self):
         if self.weight is None:
             raise RuntimeError("logreg is not fitted: nothing to save")
         tensors = {"weight": self.weight, "bias": self.bias, "feat_mean": self.feat_mean,

@@ -121,7 +121,7 @@ def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = N
     from tactbench.integrity import ALGORITHM
     from tactbench.paths import atomic_write_bytes
 
-    config, tensors = clf._export()
+    config, tensors = clf.export()
     meta = dict(metadata or {})
     classes = meta.get("classes")
     if classes is not None:

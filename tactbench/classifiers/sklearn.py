@@ -299,7 +299,7 @@ class SklearnClassifier(SequenceClassifier):
 
     # -- model files -------------------------------------------------------------------
 
-    def _export(self):
+    def export(self):
         import sklearn
         import torch
 

@@ -22,7 +22,7 @@ before it, two other test windows (:data:`TEST_WINDOWS`) are offered:
 A :class:`Windows` holds the sequences once and the window positions, so the
 many overlapping training windows share memory; :meth:`Windows.batch`
 materialises a batch ``(B, L, *frame_shape)`` on demand. The sequences may be
-arrays or *stored sequences* (:func:`tactbench.runner.cache.load_encoding`: anything
+arrays or *stored sequences* (:func:`tactbench.runner.entries.load_encoding`: anything
 with ``shape`` and slicing that reads frames from disk on demand): a batch then reads
 only its windows' frames, so memory is O(batch), whatever the dataset's size. A batch
 is estimated (windows × L × frame) before it is allocated, and one above the memory

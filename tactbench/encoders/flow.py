@@ -50,6 +50,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from tactbench.contracts import ENCODER
 from tactbench.encoders.base import Encoder
 from tactbench.errors import InputError, check_positive_float, check_positive_int
 
@@ -267,8 +268,8 @@ def is_flow_encoder(encoder: Any) -> bool:
     """
     if isinstance(encoder, FlowEncoder):
         return True
-    channels = tuple(getattr(encoder, "channels", ()) or ())
+    channels = tuple(ENCODER.get(encoder, "channels"))
     return ("magnitude" in channels and "direction" in channels
-            and callable(getattr(encoder, "flow", None))
-            and all(isinstance(getattr(encoder, a, None), (int, float))
+            and callable(ENCODER.get(encoder, "flow"))
+            and all(isinstance(ENCODER.get(encoder, a), (int, float))
                     for a in ("max_flow", "min_magnitude")))

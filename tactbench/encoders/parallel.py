@@ -1,6 +1,6 @@
 """Encoding many sequences at once, on every core.
 
-:func:`encode_all` is what the runner calls to encode a dataset. Sequences are
+:func:`encode_all` encodes a list of sequences with one encoder. Sequences are
 independent, so they are spread over ``workers`` threads (default) or
 processes; results come back in input order.
 
@@ -12,7 +12,8 @@ copying of processes. benchmarks/encoders.py measures both
 (OpenCV, torch) are limited to one thread while :func:`encode_all` runs, so
 ``workers`` threads use ``workers`` cores instead of fighting over them.
 
-:func:`encode_chunks` is the streaming form the runner's cache uses: chunks of sequences
+:func:`encode_chunks` is the streaming form the encoding pass
+(:func:`tactbench.encoders.encoding.encode_images`) uses: chunks of sequences
 come from an iterator (imaged as they are asked for), every encoder of a mapping encodes
 each chunk on one pool of workers kept for the whole stream, and the next chunk is
 already queued while the caller stores the previous one. Memory is a few chunks, not the

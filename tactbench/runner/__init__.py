@@ -23,20 +23,24 @@ its identity and seed, never on where it ran.
 
 Modules, one job each: :mod:`~tactbench.runner.scene` (run configuration, scene files),
 :mod:`~tactbench.runner.planning` (grid checks, cells, identities),
-:mod:`~tactbench.runner.cache` (encodings on disk), :mod:`~tactbench.runner.cell` (train
-and test one cell), :mod:`~tactbench.runner.executors` (local, processes, dask),
-:mod:`~tactbench.runner.store` (result rows), :mod:`~tactbench.runner.system` (versions,
+:mod:`~tactbench.runner.cache` (the cache folder; filling it for a plan),
+:mod:`~tactbench.runner.entries` (one cache entry: files, verification, reading; the pass
+that encodes a dataset is :mod:`tactbench.encoders.encoding`),
+:mod:`~tactbench.runner.cell` (train and test one cell),
+:mod:`~tactbench.runner.executors` (local, processes, dask),
+:mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
 memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
 :mod:`~tactbench.runner.reports` (tables, files, plots).
 """
 
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
-from tactbench.runner.cache import EncodingCache, ensure_encodings, load_encoding
+from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
+from tactbench.runner.entries import load_encoding
 from tactbench.runner.orchestrate import RunResult, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
+from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
-from tactbench.runner.store import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.system import git_revision
 
 __all__ = [

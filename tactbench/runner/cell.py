@@ -6,7 +6,7 @@
 plugins the run was planned with, not from whatever is installed where it runs.
 
 A cell that raises (a bug in a plugin, a classifier that fails in ``fit``, out of memory)
-returns a *failed* row instead (see :mod:`tactbench.runner.store`): no exception object
+returns a *failed* row instead (see :mod:`tactbench.runner.results`): no exception object
 crosses a process boundary, and the rest of the grid goes on. Ctrl-C
 (``KeyboardInterrupt``) is not a failure: it stops the run.
 """
@@ -18,35 +18,60 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
+from tactbench.classifiers.io import live_metadata, load_model, read_header
+from tactbench.contracts import CLASSIFIER
+from tactbench.data.splits import describe_splits, make_splits
+from tactbench.data.windows import dataset_onsets, test_windows_for, training_windows_for
+from tactbench.errors import TactbenchError
+from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
-from tactbench.runner.store import FAILED, OK
+from tactbench.runner.results import FAILED, OK
+from tactbench.runner.scene import Scene
 from tactbench.runner.system import MemoryTracker, host, now, versions
+from tactbench.seeds import derive_seed
+
+if TYPE_CHECKING:
+    import numpy as np
 
 #: How many of the innermost traceback frames a failed row keeps.
 TRACEBACK_FRAMES = 5
 
 
 @dataclass(frozen=True)
+class DatasetFacts:
+    """What a cell needs of the dataset besides its encoding, made once per run and shared
+    by every job."""
+
+    labels: tuple[int, ...]  # class index of every sample
+    users: tuple[str, ...]  # user of every sample
+    classes: tuple[str, ...]
+    onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
+
+    @classmethod
+    def of(cls, dataset: Any, *, onsets: bool = False) -> "DatasetFacts":
+        """The facts of ``dataset`` (its samples' onsets too, with ``onsets``)."""
+        return cls(labels=tuple(int(x) for x in dataset.labels),
+                   users=tuple(str(u) for u in dataset.users),
+                   classes=tuple(dataset.classes),
+                   onsets=dataset_onsets(dataset) if onsets else None)
+
+
+@dataclass(frozen=True)
 class CellJob:
-    """Everything a worker needs to run a cell, picklable and small."""
+    """Everything a worker needs to run a cell, picklable and small: the cell, the scene
+    it belongs to, the dataset's facts and where its encoding is."""
 
     cell: Cell
     identity: dict[str, Any]
     classifier: Any  # tactbench.plugins.Component of the cell's classifier (picklable)
     encoding_dir: str
-    labels: tuple[int, ...]  # class index of every sample of the dataset
-    users: tuple[str, ...]  # user of every sample
-    classes: tuple[str, ...]
-    split: str
-    test_per_class: int
-    device: str
-    threads: int  # torch threads
+    scene: Scene
+    data: DatasetFacts
+    threads: int  # torch threads, as the planning machine resolved them
     model_path: str | None = None
     model_meta: dict[str, Any] | None = None
-    test_window: str = "first"  # tactbench.data.windows.TEST_WINDOWS
-    onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
 
 
 def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
@@ -54,27 +79,18 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
     """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.cache.ensure_encodings`;
     with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
     scene = p.scene
-    from tactbench.data.windows import dataset_onsets
-
-    labels = tuple(int(x) for x in p.dataset.labels)  # once, shared by every job
-    users = tuple(str(u) for u in p.dataset.users)
-    onsets = dataset_onsets(p.dataset) if scene.test_window == "onset" else None
+    data = DatasetFacts.of(p.dataset, onsets=scene.test_window == "onset")  # shared by all
     return [CellJob(cell=c, identity=p.identities[c.key],
                     classifier=p.classifier_component(c.classifier),
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
-                    labels=labels, users=users, classes=tuple(p.dataset.classes),
-                    split=scene.split, test_per_class=scene.test_per_class,
-                    device=scene.device, threads=scene.resolved_threads(),
+                    scene=scene, data=data, threads=scene.resolved_threads(),
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
-                    model_meta=model_metadata(p, c) if models else None,
-                    test_window=scene.test_window, onsets=onsets)
+                    model_meta=model_metadata(p, c) if models else None)
             for c in cells]
 
 
 def model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
     """What `tactbench live` needs to use a cell's model: classes, layout, imaging, encoder."""
-    from tactbench.classifiers.io import live_metadata
-
     return live_metadata(p.dataset, encoder=cell.encoder, L=cell.length,
                          pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
 
@@ -85,9 +101,6 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
     name checksum, truncation and header problems), be this cell's (its metadata's
     ``cell``, ``encoder``, ``L``, ``classes``) and hold only finite weights."""
     import torch
-
-    from tactbench.classifiers.io import load_model, read_header
-    from tactbench.errors import TactbenchError
 
     try:
         clf, meta = load_model(path, registry=p.registry)
@@ -103,9 +116,12 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
     n_classes = config.get("n_classes") if isinstance(config, dict) else None
     if n_classes is not None and n_classes != len(want["classes"]):
         return f"a {n_classes}-class network for {len(want['classes'])} classes"
+    export = CLASSIFIER.get(clf, "export")
+    if export is None:  # a classifier without tensors to check
+        return None
     try:
-        _, tensors = clf._export()
-    except Exception:  # noqa: BLE001 — a classifier without tensors to check
+        _, tensors = export()
+    except Exception:  # noqa: BLE001 — it cannot export its tensors: nothing to check
         return None
     for name, tensor in tensors.items():
         if isinstance(tensor, torch.Tensor) and tensor.is_floating_point() \
@@ -140,8 +156,8 @@ def failed_row(job: CellJob, exc: BaseException,
         "status": FAILED,
         "error": {"type": type(exc).__name__, "message": str(exc) or repr(exc),
                   "traceback": "".join(frames)},
-        "classes": list(job.classes),
-        "device": job.device,
+        "classes": list(job.data.classes),
+        "device": job.scene.device,
         "threads": job.threads,
         "peak_rss_mb": memory.peak_mb,
         "peak_step": memory.peak_step,
@@ -164,36 +180,27 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     import numpy as np
     import torch
 
-    from tactbench.data.splits import describe_splits, make_splits
-    from tactbench.data.windows import test_windows_for, training_windows_for
     from tactbench.plugins import Registry
-    from tactbench.runner.cache import load_encoding
-    from tactbench.seeds import derive_seed
 
     memory = memory if memory is not None else MemoryTracker()
     torch.set_num_threads(job.threads)
     cell = job.cell
     with memory.track("load encoding"):
         sequences, meta = load_encoding(job.encoding_dir)
-    labels = np.asarray(job.labels, dtype=np.int64)
-    splits = make_splits(job.split, labels=labels, users=job.users, seed=cell.seed,
-                         test_per_class=job.test_per_class)
+    scene, data = job.scene, job.data
+    labels = np.asarray(data.labels, dtype=np.int64)
+    splits = make_splits(scene.split, labels=labels, users=data.users, seed=cell.seed,
+                         test_per_class=scene.test_per_class)
     rss0 = 0.0
     train_s = infer_s = 0.0
     n_train = n_test = 0
     indices, truths, predictions, fits = [], [], [], []
     for fold, split in enumerate(splits):
         with memory.track("windows"):
-            mode, onsets = job.test_window, job.onsets
-            train = training_windows_for(
-                mode, [sequences[i] for i in split.train], labels[split.train], cell.length,
-                onsets=None if onsets is None else [onsets[i] for i in split.train])
-            test = test_windows_for(
-                mode, [sequences[i] for i in split.test], labels[split.test], cell.length,
-                onsets=None if onsets is None else [onsets[i] for i in split.test])
+            train, test = _windows(job, sequences, labels, split)
             # The planned component, not a fresh plugin lookup: see the module docstring.
             clf = Registry([job.classifier]).build("classifier", cell.classifier,
-                                                   classes=len(job.classes))
+                                                   classes=len(data.classes))
         if fold == 0:
             rss0 = memory.peak_mb
         # one split keeps the seed it always had; the folds of a k-fold split differ
@@ -201,18 +208,12 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                            *(() if len(splits) == 1 else (f"fold {fold}",)))
         with memory.track("fit"):
             t0 = time.perf_counter()
-            fits.append(clf.fit(train, None, seed=seed, device=job.device,
+            fits.append(clf.fit(train, None, seed=seed, device=scene.device,
                                 progress=progress))
             train_s += time.perf_counter() - t0
         with memory.track("predict"):
             t0 = time.perf_counter()
-            if mode == "vote":  # every window of a sequence; probabilities averaged
-                proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
-                summed = np.zeros((len(split.test), proba.shape[1]))
-                np.add.at(summed, test.seq_index, proba)
-                predicted = summed.argmax(axis=1)
-            else:
-                predicted = np.asarray(clf.predict(test))
+            predicted = _predict(clf, test, scene.test_window, len(split.test))
             infer_s += time.perf_counter() - t0
         indices.append(np.asarray(split.test))
         truths.append(labels[split.test])
@@ -228,20 +229,15 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                                       "seed": cell.seed, "cell": cell.key,
                                       "test_accuracy": float((predicted == truth).mean())})
 
-    k = len(job.classes)
-    confusion = np.zeros((k, k), dtype=np.int64)
-    np.add.at(confusion, (truth, predicted), 1)
-    support = confusion.sum(axis=1)
-    per_class = {job.classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
-                 for i in range(k)}
+    confusion, per_class = _confusion(data.classes, truth, predicted)
     frames = max(1, int(meta.get("frames", 1)))
     return {
         "key": cell.key,
         **job.identity,
         "status": OK,
         **describe_splits(splits),
-        "test_window": job.test_window,
-        "classes": list(job.classes),
+        "test_window": scene.test_window,
+        "classes": list(data.classes),
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
@@ -260,12 +256,55 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "n_train_windows": n_train,
         "n_test": n_test,
         "fit": _jsonable(fits[0] if len(fits) == 1 else fits),
-        "device": job.device,
+        "device": scene.device,
         "threads": job.threads,
         "versions": versions(),
         "host": host(),
         "finished": now(),
     }
+
+
+def _windows(job: CellJob, sequences: Sequence[Any], labels: "np.ndarray",
+             split: Any) -> tuple[Any, Any]:
+    """The training and test windows of one split, as the scene's test window says."""
+    mode, onsets, length = job.scene.test_window, job.data.onsets, job.cell.length
+
+    def onsets_of(indices: Any) -> list[int] | None:
+        return None if onsets is None else [onsets[i] for i in indices]
+
+    train = training_windows_for(mode, [sequences[i] for i in split.train],
+                                 labels[split.train], length, onsets=onsets_of(split.train))
+    test = test_windows_for(mode, [sequences[i] for i in split.test], labels[split.test],
+                            length, onsets=onsets_of(split.test))
+    return train, test
+
+
+def _predict(clf: Any, test: Any, mode: str, n_sequences: int) -> "np.ndarray":
+    """The predicted class of each test sequence: of its one window, or with ``mode``
+    ``"vote"`` of every window of it (probabilities averaged)."""
+    import numpy as np
+
+    if mode != "vote":
+        return np.asarray(clf.predict(test))
+    proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
+    summed = np.zeros((n_sequences, proba.shape[1]))
+    np.add.at(summed, test.seq_index, proba)
+    return summed.argmax(axis=1)
+
+
+def _confusion(classes: Sequence[str], truth: "np.ndarray", predicted: "np.ndarray",
+               ) -> tuple["np.ndarray", dict[str, float | None]]:
+    """The confusion matrix (rows: true class) and each class's accuracy (None for a
+    class without test sequences)."""
+    import numpy as np
+
+    k = len(classes)
+    confusion = np.zeros((k, k), dtype=np.int64)
+    np.add.at(confusion, (truth, predicted), 1)
+    support = confusion.sum(axis=1)
+    per_class = {classes[i]: (float(confusion[i, i] / support[i]) if support[i] else None)
+                 for i in range(k)}
+    return confusion, per_class
 
 
 def _jsonable(obj: Any) -> Any:

@@ -12,10 +12,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.runner.cell import CellJob, failed_row, run_cell
+from tactbench.runner.system import BEFORE, MemoryTracker
 
 if TYPE_CHECKING:
     from tactbench.runner.scene import Scene
-    from tactbench.runner.system import MemoryTracker
     from tactbench.ui import Progress
 
 Finish = Callable[[dict[str, Any]], None]
@@ -49,8 +49,6 @@ def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
     ``memory`` follows the run's own steps in this process (planning, encoding, each
     cell): a cell whose peak was set before it started names the step that set it.
     """
-    from tactbench.runner.system import BEFORE, MemoryTracker
-
     memory = memory if memory is not None else MemoryTracker()
     for job in jobs:
         earlier = memory.peak_step

@@ -19,7 +19,7 @@ from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.scene import Scene
-from tactbench.runner.store import ResultStore, failed_rows, ok_rows
+from tactbench.runner.results import ResultStore, failed_rows, ok_rows
 from tactbench.runner.system import MemoryTracker, git_revision
 from tactbench.ui import Progress
 

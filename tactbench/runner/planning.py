@@ -18,17 +18,24 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from tactbench.contracts import CLASSIFIER, ENCODER
+from tactbench.data.imaging import image_shape, imager_build_bytes
+from tactbench.data.splits import canonical_split, make_splits, parse_split
+from tactbench.data.windows import TEST_WINDOWS
+from tactbench.datasets.loading import load_dataset
+from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import (
     InputError,
     check_choice,
     check_positive_float,
     check_positive_int,
 )
-from tactbench.runner.scene import EXECUTORS, Scene, check_scene
+from tactbench.profiles import PRECISIONS, get_profile, profile_options
+from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
 #: model, and a larger grid is a typo (its plan alone would grow without bound).
@@ -205,15 +212,15 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
         raise InputError(f"out folder {out} cannot be used: {exc.strerror or exc}") from None
 
 
-def _check_scene(scene: Scene) -> None:
-    from tactbench.data.splits import parse_split
-    from tactbench.profiles import PRECISIONS, get_profile
-
-    check_scene(scene)  # every field's type, first
+def check_scene(scene: Scene) -> None:
+    """Check ``scene`` before any work: every field's type first
+    (:func:`~tactbench.runner.scene.check_fields`), then each value's range and what the
+    values need together (a profile, split and test window that exist, one model per
+    cell when models are saved, a grid of at most :data:`MAX_CELLS`, a usable out
+    folder). Raises :class:`InputError` naming the field or option."""
+    check_fields({f.name: getattr(scene, f.name) for f in fields(Scene)}, ranges=False)
     get_profile(scene.profile)
     check_choice(scene.resolved_precision(), "precision", PRECISIONS)
-    from tactbench.data.windows import TEST_WINDOWS
-
     check_choice(scene.test_window, "test window", TEST_WINDOWS)
     if parse_split(scene.split)[1] is not None and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
@@ -228,22 +235,12 @@ def _check_scene(scene: Scene) -> None:
     check_positive_int(scene.workers, "--workers")
     if scene.threads is not None:  # torch refuses 0 only inside the cell, after the work
         check_positive_int(scene.threads, "--threads")
-    # the training memory settings come from the environment: read them now, not in a cell
-    from tactbench.classifiers.base import bank_budget_bytes, loader_workers
-
-    bank_budget_bytes()
-    loader_workers(None)
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
                * len(set(scene.L)) * len(set(scene.seeds)))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
-    if scene.executor == "local" and scene.device.strip().lower() != "cpu":
-        # a device this machine lacks would fail every cell, after the encoding
-        from tactbench.classifiers.training import select_device
-
-        select_device(scene.device)
     check_out_folder(scene.out, models=scene.save_models)
 
 
@@ -292,7 +289,6 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     of the longest L. The same estimates guard the allocations themselves
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
     """
-    from tactbench.contracts import ENCODER
     from tactbench.integrity import check_budget
 
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
@@ -300,9 +296,6 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     length = max(int(n) for n in scene.L)
     frame_shape = {"vectors": (dataset.n_taxels,)}
     if "images" in kinds.values():
-        from tactbench.data.imaging import image_shape, imager_build_bytes
-        from tactbench.runner.cache import CHUNK_BYTES
-
         pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
         h, w = image_shape(dataset.layout, pixel_mm)
         frame_shape["images"] = (h, w)
@@ -325,23 +318,9 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
                          f"({enc} × {clf.split(':')[0]})")
 
 
-def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
-    """Check the whole grid before any work: names, options, L, layout needs, split.
-
-    ``registry`` (default: every installed plugin) is the one the cells will use too.
-    ``progress(done, total)`` hears from a dataset that takes a while to make (the
-    simulator's first run).
-    Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
-    computed or written.
-    """
-    from tactbench.contracts import CLASSIFIER, ENCODER
-    from tactbench.plugins import load_registry, parse_spec
-    from tactbench.profiles import profile_options
-
-    registry = registry or load_registry()
-    _check_scene(scene)
-
-    # Names and options first (cheap), so a typo fails before a dataset is loaded.
+def _build_encoders(scene: Scene, registry) -> tuple[dict[str, Any], dict[str, str]]:
+    """Every encoder of the scene built once: ``(canonical spec → encoder, canonical spec
+    → version)``."""
     encoders: dict[str, Any] = {}
     versions: dict[str, str] = {}
     for spec in dict.fromkeys(scene.encoders):
@@ -351,8 +330,17 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         encoder = registry.build("encoder", canonical)
         encoders[canonical] = encoder
         versions[canonical] = str(ENCODER.get(encoder, "version"))
-    frame_ranks: dict[str, int | None] = {}  # canonical classifier spec → frame rank
-    batch_sizes: dict[str, int] = {}  # canonical classifier spec → windows per batch
+    return encoders, versions
+
+
+def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], dict[str, int]]:
+    """Every classifier of the scene built once with its profile's options (which checks
+    option names and values) and preflighted: ``(canonical spec → frame rank, canonical
+    spec → windows per batch)``."""
+    from tactbench.plugins import parse_spec
+
+    frame_ranks: dict[str, int | None] = {}
+    batch_sizes: dict[str, int] = {}
     for spec in dict.fromkeys(scene.classifiers):
         spec = registry.resolve("classifier", spec)  # "sklearn:SVC" → estimator=SVC
         name, _ = parse_spec(spec)
@@ -360,11 +348,53 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                                                         registry=registry))
         clf = registry.build("classifier", canonical)  # validates option names and values
         frame_ranks.setdefault(canonical, CLASSIFIER.get(clf, "frame_rank"))
-        size = getattr(clf, "batch_size", 1)
-        batch_sizes[canonical] = size if isinstance(size, int) and size > 0 else 1
-    classifier_specs = list(frame_ranks)
+        batch_sizes[canonical] = CLASSIFIER.get(clf, "batch_size")
+        preflight = CLASSIFIER.get(clf, "preflight")
+        if preflight is not None:  # a device this machine lacks would fail every cell
+            preflight(scene.device if scene.executor == "local" else "cpu")
+    return frame_ranks, batch_sizes
 
-    from tactbench.datasets.loading import load_dataset
+
+def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
+                  encoder_version: str, classifier: str, length: int,
+                  seed: int) -> dict[str, Any]:
+    """Everything that decides a cell's result; its :func:`digest` is the cell's key."""
+    return {
+        "schema": ROW_SCHEMA,
+        "dataset": dataset.name,
+        "dataset_hash": dataset_hash,
+        "split": canonical_split(scene.split),
+        # the study's test window keeps the keys cells always had
+        **({} if scene.test_window == "first" else {"test_window": scene.test_window}),
+        "test_per_class": scene.test_per_class,
+        "imaging": imaging_identity(scene, kind),
+        "encoder": encoder,
+        "encoder_version": encoder_version,
+        **storage_identity(scene.resolved_precision()),
+        "classifier": classifier,
+        "profile": scene.profile,
+        "L": int(length),
+        "seed": int(seed),
+    }
+
+
+def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
+    """Check the whole grid before any work: names, options, L, layout needs, split.
+
+    ``registry`` (default: every installed plugin) is the one the cells will use too.
+    ``progress(done, total)`` hears from a dataset that takes a while to make (the
+    simulator's first run).
+    Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
+    computed or written.
+    """
+    from tactbench.plugins import load_registry
+
+    registry = registry or load_registry()
+    check_scene(scene)
+    # Names and options first (cheap), so a typo fails before a dataset is loaded.
+    encoders, versions = _build_encoders(scene, registry)
+    frame_ranks, batch_sizes = _build_classifiers(scene, registry)
+    classifier_specs = list(frame_ranks)
 
     dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
     has_layout = dataset.layout is not None
@@ -376,37 +406,17 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     _check_lengths(scene, dataset)
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
-    from tactbench.data.splits import canonical_split, make_splits
-
     make_splits(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
                 test_per_class=scene.test_per_class)  # fails early on an impossible split
-    split_spec = canonical_split(scene.split)
 
     cells: list[Cell] = []
     identities: dict[str, dict[str, Any]] = {}
-    storage = storage_identity(scene.resolved_precision())
     for enc in encoders:
         for clf in classifier_specs:
             for length in scene.L:
                 for seed in dict.fromkeys(scene.seeds):  # a seed listed twice is one cell
-                    identity = {
-                        "schema": ROW_SCHEMA,
-                        "dataset": dataset.name,
-                        "dataset_hash": dataset_hash,
-                        "split": split_spec,
-                        # the study's test window keeps the keys cells always had
-                        **({} if scene.test_window == "first"
-                           else {"test_window": scene.test_window}),
-                        "test_per_class": scene.test_per_class,
-                        "imaging": imaging_identity(scene, kinds[clf]),
-                        "encoder": enc,
-                        "encoder_version": versions[enc],
-                        **storage,
-                        "classifier": clf,
-                        "profile": scene.profile,
-                        "L": int(length),
-                        "seed": int(seed),
-                    }
+                    identity = cell_identity(scene, dataset, dataset_hash, kinds[clf], enc,
+                                             versions[enc], clf, length, seed)
                     key = digest(identity)
                     cells.append(Cell(enc, clf, int(length), int(seed), key))
                     identities[key] = identity

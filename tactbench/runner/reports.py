@@ -3,7 +3,7 @@
 Every accuracy is reported beside what it cost (encode ms per frame, train seconds,
 inference ms per sequence, peak memory): users choose on both.
 
-Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.store`) are left
+Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.results`) are left
 out of every accuracy table and plot, and listed on their own with their error.
 
 Cells that share a dataset and split are compared *paired* (:func:`comparisons`): every
@@ -26,7 +26,7 @@ from typing import Any, Iterable, Sequence
 
 from tactbench.errors import InputError
 from tactbench.paths import atomic_write_text
-from tactbench.runner.store import failed_rows, ok_rows, row_status
+from tactbench.runner.results import failed_rows, ok_rows, row_status
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
 #: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).

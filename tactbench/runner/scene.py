@@ -252,11 +252,6 @@ def check_fields(values: dict[str, Any], where: str | None = None, *,
     return out
 
 
-def check_scene(scene: Scene) -> None:
-    """Check the types of every field of ``scene`` (see :func:`check_fields`)."""
-    check_fields({f.name: getattr(scene, f.name) for f in fields(Scene)}, ranges=False)
-
-
 def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     seen: dict[str, Any] = {}
     for key, value in pairs:

@@ -164,7 +164,7 @@ def test_a_saved_model_refits_and_a_changed_one_is_refused(tmp_path, registry):
 
     # What load_model hands to _restore, changed as a different scikit-learn would
     # change the refit: the saved predictions are not reproduced.
-    config, tensors = clf._export()
+    config, tensors = clf.export()
     tensors = {k: v.clone() for k, v in tensors.items()}
     tensors["check_proba"] = tensors["check_proba"].flip(1)
     with pytest.raises(ValueError, match="does not reproduce the saved predictions"):
@@ -172,7 +172,7 @@ def test_a_saved_model_refits_and_a_changed_one_is_refused(tmp_path, registry):
     del tensors["labels"]
     with pytest.raises(InputError, match="expected tensors"):
         SklearnClassifier._restore(config, tensors)
-    config, tensors = clf._export()
+    config, tensors = clf.export()
     tensors["features"] = tensors["features"][:, :-1]
     with pytest.raises(InputError, match="do not fit"):
         SklearnClassifier._restore(config, tensors)

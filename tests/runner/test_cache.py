@@ -12,8 +12,8 @@ import pytest
 
 from tactbench.errors import CorruptArtefactError
 from tactbench.runner import EncodingCache, ensure_encodings, load_encoding, plan
-from tactbench.runner import cache as cache_module
-from tactbench.runner.cache import Storage, chunk_bounds
+from tactbench.encoders.encoding import Storage, chunk_bounds
+from tactbench.runner import entries as entries_module
 
 
 def test_write_and_load_round_trip(tmp_path):
@@ -110,17 +110,6 @@ def test_float16_is_within_a_thousandth_relative(tmp_path):
     assert meta["precision"] == meta["dtype"] == "float16"
     for want, got in zip(seqs, loaded):
         np.testing.assert_allclose(np.asarray(got), want, rtol=1e-3, atol=1e-7)
-
-
-def test_taxel_vectors_are_one_channel():
-    storage = Storage.for_channels("uint8", 1)
-    vectors = np.linspace(0, 1, 12, dtype=np.float32).reshape(3, 4)
-    back = storage.decode(storage.encode(vectors))
-    assert back.shape == (3, 4) and np.abs(back - vectors).max() <= 0.5 / 255 + 1e-7
-    with pytest.raises(ValueError, match="2 value ranges for 3 channels"):
-        Storage.for_channels("uint8", 3, ((0, 1), (0, 1)))
-    with pytest.raises(ValueError, match="precision"):
-        Storage.for_channels("int4", 1)
 
 
 # ------------------------------------------------------------------------ reader
@@ -221,13 +210,6 @@ def test_an_entry_of_an_older_format_is_refused_and_rebuilt(tiny_scene, cache, c
 # --------------------------------------------------------------------- streaming
 
 
-def test_chunk_bounds_respect_the_budget_and_take_every_sample():
-    assert chunk_bounds([3, 3, 3, 3], 10, budget=60) == [(0, 2), (2, 4)]
-    assert chunk_bounds([3, 9, 1], 10, budget=40) == [(0, 1), (1, 2), (2, 3)]  # a long one
-    assert chunk_bounds([2] * 5, 1, budget=1000) == [(0, 5)]
-    assert chunk_bounds([], 4) == []
-
-
 def test_streaming_writes_exactly_what_the_in_memory_path_wrote(tiny_scene, cache):
     """Several chunks (the budget holds two samples' images), every encoder of the
     plan, bit-identical to imaging and encoding the whole dataset at once."""
@@ -299,7 +281,7 @@ def test_an_entry_records_what_it_is_and_checksums_streamed_while_writing(tmp_pa
 
 
 def test_the_identity_recorded_in_an_entry_must_hash_to_its_key(tmp_path):
-    from tactbench.runner.cache import seal
+    from tactbench.runner.entries import seal
 
     cache = EncodingCache(tmp_path)
     identity = cache.identity("h", {"kind": "vectors"}, "raw", "1")
@@ -324,7 +306,7 @@ def test_the_full_checksum_is_read_once_per_process_per_version_of_the_file(tmp_
     monkeypatch.setattr(integrity, "hash_file", lambda *a, **k: calls.append(a) or real(*a, **k))
     cache.verify("k")
     assert calls == []  # the writer hashed the bytes as it wrote them: no second read
-    cache_module._VERIFIED.clear()  # as in another process
+    entries_module._VERIFIED.clear()  # as in another process
     cache.verify("k")
     cache.verify("k")
     load_encoding(cache.path("k"))
@@ -361,7 +343,8 @@ RACER = """
 import sys, time, zlib
 from pathlib import Path
 import numpy as np
-from tactbench.runner.cache import EncodingCache, load_encoding
+from tactbench.runner.cache import EncodingCache
+from tactbench.runner.entries import load_encoding
 root, go = sys.argv[1], Path(sys.argv[2])
 while not go.exists():
     time.sleep(0.001)
@@ -395,7 +378,8 @@ def test_two_processes_writing_one_key_both_use_the_winners_entry(tmp_path):
 SLOW_WRITER = """
 import sys, time
 import numpy as np
-from tactbench.runner.cache import EncodingCache, Storage
+from tactbench.encoders.encoding import Storage
+from tactbench.runner.cache import EncodingCache
 cache = EncodingCache(sys.argv[1])
 with cache.entry("k", [1] * 1000, (3,), Storage.for_channels("float32", 1)) as w:
     for _ in range(1000):

@@ -21,9 +21,9 @@ from hypothesis import strategies as st
 from tactbench.errors import CorruptArtefactError
 from tactbench.integrity import hash_file
 from tactbench.runner import EncodingCache, ResultStore, ensure_encodings, load_encoding, plan
-from tactbench.runner import cache as cache_module
-from tactbench.runner.cache import seal
-from tactbench.runner.store import check_row, row_checksum
+from tactbench.runner import entries as entries_module
+from tactbench.runner.entries import seal
+from tactbench.runner.results import check_row, row_checksum
 
 FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
@@ -94,8 +94,8 @@ def _restore(root: Path, files: dict[str, bytes]) -> None:
 def _forget_verified() -> None:
     # each example is a new version of the entry; the per-process memo keys on the files'
     # inode, size and times, which two versions written within one clock tick can share
-    cache_module._VERIFIED.clear()
-    cache_module._LOADED.clear()
+    entries_module._VERIFIED.clear()
+    entries_module._LOADED.clear()
 
 
 # ------------------------------------------------------------------- cache entries

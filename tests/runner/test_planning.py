@@ -64,7 +64,7 @@ def test_frame_diff_encodes_taxel_vectors_for_a_vector_classifier(tiny_scene, ca
     import numpy as np
 
     from tactbench.runner import run
-    from tactbench.runner.cache import load_encoding
+    from tactbench.runner.entries import load_encoding
 
     scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["raw", "frame-diff"],
                        classifiers=["logreg"], L=[3], seeds=[0], test_per_class=2)

@@ -186,7 +186,7 @@ def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
 
 
 def test_a_row_with_broken_predictions_is_a_damaged_row():
-    from tactbench.runner.store import check_row
+    from tactbench.runner.results import check_row
 
     row = _row("raw", 0, [0, 1], [0, 1])
     row["key"] = "k"

@@ -11,7 +11,7 @@ import pytest
 
 from tactbench.can.codec import TaxelMap, encode_sweep
 from tactbench.can.simulate import SimSample, as_sim_sample, play, traffic
-from tactbench.contracts import Sensor
+from tactbench.contracts import SENSOR
 from tactbench.plugins import load_registry
 from tactbench.sensors.cyskin_can import CySkinCAN, parse_taxel_ids
 
@@ -42,7 +42,7 @@ def run_sender(channel: str, bursts, **kw) -> threading.Thread:
 def test_sensor_yields_the_simulated_sweeps_with_labels(channel):
     samples = sim_samples()
     with CySkinCAN(channel=channel, taxel_ids="32-42;48-58", idle_timeout=0.5) as sensor:
-        assert isinstance(sensor, Sensor)
+        assert SENSOR.problems(sensor) == []
         np.testing.assert_array_equal(sensor.taxel_ids, IDS)
         sender = run_sender(channel, traffic(samples, sensor.taxel_map), speed=10)
         frames = list(sensor.frames())

@@ -30,7 +30,7 @@ from typing import Any, Iterable
 from tactbench.errors import CorruptArtefactError
 from tactbench.paths import Temporary, atomic_write_text, remove_orphans
 
-log = logging.getLogger("tactbench.runner.store")
+log = logging.getLogger("tactbench.runner.results")
 
 OK = "ok"
 FAILED = "failed"
