@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 from typing import Any, Iterable
 
-from tactbench.errors import BudgetError, CorruptArtefactError, InputError
+from tactbench.errors import BudgetError, InputError
 
 #: Digest algorithm recorded beside every checksum (so it can change later).
 ALGORITHM = "sha256"
@@ -59,17 +59,6 @@ def hash_file(path: str | Path, *, length: int | None = None) -> str:
             if left is not None:
                 left -= len(block)
     return h.hexdigest()
-
-
-def verify_file(path: str | Path, expected: str, *, what: str = "payload") -> None:
-    """Raise :class:`CorruptArtefactError` unless ``path`` hashes to ``expected``."""
-    try:
-        got = hash_file(path)
-    except FileNotFoundError:
-        raise CorruptArtefactError(path, f"{what} is missing") from None
-    if got != expected:
-        raise CorruptArtefactError(path, f"{what} checksum {got[:12]}… does not match the "
-                                         f"recorded {str(expected)[:12]}…")
 
 
 # ------------------------------------------------------------------------ npy headers

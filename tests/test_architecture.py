@@ -74,3 +74,16 @@ def test_data_moves_down_the_pipeline():
             if bad:
                 wrong.append(f"{path.relative_to(REPO)} imports {sorted(bad)}")
     assert not wrong, "a stage imports one above it: " + "; ".join(wrong)
+
+
+def test_importing_tactbench_has_no_side_effects_on_the_import_system():
+    """No finder on sys.meta_path, no hooks: ``import tactbench`` only defines names."""
+    import subprocess
+    import sys
+
+    code = ("import sys; before = list(sys.meta_path), list(sys.path_hooks)\n"
+            "import tactbench\n"
+            "assert (list(sys.meta_path), list(sys.path_hooks)) == before\n"
+            "print('clean')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.stdout.strip() == "clean", out.stderr

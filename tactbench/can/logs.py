@@ -388,23 +388,6 @@ def _class_order(segments: list[Segment]) -> list[str]:
     return sorted(names, key=index.__getitem__)
 
 
-def LogReplay(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None = None,
-              realtime: bool = False, missing: str = "hold") -> Any:
-    """Deprecated: the ``replay`` sensor plays CAN logs (``Replay(path)``); this returns one.
-
-    Kept for one release because earlier docs used it.
-    """
-    import warnings
-
-    warnings.warn("tactbench.can.logs.LogReplay is deprecated: use the 'replay' sensor "
-                  "(tactbench.sensors.replay.Replay(path)), which plays CAN logs",
-                  DeprecationWarning, stacklevel=2)
-    from tactbench.sensors.replay import Replay  # the sensor sits above this module
-
-    return Replay(str(path), realtime=realtime, taxel_ids=taxel_ids, format=fmt,
-                  missing=missing)
-
-
 class _SegmentBuilder:
     def __init__(self, info: dict[str, Any] | None) -> None:
         self.info = info

@@ -253,10 +253,3 @@ def unroll(points: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
             return np.column_stack([ang * radius, h])
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     return centred @ vt[:2].T
-
-
-def __getattr__(name: str) -> Any:
-    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
-    from tactbench._compat import moved_name
-
-    return moved_name(__name__, name)
