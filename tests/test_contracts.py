@@ -12,7 +12,8 @@ import pytest
 from tactbench import contracts, hookimpl
 from tactbench.contracts import CLASSIFIER, CONTRACTS, ENCODER, SENSOR
 from tactbench.errors import ContractError, PluginError
-from tactbench.plugins import KINDS, collect_registry, make_plugin_manager
+from tactbench.plugins import collect_registry, make_plugin_manager
+from tactbench.registry import KINDS
 
 MODULE = "tb_contract_plugins"  # where the tiny plugin classes below are importable from
 TINY_SYNTHETIC = "synthetic-forearm:users=1,repetitions=1,positions=1"

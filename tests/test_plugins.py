@@ -13,7 +13,8 @@ import pytest
 
 from tactbench import hookimpl, hookspecs
 from tactbench.errors import ComponentLoadError, InputError, PluginError, UnknownComponentError
-from tactbench.plugins import collect_registry, format_spec, make_plugin_manager, parse_spec
+from tactbench.plugins import collect_registry, make_plugin_manager
+from tactbench.specs import format_spec, parse_spec
 
 GOOD_PLUGIN = """
     from tactbench import hookimpl
@@ -333,7 +334,8 @@ def test_hook_reference_documents_every_hook_with_its_signature():
 
 
 def test_a_bare_leading_value_fills_the_components_positional_option():
-    from tactbench.plugins import POSITIONAL, load_registry, parse_spec
+    from tactbench.plugins import load_registry
+    from tactbench.specs import POSITIONAL, parse_spec
 
     assert parse_spec("sklearn:SVC,C=10") == ("sklearn", {POSITIONAL: "SVC", "C": 10})
     with pytest.raises(InputError, match="bad option 'C' in"):

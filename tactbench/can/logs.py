@@ -22,7 +22,7 @@ from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
 from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
 from tactbench.errors import InputError, MissingFileError, TactbenchError
-from tactbench.integrity import check_budget, memory_budget_bytes
+from tactbench.budget import check_budget, memory_budget_bytes
 
 #: Class name of the samples of a log without label markers.
 UNLABELLED = "unlabelled"
@@ -410,7 +410,7 @@ def segment_messages(messages: Iterable[Any], taxels: TaxelMap, *, missing: str 
     Returns ``(segments, assembler stats, broken meta messages)``. Unlabelled
     stretches with no sweeps are dropped; labelled ones are kept even if empty.
     The sweeps kept (each ``N`` float32 values, held twice while a segment is built)
-    must fit the memory budget (default :func:`tactbench.integrity.memory_budget_bytes`):
+    must fit the memory budget (default :func:`tactbench.budget.memory_budget_bytes`):
     a few messages can start thousands of sweeps of 65 536 taxels.
     """
     asm = SweepAssembler(taxels, missing=missing)

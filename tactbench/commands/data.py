@@ -31,7 +31,7 @@ def _load_as(fmt: str, src: str):
     from tactbench.cli import get_registry
     from tactbench.datasets.loading import check_loaded, takes_progress
     from tactbench.errors import InputError, MissingFileError
-    from tactbench.plugins import parse_spec
+    from tactbench.specs import parse_spec
     from tactbench.ui import Progress
 
     name, options = parse_spec(fmt)

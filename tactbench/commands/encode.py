@@ -32,7 +32,7 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 
     from tactbench.cli import get_registry
     from tactbench.contracts import ENCODER
-    from tactbench.integrity import check_budget
+    from tactbench.budget import check_budget
     from tactbench.paths import atomic_write_text
 
     src = Path(input_path)

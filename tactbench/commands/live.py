@@ -14,7 +14,7 @@ def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
     """The sensor for ``spec`` (+ ``source``, the file ``replay`` plays), with the
     model's taxels when a bus sensor needs them."""
     from tactbench.cli import get_registry
-    from tactbench.plugins import parse_spec
+    from tactbench.specs import parse_spec
 
     name, options = parse_spec(spec)
     if name == "replay":

@@ -272,7 +272,7 @@ def _read_text(path: Path) -> str:
         raise MissingFileError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: a folder, not a layout file")
-    from tactbench.integrity import check_budget
+    from tactbench.budget import check_budget
 
     # Parsed JSON of numbers takes several times its text.
     check_budget(16 * path.stat().st_size, f"reading layout file {path}")

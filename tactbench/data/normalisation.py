@@ -51,7 +51,7 @@ class Normalisation:
     def parse(cls, spec: "str | Normalisation") -> "Normalisation":
         if isinstance(spec, Normalisation):
             return spec
-        from tactbench.plugins import parse_spec
+        from tactbench.specs import parse_spec
 
         kind, opts = parse_spec(str(spec))
         check_choice(kind, "normalisation", tuple(cls.KINDS))
@@ -72,7 +72,7 @@ class Normalisation:
 
     @property
     def spec(self) -> str:
-        from tactbench.plugins import format_spec
+        from tactbench.specs import format_spec
 
         return format_spec(self.kind, {k: (int(v) if float(v).is_integer() else v)
                                        for k, v in self.options})

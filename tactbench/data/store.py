@@ -121,7 +121,7 @@ def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
     Every manifest field's type is checked; of ``arrays.npz`` only the members the
     format defines are read (others are ignored, never decompressed), each after its
     npy header (shape × item size) was checked against the zip member's size and the
-    whole against the memory budget (:func:`tactbench.integrity.check_budget`).
+    whole against the memory budget (:func:`tactbench.budget.check_budget`).
     ``verify`` recomputes the content hash and compares it with the manifest's
     (detects edited or corrupted arrays). Nothing in the folder is written.
     """
@@ -131,7 +131,7 @@ def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
     mpath, apath = folder / MANIFEST, folder / ARRAYS
     if not mpath.is_file():
         raise InputError(f"{folder}: not a tactbench dataset folder (no {MANIFEST})")
-    from tactbench.integrity import check_budget
+    from tactbench.budget import check_budget
 
     # Parsed JSON takes several times its text (the samples' lists of strings).
     check_budget(16 * mpath.stat().st_size, f"reading {mpath}")
@@ -228,7 +228,8 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
 
     from numpy.lib import format as npy
 
-    from tactbench.integrity import _human, check_budget, read_npy_header, zip_read_errors
+    from tactbench.budget import check_budget, human_bytes
+    from tactbench.integrity import read_npy_header, zip_read_errors
 
     def bad(problem: str) -> InputError:
         return InputError(f"{path}: {problem}")
@@ -263,7 +264,7 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
                     held = info.file_size - fh.tell()
                     if claimed != held:
                         raise bad(f"member {key!r} claims shape {shape} {dtype} "
-                                  f"({_human(claimed)}), but holds {_human(held)}")
+                                  f"({human_bytes(claimed)}), but holds {human_bytes(held)}")
                 headers[key] = (shape, fortran, dtype)
             total = sum(math.prod(s) * d.itemsize for s, _, d in headers.values())
             if "values" in headers and headers["values"][2] != np.float32:

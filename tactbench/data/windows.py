@@ -26,7 +26,7 @@ arrays or *stored sequences* (:func:`tactbench.runner.cache.load_encoding`: anyt
 with ``shape`` and slicing that reads frames from disk on demand): a batch then reads
 only its windows' frames, so memory is O(batch), whatever the dataset's size. A batch
 is estimated (windows × L × frame) before it is allocated, and one above the memory
-budget is refused (:func:`tactbench.integrity.check_budget`): ``L`` is the user's, and
+budget is refused (:func:`tactbench.budget.check_budget`): ``L`` is the user's, and
 ``L = 1000`` over 27-frame sequences would otherwise allocate mostly padding.
 """
 
@@ -38,7 +38,7 @@ from typing import Sequence
 import numpy as np
 
 from tactbench.errors import InputError, check_positive_int
-from tactbench.integrity import check_budget
+from tactbench.budget import check_budget
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ float32's range, duplicate taxel ids and timestamps that go backwards each raise
 :class:`~tactbench.errors.InputError` naming the file, the line, the field and the
 problem. Row lengths are checked against the header before anything is allocated,
 and the values' memory (frames × taxels, and for a folder every file's) is checked
-against :func:`tactbench.integrity.check_budget` first (a
+against :func:`tactbench.budget.check_budget` first (a
 :class:`~tactbench.errors.BudgetError` beyond it).
 ``nan`` in a reading marks a missing taxel: kept as NaN (counted by
 ``tactbench data info``), not an error. Writing and reading back is exact.
@@ -33,7 +33,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
-from tactbench.integrity import check_budget, memory_budget_bytes
+from tactbench.budget import check_budget, memory_budget_bytes
 
 SUFFIX = ".txt"
 #: CySkin text values are baseline-removed raw counts, non-negative; the scale

@@ -102,7 +102,8 @@ def read_array_file(path: Path, *, timestamp_column: str | int | None = None
 
 def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
     """An npy array from ``fh``, its header checked (and its size budgeted) before reading."""
-    from tactbench.integrity import check_budget, read_npy_header
+    from tactbench.budget import check_budget
+    from tactbench.integrity import read_npy_header
 
     try:
         shape, fortran, dtype = read_npy_header(fh)
@@ -172,7 +173,7 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.n
 
 def _read_csv(path: Path, timestamp_column: str | int | None
               ) -> tuple[np.ndarray, np.ndarray | None]:
-    from tactbench.integrity import check_budget
+    from tactbench.budget import check_budget
 
     # a CSV cell of a number is ≥ 2 bytes ("0,"), and becomes 8 bytes as float64
     check_budget(path.stat().st_size * 4, f"reading {path}")

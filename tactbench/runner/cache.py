@@ -861,7 +861,7 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
     side (planning refuses any other encoder on vectors). Stored as one channel whose
     range spans every channel's."""
     from tactbench.contracts import ENCODER
-    from tactbench.plugins import parse_spec
+    from tactbench.specs import parse_spec
 
     dataset = plan_.dataset
     lengths = dataset.lengths()

@@ -83,7 +83,7 @@ class Plan:
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
-        from tactbench.plugins import parse_spec
+        from tactbench.specs import parse_spec
 
         return self.registry.get("classifier", parse_spec(spec)[0])
 
@@ -120,7 +120,7 @@ def input_kind(frame_rank: int | None, has_layout: bool) -> str:
 
 
 def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dict]:
-    from tactbench.plugins import format_spec, parse_spec
+    from tactbench.specs import format_spec, parse_spec
 
     name, options = parse_spec(spec)
     merged = {**(extra or {}), **options}
@@ -287,13 +287,13 @@ def _check_lengths(scene: Scene, dataset) -> None:
 def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[str, str],
                   batch_sizes: dict[str, int]) -> None:
     """Estimate the large steps' memory from the inputs and refuse, before any work, one
-    above the budget (:func:`tactbench.integrity.check_budget`): building the imaging
+    above the budget (:func:`tactbench.budget.check_budget`): building the imaging
     operator, a chunk of images and its encodings (two in flight), and a batch of windows
     of the longest L. The same estimates guard the allocations themselves
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
     """
     from tactbench.contracts import ENCODER
-    from tactbench.integrity import check_budget
+    from tactbench.budget import check_budget
 
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
     longest = int(dataset.lengths().max())
@@ -335,7 +335,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     computed or written.
     """
     from tactbench.contracts import CLASSIFIER, ENCODER
-    from tactbench.plugins import load_registry, parse_spec
+    from tactbench.plugins import load_registry
+    from tactbench.specs import parse_spec
     from tactbench.profiles import profile_options
 
     registry = registry or load_registry()
