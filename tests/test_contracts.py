@@ -126,7 +126,7 @@ def test_check_lists_every_problem_at_once():
 
 
 def test_a_documented_protocol_encoder_builds_runs_and_gets_the_defaults(registry):
-    from tactbench.encoders.testing import check_contract
+    from tactbench.encoders.evaluation.conformance import check_contract
 
     enc = registry.build("encoder", "minimal")
     out = enc.encode(np.zeros((4, 5, 6), np.float32))

@@ -42,7 +42,7 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     front (no encoder both faster and more accurate) is marked.
     """
     from tactbench.cli import get_registry
-    from tactbench.encoders import flowbench as fb
+    from tactbench.encoders.evaluation import flowbench as fb
     from tactbench.ui import Progress
 
     registry = get_registry(warn=not as_json)

@@ -23,7 +23,7 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
     result) or fails with the reason. The exit status is 1 when anything failed.
     """
     from tactbench.cli import get_registry
-    from tactbench.encoders import stability as st
+    from tactbench.encoders.evaluation import stability as st
     from tactbench.ui import Progress
 
     registry = get_registry(warn=not as_json)

@@ -3,13 +3,13 @@
 Run it on any encoder (an instance, a factory, or a registered spec such as
 ``"farneback:winsize=9"``)::
 
-    from tactbench.encoders.testing import check_encoder
+    from tactbench.testing import check_encoder
     check_encoder("my-encoder")          # raises AssertionError listing failures
 
 or, in a plugin's test suite, one pytest test per check::
 
     import pytest
-    from tactbench.encoders.testing import conformance_cases, run_check
+    from tactbench.testing import conformance_cases, run_check
 
     @pytest.mark.parametrize("encoder, check", conformance_cases(["my-encoder"]))
     def test_conformance(encoder, check):
