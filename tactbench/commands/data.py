@@ -132,7 +132,8 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
     folder) or a registered dataset spec. The folder written is verified by reading it
     back: its content hash must equal the source's.
     """
-    from tactbench.data.store import MANIFEST, read_dataset
+    from tactbench.data.dataset import Dataset
+    from tactbench.data.store import MANIFEST
     from tactbench.errors import InputError
 
     dest = Path(out)
@@ -144,7 +145,7 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
                          f"(nothing was written)")
     ds = _load(src) if fmt is None else _load_as(fmt, src)
     ds.save(dest)
-    back = read_dataset(dest)  # verifies the stored content hash against the arrays
+    back = Dataset.load(dest)  # verifies the stored content hash against the arrays
     if back.content_hash() != ds.content_hash():
         raise RuntimeError(f"{dest}: read back with content hash {back.content_hash()[:16]} "
                            f"instead of {ds.content_hash()[:16]}")  # a bug, not user error

@@ -50,8 +50,9 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
 @click.option("--seed", default=0, show_default=True, type=int)
 def generate_cmd(out: str, taxels: int, seed: int) -> None:
     """Write the generated CySkin-like forearm layout as CSV."""
+    from tactbench.data.layout_io import write_layout_csv
     from tactbench.datasets.forearm import cyskin_forearm
 
     layout = cyskin_forearm(taxels, seed=seed)
-    layout.to_csv(out)
+    write_layout_csv(layout, out)
     click.echo(f"wrote {layout.n_taxels} taxels to {out}", err=True)

@@ -66,9 +66,9 @@ from typing import Any
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.data.layout import TaxelLayout
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
-from tactbench.budget import check_budget
 
 METHODS = ("linear", "gaussian")
 #: Sub-samples per pixel side are chosen so sub-samples are ≤ spacing / 4 apart.

@@ -12,9 +12,10 @@ A :class:`TaxelLayout` holds, for ``N`` taxels:
   that images cover (by default the taxels' bounding box grown by half the
   median taxel spacing on each side).
 
-:func:`unroll` flattens 3-D positions. Files and the dict format are in
-:mod:`tactbench.data.layout_io` (``TaxelLayout.from_json``/``from_csv``/``to_csv``
-delegate to it); the generated CySkin-like forearm is
+:func:`unroll` flattens 3-D positions. Files and the dict format are
+:mod:`tactbench.data.layout_io`'s (``read_layout_csv``, ``write_layout_csv``,
+``read_layout_json``, ``load_layout``), which imports this module, never the reverse; the
+generated CySkin-like forearm is
 :func:`tactbench.datasets.forearm.cyskin_forearm`.
 """
 
@@ -22,7 +23,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -177,29 +177,6 @@ class TaxelLayout:
             "has_normals": self.normals is not None,
             "modules": int(np.unique(self.ids // SLOTS_PER_ID).size),
         }
-
-    # ---------------------------------------------------------------- files
-
-    def to_csv(self, path: str | Path) -> None:
-        """Write ``id,x_mm,y_mm`` (see :func:`tactbench.data.layout_io.write_layout_csv`)."""
-        from tactbench.data.layout_io import write_layout_csv
-
-        write_layout_csv(self, path)
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> "TaxelLayout":
-        """Read ``id,x_mm,y_mm[,z_mm]`` (see :func:`tactbench.data.layout_io.read_layout_csv`)."""
-        from tactbench.data.layout_io import read_layout_csv
-
-        return read_layout_csv(path)
-
-    @classmethod
-    def from_json(cls, path: str | Path, *, map_index: int = 0) -> "TaxelLayout":
-        """Read a CySkin calibration JSON (see
-        :func:`tactbench.data.layout_io.read_layout_json`)."""
-        from tactbench.data.layout_io import read_layout_json
-
-        return read_layout_json(path, map_index=map_index)
 
 
 # ---------------------------------------------------------------------- helpers
