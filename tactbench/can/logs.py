@@ -18,11 +18,13 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
+from tactbench.budget import check_budget, memory_budget_bytes
 from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
 from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError, TactbenchError
-from tactbench.budget import check_budget, memory_budget_bytes
 
 #: Class name of the samples of a log without label markers.
 UNLABELLED = "unlabelled"
@@ -349,9 +351,6 @@ class CanLog:
         label markers gives one sample per unlabelled stretch, of class
         ``"unlabelled"``.
         """
-        from tactbench.data.dataset import Dataset
-        from tactbench.data.recording import Recording, Sample
-
         segments = [s if s.info is not None else
                     Segment({"label": UNLABELLED}, s.timestamps, s.values, s.missing)
                     for s in self.sample_segments()]

@@ -7,7 +7,12 @@ from pathlib import Path
 
 import click
 
+from tactbench.budget import check_budget
+from tactbench.cli import get_registry
+from tactbench.contracts import ENCODER
 from tactbench.errors import InputError, MissingFileError
+from tactbench.integrity import read_npy_header
+from tactbench.paths import atomic_write_text
 
 
 @click.command("encode")
@@ -30,10 +35,6 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 
     import numpy as np
 
-    from tactbench.cli import get_registry
-    from tactbench.contracts import ENCODER
-    from tactbench.budget import check_budget
-    from tactbench.paths import atomic_write_text
 
     src = Path(input_path)
     if not src.is_file():
@@ -101,7 +102,6 @@ def _npy_header(src: Path):
     that a header claiming more than the file holds is refused before anything is read."""
     import math
 
-    from tactbench.integrity import read_npy_header
 
     try:
         with open(src, "rb") as fh:

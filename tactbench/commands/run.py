@@ -10,6 +10,15 @@ import click
 
 from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
+from tactbench.runner import Scene, load_scene_file, parse_lengths, run
+from tactbench.runner.reports import (
+    failed_cells,
+    print_comparisons,
+    print_table,
+    summarise,
+    write_reports,
+)
+from tactbench.runner.scene import parse_seeds
 
 
 @click.command("run")
@@ -65,16 +74,6 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
     others go on; the command then exits with status 1, and running it again retries
     the failed cells.
     """
-    from tactbench.runner import Scene, load_scene_file, parse_lengths, run
-    from tactbench.runner.reports import (
-        failed_cells,
-        print_comparisons,
-        print_table,
-        summarise,
-        write_reports,
-    )
-    from tactbench.runner.scene import parse_seeds
-
     fields = load_scene_file(scene_file) if scene_file else {}
     given = {"dataset": dataset, "encoders": list(encoders) or None,
              "classifiers": list(classifiers) or None,

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from tactbench.errors import InputError, check_shape
+from tactbench.errors import InputError, check_positive_float, check_positive_int, check_shape
 
 #: CySkin taxel ids: ``module_id * SLOTS_PER_ID + slot``.
 SLOTS_PER_ID = 16
@@ -93,8 +93,6 @@ class TaxelLayout:
         the grid's rows and columns. The image bounds pad the grid by half a pitch on each
         side, so at ``pixel_mm == pitch_mm`` one pixel covers one cell.
         """
-        from tactbench.errors import check_positive_float, check_positive_int
-
         rows = check_positive_int(rows, "grid rows")
         cols = check_positive_int(cols, "grid cols")
         pitch = check_positive_float(pitch_mm, "grid pitch_mm")

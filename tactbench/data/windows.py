@@ -37,8 +37,8 @@ from typing import Sequence
 
 import numpy as np
 
-from tactbench.errors import InputError, check_positive_int
 from tactbench.budget import check_budget
+from tactbench.errors import InputError, check_choice, check_positive_int
 
 
 @dataclass(frozen=True)
@@ -162,8 +162,6 @@ def test_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequenc
     """The test windows of ``mode`` (:data:`TEST_WINDOWS`): one per sequence for
     ``first`` and ``onset`` (which needs ``onsets``), every window for ``vote``
     (``seq_index`` says whose; the caller averages their probabilities)."""
-    from tactbench.errors import check_choice
-
     check_choice(mode, "test window", TEST_WINDOWS)
     if mode == "first":
         return test_windows(sequences, labels, length)

@@ -39,8 +39,9 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from tactbench.contracts import ENCODER
-from tactbench.encoders.flow import is_flow_encoder  # noqa: F401  (also importable from here)
+from tactbench.encoders.flow import is_flow_encoder
 from tactbench.errors import InputError
+from tactbench.plugins import load_registry
 
 #: Tolerance for comparing outputs computed in different batches (float32 noise).
 BATCH_ATOL = 1e-4
@@ -295,8 +296,6 @@ CHECKS: dict[str, Callable[[Any], None]] = {
 def build_encoder(encoder: Any) -> Any:
     """An encoder from an instance, a zero-argument factory/class, or a registry spec."""
     if isinstance(encoder, str):
-        from tactbench.plugins import load_registry
-
         return load_registry().build("encoder", encoder)
     if isinstance(encoder, type) or (callable(encoder) and not hasattr(encoder, "encode")):
         return encoder()
