@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import traceback
 from typing import Any
 
 import click
@@ -174,8 +175,6 @@ def main(argv: list[str] | None = None) -> None:
     try:
         cli.main(args=argv, prog_name="tactbench")
     except Exception:  # click has handled every user-facing error already
-        import traceback
-
         traceback.print_exc()
         click.echo(BUG_REPORT, err=True)
         sys.exit(1)

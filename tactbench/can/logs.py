@@ -11,7 +11,10 @@ up as taxels that are always 0).
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
+import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -140,8 +143,6 @@ def check_blf(path: str | Path, *, budget: int | None = None) -> None:
     hold 3 GB). Decompression here is streamed, 1 MiB at a time; it costs a fraction of
     python-can's parsing. Anything else damaged is left to python-can to report.
     """
-    import struct
-
     path = Path(path)
     limit = memory_budget_bytes() if budget is None else budget
     size = path.stat().st_size
@@ -185,8 +186,6 @@ def check_blf(path: str | Path, *, budget: int | None = None) -> None:
 def _inflate_count(f: Any, n: int, inflated: int, stop: int) -> int:
     """``inflated`` plus the decompressed size of the next ``n`` bytes of ``f`` (zlib),
     counted 1 MiB at a time and no further than ``stop``; -1 when they are not zlib."""
-    import zlib
-
     d = zlib.decompressobj()
     step = 1 << 20
     try:
@@ -519,8 +518,6 @@ def reader_warnings() -> Iterator[list[str]]:
     """Gather what python-can's log readers warn about (through ``logging``: objects of a
     damaged log they skip) instead of letting it print beside tactbench's one line; the
     list is filled while the block runs."""
-    import logging
-
     caught: list[str] = []
 
     class _Catch(logging.Filter):

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import math
+import os
+import tempfile
+import time
 from pathlib import Path
 
 import click
@@ -31,8 +35,6 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     and options, the channel names and ranges, and for flow encoders the
     magnitude scale in pixels per frame.
     """
-    import time
-
     import numpy as np
 
 
@@ -80,9 +82,6 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 def _check_writable(dst: Path) -> None:
     """Refuse, before encoding, an output under a file or in a folder that cannot be
     written (a probe file is made and removed: permissions alone do not tell)."""
-    import os
-    import tempfile
-
     folder = dst.absolute().parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
@@ -100,8 +99,6 @@ def _check_writable(dst: Path) -> None:
 def _npy_header(src: Path):
     """``(shape, dtype)`` from a .npy file's header, checked against the file's size, so
     that a header claiming more than the file holds is refused before anything is read."""
-    import math
-
 
     try:
         with open(src, "rb") as fh:

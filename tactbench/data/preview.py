@@ -16,6 +16,7 @@ picture. ``tactbench data preview`` is this module plus option parsing.
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -140,8 +141,6 @@ def taxel_bands(vectors: np.ndarray, *, band: int = BAND_PX) -> np.ndarray:
 
 def write_png(path: str | Path, image: np.ndarray) -> None:
     """Save an RGB picture ``(H, W, 3)`` in [0, 1] as a PNG file (replaced atomically)."""
-    import io
-
     from matplotlib.image import imsave
 
 

@@ -23,6 +23,7 @@ With ``realtime=True`` each frame is released at its recorded time after the fir
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any, Iterator
 
@@ -166,7 +167,6 @@ def _restamped(frame: Any, timestamp: float, sequence: int) -> Any:
     """``frame`` at ``timestamp`` (a later pass of a loop); sweeps keep counting."""
     if isinstance(frame, Frame):
         return Frame(timestamp, frame.values)
-    import dataclasses
 
     return dataclasses.replace(frame, timestamp=timestamp, first_timestamp=timestamp,
                                sequence=sequence, counter=sequence % 256)
