@@ -16,12 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 
 from tactbench.contracts import check
-from tactbench.errors import (
-    ComponentLoadError,
-    InputError,
-    TactbenchError,
-    UnknownComponentError,
-)
+from tactbench.errors import ComponentLoadError, InputError, TactbenchError, UnknownComponentError
 from tactbench.specs import POSITIONAL, format_spec, parse_spec
 
 #: kind → the hook that registers components of that kind.

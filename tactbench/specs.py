@@ -25,7 +25,7 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     than the last one winning silently. The first item may be a bare value
     (``sklearn:SVC,C=10``): it is kept under :data:`POSITIONAL` and given to the option
     the component's factory names in its ``positional_option`` attribute
-    (:meth:`Registry.resolve`).
+    (:meth:`tactbench.registry.Registry.resolve`).
     """
     if not isinstance(spec, str):
         raise InputError(f"a component is named by text such as 'farneback:winsize=9', "
