@@ -46,7 +46,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tactbench.encoders import flowbench as fb
+from tactbench.encoders.evaluation import flowbench as fb
 from tactbench.encoders.flow import FlowEncoder
 from tactbench.plugins import load_registry
 

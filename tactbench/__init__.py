@@ -15,8 +15,3 @@ __version__ = "0.1.0"
 hookimpl = pluggy.HookimplMarker("tactbench")
 
 __all__ = ["__version__", "hookimpl"]
-
-# Modules moved in 0.2 stay importable under their old names for one release.
-from tactbench import _compat  # noqa: E402
-
-_compat.install()

@@ -1,8 +1,9 @@
 """The ``tactbench`` command line.
 
 Start-up stays cheap: built-in commands are imported when they run (see
-:data:`BUILTIN_COMMANDS`), plugins load on first need, and heavy libraries are
-imported by the components that use them.
+:data:`BUILTIN_COMMANDS`; ``--help`` lists them from :data:`BUILTIN_SUMMARIES` without
+importing them), plugins load on first need, and heavy libraries are imported by the
+components that use them.
 """
 
 from __future__ import annotations
@@ -10,11 +11,14 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import traceback
 from typing import Any
 
 import click
 
 from tactbench import __version__
+from tactbench.errors import PluginError, TactbenchError
+from tactbench.plugins import collect_registry, make_plugin_manager
 
 #: command name → "module:attribute" of its click command, imported on use.
 BUILTIN_COMMANDS: dict[str, str] = {
@@ -29,6 +33,25 @@ BUILTIN_COMMANDS: dict[str, str] = {
     "encode": "tactbench.commands.encode:encode_cmd",
     "flowbench": "tactbench.commands.flowbench:flowbench_cmd",
     "stability": "tactbench.commands.stability:stability_cmd",
+}
+
+#: command name → its one-line summary, as ``tactbench --help`` lists it: the list is
+#: drawn without importing the commands (whose modules import the library they drive).
+#: ``tests/test_cli.py`` checks each is the command's own short help.
+BUILTIN_SUMMARIES: dict[str, str] = {
+    "list": "List registered sensors, datasets, encoders and classifiers.",
+    "plugins": "List plugins (built-in and installed), their versions and load errors.",
+    "data": "Inspect, simulate and preview datasets.",
+    "can": "CySkin taxel traffic on a CAN bus: simulate, record, bus load, log info.",
+    "live": "Classify gestures live: each sweep is encoded once and the last L frames "
+            "classified.",
+    "layout": "Inspect and generate taxel layouts.",
+    "run": "Run a benchmark grid and report accuracy beside its cost.",
+    "cache": "Inspect or clear cached encodings (TACTBENCH_CACHE, default "
+             "~/.cache/tactbench).",
+    "encode": "Encode a (T, H, W) sequence into (T, C, H, W) feature images.",
+    "flowbench": "Endpoint error, angular error and ms per frame pair of flow encoders.",
+    "stability": "Every encoder on stiff and extreme inputs: pass or fail, with the reason.",
 }
 
 DEBUG_ENV = "TACTBENCH_DEBUG"
@@ -64,9 +87,24 @@ class TactbenchGroup(click.Group):
         self._load_plugin_commands(ctx)
         return self.commands.get(cmd_name)
 
-    def invoke(self, ctx: click.Context) -> Any:
-        from tactbench.errors import TactbenchError
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The command list of ``--help``, as click draws it, with the built-in commands'
+        summaries taken from :data:`BUILTIN_SUMMARIES` rather than imported."""
+        listed: list[tuple[str, click.Command]] = []
+        for name in self.list_commands(ctx):
+            if name in BUILTIN_COMMANDS:
+                listed.append((name, click.Command(name, help=BUILTIN_SUMMARIES[name])))
+                continue
+            cmd = self.commands.get(name)
+            if cmd is not None and not cmd.hidden:
+                listed.append((name, cmd))
+        if listed:
+            limit = formatter.width - 6 - max(len(name) for name, _ in listed)
+            with formatter.section("Commands"):
+                formatter.write_dl([(name, cmd.get_short_help_str(limit))
+                                    for name, cmd in listed])
 
+    def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
         except TactbenchError as exc:  # the user's mistake: one line, exit status 2
@@ -92,9 +130,6 @@ def plugin_manager(ctx: click.Context):
     """This invocation's plugin manager, built on first use; problems go to stderr once."""
     state = _state(ctx)
     if "pm" not in state:
-        from tactbench.errors import PluginError
-        from tactbench.plugins import make_plugin_manager
-
         try:
             state["pm"] = make_plugin_manager()
         except PluginError as exc:  # strict mode: a broken plugin is the user's to fix
@@ -107,9 +142,6 @@ def get_registry(ctx: click.Context | None = None, *, warn: bool = True):
     ctx = ctx or click.get_current_context()
     state = _state(ctx)
     if "registry" not in state:
-        from tactbench.errors import PluginError
-        from tactbench.plugins import collect_registry
-
         try:
             state["registry"] = collect_registry(plugin_manager(ctx))
         except PluginError as exc:
@@ -143,8 +175,6 @@ def main(argv: list[str] | None = None) -> None:
     try:
         cli.main(args=argv, prog_name="tactbench")
     except Exception:  # click has handled every user-facing error already
-        import traceback
-
         traceback.print_exc()
         click.echo(BUG_REPORT, err=True)
         sys.exit(1)

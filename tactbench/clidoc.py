@@ -14,6 +14,8 @@ from pathlib import Path
 
 import click
 
+from tactbench.cli import BUILTIN_COMMANDS, TactbenchGroup, cli
+
 WIDTH = 96
 HEADER = """# Command-line reference
 
@@ -38,15 +40,11 @@ def _walk(command: click.Command, path: list[str], parent: click.Context | None)
 
 
 def _builtin_names():
-    from tactbench.cli import BUILTIN_COMMANDS
-
     return sorted(BUILTIN_COMMANDS)
 
 
 def _builtin_cli() -> click.Group:
     """A copy of the ``tactbench`` group that never loads plugin commands."""
-    from tactbench.cli import TactbenchGroup, cli
-
     group = TactbenchGroup(name="tactbench", callback=cli.callback, params=cli.params,
                            help=cli.help, context_settings=cli.context_settings)
     group._plugin_commands_loaded = True  # built-ins only: the file must not vary

@@ -9,6 +9,9 @@ a Python caller would expect (``ValueError``, ``FileNotFoundError``, ``LookupErr
 
 from __future__ import annotations
 
+import difflib
+import math
+import numbers
 from typing import Any
 
 
@@ -48,8 +51,6 @@ class ComponentLoadError(TactbenchError):
 
 def check_positive_int(value: Any, name: str, *, minimum: int = 1) -> int:
     """``value`` as an ``int`` ≥ ``minimum``; bools, floats with a fraction, text refused."""
-    import numbers
-
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         if isinstance(value, numbers.Real) and not isinstance(value, bool) \
                 and float(value).is_integer():
@@ -63,9 +64,6 @@ def check_positive_int(value: Any, name: str, *, minimum: int = 1) -> int:
 
 def check_positive_float(value: Any, name: str, *, allow_zero: bool = False) -> float:
     """``value`` as a finite ``float`` > 0 (≥ 0 with ``allow_zero``)."""
-    import math
-    import numbers
-
     if isinstance(value, bool) or not isinstance(value, numbers.Real) \
             or not math.isfinite(float(value)):
         raise InputError(f"{name} must be a finite number, got {value!r}")
@@ -78,7 +76,6 @@ def check_choice(value: Any, name: str, choices: "tuple[str, ...] | list[str]") 
     """``value`` if it is one of ``choices``; else an error listing them (closest first)."""
     if value in choices:
         return value
-    import difflib
 
     close = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
     hint = f"; did you mean '{close[0]}'?" if close else "."

@@ -1,30 +1,30 @@
-"""Checksums and memory budgets: what every stored artefact and large step goes through.
+"""Checksums and file formats: what every stored artefact goes through when read back.
 
 Everything tactbench stores records a checksum of its payload, and its reader verifies
 it before use (see ``docs/reliability.md``). The digest is SHA-256 (``hashlib``): on
 this project's machines it hashes about 1.8 GB/s (BLAKE2b 0.9 GB/s; CPUs with SHA
 instructions), far cheaper than recomputing any cached encoding.
 
-A step that allocates in proportion to its inputs (images × frames, windows × L,
-ids × rows) first asks :func:`check_budget` with its estimate; an estimate above the
-budget is refused in one line naming the step, the estimate and how to raise the budget.
+The file formats tactbench reads arrays from are checked here too: :func:`read_npy_header`
+is the one reader of ``.npy`` headers (with the one limit :data:`NPY_HEADER_MAX`), and
+:func:`zip_read_errors` is what a damaged ``.npz`` can raise. (The memory budget of large
+steps is :mod:`tactbench.budget`.)
 """
 
 from __future__ import annotations
 
 import hashlib
-import os
+import io
+import struct
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Iterable
 
-from tactbench.errors import BudgetError, CorruptArtefactError, InputError
 
 #: Digest algorithm recorded beside every checksum (so it can change later).
 ALGORITHM = "sha256"
 _CHUNK = 1 << 20
-
-#: Environment variable that sets the memory budget, in MiB.
-BUDGET_ENV = "TACTBENCH_MEMORY_MIB"
 
 
 def new_hasher() -> "hashlib._Hash":
@@ -61,17 +61,6 @@ def hash_file(path: str | Path, *, length: int | None = None) -> str:
     return h.hexdigest()
 
 
-def verify_file(path: str | Path, expected: str, *, what: str = "payload") -> None:
-    """Raise :class:`CorruptArtefactError` unless ``path`` hashes to ``expected``."""
-    try:
-        got = hash_file(path)
-    except FileNotFoundError:
-        raise CorruptArtefactError(path, f"{what} is missing") from None
-    if got != expected:
-        raise CorruptArtefactError(path, f"{what} checksum {got[:12]}… does not match the "
-                                         f"recorded {str(expected)[:12]}…")
-
-
 # ------------------------------------------------------------------------ npy headers
 
 #: The longest ``.npy`` header read. numpy writes a few hundred bytes; a larger length
@@ -92,9 +81,7 @@ def read_npy_header(fh: Any, *, max_header: int = NPY_HEADER_MAX
     ≥ 0. Callers turn it into their own error naming the file. Object dtypes are returned
     as they are: whether they are refused is the caller's to say.
     """
-    import io
-
-    from numpy.lib import format as npy
+    from numpy.lib import format as npy  # numpy stays out of import time
 
     start = fh.read(8)
     if len(start) < 8 or start[:6] != b"\x93NUMPY":
@@ -130,54 +117,5 @@ def zip_read_errors() -> tuple[type[BaseException], ...]:
     library: a bad archive or member, inflating damaged data (``zlib.error``), a header
     cut short (``struct.error``, ``EOFError``), an unknown compression or version
     (``NotImplementedError``), an "encrypted" flag (``RuntimeError``), the file itself."""
-    import struct
-    import zipfile
-    import zlib
-
     return (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, struct.error, EOFError,
             NotImplementedError, RuntimeError, OSError)
-
-
-# ----------------------------------------------------------------------- memory budget
-
-
-def machine_memory_bytes() -> int:
-    """Physical memory of this machine (bytes), or 8 GiB when it cannot be read."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
-
-
-def memory_budget_bytes() -> int:
-    """The budget for one step: ``TACTBENCH_MEMORY_MIB`` or half this machine's memory."""
-    text = os.environ.get(BUDGET_ENV)
-    if text is None or text == "":
-        return machine_memory_bytes() // 2
-    try:
-        mib = float(text)
-    except ValueError:
-        mib = -1.0
-    if not mib > 0 or mib != mib or mib == float("inf"):
-        raise InputError(f"{BUDGET_ENV} must be a positive number of MiB, got {text!r}")
-    return int(mib * (1 << 20))
-
-
-def _human(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if abs(n) < 1024 or unit == "TiB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} PiB"  # pragma: no cover
-
-
-def check_budget(nbytes: float, what: str, *, budget: int | None = None) -> None:
-    """Refuse a step whose estimated memory ``nbytes`` exceeds the budget.
-
-    ``what`` names the step and its inputs, e.g. ``"imaging 1900 samples at 0.01 mm
-    (35700×33400 px)"``. Raises :class:`BudgetError` (a :class:`TactbenchError`).
-    """
-    limit = memory_budget_bytes() if budget is None else budget
-    if nbytes > limit:
-        raise BudgetError(f"{what} would need about {_human(nbytes)}, more than the memory "
-                          f"budget of {_human(limit)}; set {BUDGET_ENV} to raise it")

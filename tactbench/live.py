@@ -528,10 +528,3 @@ def run_summary(live: LiveClassifier, latencies_ms: Sequence[float],
     if stats is not None:
         summary["bus"] = stats.to_dict()
     return summary
-
-
-def __getattr__(name: str) -> Any:
-    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
-    from tactbench._compat import moved_name
-
-    return moved_name(__name__, name)

@@ -11,9 +11,11 @@ a temporary whose process is gone (killed mid-write) is recognised as an *orphan
 from __future__ import annotations
 
 import errno
+import hashlib
 import os
 import re
 import shutil
+import socket
 import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -45,9 +47,6 @@ def cache_dir(*parts: str) -> Path:
 
 def host_tag() -> str:
     """8 hex digits naming this machine (its host name's SHA-256), for temporary names."""
-    import hashlib
-    import socket
-
     return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 
 

@@ -1,7 +1,4 @@
-"""Plugin discovery and the component registry.
-
-Plugins register *descriptions* of components (``name → "module:Attribute"``);
-nothing a component needs is imported until :meth:`Registry.build` builds it.
+"""Plugin discovery: the plugin manager, built-in plugins and entry points.
 
 Where plugins come from, in this order:
 
@@ -9,32 +6,29 @@ Where plugins come from, in this order:
 2. the entry-point group ``tactbench`` of installed distributions.
 
 A plugin that fails to import, implements an unknown hook, or whose hook raises
-is recorded as a :class:`PluginProblem` and skipped; the rest keep working.
-With ``TACTBENCH_STRICT_PLUGINS=1`` the first such problem raises
-:class:`~tactbench.errors.PluginError` instead.
+is recorded as a :class:`~tactbench.registry.PluginProblem` and skipped; the rest keep
+working. With ``TACTBENCH_STRICT_PLUGINS=1`` the first such problem raises
+:class:`~tactbench.errors.PluginError` instead. :func:`collect_registry` calls every
+plugin's ``register_*`` hooks and gathers what they register into a
+:class:`~tactbench.registry.Registry` (:mod:`tactbench.registry`); the spec grammar
+``name:key=value`` is :mod:`tactbench.specs`.
 """
 
 from __future__ import annotations
 
 import difflib
 import importlib
-import importlib.util
-import inspect
 import os
 import re
-from dataclasses import dataclass, replace
+from dataclasses import replace
+from importlib.metadata import entry_points
 from typing import Any, Callable, Iterable
 
 import pluggy
 
 from tactbench import __version__, hookspecs
-from tactbench.errors import (
-    ComponentLoadError,
-    InputError,
-    PluginError,
-    TactbenchError,
-    UnknownComponentError,
-)
+from tactbench.errors import InputError, PluginError
+from tactbench.registry import KIND_HOOKS, Component, PluginInfo, PluginProblem, Registry
 
 ENTRY_POINT_GROUP = "tactbench"
 STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
@@ -47,275 +41,8 @@ BUILTIN_PLUGINS: tuple[str, ...] = (
     "tactbench.classifiers",
 )
 
-#: kind → the hook that registers components of that kind.
-KIND_HOOKS: dict[str, str] = {
-    "sensor": "register_sensors",
-    "dataset": "register_datasets",
-    "encoder": "register_encoders",
-    "classifier": "register_classifiers",
-}
-KINDS: tuple[str, ...] = tuple(KIND_HOOKS)
-
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.-]*$")
 _TARGET_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
-
-
-@dataclass(frozen=True)
-class PluginInfo:
-    """One plugin: a built-in module or an installed entry point."""
-
-    name: str
-    distribution: str
-    version: str
-    source: str  # "builtin" or "entry point"
-    hooks: tuple[str, ...] = ()
-    error: str | None = None
-
-    def label(self) -> str:
-        return f"'{self.name}' ({self.distribution} {self.version})"
-
-
-@dataclass(frozen=True)
-class PluginProblem:
-    """Something wrong with a plugin, reported instead of crashing."""
-
-    plugin: str
-    distribution: str
-    message: str
-
-    def __str__(self) -> str:
-        return f"plugin '{self.plugin}' ({self.distribution}): {self.message}"
-
-
-@dataclass(frozen=True)
-class Component:
-    """A registered component: what it is called and where its code lives."""
-
-    kind: str
-    name: str
-    target: str
-    summary: str
-    requires: tuple[str, ...]
-    plugin: str
-    distribution: str
-
-    def missing_requirements(self) -> list[str]:
-        """Required top-level modules that are not installed (found without importing)."""
-        missing = []
-        for module in self.requires:
-            top = module.split(".", 1)[0]
-            if importlib.util.find_spec(top) is None:
-                missing.append(module)
-        return missing
-
-    def load(self) -> Any:
-        """Import and return the target object (usually a class)."""
-        missing = self.missing_requirements()
-        if missing:
-            raise ComponentLoadError(
-                f"{self.kind} '{self.name}' (plugin '{self.plugin}') needs "
-                f"{', '.join(missing)}, which is not installed"
-            )
-        module_name, _, attr_path = self.target.partition(":")
-        try:
-            obj: Any = importlib.import_module(module_name)
-            for part in attr_path.split("."):
-                obj = getattr(obj, part)
-        except Exception as exc:  # any import-time failure of a plugin's code
-            raise ComponentLoadError(
-                f"{self.kind} '{self.name}' (plugin '{self.plugin}'): cannot import "
-                f"target '{self.target}': {type(exc).__name__}: {exc}"
-            ) from exc
-        return obj
-
-
-class Registry:
-    """All components registered by all plugins, by kind and name."""
-
-    def __init__(
-        self,
-        components: Iterable[Component],
-        plugins: Iterable[PluginInfo] = (),
-        problems: Iterable[PluginProblem] = (),
-    ) -> None:
-        self._by_kind: dict[str, dict[str, Component]] = {kind: {} for kind in KINDS}
-        for comp in components:
-            self._by_kind[comp.kind][comp.name] = comp
-        self.plugins: list[PluginInfo] = list(plugins)
-        self.problems: list[PluginProblem] = list(problems)
-
-    def components(self, kind: str | None = None) -> list[Component]:
-        kinds = KINDS if kind is None else (_check_kind(kind),)
-        return [c for k in kinds for c in self._by_kind[k].values()]
-
-    def names(self, kind: str) -> list[str]:
-        return sorted(self._by_kind[_check_kind(kind)])
-
-    def get(self, kind: str, name: str) -> Component:
-        table = self._by_kind[_check_kind(kind)]
-        if name in table:
-            return table[name]
-        known = sorted(table)
-        close = difflib.get_close_matches(name, known, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else "."
-        raise UnknownComponentError(
-            f"unknown {kind} '{name}'{hint} Known {kind}s: {', '.join(known) or 'none'}"
-        )
-
-    def build(self, kind: str, spec: str, **options: Any) -> Any:
-        """Build a component from ``"name"`` or ``"name:key=value,..."``.
-
-        Keyword ``options`` override those in ``spec``. An unknown option name raises
-        :class:`~tactbench.errors.InputError` listing the accepted ones; a bad option value
-        raises what the component raises (an ``InputError`` for a user's mistake), with
-        the component's name put in front of the message. The built object is checked
-        against its kind's contract (:func:`tactbench.contracts.check`):
-        :class:`~tactbench.errors.ContractError` names what it misses.
-        """
-        name, spec_options = parse_spec(spec)
-        spec_options.update(options)
-        comp = self.get(kind, name)
-        factory = comp.load()
-        spec_options = _resolve_positional(comp, factory, spec_options, spec)
-        _check_options(comp, factory, spec_options)
-        from tactbench.contracts import check
-
-        try:
-            obj = factory(**spec_options)
-        except TactbenchError as exc:
-            # Keep the type (MissingFileError stays a FileNotFoundError) and traceback;
-            # only say which component refused the option.
-            who = f"{kind} '{comp.name}'"
-            if exc.args and isinstance(exc.args[0], str) and who not in exc.args[0]:
-                exc.args = (f"{who}: {exc.args[0]}", *exc.args[1:])
-            raise
-        return check(kind, obj, name=comp.name, plugin=comp.plugin)
-
-
-    def resolve(self, kind: str, spec: str) -> str:
-        """``spec`` with a bare leading value given its option's name
-        (``sklearn:SVC,C=10`` → ``sklearn:C=10,estimator=SVC``), options sorted: the one
-        spelling a cell identity records."""
-        name, options = parse_spec(spec)
-        if POSITIONAL in options:
-            comp = self.get(kind, name)
-            options = _resolve_positional(comp, comp.load(), options, spec)
-        return format_spec(name, options)
-
-
-def _resolve_positional(comp: Component, factory: Any, options: dict[str, Any],
-                        spec: str) -> dict[str, Any]:
-    """``options`` with :data:`POSITIONAL` renamed to the factory's ``positional_option``."""
-    if POSITIONAL not in options:
-        return options
-    target = getattr(factory, "positional_option", None)
-    if not isinstance(target, str):
-        raise InputError(f"{comp.kind} '{comp.name}' takes no value without a name: write "
-                         f"key=value in '{spec}'")
-    if target in options:
-        raise InputError(f"option '{target}' is given twice in '{spec}' (once without its "
-                         f"name); give it once")
-    out = {k: v for k, v in options.items() if k != POSITIONAL}
-    out[target] = options[POSITIONAL]
-    return out
-
-
-def _check_kind(kind: str) -> str:
-    if kind not in KIND_HOOKS:
-        raise InputError(f"unknown component kind '{kind}'; kinds: {', '.join(KINDS)}")
-    return kind
-
-
-def _check_options(comp: Component, factory: Any, options: dict[str, Any]) -> None:
-    try:
-        sig = inspect.signature(factory)
-    except (TypeError, ValueError):
-        return
-    params = sig.parameters.values()
-    if any(p.kind is p.VAR_KEYWORD for p in params):
-        return
-    accepted = [p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    for key in options:
-        if key not in accepted:
-            close = difflib.get_close_matches(key, accepted, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else "."
-            raise InputError(
-                f"{comp.kind} '{comp.name}' has no option '{key}'{hint} "
-                f"Options: {', '.join(accepted) or 'none'}"
-            )
-
-
-#: Key under which :func:`parse_spec` keeps a leading value without ``key=``
-#: (``sklearn:SVC,C=10``); the component's ``positional_option`` names what it fills.
-POSITIONAL = "_"
-
-
-def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
-    """Split ``"farneback:winsize=9,levels=2"`` into a name and typed options.
-
-    Values become ``int``, ``float``, ``bool`` (``true``/``false``), ``None``
-    (``none``) or stay strings. An option given twice is refused (naming it), rather
-    than the last one winning silently. The first item may be a bare value
-    (``sklearn:SVC,C=10``): it is kept under :data:`POSITIONAL` and given to the option
-    the component's factory names in its ``positional_option`` attribute
-    (:meth:`Registry.resolve`).
-    """
-    if not isinstance(spec, str):
-        raise InputError(f"a component is named by text such as 'farneback:winsize=9', "
-                         f"got {type(spec).__name__} {spec!r}")
-    name, _, rest = spec.partition(":")
-    name = name.strip()
-    if not name:
-        raise InputError(f"empty component name in '{spec}'")
-    options: dict[str, Any] = {}
-    if rest.strip():
-        for n, item in enumerate(rest.split(",")):
-            key, eq, value = item.partition("=")
-            key = key.strip()
-            if n == 0 and not eq and key:  # "sklearn:SVC,C=10": the positional value
-                options[POSITIONAL] = _coerce(key)
-                continue
-            if not eq or not key.isidentifier():
-                raise InputError(
-                    f"bad option '{item}' in '{spec}': expected key=value, as in "
-                    f"'{name}:key=value,other=value'"
-                )
-            if key in options:
-                raise InputError(f"option '{key}' is given twice in '{spec}'; give it once")
-            options[key] = _coerce(value.strip())
-    return name, options
-
-
-def _coerce(text: str) -> Any:
-    lowered = text.lower()
-    if lowered in ("true", "false"):
-        return lowered == "true"
-    if lowered in ("none", "null"):
-        return None
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
-def format_spec(name: str, options: dict[str, Any]) -> str:
-    """The inverse of :func:`parse_spec`, with options in sorted order."""
-    if not options:
-        return name
-    return name + ":" + ",".join(f"{k}={_format_value(v)}" for k, v in sorted(options.items()))
-
-
-def _format_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if value is None:
-        return "none"
-    return str(value)
-
-
-# --------------------------------------------------------------------------- loading
 
 
 class PluginManager(pluggy.PluginManager):
@@ -420,8 +147,6 @@ def make_plugin_manager(*, builtins: bool = True, entry_points: bool = True,
 
 
 def _load_entry_points(pm: PluginManager) -> None:
-    from importlib.metadata import entry_points
-
     seen: set[str] = set()
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         dist = ep.dist.name if ep.dist is not None else "?"

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 import tactbench
-from tactbench.cli import BUILTIN_COMMANDS, cli
+from tactbench.cli import BUILTIN_COMMANDS, BUILTIN_SUMMARIES, cli
 
 HEAVY = ("torch", "kornia", "cv2", "can", "skimage", "matplotlib", "dask")
 
@@ -37,6 +37,31 @@ def test_every_builtin_command_target_imports():
         module, _, attr = target.partition(":")
         command = getattr(__import__(module, fromlist=[attr]), attr)
         assert command.name == name, f"BUILTIN_COMMANDS['{name}'] points at '{command.name}'"
+
+
+def test_help_summaries_are_the_commands_own():
+    """``--help`` lists the built-ins from BUILTIN_SUMMARIES: the same lines click would
+    draw from the imported commands, at any width."""
+    import click
+
+    assert set(BUILTIN_SUMMARIES) == set(BUILTIN_COMMANDS)
+    ctx = click.Context(cli)
+    for name in BUILTIN_COMMANDS:
+        real = cli.get_command(ctx, name)
+        stand_in = click.Command(name, help=BUILTIN_SUMMARIES[name])
+        for limit in (30, 45, 60, 80, 200):
+            assert stand_in.get_short_help_str(limit) == real.get_short_help_str(limit), name
+
+
+def test_help_imports_no_command_and_no_numpy():
+    code = ("import sys; from tactbench.cli import main\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "bad = sorted(m for m in sys.modules if m.startswith('tactbench.commands.') "
+            "or m.split('.')[0] in ('numpy', 'torch', 'cv2', 'kornia', 'can', 'matplotlib'))\n"
+            "print('imported:', bad)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert "imported: []" in out.stdout, out.stdout + out.stderr
+    assert "stability" in out.stdout and "Every encoder on stiff" in out.stdout
 
 
 def test_list_json_is_one_document_with_every_field():

@@ -12,7 +12,8 @@ import pytest
 from tactbench import contracts, hookimpl
 from tactbench.contracts import CLASSIFIER, CONTRACTS, ENCODER, SENSOR
 from tactbench.errors import ContractError, InputError, PluginError
-from tactbench.plugins import KINDS, collect_registry, make_plugin_manager
+from tactbench.plugins import collect_registry, make_plugin_manager
+from tactbench.registry import KINDS
 
 MODULE = "tb_contract_plugins"  # where the tiny plugin classes below are importable from
 TINY_SYNTHETIC = "synthetic-forearm:users=1,repetitions=1,positions=1"
@@ -130,7 +131,7 @@ def test_check_lists_every_problem_at_once():
 
 
 def test_a_documented_protocol_encoder_builds_runs_and_gets_the_defaults(registry):
-    from tactbench.encoders.testing import check_contract
+    from tactbench.encoders.evaluation.conformance import check_contract
 
     enc = registry.build("encoder", "minimal")
     out = enc.encode(np.zeros((4, 5, 6), np.float32))

@@ -50,7 +50,7 @@ def test_it_encodes_contact_onsets_and_releases(installed):
         encoder.encode(np.full((2, 2, 2), np.nan, np.float32))
 
 
-from tactbench.encoders.testing import conformance_cases, run_check  # noqa: E402
+from tactbench.testing import conformance_cases, run_check  # noqa: E402
 
 
 @pytest.mark.parametrize("encoder, check", conformance_cases(

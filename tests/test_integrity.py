@@ -1,4 +1,4 @@
-"""Shared checks: checksums, the memory budget and the one .npy header reader."""
+"""Checksums and the one .npy header reader."""
 
 from __future__ import annotations
 
@@ -7,14 +7,11 @@ import io
 import numpy as np
 import pytest
 
-from tactbench.errors import BudgetError, InputError
 from tactbench.integrity import (
     NPY_HEADER_MAX,
-    check_budget,
     hash_bytes,
     hash_chunks,
     hash_file,
-    memory_budget_bytes,
     read_npy_header,
 )
 
@@ -31,19 +28,6 @@ def test_hashes_of_a_file_its_bytes_and_its_chunks_agree(tmp_path):
     whole = hash_bytes(data)
     assert hash_file(tmp_path / "f") == whole == hash_chunks([data[:7], data[7:]])
     assert hash_file(tmp_path / "f", length=10) == hash_bytes(data[:10])
-
-
-def test_the_budget_refuses_in_one_line_naming_the_variable(monkeypatch):
-    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "1")
-    assert memory_budget_bytes() == 1 << 20
-    check_budget(1 << 20, "a step")
-    with pytest.raises(BudgetError, match=r"a step would need about 2\.0 MiB, more than the "
-                                          r"memory budget of 1\.0 MiB; set TACTBENCH_MEMORY_MIB"):
-        check_budget(2 << 20, "a step")
-    for bad in ("0", "-3", "nan", "inf", "lots"):
-        monkeypatch.setenv("TACTBENCH_MEMORY_MIB", bad)
-        with pytest.raises(InputError, match="TACTBENCH_MEMORY_MIB must be a positive number"):
-            memory_budget_bytes()
 
 
 def test_a_sound_header_leaves_the_stream_at_the_data():

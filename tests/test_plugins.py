@@ -13,7 +13,8 @@ import pytest
 
 from tactbench import hookimpl, hookspecs
 from tactbench.errors import ComponentLoadError, InputError, PluginError, UnknownComponentError
-from tactbench.plugins import collect_registry, format_spec, make_plugin_manager, parse_spec
+from tactbench.plugins import collect_registry, make_plugin_manager
+from tactbench.specs import format_spec, parse_spec
 
 GOOD_PLUGIN = """
     from tactbench import hookimpl
@@ -333,7 +334,8 @@ def test_hook_reference_documents_every_hook_with_its_signature():
 
 
 def test_a_bare_leading_value_fills_the_components_positional_option():
-    from tactbench.plugins import POSITIONAL, load_registry, parse_spec
+    from tactbench.plugins import load_registry
+    from tactbench.specs import POSITIONAL, parse_spec
 
     assert parse_spec("sklearn:SVC,C=10") == ("sklearn", {POSITIONAL: "SVC", "C": 10})
     with pytest.raises(InputError, match="bad option 'C' in"):
@@ -345,3 +347,20 @@ def test_a_bare_leading_value_fills_the_components_positional_option():
         registry.build("encoder", "farneback:9")
     with pytest.raises(InputError, match="option 'estimator' is given twice"):
         registry.build("classifier", "sklearn:SVC,estimator=SVC")
+
+
+def test_the_names_plugin_authors_import_keep_their_place():
+    """The plugin layer is three modules (loader, registry, spec grammar); what the docs
+    tell plugin authors to import is where they say."""
+    import tactbench
+    import tactbench.testing as face
+    from tactbench import plugins, registry, specs
+    from tactbench.classifiers.testing import check_classifier
+    from tactbench.encoders.evaluation.conformance import check_encoder, conformance_cases
+
+    assert tactbench.hookimpl.project_name == plugins.ENTRY_POINT_GROUP == "tactbench"
+    assert plugins.Registry is registry.Registry and plugins.Component is registry.Component
+    assert callable(plugins.make_plugin_manager) and callable(plugins.load_registry)
+    assert (face.check_encoder, face.check_classifier, face.conformance_cases) == (
+        check_encoder, check_classifier, conformance_cases)
+    assert specs.format_spec(*specs.parse_spec("dis:preset=fast,a=1")) == "dis:a=1,preset=fast"

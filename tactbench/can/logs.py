@@ -11,18 +11,23 @@ up as taxels that are always 0).
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
+import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 import numpy as np
 
+from tactbench.budget import check_budget, memory_budget_bytes
 from tactbench.can.assembler import AssemblerStats, Sweep, SweepAssembler
 from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
+from tactbench.data.dataset import Dataset
+from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError, TactbenchError
-from tactbench.integrity import check_budget, memory_budget_bytes
 
 #: Class name of the samples of a log without label markers.
 UNLABELLED = "unlabelled"
@@ -138,8 +143,6 @@ def check_blf(path: str | Path, *, budget: int | None = None) -> None:
     hold 3 GB). Decompression here is streamed, 1 MiB at a time; it costs a fraction of
     python-can's parsing. Anything else damaged is left to python-can to report.
     """
-    import struct
-
     path = Path(path)
     limit = memory_budget_bytes() if budget is None else budget
     size = path.stat().st_size
@@ -183,8 +186,6 @@ def check_blf(path: str | Path, *, budget: int | None = None) -> None:
 def _inflate_count(f: Any, n: int, inflated: int, stop: int) -> int:
     """``inflated`` plus the decompressed size of the next ``n`` bytes of ``f`` (zlib),
     counted 1 MiB at a time and no further than ``stop``; -1 when they are not zlib."""
-    import zlib
-
     d = zlib.decompressobj()
     step = 1 << 20
     try:
@@ -349,9 +350,6 @@ class CanLog:
         label markers gives one sample per unlabelled stretch, of class
         ``"unlabelled"``.
         """
-        from tactbench.data.dataset import Dataset
-        from tactbench.data.recording import Recording, Sample
-
         segments = [s if s.info is not None else
                     Segment({"label": UNLABELLED}, s.timestamps, s.values, s.missing)
                     for s in self.sample_segments()]
@@ -388,23 +386,6 @@ def _class_order(segments: list[Segment]) -> list[str]:
     return sorted(names, key=index.__getitem__)
 
 
-def LogReplay(path: str | Path, *, taxel_ids: Any = None, fmt: FrameFormat | None = None,
-              realtime: bool = False, missing: str = "hold") -> Any:
-    """Deprecated: the ``replay`` sensor plays CAN logs (``Replay(path)``); this returns one.
-
-    Kept for one release because earlier docs used it.
-    """
-    import warnings
-
-    warnings.warn("tactbench.can.logs.LogReplay is deprecated: use the 'replay' sensor "
-                  "(tactbench.sensors.replay.Replay(path)), which plays CAN logs",
-                  DeprecationWarning, stacklevel=2)
-    from tactbench.sensors.replay import Replay  # the sensor sits above this module
-
-    return Replay(str(path), realtime=realtime, taxel_ids=taxel_ids, format=fmt,
-                  missing=missing)
-
-
 class _SegmentBuilder:
     def __init__(self, info: dict[str, Any] | None) -> None:
         self.info = info
@@ -427,7 +408,7 @@ def segment_messages(messages: Iterable[Any], taxels: TaxelMap, *, missing: str 
     Returns ``(segments, assembler stats, broken meta messages)``. Unlabelled
     stretches with no sweeps are dropped; labelled ones are kept even if empty.
     The sweeps kept (each ``N`` float32 values, held twice while a segment is built)
-    must fit the memory budget (default :func:`tactbench.integrity.memory_budget_bytes`):
+    must fit the memory budget (default :func:`tactbench.budget.memory_budget_bytes`):
     a few messages can start thousands of sweeps of 65 536 taxels.
     """
     asm = SweepAssembler(taxels, missing=missing)
@@ -537,8 +518,6 @@ def reader_warnings() -> Iterator[list[str]]:
     """Gather what python-can's log readers warn about (through ``logging``: objects of a
     damaged log they skip) instead of letting it print beside tactbench's one line; the
     list is filled while the block runs."""
-    import logging
-
     caught: list[str] = []
 
     class _Catch(logging.Filter):

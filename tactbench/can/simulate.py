@@ -20,7 +20,10 @@ from typing import Any, Callable, Iterable, Iterator
 import numpy as np
 
 from tactbench.can.codec import TaxelMap, encode_sweep
+from tactbench.can.logs import is_can_log, read_log, write_log
 from tactbench.can.meta import is_meta, marker_messages, taxel_map_messages
+from tactbench.data.recording import Recording, Sample
+from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError
 
 
@@ -41,8 +44,6 @@ def as_sim_sample(sample: Any, rate_hz: float = 10.0,
     (its integer label becomes the class name, and ``class_index``, when ``classes``
     is given). A bare array is timed at ``rate_hz`` (sweeps per second) and unlabelled.
     """
-    from tactbench.data.recording import Recording, Sample
-
     info = None
     if isinstance(sample, Sample):
         label: Any = sample.label
@@ -77,13 +78,10 @@ def load_samples(source: str, *, rate_hz: float = 10.0) -> tuple[list[SimSample]
     taxel ids, in the order of their values). ``rate_hz`` times samples without
     timestamps.
     """
-    from tactbench.can.logs import is_can_log, read_log
-
     if is_can_log(source):
         log = read_log(source)
         segments = log.labelled or log.segments
         return [SimSample(s.values, s.timestamps, s.info) for s in segments], log.taxel_ids
-    from tactbench.datasets.loading import load_dataset
 
     dataset = load_dataset(source)
     samples = [as_sim_sample(s, rate_hz, dataset.classes) for s in dataset.samples]
@@ -206,7 +204,5 @@ def write_samples(path: str | Path, samples: list[SimSample], taxels: TaxelMap, 
                   t0: float | None = None) -> int:
     """Write ``samples`` as CySkin traffic straight into the log ``path``, stamped from
     ``t0`` (s, default now); returns the number of messages written."""
-    from tactbench.can.logs import write_log
-
     bursts = traffic(samples, taxels, rate_hz=rate_hz, gap_s=gap_s, markers=markers)
     return write_log(path, schedule_messages(bursts, t0=time.time() if t0 is None else t0))

@@ -190,7 +190,7 @@ class SklearnClassifier(SequenceClassifier):
 
     def _window_features(self, x: Windows | np.ndarray) -> np.ndarray:
         """``(B, L × F)`` float32: each sequence's frames reduced to features once."""
-        from tactbench.integrity import check_budget
+        from tactbench.budget import check_budget
 
         if not isinstance(x, Windows):
             b, length = x.shape[:2]

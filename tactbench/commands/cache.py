@@ -6,6 +6,8 @@ import json
 
 import click
 
+from tactbench.runner import EncodingCache
+
 
 @click.group("cache")
 def cache_group() -> None:
@@ -18,8 +20,6 @@ def cache_ls(as_json: bool) -> None:
     """List cached encodings: encoder, dataset, imaging, storage precision, frames, size,
     state (ok, or damaged: rebuilt by the next run that needs it); then temporary folders
     (being written, or orphaned by a killed process: removed by the next run)."""
-    from tactbench.runner import EncodingCache
-
     cache = EncodingCache()
     entries = cache.entries()
     temporaries = cache.temporaries()
@@ -55,8 +55,6 @@ def cache_ls(as_json: bool) -> None:
 def cache_clear(yes: bool) -> None:
     """Delete every cached encoding and orphaned temporary folder (results in run folders
     are kept; folders that a running process is writing are left to it)."""
-    from tactbench.runner import EncodingCache
-
     cache = EncodingCache()
     if not yes and not click.confirm(f"Delete cached encodings in {cache.root}?"):
         return

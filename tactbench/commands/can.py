@@ -9,7 +9,15 @@ from typing import Any
 
 import click
 
+from tactbench.can.bus import open_bus
+from tactbench.can.busload import bus_load, cyskin_like_ids
+from tactbench.can.codec import FrameFormat, TaxelMap
+from tactbench.can.logs import check_log_out, read_log
+from tactbench.can.record import record
+from tactbench.can.simulate import load_samples, send_samples, write_samples
 from tactbench.errors import TactbenchError
+from tactbench.sensors.cyskin_can import parse_taxel_ids, resolve_taxel_ids
+from tactbench.ui import Progress
 
 
 def _err(text: str) -> None:
@@ -40,8 +48,6 @@ def bus_options(func):
 
 
 def _format(format_spec: str, format_file: str | None):
-    from tactbench.can.codec import FrameFormat
-
     return FrameFormat.parse(format_spec, format_file)
 
 
@@ -78,20 +84,12 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
     'synthetic-forearm:users=2') or a CAN log. Each labelled sample is framed
     by label markers, so a recording of the bus keeps the labels.
     """
-    from tactbench.can.bus import open_bus
-    from tactbench.can.busload import bus_load
-    from tactbench.can.codec import TaxelMap
-    from tactbench.can.simulate import load_samples, send_samples, write_samples
-    from tactbench.ui import Progress
-
     fmt = _format(format_spec, format_file)
     if speed < 0:
         raise click.UsageError("--speed must be ≥ 0")
     if loop and out is not None:
         raise click.UsageError("--loop needs a bus, not --out")
     if out is not None:
-        from tactbench.can.logs import check_log_out
-
         check_log_out(out)  # before the samples are loaded
     samples, ids = load_samples(source, rate_hz=rate_hz)
     if limit is not None:
@@ -156,12 +154,6 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     Stops at --duration, --idle-timeout, --max-messages or Ctrl-C. The log reads
     back with 'tactbench can info', 'tactbench data info' and the replay sensor.
     """
-    from tactbench.can.bus import open_bus
-    from tactbench.can.logs import check_log_out
-    from tactbench.can.record import record
-    from tactbench.sensors.cyskin_can import resolve_taxel_ids
-    from tactbench.ui import Progress
-
     fmt = _format(format_spec, format_file)
     check_log_out(out)  # before the bus is opened: nothing recorded is lost to a bad --out
     if duration is None and idle_timeout is None and max_messages is None and sys.stdin.isatty():
@@ -204,10 +196,6 @@ def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bi
              data_bitrate: int | None, rate_hz: float, format_spec: str,
              format_file: str | None, as_json: bool) -> None:
     """Messages and bus load per sweep for a layout, bitrate and sweep rate."""
-    from tactbench.can.busload import bus_load, cyskin_like_ids
-    from tactbench.can.codec import TaxelMap
-    from tactbench.sensors.cyskin_can import resolve_taxel_ids
-
     given = [x is not None for x in (n_taxels, taxel_ids, layout)]
     if sum(given) != 1:
         raise click.UsageError("give exactly one of --taxels, --taxel-ids, --layout")
@@ -253,9 +241,6 @@ def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bi
 def info_cmd(log: str, taxel_ids: str | None, format_spec: str, format_file: str | None,
              as_json: bool) -> None:
     """What a CAN log holds: sweeps, labelled samples per class, lost messages."""
-    from tactbench.can.logs import read_log
-    from tactbench.sensors.cyskin_can import parse_taxel_ids
-
     fmt = _format(format_spec, format_file)
     ids = parse_taxel_ids(taxel_ids) if taxel_ids else None
     summary = read_log(Path(log), taxel_ids=ids, fmt=fmt).summary()

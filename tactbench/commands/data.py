@@ -8,6 +8,16 @@ from pathlib import Path
 
 import click
 
+from tactbench.cli import get_registry
+from tactbench.data.dataset import Dataset
+from tactbench.data.preview import preview_strip, write_png
+from tactbench.data.store import MANIFEST
+from tactbench.datasets.loading import check_loaded, load_dataset, takes_progress
+from tactbench.datasets.synthetic import generate
+from tactbench.errors import InputError, MissingFileError
+from tactbench.specs import parse_spec
+from tactbench.ui import Progress
+
 
 @click.group("data")
 def data_group() -> None:
@@ -16,10 +26,6 @@ def data_group() -> None:
 
 def _load(path: str):
     """The dataset at ``path`` (or registered as ``path``), with a bar while it is made."""
-    from tactbench.cli import get_registry
-    from tactbench.datasets.loading import load_dataset
-    from tactbench.ui import Progress
-
     registry = None if Path(path).exists() else get_registry()
     with Progress() as bars:
         return load_dataset(path, registry=registry,
@@ -28,12 +34,6 @@ def _load(path: str):
 
 def _load_as(fmt: str, src: str):
     """``src`` read by the registered dataset ``fmt`` (with options), ``src`` as its path."""
-    from tactbench.cli import get_registry
-    from tactbench.datasets.loading import check_loaded, takes_progress
-    from tactbench.errors import InputError, MissingFileError
-    from tactbench.plugins import parse_spec
-    from tactbench.ui import Progress
-
     name, options = parse_spec(fmt)
     if "path" in options:
         raise InputError(f"--format {fmt}: give the path as SRC, not as path=")
@@ -106,9 +106,6 @@ def info_cmd(path: str, as_json: bool) -> None:
               help="Positions (1: front only, 2: front and side).")
 def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int) -> None:
     """Generate the synthetic-forearm gesture dataset into a folder."""
-    from tactbench.datasets.synthetic import generate
-    from tactbench.ui import Progress
-
     with Progress() as bars:
         ds = generate(users=users, positions=positions, repetitions=repetitions, seed=seed,
                       progress=bars.callback("simulating gestures"))
@@ -132,9 +129,6 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
     folder) or a registered dataset spec. The folder written is verified by reading it
     back: its content hash must equal the source's.
     """
-    from tactbench.data.store import MANIFEST, read_dataset
-    from tactbench.errors import InputError
-
     dest = Path(out)
     if dest.exists() and not dest.is_dir():
         raise InputError(f"--out {out}: exists and is not a folder")
@@ -144,7 +138,7 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
                          f"(nothing was written)")
     ds = _load(src) if fmt is None else _load_as(fmt, src)
     ds.save(dest)
-    back = read_dataset(dest)  # verifies the stored content hash against the arrays
+    back = Dataset.load(dest)  # verifies the stored content hash against the arrays
     if back.content_hash() != ds.content_hash():
         raise RuntimeError(f"{dest}: read back with content hash {back.content_hash()[:16]} "
                            f"instead of {ds.content_hash()[:16]}")  # a bug, not user error
@@ -174,13 +168,9 @@ def preview_cmd(path: str, index: int, out: str, encoder: str | None, pixel_mm: 
     A dataset without a layout is shown as its taxel values over time
     (frames down, taxels across).
     """
-    from tactbench.data.preview import preview_strip, write_png
-
     ds = _load(path)
     enc = None
     if encoder:
-        from tactbench.cli import get_registry
-
         enc = get_registry().build("encoder", encoder)
     shown = preview_strip(ds, index, encoder=enc, pixel_mm=pixel_mm, method=method,
                           max_frames=max_frames)

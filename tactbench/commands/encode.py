@@ -3,11 +3,20 @@
 from __future__ import annotations
 
 import json
+import math
+import os
+import tempfile
+import time
 from pathlib import Path
 
 import click
 
+from tactbench.budget import check_budget
+from tactbench.cli import get_registry
+from tactbench.contracts import ENCODER
 from tactbench.errors import InputError, MissingFileError
+from tactbench.integrity import read_npy_header
+from tactbench.paths import atomic_write_text
 
 
 @click.command("encode")
@@ -26,14 +35,8 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     and options, the channel names and ranges, and for flow encoders the
     magnitude scale in pixels per frame.
     """
-    import time
-
     import numpy as np
 
-    from tactbench.cli import get_registry
-    from tactbench.contracts import ENCODER
-    from tactbench.integrity import check_budget
-    from tactbench.paths import atomic_write_text
 
     src = Path(input_path)
     if not src.is_file():
@@ -79,9 +82,6 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 def _check_writable(dst: Path) -> None:
     """Refuse, before encoding, an output under a file or in a folder that cannot be
     written (a probe file is made and removed: permissions alone do not tell)."""
-    import os
-    import tempfile
-
     folder = dst.absolute().parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
@@ -99,9 +99,6 @@ def _check_writable(dst: Path) -> None:
 def _npy_header(src: Path):
     """``(shape, dtype)`` from a .npy file's header, checked against the file's size, so
     that a header claiming more than the file holds is refused before anything is read."""
-    import math
-
-    from tactbench.integrity import read_npy_header
 
     try:
         with open(src, "rb") as fh:

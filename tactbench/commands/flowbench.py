@@ -8,6 +8,11 @@ from pathlib import Path
 
 import click
 
+from tactbench.cli import get_registry
+from tactbench.encoders.evaluation import flowbench as fb
+from tactbench.encoders.parallel import default_workers
+from tactbench.ui import Progress
+
 
 def _parse_size(text: str) -> tuple[int, int]:
     try:
@@ -41,10 +46,6 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     by a smooth flow. Errors are averaged over the tactile scenes; the Pareto
     front (no encoder both faster and more accurate) is marked.
     """
-    from tactbench.cli import get_registry
-    from tactbench.encoders import flowbench as fb
-    from tactbench.ui import Progress
-
     registry = get_registry(warn=not as_json)
     specs = specs or fb.DEFAULT_ENCODERS
     encoders = [(spec, registry.build("encoder", spec)) for spec in specs]
@@ -80,6 +81,4 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
 
 
 def _cores() -> int:
-    from tactbench.encoders.parallel import default_workers
-
     return default_workers()

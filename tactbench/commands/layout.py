@@ -6,6 +6,10 @@ import json
 
 import click
 
+from tactbench.data.imaging import image_shape
+from tactbench.data.layout_io import load_layout, write_layout_csv
+from tactbench.datasets.forearm import cyskin_forearm
+
 
 @click.group("layout")
 def layout_group() -> None:
@@ -20,9 +24,6 @@ def layout_group() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
     """Taxel count, extent in mm, median spacing of a layout (.json or .csv)."""
-    from tactbench.data.imaging import image_shape
-    from tactbench.data.layout_io import load_layout
-
     layout = load_layout(file)
     summary = layout.summary()
     summary["path"] = file
@@ -50,8 +51,6 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
 @click.option("--seed", default=0, show_default=True, type=int)
 def generate_cmd(out: str, taxels: int, seed: int) -> None:
     """Write the generated CySkin-like forearm layout as CSV."""
-    from tactbench.datasets.forearm import cyskin_forearm
-
     layout = cyskin_forearm(taxels, seed=seed)
-    layout.to_csv(out)
+    write_layout_csv(layout, out)
     click.echo(f"wrote {layout.n_taxels} taxels to {out}", err=True)

@@ -8,14 +8,16 @@ from typing import Any
 
 import click
 
+from tactbench.cli import get_registry
+from tactbench.contracts import SENSOR
+from tactbench.live import LiveClassifier, LiveModel, run_summary
+from tactbench.specs import parse_spec
+
 
 def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
                   bus: dict[str, Any]) -> Any:
     """The sensor for ``spec`` (+ ``source``, the file ``replay`` plays), with the
     model's taxels when a bus sensor needs them."""
-    from tactbench.cli import get_registry
-    from tactbench.plugins import parse_spec
-
     name, options = parse_spec(spec)
     if name == "replay":
         if source is not None:

@@ -11,6 +11,15 @@ import click
 
 from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
+from tactbench.runner import Scene, load_scene_file, parse_lengths, run
+from tactbench.runner.reports import (
+    failed_cells,
+    print_comparisons,
+    print_table,
+    summarise,
+    write_reports,
+)
+from tactbench.runner.scene import parse_seeds
 
 
 class SceneOption(click.Option):
@@ -151,15 +160,6 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     others go on; the command then exits with status 1, and running it again retries
     the failed cells.
     """
-    from tactbench.runner import Scene, load_scene_file, run
-    from tactbench.runner.reports import (
-        failed_cells,
-        print_comparisons,
-        print_table,
-        summarise,
-        write_reports,
-    )
-
     fields = load_scene_file(scene_file) if scene_file else {}
     for param in ctx.command.params:  # command-line values override the file
         if isinstance(param, SceneOption):

@@ -7,6 +7,10 @@ import sys
 
 import click
 
+from tactbench.cli import get_registry
+from tactbench.encoders.evaluation import stability as st
+from tactbench.ui import Progress
+
 
 @click.command("stability")
 @click.option("--encoder", "-e", "specs", multiple=True,
@@ -22,10 +26,6 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
     float16/64 input, and values far outside [0, 1]. Each case × encoder passes (finite, in range, deterministic, the documented
     result) or fails with the reason. The exit status is 1 when anything failed.
     """
-    from tactbench.cli import get_registry
-    from tactbench.encoders import stability as st
-    from tactbench.ui import Progress
-
     registry = get_registry(warn=not as_json)
     explicit = bool(specs)
     specs = specs or tuple(registry.names("encoder"))

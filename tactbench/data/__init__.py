@@ -10,7 +10,7 @@ module              what it holds
 ``dataset``         ``Dataset``: samples, classes, layout, normalisation; vectors, images,
                     content hash
 ``store``           the dataset folder on disk (``manifest.json`` + ``arrays.npz``):
-                    ``write_dataset``, ``read_dataset``
+                    ``write_dataset``, ``read_dataset_fields``
 ``layout``          ``TaxelLayout`` (taxel ids and positions in mm, image bounds),
                     ``unroll``
 ``layout_io``       layout files (CySkin JSON, CSV): ``load_layout``; the layout ↔ dict

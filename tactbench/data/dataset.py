@@ -17,9 +17,18 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from tactbench.data.imaging import Imager
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.normalisation import Normalisation
 from tactbench.data.recording import Sample
+from tactbench.data.store import (
+    ARRAYS,
+    FORMAT_NAME,
+    MANIFEST,
+    SCHEMA_VERSION,
+    read_dataset_fields,
+    write_dataset,
+)
 from tactbench.errors import InputError
 
 
@@ -196,8 +205,6 @@ class Dataset:
                              f"(Dataset.vectors) or give it a layout")
         key = (float(pixel_mm), str(method))
         if key not in self._imagers:
-            from tactbench.data.imaging import Imager
-
             layout = self.layout
             if layout.n_taxels != self.n_taxels or not np.array_equal(layout.ids,
                                                                       self.taxel_ids):
@@ -239,8 +246,6 @@ class Dataset:
         Computed once and cached.
         """
         if self._hash is None:
-            from tactbench.data.store import FORMAT_NAME, SCHEMA_VERSION
-
             h = hashlib.sha256()
             meta = {"format": FORMAT_NAME, "schema": SCHEMA_VERSION,
                     "classes": list(self.classes),
@@ -273,17 +278,25 @@ class Dataset:
 
         See :func:`tactbench.data.store.write_dataset`.
         """
-        from tactbench.data.store import write_dataset
-
         return write_dataset(self, folder)
 
     @classmethod
     def load(cls, folder: str | Path, *, verify: bool = True) -> "Dataset":
-        """Read a dataset folder written by :meth:`save`, validating it (``verify``:
-        also recompute the content hash). See :func:`tactbench.data.store.read_dataset`."""
-        from tactbench.data.store import read_dataset
-
-        return read_dataset(folder, verify=verify)
+        """Read a dataset folder written by :meth:`save`, validating it
+        (:func:`tactbench.data.store.read_dataset_fields`); ``verify`` also recomputes the
+        content hash and compares it with the manifest's (detects edited or corrupted
+        arrays). Nothing in the folder is written."""
+        folder = Path(folder)
+        fields, recorded = read_dataset_fields(folder)
+        try:
+            ds = cls(**fields)
+        except InputError as exc:
+            raise InputError(f"{folder / MANIFEST}: {exc}") from None
+        if verify and ds.content_hash() != recorded:
+            raise InputError(f"{folder / ARRAYS}: content hash {ds.content_hash()[:12]}… does "
+                             f"not match the manifest's {str(recorded)[:12]}…: the files were "
+                             f"modified or are corrupted")
+        return ds
 
 
 def _le(arr: np.ndarray, dtype: str) -> bytes:

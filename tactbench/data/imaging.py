@@ -56,7 +56,7 @@ Memory
     pixel size far below the taxel pitch grows it with the square of the ratio (0.01 mm
     on the forearm: 1.2 billion pixels, ~350 GiB). :class:`Imager` estimates it
     (:func:`imager_build_bytes`) and imaging a batch of frames, and refuses either above
-    the memory budget (:func:`tactbench.integrity.check_budget`) before allocating.
+    the memory budget (:func:`tactbench.budget.check_budget`) before allocating.
 """
 
 from __future__ import annotations
@@ -66,9 +66,9 @@ from typing import Any
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.data.layout import TaxelLayout
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
-from tactbench.integrity import check_budget
 
 METHODS = ("linear", "gaussian")
 #: Sub-samples per pixel side are chosen so sub-samples are ≤ spacing / 4 apart.

@@ -12,9 +12,10 @@ A :class:`TaxelLayout` holds, for ``N`` taxels:
   that images cover (by default the taxels' bounding box grown by half the
   median taxel spacing on each side).
 
-:func:`unroll` flattens 3-D positions. Files and the dict format are in
-:mod:`tactbench.data.layout_io` (``TaxelLayout.from_json``/``from_csv``/``to_csv``
-delegate to it); the generated CySkin-like forearm is
+:func:`unroll` flattens 3-D positions. Files and the dict format are
+:mod:`tactbench.data.layout_io`'s (``read_layout_csv``, ``write_layout_csv``,
+``read_layout_json``, ``load_layout``), which imports this module, never the reverse; the
+generated CySkin-like forearm is
 :func:`tactbench.datasets.forearm.cyskin_forearm`.
 """
 
@@ -22,12 +23,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tactbench.errors import InputError, check_shape
+from tactbench.errors import InputError, check_positive_float, check_positive_int, check_shape
 
 #: CySkin taxel ids: ``module_id * SLOTS_PER_ID + slot``.
 SLOTS_PER_ID = 16
@@ -93,8 +93,6 @@ class TaxelLayout:
         the grid's rows and columns. The image bounds pad the grid by half a pitch on each
         side, so at ``pixel_mm == pitch_mm`` one pixel covers one cell.
         """
-        from tactbench.errors import check_positive_float, check_positive_int
-
         rows = check_positive_int(rows, "grid rows")
         cols = check_positive_int(cols, "grid cols")
         pitch = check_positive_float(pitch_mm, "grid pitch_mm")
@@ -178,29 +176,6 @@ class TaxelLayout:
             "modules": int(np.unique(self.ids // SLOTS_PER_ID).size),
         }
 
-    # ---------------------------------------------------------------- files
-
-    def to_csv(self, path: str | Path) -> None:
-        """Write ``id,x_mm,y_mm`` (see :func:`tactbench.data.layout_io.write_layout_csv`)."""
-        from tactbench.data.layout_io import write_layout_csv
-
-        write_layout_csv(self, path)
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> "TaxelLayout":
-        """Read ``id,x_mm,y_mm[,z_mm]`` (see :func:`tactbench.data.layout_io.read_layout_csv`)."""
-        from tactbench.data.layout_io import read_layout_csv
-
-        return read_layout_csv(path)
-
-    @classmethod
-    def from_json(cls, path: str | Path, *, map_index: int = 0) -> "TaxelLayout":
-        """Read a CySkin calibration JSON (see
-        :func:`tactbench.data.layout_io.read_layout_json`)."""
-        from tactbench.data.layout_io import read_layout_json
-
-        return read_layout_json(path, map_index=map_index)
-
 
 # ---------------------------------------------------------------------- helpers
 
@@ -253,10 +228,3 @@ def unroll(points: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
             return np.column_stack([ang * radius, h])
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     return centred @ vt[:2].T
-
-
-def __getattr__(name: str) -> Any:
-    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
-    from tactbench._compat import moved_name
-
-    return moved_name(__name__, name)

@@ -28,8 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.data.layout import TaxelLayout, unroll
 from tactbench.errors import InputError, MissingFileError
+from tactbench.paths import atomic_write_text
 
 #: The keys of the dict format: required, then optional.
 DICT_REQUIRED = ("ids", "positions")
@@ -133,8 +135,6 @@ def write_layout_csv(layout: TaxelLayout, path: str | Path) -> None:
     Floats are written with ``repr`` so reading back is exact; the file is replaced
     atomically.
     """
-    from tactbench.paths import atomic_write_text
-
     buf = io.StringIO(newline="")
     buf.write("# bounds_mm=" + ",".join(repr(float(b)) for b in layout.bounds) + "\n")
     writer = csv.writer(buf)
@@ -272,7 +272,6 @@ def _read_text(path: Path) -> str:
         raise MissingFileError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: a folder, not a layout file")
-    from tactbench.integrity import check_budget
 
     # Parsed JSON of numbers takes several times its text.
     check_budget(16 * path.stat().st_size, f"reading layout file {path}")

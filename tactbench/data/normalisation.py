@@ -15,6 +15,7 @@ import numpy as np
 
 from tactbench.data.recording import UINT16_MAX, Sample
 from tactbench.errors import InputError, check_choice
+from tactbench.specs import format_spec, parse_spec
 
 #: Bytes of readings copied at once while finding each taxel's rest value.
 OFFSET_BLOCK_BYTES = 16 * 2 ** 20
@@ -51,7 +52,6 @@ class Normalisation:
     def parse(cls, spec: "str | Normalisation") -> "Normalisation":
         if isinstance(spec, Normalisation):
             return spec
-        from tactbench.plugins import parse_spec
 
         kind, opts = parse_spec(str(spec))
         check_choice(kind, "normalisation", tuple(cls.KINDS))
@@ -72,8 +72,6 @@ class Normalisation:
 
     @property
     def spec(self) -> str:
-        from tactbench.plugins import format_spec
-
         return format_spec(self.kind, {k: (int(v) if float(v).is_integer() else v)
                                        for k, v in self.options})
 

@@ -16,13 +16,16 @@ picture. ``tactbench data preview`` is this module plus option parsing.
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
+from tactbench.contracts import ENCODER
 from tactbench.errors import InputError, check_positive_int, check_shape
+from tactbench.paths import atomic_write_bytes
 
 #: Colour map for pressure in [0, 1].
 COLORMAP = "inferno"
@@ -75,8 +78,6 @@ def preview_strip(dataset: Any, index: int, *, encoder: Any = None, pixel_mm: fl
     if encoder is None:
         frames = colorize(seq[:max_frames])
     else:  # the whole sequence: an encoder may look at earlier frames
-        from tactbench.contracts import ENCODER
-
         encoded = np.asarray(encoder.encode(seq))
         frames = to_rgb(encoded[:max_frames], ENCODER.get(encoder, "ranges"))
     return Preview(tile(frames), int(frames.shape[0]), tuple(seq.shape[1:]),
@@ -140,11 +141,8 @@ def taxel_bands(vectors: np.ndarray, *, band: int = BAND_PX) -> np.ndarray:
 
 def write_png(path: str | Path, image: np.ndarray) -> None:
     """Save an RGB picture ``(H, W, 3)`` in [0, 1] as a PNG file (replaced atomically)."""
-    import io
-
     from matplotlib.image import imsave
 
-    from tactbench.paths import atomic_write_bytes
 
     check_shape(image, "H W rgb", "image", rgb=3)
     buf = io.BytesIO()

@@ -106,10 +106,3 @@ class Sample:
     position: str = ""
     repetition: int = 0
     source: str = ""
-
-
-def __getattr__(name: str) -> Any:
-    """Names that moved out of this module (see tactbench._compat.MOVED_NAMES)."""
-    from tactbench._compat import moved_name
-
-    return moved_name(__name__, name)

@@ -120,7 +120,7 @@ def user_folds(users: Sequence[str], labels: Sequence[int], *, seed: int, folds:
 
 def parse_split(spec: str) -> tuple[str, int | None]:
     """``"paper"`` → ``("paper", None)``; ``"users:folds=5"`` → ``("users", 5)``."""
-    from tactbench.plugins import parse_spec
+    from tactbench.specs import parse_spec
 
     if not isinstance(spec, str):
         raise InputError(f"split must be text such as 'paper', 'users' or 'users:folds=5', "

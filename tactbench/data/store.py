@@ -1,4 +1,4 @@
-"""The dataset store: a :class:`~tactbench.data.dataset.Dataset` as a folder on disk.
+"""The dataset store: the folder format a :class:`~tactbench.data.dataset.Dataset` is kept in.
 
 A dataset folder holds
 
@@ -14,9 +14,12 @@ A dataset folder holds
   ``layout_positions``, ``layout_bounds``, optionally ``layout_positions_3d`` and
   ``layout_normals``).
 
-:func:`write_dataset` writes each file atomically, manifest last; :func:`read_dataset`
+:func:`write_dataset` writes each file atomically, manifest last; :func:`read_dataset_fields`
 validates everything and raises :class:`~tactbench.errors.InputError` naming the file
-and the problem; nothing is half-loaded. Whole folders (the synthetic dataset's cache)
+and the problem; nothing is half-loaded. This module knows the format, not the class:
+:meth:`Dataset.save <tactbench.data.dataset.Dataset.save>` and
+:meth:`Dataset.load <tactbench.data.dataset.Dataset.load>` call it (the dependency points
+one way, from the dataset to its store). Whole folders (the synthetic dataset's cache)
 are built with :func:`tactbench.paths.atomic_folder`.
 """
 
@@ -24,16 +27,19 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import re
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tactbench.data.dataset import Dataset
+from tactbench.budget import check_budget, human_bytes
 from tactbench.data.layout_io import layout_from_dict, layout_to_dict
 from tactbench.data.recording import UINT16_MAX, Recording, Sample
 from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.integrity import read_npy_header, zip_read_errors
 from tactbench.paths import atomic_write_bytes, atomic_write_text
 
 FORMAT_NAME = "tactbench-dataset"
@@ -56,8 +62,9 @@ def _raw_counts(values: np.ndarray) -> bool:
         and np.array_equal(values, np.round(values)))))
 
 
-def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
-    """Write ``manifest.json`` and ``arrays.npz`` of ``dataset`` into ``folder`` (created).
+def write_dataset(dataset: Any, folder: str | Path) -> Path:
+    """Write ``manifest.json`` and ``arrays.npz`` of ``dataset`` (a
+    :class:`~tactbench.data.dataset.Dataset`) into ``folder`` (created).
 
     Values are stored as uint16 when they are all whole numbers in [0, 65535] (raw
     sensor counts: half the size, exact), else float32. Each file is replaced
@@ -115,15 +122,18 @@ def write_dataset(dataset: Dataset, folder: str | Path) -> Path:
 # ------------------------------------------------------------------------------ read
 
 
-def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
-    """Read a dataset folder written by :func:`write_dataset`, validating it.
+def read_dataset_fields(folder: str | Path) -> tuple[dict[str, Any], str]:
+    """Read a dataset folder written by :func:`write_dataset`, validating it: the keyword
+    arguments of :class:`~tactbench.data.dataset.Dataset` (``name``, ``samples``,
+    ``classes``, ``layout``, ``normalisation``, ``description``) and the content hash
+    the manifest records, which :meth:`Dataset.load <tactbench.data.dataset.Dataset.load>`
+    compares with the data's.
 
     Every manifest field's type is checked; of ``arrays.npz`` only the members the
     format defines are read (others are ignored, never decompressed), each after its
     npy header (shape × item size) was checked against the zip member's size and the
-    whole against the memory budget (:func:`tactbench.integrity.check_budget`).
-    ``verify`` recomputes the content hash and compares it with the manifest's
-    (detects edited or corrupted arrays). Nothing in the folder is written.
+    whole against the memory budget (:func:`tactbench.budget.check_budget`).
+    Nothing in the folder is written.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -131,8 +141,6 @@ def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
     mpath, apath = folder / MANIFEST, folder / ARRAYS
     if not mpath.is_file():
         raise InputError(f"{folder}: not a tactbench dataset folder (no {MANIFEST})")
-    from tactbench.integrity import check_budget
-
     # Parsed JSON takes several times its text (the samples' lists of strings).
     check_budget(16 * mpath.stat().st_size, f"reading {mpath}")
     try:
@@ -145,12 +153,8 @@ def read_dataset(folder: str | Path, *, verify: bool = True) -> Dataset:
     if not apath.is_file():
         raise InputError(f"{folder}: {ARRAYS} is missing (the manifest names "
                          f"{manifest['n_samples']} samples)")
-    ds = _dataset_from(manifest, _read_npz(apath, manifest), mpath, apath)
-    if verify and ds.content_hash() != manifest["content_hash"]:
-        raise InputError(f"{apath}: content hash {ds.content_hash()[:12]}… does not "
-                         f"match the manifest's {str(manifest['content_hash'])[:12]}…: "
-                         f"the files were modified or are corrupted")
-    return ds
+    fields = _fields_from(manifest, _read_npz(apath, manifest), apath)
+    return fields, manifest["content_hash"]
 
 
 _MANIFEST_FIELDS = {
@@ -223,12 +227,7 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
     read: its npy header (no objects; shape × item size equal to the zip member's
     uncompressed size) and the members' total (plus the float32 copy of ``values``)
     against the memory budget. Other members are not decompressed."""
-    import math
-    import zipfile
-
     from numpy.lib import format as npy
-
-    from tactbench.integrity import _human, check_budget, read_npy_header, zip_read_errors
 
     def bad(problem: str) -> InputError:
         return InputError(f"{path}: {problem}")
@@ -263,7 +262,7 @@ def _read_npz(path: Path, manifest: dict | None = None) -> dict[str, np.ndarray]
                     held = info.file_size - fh.tell()
                     if claimed != held:
                         raise bad(f"member {key!r} claims shape {shape} {dtype} "
-                                  f"({_human(claimed)}), but holds {_human(held)}")
+                                  f"({human_bytes(claimed)}), but holds {human_bytes(held)}")
                 headers[key] = (shape, fortran, dtype)
             total = sum(math.prod(s) * d.itemsize for s, _, d in headers.values())
             if "values" in headers and headers["values"][2] != np.float32:
@@ -294,7 +293,7 @@ def _need(arrays: dict, key: str, path: Path, ndim: int, kinds: str) -> np.ndarr
     return arr
 
 
-def _dataset_from(m: dict, arrays: dict, mpath: Path, apath: Path) -> Dataset:
+def _fields_from(m: dict, arrays: dict, apath: Path) -> dict[str, Any]:
     n, n_tax, n_frames = m["n_samples"], m["n_taxels"], m["n_frames"]
     values = _need(arrays, "values", apath, 2, "fu")
     timestamps = _need(arrays, "timestamps", apath, 1, "f")
@@ -343,8 +342,5 @@ def _dataset_from(m: dict, arrays: dict, mpath: Path, apath: Path) -> Dataset:
             raise InputError(f"{apath}: sample {k}: {exc}") from None
         samples.append(Sample(rec, int(labels[k]), m["users"][k], m["positions"][k],
                               int(reps[k]), m["sources"][k]))
-    try:
-        return Dataset(m["name"], samples, classes, layout, m["normalisation"],
-                       description=str(m.get("description", "")))
-    except InputError as exc:
-        raise InputError(f"{mpath}: {exc}") from None
+    return {"name": m["name"], "samples": samples, "classes": classes, "layout": layout,
+            "normalisation": m["normalisation"], "description": str(m.get("description", ""))}

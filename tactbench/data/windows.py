@@ -26,7 +26,7 @@ arrays or *stored sequences* (:func:`tactbench.runner.entries.load_encoding`: an
 with ``shape`` and slicing that reads frames from disk on demand): a batch then reads
 only its windows' frames, so memory is O(batch), whatever the dataset's size. A batch
 is estimated (windows × L × frame) before it is allocated, and one above the memory
-budget is refused (:func:`tactbench.integrity.check_budget`): ``L`` is the user's, and
+budget is refused (:func:`tactbench.budget.check_budget`): ``L`` is the user's, and
 ``L = 1000`` over 27-frame sequences would otherwise allocate mostly padding.
 """
 
@@ -37,8 +37,8 @@ from typing import Sequence
 
 import numpy as np
 
-from tactbench.errors import InputError, check_positive_int
-from tactbench.integrity import check_budget
+from tactbench.budget import check_budget
+from tactbench.errors import InputError, check_choice, check_positive_int
 
 
 @dataclass(frozen=True)
@@ -162,8 +162,6 @@ def test_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequenc
     """The test windows of ``mode`` (:data:`TEST_WINDOWS`): one per sequence for
     ``first`` and ``onset`` (which needs ``onsets``), every window for ``vote``
     (``seq_index`` says whose; the caller averages their probabilities)."""
-    from tactbench.errors import check_choice
-
     check_choice(mode, "test window", TEST_WINDOWS)
     if mode == "first":
         return test_windows(sequences, labels, length)

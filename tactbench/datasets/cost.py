@@ -30,6 +30,7 @@ from tactbench.data.layout import TaxelLayout
 from tactbench.data.recording import Recording, Sample
 from tactbench.datasets.folder import is_number
 from tactbench.errors import InputError, MissingFileError, check_positive_float
+from tactbench.paths import atomic_write_text
 
 RATE_HZ = 135.0
 GRID = 8
@@ -119,8 +120,6 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
 def write_cost_csv(dataset: Dataset, path: str | Path) -> None:
     """Write a 64-taxel dataset in the CoST CSV format (with a header); the file is
     replaced atomically."""
-    from tactbench.paths import atomic_write_text
-
     if dataset.n_taxels != GRID * GRID:
         raise InputError(f"CoST files hold 64 channels; dataset {dataset.name!r} has "
                          f"{dataset.n_taxels} taxels")

@@ -16,7 +16,7 @@ float32's range, duplicate taxel ids and timestamps that go backwards each raise
 :class:`~tactbench.errors.InputError` naming the file, the line, the field and the
 problem. Row lengths are checked against the header before anything is allocated,
 and the values' memory (frames × taxels, and for a folder every file's) is checked
-against :func:`tactbench.integrity.check_budget` first (a
+against :func:`tactbench.budget.check_budget` first (a
 :class:`~tactbench.errors.BudgetError` beyond it).
 ``nan`` in a reading marks a missing taxel: kept as NaN (counted by
 ``tactbench data info``), not an error. Writing and reading back is exact.
@@ -30,10 +30,11 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from tactbench.budget import check_budget, memory_budget_bytes
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
-from tactbench.integrity import check_budget, memory_budget_bytes
+from tactbench.paths import atomic_write_text
 
 SUFFIX = ".txt"
 #: CySkin text values are baseline-removed raw counts, non-negative; the scale
@@ -277,8 +278,6 @@ def write_cyskin_text(recording: Recording, path: str | Path, *,
     with the shortest text that reads back to the same float. Frame indices
     default to 0, 1, 2, … The file is replaced atomically.
     """
-    from tactbench.paths import atomic_write_text
-
     idx = np.arange(recording.n_frames) if frame_indices is None else frame_indices
     lines = [" ".join(str(int(t)) for t in recording.taxel_ids)]
     for k in range(recording.n_frames):

@@ -53,10 +53,13 @@ from typing import Any, Callable
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
+from tactbench.data.layout_io import load_layout
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError, check_positive_float
+from tactbench.integrity import read_npy_header, zip_read_errors
 
 SUFFIXES = (".npy", ".npz", ".csv")
 #: Grid pitch assumed when none is given: the quick profile's pixel, so one pixel per cell.
@@ -102,8 +105,6 @@ def read_array_file(path: Path, *, timestamp_column: str | int | None = None
 
 def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
     """An npy array from ``fh``, its header checked (and its size budgeted) before reading."""
-    from tactbench.integrity import check_budget, read_npy_header
-
     try:
         shape, fortran, dtype = read_npy_header(fh)
     except ValueError as exc:
@@ -133,8 +134,6 @@ def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
 
 
 def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    from tactbench.integrity import zip_read_errors
-
     try:
         zf = zipfile.ZipFile(path)
     except (*zip_read_errors(), ValueError) as exc:
@@ -160,8 +159,6 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.ndarray:
-    from tactbench.integrity import zip_read_errors
-
     try:
         with zf.open(info) as fh:
             return _read_npy(fh, path, info.file_size, f"member {info.filename!r}")
@@ -172,8 +169,6 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.n
 
 def _read_csv(path: Path, timestamp_column: str | int | None
               ) -> tuple[np.ndarray, np.ndarray | None]:
-    from tactbench.integrity import check_budget
-
     # a CSV cell of a number is ≥ 2 bytes ("0,"), and becomes 8 bytes as float64
     check_budget(path.stat().st_size * 4, f"reading {path}")
     try:
@@ -429,8 +424,6 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
         lay: TaxelLayout | None = TaxelLayout.grid(*frame_shape, pitch)
         ids = lay.ids
     elif layout is not None:
-        from tactbench.data.layout_io import load_layout
-
         lay = load_layout(layout)
         if lay.n_taxels != frame_shape[0]:
             raise InputError(f"{first.path}: {frame_shape[0]} taxels per frame, but layout "

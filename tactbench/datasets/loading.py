@@ -10,9 +10,14 @@ import inspect
 from pathlib import Path
 from typing import Any, Callable
 
+from tactbench.can.logs import read_log
 from tactbench.data.dataset import Dataset
 from tactbench.data.store import MANIFEST
+from tactbench.datasets.cost import read_cost_csv
+from tactbench.datasets.cyskin_text import read_cyskin_folder
+from tactbench.datasets.folder import looks_like_folder, read_folder
 from tactbench.errors import ContractError, InputError, MissingFileError
+from tactbench.plugins import load_registry
 
 #: CAN log suffixes read through :mod:`tactbench.can.logs` (python-can's ``.csv``
 #: is not among them: ``.csv`` means CoST here).
@@ -25,7 +30,6 @@ def detect_format(path: Path) -> str:
     if path.is_dir():
         if (path / MANIFEST).is_file():
             return "dataset"
-        from tactbench.datasets.folder import looks_like_folder
 
         if looks_like_folder(path):
             return "folder"
@@ -58,18 +62,11 @@ def load_path(path: str | Path, *, progress: Callable[..., None] | None = None) 
     if kind == "dataset":
         return Dataset.load(path if path.is_dir() else path.parent)
     if kind == "folder":
-        from tactbench.datasets.folder import read_folder
-
         return read_folder(path, progress=progress)
     if kind == "cyskin-text":
-        from tactbench.datasets.cyskin_text import read_cyskin_folder
-
         return read_cyskin_folder(path)
     if kind == "can-log":  # CySkin traffic recorded by `tactbench can record`
-        from tactbench.can.logs import read_log
-
         return read_log(path).to_dataset()
-    from tactbench.datasets.cost import read_cost_csv
 
     return read_cost_csv(path)
 
@@ -100,8 +97,6 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
     if isinstance(spec_or_path, Path) or _looks_like_path(text) and ":" not in text.split("/")[0]:
         raise MissingFileError(f"{text}: no such file or folder (and not a dataset name)")
     if registry is None:
-        from tactbench.plugins import load_registry
-
         registry = load_registry()
     source = registry.build("dataset", text)
     if progress is not None and takes_progress(source.load):

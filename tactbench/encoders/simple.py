@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tactbench.encoders.base import Encoder, previous_frames
+from tactbench.errors import check_shape
 
 
 class Raw(Encoder):
@@ -19,8 +20,6 @@ class Raw(Encoder):
 
     def encode_vectors(self, seq: np.ndarray) -> np.ndarray:
         """Taxel vectors ``(T, N)`` pass through (a float32 copy)."""
-        from tactbench.errors import check_shape
-
         seq = np.array(seq, dtype=np.float32)
         check_shape(seq, "T N", "taxel vectors", dtype_kind="f")
         return seq
@@ -45,8 +44,6 @@ class FrameDiff(Encoder):
     def encode_vectors(self, seq: np.ndarray) -> np.ndarray:
         """Taxel vectors ``(T, N)`` → ``(T, 2N)``: the pressures, then their change
         from the previous sweep (the same two channels, side by side)."""
-        from tactbench.errors import check_shape
-
         seq = np.asarray(seq, dtype=np.float32)
         check_shape(seq, "T N", "taxel vectors", dtype_kind="f")
         return self._encode(seq).reshape(seq.shape[0], -1)

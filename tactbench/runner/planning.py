@@ -35,6 +35,8 @@ from tactbench.errors import (
     check_positive_int,
 )
 from tactbench.profiles import PRECISIONS, get_profile, profile_options
+from tactbench.budget import check_budget
+from tactbench.specs import parse_spec
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
@@ -90,7 +92,7 @@ class Plan:
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
-        from tactbench.plugins import parse_spec
+        from tactbench.specs import parse_spec
 
         return self.registry.get("classifier", parse_spec(spec)[0])
 
@@ -127,7 +129,7 @@ def input_kind(frame_rank: int | None, has_layout: bool) -> str:
 
 
 def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dict]:
-    from tactbench.plugins import format_spec, parse_spec
+    from tactbench.specs import format_spec, parse_spec
 
     name, options = parse_spec(spec)
     merged = {**(extra or {}), **options}
@@ -284,13 +286,11 @@ def _check_lengths(scene: Scene, dataset) -> None:
 def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[str, str],
                   batch_sizes: dict[str, int]) -> None:
     """Estimate the large steps' memory from the inputs and refuse, before any work, one
-    above the budget (:func:`tactbench.integrity.check_budget`): building the imaging
+    above the budget (:func:`tactbench.budget.check_budget`): building the imaging
     operator, a chunk of images and its encodings (two in flight), and a batch of windows
     of the longest L. The same estimates guard the allocations themselves
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
     """
-    from tactbench.integrity import check_budget
-
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
     longest = int(dataset.lengths().max())
     length = max(int(n) for n in scene.L)
@@ -337,8 +337,6 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
     """Every classifier of the scene built once with its profile's options (which checks
     option names and values) and preflighted: ``(canonical spec → frame rank, canonical
     spec → windows per batch)``."""
-    from tactbench.plugins import parse_spec
-
     frame_ranks: dict[str, int | None] = {}
     batch_sizes: dict[str, int] = {}
     for spec in dict.fromkeys(scene.classifiers):

@@ -10,7 +10,7 @@ given twice (``seed`` and ``seeds``, or a JSON key twice) is refused in one line
 the file and the field.
 
 (The runner's scene is the run configuration; the synthetic flow scenes of
-:mod:`tactbench.encoders.flowbench` are a different thing with their own name.)
+:mod:`tactbench.encoders.evaluation.flowbench` are a different thing with their own name.)
 """
 
 from __future__ import annotations

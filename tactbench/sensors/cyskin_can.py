@@ -20,6 +20,7 @@ from tactbench.can.bus import open_bus
 from tactbench.can.busload import BusLoad, bus_load
 from tactbench.can.codec import MAX_TAXELS, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, is_meta
+from tactbench.data.layout_io import load_layout
 from tactbench.errors import InputError
 
 
@@ -77,8 +78,6 @@ def resolve_taxel_ids(taxel_ids: Any = None, layout: Any = None) -> np.ndarray:
     if taxel_ids is not None:
         return parse_taxel_ids(taxel_ids)
     if isinstance(layout, (str, Path)):
-        from tactbench.data.layout_io import load_layout
-
         layout = load_layout(layout)
     return np.asarray(layout.ids, dtype=np.int64)
 
@@ -126,8 +125,6 @@ class CySkinCAN:
                  receive_own_messages: bool = False) -> None:
         fmt = FrameFormat.parse(format, format_file)
         if isinstance(layout, (str, Path)):
-            from tactbench.data.layout_io import load_layout
-
             layout = load_layout(layout)
         self.layout = layout  # the TaxelLayout when given one (see contracts.SENSOR)
         self.taxel_map = TaxelMap(resolve_taxel_ids(taxel_ids, layout), fmt)

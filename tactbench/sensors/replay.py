@@ -23,13 +23,18 @@ With ``realtime=True`` each frame is released at its recorded time after the fir
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any, Iterator
 
 import numpy as np
 
+from tactbench.can.codec import FrameFormat
+from tactbench.can.logs import LOG_SUFFIXES, is_can_log, read_log
 from tactbench.data.recording import Frame, Recording
+from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError
+from tactbench.sensors.cyskin_can import parse_taxel_ids
 
 
 class Replay:
@@ -59,8 +64,6 @@ class Replay:
     def __init__(self, path: str, sample: int | None = None, realtime: bool = False,
                  loop: bool = False, *, taxel_ids: Any = None, format: Any = "",
                  format_file: str | None = None, missing: str = "hold") -> None:
-        from tactbench.can.logs import is_can_log
-
         self.realtime = bool(realtime)
         self.loop = bool(loop)
         self._closed = False
@@ -70,10 +73,6 @@ class Replay:
         self.recording: Recording | None = None
         self.layout = None
         if is_can_log(path):
-            from tactbench.can.codec import FrameFormat
-            from tactbench.can.logs import read_log
-            from tactbench.sensors.cyskin_can import parse_taxel_ids
-
             fmt = (format if isinstance(format, FrameFormat)
                    else FrameFormat.parse(format, format_file))
             ids = None if taxel_ids is None else parse_taxel_ids(taxel_ids)
@@ -85,7 +84,6 @@ class Replay:
         if taxel_ids is not None or format or format_file or missing != "hold":
             raise InputError(f"{path}: taxel_ids, format, format_file and missing apply to "
                              f"CAN logs ({', '.join(_can_suffixes())}) only")
-        from tactbench.datasets.loading import load_dataset
 
         dataset = load_dataset(path)
         sample = 0 if sample is None else sample
@@ -169,13 +167,10 @@ def _restamped(frame: Any, timestamp: float, sequence: int) -> Any:
     """``frame`` at ``timestamp`` (a later pass of a loop); sweeps keep counting."""
     if isinstance(frame, Frame):
         return Frame(timestamp, frame.values)
-    import dataclasses
 
     return dataclasses.replace(frame, timestamp=timestamp, first_timestamp=timestamp,
                                sequence=sequence, counter=sequence % 256)
 
 
 def _can_suffixes() -> tuple[str, ...]:
-    from tactbench.can.logs import LOG_SUFFIXES
-
     return LOG_SUFFIXES

@@ -199,19 +199,6 @@ def test_iter_sweeps_gives_every_sweep_or_one_sample(tmp_path):
         next(log.iter_sweeps(3))
 
 
-def test_log_replay_is_a_deprecated_name_for_the_replay_sensor(tmp_path):
-    from tactbench.can.logs import LogReplay
-    from tactbench.sensors.replay import Replay
-
-    path = tmp_path / "run.blf"
-    write_log(path, schedule_messages(traffic(samples(), TaxelMap(IDS))))
-    with pytest.warns(DeprecationWarning, match="'replay' sensor"):
-        sensor = LogReplay(path, realtime=False)
-    assert isinstance(sensor, Replay)
-    with sensor:
-        assert len(list(sensor.frames())) == sum(len(s.values) for s in samples())
-
-
 def test_a_log_under_a_file_or_onto_a_folder_is_one_clear_error(tmp_path):
     from tactbench.errors import InputError
 

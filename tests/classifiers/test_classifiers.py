@@ -458,7 +458,7 @@ class Unseeded(SmallCnnLstm):
 
 def test_the_conformance_checks_catch_a_broken_classifier():
     from tactbench.classifiers.testing import check_classifier
-    from tactbench.plugins import Component, Registry
+    from tactbench.registry import Component, Registry
 
     registry = Registry([Component("classifier", "unseeded", f"{__name__}:Unseeded",
                                    "test", (), "test", "test")])

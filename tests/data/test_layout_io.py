@@ -167,20 +167,6 @@ def test_real_3d_unroll_keeps_the_taxel_spacing(shared_data):
     assert lay.median_spacing() == pytest.approx(np.median(d3[:, 1]), rel=0.05)
 
 
-def test_taxel_layout_file_methods_use_these_readers(tmp_path):
-    lay = TaxelLayout(ids=[1, 2, 3], positions=[[0.0, 0.0], [7.5, 0.0], [0.0, 7.5]],
-                      bounds=(-1.0, -1.0, 9.0, 9.0))
-    lay.to_csv(tmp_path / "m.csv")
-    back = TaxelLayout.from_csv(tmp_path / "m.csv")
-    assert back.ids.tolist() == [1, 2, 3] and back.bounds == lay.bounds
-    doc = {"tactile_maps": {"taxels": [{"id": 1, "x": [0.0, 0.0]}, {"id": 2, "x": [0.01, 0]},
-                                       {"id": 3, "x": [0.0, 0.01]}]}}
-    assert TaxelLayout.from_json(write_json(tmp_path / "m.json", doc)).n_taxels == 3
-
-
-# ----------------------------------------------------------------- dict format
-
-
 def assert_same_layout(a, b):
     assert a.name == b.name and a.bounds == b.bounds
     assert a.ids.dtype == b.ids.dtype and np.array_equal(a.ids, b.ids)

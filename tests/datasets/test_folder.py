@@ -10,8 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
+from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
-from tactbench.data.store import read_dataset
+from tactbench.data.layout_io import write_layout_csv
 from tactbench.datasets.folder import FolderDataset, read_folder
 from tactbench.datasets.loading import detect_format, load_dataset
 from tactbench.errors import BudgetError, InputError, MissingFileError, TactbenchError
@@ -105,12 +106,12 @@ def test_taxel_vectors_without_and_with_a_layout(tmp_path):
     np.testing.assert_allclose(ds.samples[1].recording.timestamps, [0, 0.02, 0.04, 0.06])
     assert ds.users == [""] * 6 and "50 Hz" in ds.description
     lay = TaxelLayout(ids=np.arange(100, 107), positions=np.c_[np.arange(7.0), np.zeros(7)])
-    lay.to_csv(tmp_path / "layout.csv")
+    write_layout_csv(lay, tmp_path / "layout.csv")
     with_layout = read_folder(root, layout=tmp_path / "layout.csv")
     np.testing.assert_array_equal(with_layout.taxel_ids, np.arange(100, 107))
     assert with_layout.layout.n_taxels == 7
-    TaxelLayout(ids=np.arange(5), positions=np.c_[np.arange(5.0), np.zeros(5)]).to_csv(
-        tmp_path / "small.csv")
+    write_layout_csv(TaxelLayout(ids=np.arange(5), positions=np.c_[np.arange(5.0), np.zeros(5)]),
+                     tmp_path / "small.csv")
     with pytest.raises(InputError, match=r"7 taxels per frame, but layout .*small.csv has 5"):
         read_folder(root, layout=tmp_path / "small.csv")
 
@@ -284,7 +285,7 @@ def test_registered_reader_path_detection_and_import_round_trip(tmp_path):
     res = CliRunner().invoke(cli, ["data", "import", str(tmp_path / "d"), "--format",
                                    "folder:users=prefix,pitch_mm=7", "--out", str(out)])
     assert res.exit_code == 0, res.output
-    back = read_dataset(out)
+    back = Dataset.load(out)
     assert back.content_hash() == direct.content_hash()
     assert back.users == direct.users and back.layout.name == "grid-6x5"
     assert direct.content_hash()[:16] in res.output
@@ -304,10 +305,9 @@ def test_import_of_any_readable_source_and_its_errors(tmp_path):
     res = CliRunner().invoke(cli, ["data", "import", str(tmp_path / "syn"),
                                    "--out", str(tmp_path / "copy")])
     assert res.exit_code == 0, res.output
-    assert read_dataset(tmp_path / "copy").content_hash() == src.content_hash()
+    assert Dataset.load(tmp_path / "copy").content_hash() == src.content_hash()
 
     grid = TaxelLayout.grid(8, 8, 10.0)
-    from tactbench.data.dataset import Dataset
     from tactbench.data.recording import Recording, Sample
 
     rec = Recording(np.arange(128, dtype=np.float32).reshape(2, 64), [0.0, 0.1], grid.ids)
@@ -316,7 +316,7 @@ def test_import_of_any_readable_source_and_its_errors(tmp_path):
     res = CliRunner().invoke(cli, ["data", "import", str(tmp_path / "cost.csv"), "--format",
                                    "cost:pitch_mm=10", "--out", str(tmp_path / "cost-ds")])
     assert res.exit_code == 0, res.output
-    assert read_dataset(tmp_path / "cost-ds").content_hash() == \
+    assert Dataset.load(tmp_path / "cost-ds").content_hash() == \
         read_cost_csv(tmp_path / "cost.csv").content_hash()
 
     for args, message in [

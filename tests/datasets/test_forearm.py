@@ -44,13 +44,6 @@ def test_forearm_smaller_counts():
         cyskin_forearm(5000, circumference_mm=120, length_mm=100)
 
 
-def test_forearm_is_still_importable_from_its_old_module():
-    with pytest.warns(DeprecationWarning, match="tactbench.datasets.forearm"):
-        from tactbench.data.layout import cyskin_forearm as old
-
-    assert old is cyskin_forearm
-
-
 @pytest.mark.parametrize("kwargs, message", [
     (dict(n_taxels=0), "n_taxels must be ≥ 1"),
     (dict(pitch_mm=-1.0), "pitch_mm must be > 0"),

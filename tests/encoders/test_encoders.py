@@ -14,7 +14,11 @@ from hypothesis.extra import numpy as hnp
 from tactbench.cli import cli
 from tactbench.encoders.base import check_sequence
 from tactbench.encoders.flow import FlowEncoder, flow_to_channels
-from tactbench.encoders.testing import conformance_cases, contact_sequence, run_check
+from tactbench.encoders.evaluation.conformance import (
+    conformance_cases,
+    contact_sequence,
+    run_check,
+)
 from tactbench.plugins import load_registry
 
 BUILTINS = ("raw", "frame-diff", "farneback", "lucas-kanade", "kornia-flow", "dis", "tvl1")

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
-from tactbench.encoders import flowbench as fb
+from tactbench.encoders.evaluation import flowbench as fb
 
 
 def warp_back(curr: np.ndarray, flow: np.ndarray) -> np.ndarray:
@@ -101,6 +102,29 @@ def test_run_ranks_a_real_method_above_a_blind_one(tmp_path):
     assert {r["encoder"] for r in doc["results"]} == {"dis", "blind"}
     assert paths["csv"].read_text().count("\n") == len(doc["scenes"]) + 1
     assert paths["png"].stat().st_size > 1000
+    assert sorted(f.name for f in tmp_path.iterdir()) == sorted(p.name for p in paths.values())
+
+
+def test_outputs_are_written_whole_or_not_at_all(tmp_path, monkeypatch):
+    """A plot that fails half-way leaves the old plot whole and no temporary behind."""
+    from matplotlib.figure import Figure
+
+    def half_then_fail(self, fname, **kwargs):
+        if hasattr(fname, "write"):
+            fname.write(b"half a png")
+        else:
+            Path(fname).write_bytes(b"half a png")
+        raise OSError("disk full")
+
+    (tmp_path / "flow_error_vs_time.png").write_bytes(b"old plot")
+    monkeypatch.setattr(Figure, "savefig", half_then_fail)
+    with pytest.raises(OSError, match="disk full"):
+        fb.write_outputs([fb.EncoderResult("dis", "8x8", 0.5, 3.0, 0.1, 0.4, pareto=True)],
+                         tmp_path, {"test": True})
+    assert json.loads((tmp_path / "flowbench.json").read_text())["meta"] == {"test": True}
+    assert (tmp_path / "flow_error_vs_time.png").read_bytes() == b"old plot"
+    assert sorted(f.name for f in tmp_path.iterdir()) == [
+        "flow_error_vs_time.png", "flowbench.csv", "flowbench.json"]
 
 
 def test_command_prints_one_json_document_and_writes_files(tmp_path):

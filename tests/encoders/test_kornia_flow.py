@@ -9,7 +9,7 @@ torch = pytest.importorskip("torch")
 kornia = pytest.importorskip("kornia")
 
 from tactbench.encoders import kornia_flow as kf  # noqa: E402
-from tactbench.encoders.testing import contact_sequence  # noqa: E402
+from tactbench.encoders.evaluation.conformance import contact_sequence  # noqa: E402
 
 
 @pytest.fixture

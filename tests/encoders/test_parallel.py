@@ -8,7 +8,7 @@ import pytest
 from tactbench.encoders.farneback import Farneback
 from tactbench.encoders.parallel import encode_all, encode_chunks
 from tactbench.encoders.simple import FrameDiff
-from tactbench.encoders.testing import contact_sequence
+from tactbench.encoders.evaluation.conformance import contact_sequence
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
-from tactbench.encoders import stability as st
+from tactbench.encoders.evaluation import stability as st
 from tactbench.encoders.base import Encoder
 from tactbench.encoders.simple import Raw
 

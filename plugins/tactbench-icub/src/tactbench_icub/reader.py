@@ -33,7 +33,7 @@ Reading is strict: a file that is empty, has no time slice, ends inside a slice,
 ``-10000`` inside a slice, a line with the wrong number of values, a value that is not a
 finite number, a reading outside 0–255, or text that is not ASCII raises
 :class:`tactbench.errors.InputError` naming the file and the line. A file (or folder)
-larger than the memory budget allows (:func:`tactbench.integrity.check_budget`) is
+larger than the memory budget allows (:func:`tactbench.budget.check_budget`) is
 refused before it is read, with a :class:`~tactbench.errors.BudgetError`.
 """
 
@@ -48,7 +48,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
-from tactbench.integrity import check_budget
+from tactbench.budget import check_budget
 
 FINGERS = ("thumb", "index", "middle", "ring", "little")
 TAXELS_PER_FINGER = 12

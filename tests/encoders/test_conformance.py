@@ -7,7 +7,7 @@ import pytest
 
 from tactbench.encoders.base import Encoder, previous_frames
 from tactbench.encoders.flow import FlowEncoder
-from tactbench.encoders.testing import (
+from tactbench.encoders.evaluation.conformance import (
     CHECKS,
     check_encoder,
     conformance_cases,

@@ -3,13 +3,13 @@
 Run it on any encoder (an instance, a factory, or a registered spec such as
 ``"farneback:winsize=9"``)::
 
-    from tactbench.encoders.testing import check_encoder
+    from tactbench.testing import check_encoder
     check_encoder("my-encoder")          # raises AssertionError listing failures
 
 or, in a plugin's test suite, one pytest test per check::
 
     import pytest
-    from tactbench.encoders.testing import conformance_cases, run_check
+    from tactbench.testing import conformance_cases, run_check
 
     @pytest.mark.parametrize("encoder, check", conformance_cases(["my-encoder"]))
     def test_conformance(encoder, check):
@@ -39,8 +39,9 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from tactbench.contracts import ENCODER
-from tactbench.encoders.flow import is_flow_encoder  # noqa: F401  (also importable from here)
+from tactbench.encoders.flow import is_flow_encoder
 from tactbench.errors import InputError
+from tactbench.plugins import load_registry
 
 #: Tolerance for comparing outputs computed in different batches (float32 noise).
 BATCH_ATOL = 1e-4
@@ -295,8 +296,6 @@ CHECKS: dict[str, Callable[[Any], None]] = {
 def build_encoder(encoder: Any) -> Any:
     """An encoder from an instance, a zero-argument factory/class, or a registry spec."""
     if isinstance(encoder, str):
-        from tactbench.plugins import load_registry
-
         return load_registry().build("encoder", encoder)
     if isinstance(encoder, type) or (callable(encoder) and not hasattr(encoder, "encode")):
         return encoder()

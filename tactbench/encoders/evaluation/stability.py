@@ -38,7 +38,7 @@ import numpy as np
 
 from tactbench.contracts import ENCODER
 from tactbench.encoders.flow import is_flow_encoder
-from tactbench.encoders.testing import contact_sequence
+from tactbench.encoders.evaluation.conformance import contact_sequence
 from tactbench.errors import InputError
 
 RANGE_ATOL = 1e-6

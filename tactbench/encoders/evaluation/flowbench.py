@@ -36,6 +36,9 @@ tactile sequence, divided by its 16 frame pairs: what a user pays per frame.
 
 from __future__ import annotations
 
+import csv
+import io
+import json
 import math
 import statistics
 import time
@@ -47,6 +50,7 @@ import numpy as np
 
 from tactbench.encoders.flow import is_flow_encoder
 from tactbench.errors import InputError
+from tactbench.paths import atomic_write_bytes, atomic_write_text
 
 MOTIONS = ("translate", "twist", "push", "pull", "pressure")
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
@@ -429,9 +433,10 @@ def plot(results: Sequence[EncoderResult], path: Path) -> Path:
         ax.set_title(f"{res} px")
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=120)
     plt.close(fig)
+    atomic_write_bytes(path, png.getvalue())
     return path
 
 
@@ -444,20 +449,18 @@ def to_document(results: Sequence[EncoderResult], meta: dict[str, Any]) -> dict[
 
 def write_outputs(results: Sequence[EncoderResult], out: Path,
                   meta: dict[str, Any]) -> dict[str, Path]:
-    """Write ``flowbench.json``, ``flowbench.csv`` (per scene) and the plot into ``out``."""
-    import csv
-    import json
-
-    out.mkdir(parents=True, exist_ok=True)
+    """Write ``flowbench.json``, ``flowbench.csv`` (per scene) and the plot into ``out``,
+    each atomically (a reader sees the old file or the new one, never half)."""
     doc = to_document(results, meta)
     paths = {"json": out / "flowbench.json", "csv": out / "flowbench.csv",
              "png": out / "flow_error_vs_time.png"}
-    paths["json"].write_text(json.dumps(doc, indent=2) + "\n")
-    with paths["csv"].open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=["encoder", "resolution", "scene", "motion",
-                                                "speed", "size", "tactile", "epe_px",
-                                                "angular_deg"])
-        writer.writeheader()
-        writer.writerows(doc["scenes"])
+    atomic_write_text(paths["json"], json.dumps(doc, indent=2) + "\n")
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=["encoder", "resolution", "scene", "motion",
+                                               "speed", "size", "tactile", "epe_px",
+                                               "angular_deg"])
+    writer.writeheader()
+    writer.writerows(doc["scenes"])
+    atomic_write_text(paths["csv"], table.getvalue())
     plot(results, paths["png"])
     return paths
