@@ -174,19 +174,19 @@ def pct(x: float | None) -> str:
 
 
 def summary_table(results: dict) -> str:
-    from tactbench.runner.reports import markdown_table
+    from tactbench.runner.tables import markdown_table
 
     return markdown_table(results["summary"])
 
 
 def comparison_table(comps: list[dict]) -> str:
-    from tactbench.runner.reports import comparisons_markdown
+    from tactbench.runner.tables import comparisons_markdown
 
     return comparisons_markdown(comps) or "(no paired comparison)"
 
 
 def find(results: dict, **want) -> dict | None:
-    from tactbench.runner.reports import short_name
+    from tactbench.runner.summaries import short_name
 
     for s in results["summary"]:
         if all((short_name(s[k]) if k == "classifier" else s[k]) == v
@@ -196,7 +196,7 @@ def find(results: dict, **want) -> dict | None:
 
 
 def comp(results: dict, factor: str, a, b, **where) -> dict | None:
-    from tactbench.runner.reports import short_name
+    from tactbench.runner.summaries import short_name
 
     for c in results.get("comparisons", []):
         if c["factor"] != factor:
@@ -242,7 +242,7 @@ def study(root: Path, m: dict) -> str:
             "-L", "1-6", "--seed", SEEDS]
     parts = [run_grid("study", split, [*base, "--split", split], root)
              for split in ("paper", "users")]
-    from tactbench.runner.reports import write_reports
+    from tactbench.runner.writers import write_reports
 
     reference = [{"label": "raw (pressure only)", "L": 5, "accuracy": 0.807, "err": 0.004},
                  {"label": "farneback (with flow)", "L": 5, "accuracy": 0.891, "err": 0.002}]
@@ -544,7 +544,7 @@ def real_data(root: Path, m: dict) -> str:
                   comparison_table([c for c in results["comparisons"]
                                     if c["factor"] == "encoder"]), ""]
         lines += figures(part, Path("real-data")) + [""]
-    from tactbench.runner.reports import short_name
+    from tactbench.runner.summaries import short_name
 
     lines += ["## What it shows", ""]
     for part in parts:

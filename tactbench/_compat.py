@@ -27,7 +27,7 @@ MOVED_MODULES: dict[str, str] = {
     "tactbench.flowbench": "tactbench.encoders.flowbench",
     "tactbench.stability": "tactbench.encoders.stability",
     "tactbench.training": "tactbench.classifiers.training",
-    "tactbench.reports": "tactbench.runner.reports",
+    "tactbench.reports": "tactbench.runner.writers",
 }
 
 

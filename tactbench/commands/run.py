@@ -66,13 +66,9 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
     the failed cells.
     """
     from tactbench.runner import Scene, load_scene_file, parse_lengths, run
-    from tactbench.runner.reports import (
-        failed_cells,
-        print_comparisons,
-        print_table,
-        summarise,
-        write_reports,
-    )
+    from tactbench.runner.summaries import failed_cells, summarise
+    from tactbench.runner.tables import print_comparisons, print_table
+    from tactbench.runner.writers import write_reports
     from tactbench.runner.scene import parse_seeds
 
     fields = load_scene_file(scene_file) if scene_file else {}

@@ -245,7 +245,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
-        # per test sequence, for paired comparisons between cells (runner.reports)
+        # per test sequence, for paired comparisons between cells (runner.summaries)
         "test_predictions": {"indices": test_index.tolist(),
                              "labels": truth.tolist(), "predictions": predicted.tolist()},
         # cost on one core: wall time × workers that shared the encoding, per frame

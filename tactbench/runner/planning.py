@@ -29,6 +29,7 @@ from tactbench.errors import (
     check_positive_int,
 )
 from tactbench.runner.scene import EXECUTORS, Scene, check_scene
+from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
 #: model, and a larger grid is a typo (its plan alone would grow without bound).
@@ -36,8 +37,6 @@ MAX_CELLS = 10_000
 
 #: What tactbench writes at the top of an out folder (see :func:`check_out_folder`).
 OUT_FOLDERS = ("cells", "models")
-OUT_FILES = ("results.json", "results.csv", "report.md", "accuracy_vs_L.png",
-             "cost_vs_accuracy.png", "per_class_vs_L.png")
 _OUT_PATTERNS = (re.compile(r"confusion_.+\.png"),)
 #: What file managers leave in any folder they show (tactbench neither reads nor writes it).
 OUT_LITTER = (".DS_Store", "Thumbs.db", "desktop.ini")

@@ -210,7 +210,7 @@ def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_sc
 
     scene = tiny_scene(encoders=["raw"], classifiers=["logreg:max_iter=20"], seeds=[0])
     run(scene, progress=False, cache=cache)
-    from tactbench.runner.reports import write_reports
+    from tactbench.runner.writers import write_reports
 
     out = tmp_path / "out"
     write_reports(out, [], meta={}, plots=False)

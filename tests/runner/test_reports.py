@@ -9,7 +9,8 @@ import json
 import pytest
 
 from tactbench.runner import run
-from tactbench.runner.reports import failed_cells, summarise, write_reports
+from tactbench.runner.summaries import failed_cells, summarise
+from tactbench.runner.writers import write_reports
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -43,7 +44,7 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
 
 
 def test_the_peak_step_of_a_summary_is_the_most_common_over_seeds():
-    from tactbench.runner.reports import peak_step
+    from tactbench.runner.summaries import peak_step
 
     assert peak_step([{"peak_step": "fit"}, {"peak_step": "predict"},
                       {"peak_step": "predict"}]) == "predict"
@@ -107,7 +108,7 @@ def _row(encoder, seed, truth, predicted, *, L=5, classifier="logreg", indices=N
 
 
 def test_pairs_differing_in_one_factor_are_compared_sequence_by_sequence():
-    from tactbench.runner.reports import comparisons
+    from tactbench.runner.summaries import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -132,7 +133,7 @@ def test_pairs_differing_in_one_factor_are_compared_sequence_by_sequence():
 
 
 def test_a_difference_whose_interval_spans_zero_is_unresolved_in_every_output(tmp_path):
-    from tactbench.runner.reports import comparisons
+    from tactbench.runner.summaries import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -151,7 +152,7 @@ def test_a_difference_whose_interval_spans_zero_is_unresolved_in_every_output(tm
 
 
 def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
-    from tactbench.runner.reports import comparisons
+    from tactbench.runner.summaries import comparisons
 
     truth = [0, 1] * 10
     a = _row("raw", 0, truth, truth)
@@ -166,7 +167,8 @@ def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
 
 
 def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
-    from tactbench.runner.reports import comparisons, markdown_table
+    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.tables import markdown_table
 
     truth = [0, 1] * 10
     rows = [_row("raw", s, truth, truth, L=L, classifier=clf)
@@ -243,7 +245,7 @@ def _grid(seeds=(0, 1, 2), lengths=(3, 5)):
 
 
 def test_pareto_front_by_hand():
-    from tactbench.runner.reports import pareto_front
+    from tactbench.runner.plots import pareto_front
 
     points = [(1.0, 0.8),  # 0: front
               (2.0, 0.9),  # 1: front
@@ -329,7 +331,7 @@ def test_one_seed_gives_lines_without_bands(tmp_path, drawn):
 
 
 def test_the_band_falls_back_to_the_std_and_then_to_none():
-    from tactbench.runner.reports import accuracy_band, band_note
+    from tactbench.runner.plots import accuracy_band, band_note
 
     s = {"seeds": [0, 1], "accuracy_mean": 0.8, "accuracy_std": 0.1,
          "accuracy_ci95": [0.7, 0.9]}
@@ -408,7 +410,7 @@ def test_a_line_with_one_seed_at_some_l_says_where_it_has_no_band(tmp_path, draw
 
 
 def test_short_names_keep_the_estimator():
-    from tactbench.runner.reports import short_name
+    from tactbench.runner.summaries import short_name
 
     assert short_name("small-cnn-lstm:epochs=4,width=16") == "small-cnn-lstm"
     assert short_name("sklearn:C=10,estimator=SVC") == "sklearn:SVC"

@@ -1,4 +1,4 @@
-"""tactbench.runner.stats against independent computations, simulations and degenerate
+"""tactbench.runner.statistics against independent computations, simulations and degenerate
 inputs."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.stats import (
+from tactbench.runner.statistics import (
     paired_difference,
     pairs_differing_in_one_factor,
     seed_summary,
