@@ -1,36 +1,83 @@
-"""Paired statistics for comparing cells: pure functions over numpy arrays.
+"""Statistics for comparing training procedures: the training run is the unit of evidence.
 
-Two encoders (or classifiers) in one run are tested on the same test sequences under the
-same seeds, so they are compared *paired*, sequence by sequence (see docs/statistics.md):
+A verdict ("B beats A") is a claim about two *training procedures* on this kind of data,
+not about two fitted models on one test set (see docs/statistics.md and the references
+there). Every seed of a run redraws the split and the initialisation, so each seed gives
+one *run*: one trained pair and one difference of accuracy ``d_s = acc_B − acc_A``.
+The functions here are pure (numpy arrays in, numbers out); scipy is imported inside them.
 
-- :func:`seed_summary`: mean, standard deviation and a 95 % t-interval of the mean
-  accuracy over seeds;
-- :func:`paired_difference`: the mean difference of accuracy B − A with a bootstrap
-  interval over test sequences (``scipy.stats.bootstrap``, resampling within each seed),
-  how many seeds agree on its sign, the exact McNemar p-value on the pooled paired
-  predictions (``scipy.stats.binomtest``) and a verdict;
+- :func:`corrected_t`: the corrected resampled t-test of Nadeau & Bengio (2003) over the
+  per-run differences, ``var × (1/J + n_test/n_train)``, J − 1 degrees of freedom; for a
+  K-fold split repeated over seeds the same correction with ``n_test/n_train = 1/(K − 1)``
+  (Bouckaert & Frank 2004). Its interval is the one shown beside every verdict.
+- :func:`sign_flip_p`: the exact sign-flip permutation test over runs; with J runs its
+  smallest two-sided p is ``2 / 2^J``. The stricter of the two p-values governs.
+- :func:`holm`: Holm's step-down adjustment within a family of comparisons.
+- :func:`tost_p`: two one-sided tests (Schuirmann 1987) for equivalence within ±margin.
+- :func:`runs_needed`: how many runs the observed variance needs for an interval of ±h.
+- :func:`verdict`: the rules that turn the above into "B better", "A better",
+  "equivalent", "unresolved" or "too few runs".
+- :func:`variance_components`: split / initialisation / test-sampling variance of runs
+  that vary split and initialisation separately.
+- :func:`mcnemar_p`: McNemar's exact test on one seed's paired predictions — a statement
+  about *those two trained models* on that test set only.
+- :func:`seed_summary`: the t-interval of a cell's mean accuracy over seeds.
 - :func:`pairs_differing_in_one_factor`: which cells of a grid to compare.
 
-Nothing here imports the runner; scipy is imported inside the functions.
+:func:`sign_flip_p`, :func:`corrected_t` and :func:`holm` are written with numpy and work
+on arrays of many families at once (the leading axes), which keeps the simulation checks
+of tests/runner/test_statistics.py fast; each is checked there against scipy's own
+(``scipy.stats.permutation_test``, ``scipy.stats.ttest_1samp``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any, Hashable, Mapping, Sequence
 
 import numpy as np
 
 from tactbench.errors import InputError
 
-#: Bootstrap resamples in :func:`paired_difference` unless told.
-N_RESAMPLES = 4000
-#: Fewer test sequences than this give an interval but no verdict: a percentile bootstrap
-#: of a handful of sequences is too narrow to call a winner.
-MIN_SEQUENCES_FOR_VERDICT = 10
-#: Resampled values held at once during the bootstrap (resamples × sequences).
-_BOOTSTRAP_BATCH_VALUES = 2_000_000
+#: Fewer runs than this give no verdict: one model pair says nothing about the procedure.
+MIN_RUNS = 3
+#: Fewer distinct test recordings on which the two cells ever disagree than this give no
+#: verdict: a handful of recordings (however many rows they fill) is too little evidence.
+MIN_DISCORDANT_RECORDINGS = 10
+#: An interval end within this of 0 (accuracy as a fraction) touches 0: floating-point
+#: noise of a mean of zeros is not a difference.
+ZERO_TOLERANCE = 1e-9
+#: The interval half-width (accuracy fraction) :func:`runs_needed` aims at without a margin.
+TARGET_HALF_WIDTH = 0.02
+#: Runs beyond this are not searched by :func:`runs_needed` (the answer is "more than").
+MAX_RUNS_SEARCHED = 1000
+#: Exact sign-flip enumeration up to this many runs; above, this many random sign vectors.
+_EXACT_RUNS = 16
+_RANDOM_FLIPS = 1 << 16
+
+
+def _check_confidence(confidence: float) -> float:
+    try:
+        c = float(confidence)
+    except (TypeError, ValueError):
+        c = float("nan")
+    if not 0 < c < 1:
+        raise InputError(f"confidence must be between 0 and 1 (e.g. 0.95), got {confidence!r}")
+    return c
+
+
+def _check_ratio(ratio: float) -> float:
+    try:
+        r = float(ratio)
+    except (TypeError, ValueError):
+        r = float("nan")
+    if not (math.isfinite(r) and r >= 0):
+        raise InputError(f"n_test/n_train must be a finite number ≥ 0, got {ratio!r}")
+    return r
+
+
+# --------------------------------------------------------------------- one cell over seeds
 
 
 @dataclass(frozen=True)
@@ -51,24 +98,14 @@ class SeedSummary:
         return asdict(self)
 
 
-def _check_confidence(confidence: float) -> float:
-    try:
-        c = float(confidence)
-    except (TypeError, ValueError):
-        c = float("nan")
-    if not 0 < c < 1:
-        raise InputError(f"confidence must be between 0 and 1 (e.g. 0.95), got {confidence!r}")
-    return c
-
-
 def seed_summary(accuracies: Sequence[float] | np.ndarray, *,
                  confidence: float = 0.95) -> SeedSummary:
     """Mean ± std of ``accuracies`` (one per seed) and a t-interval of the mean.
 
-    The interval is ``mean ± t(n − 1) · std / √n`` (``scipy.stats.t``): it says where the
-    mean over *seeds* would lie with other seeds on the same data, not over other data.
-    With one seed there is no interval (``low``/``high`` None, ``note`` says so); with
-    identical accuracies it is the point itself.
+    The interval is ``mean ± t(n − 1) · std / √n`` (``scipy.stats.t``): where the mean
+    over seeds would lie with other seeds on the same data. Seeds share the data, so it
+    is narrower than an interval over data sets would be; the comparisons of cells use
+    :func:`corrected_t`. With one seed there is no interval (``note`` says so).
     """
     from scipy import stats
 
@@ -88,167 +125,223 @@ def seed_summary(accuracies: Sequence[float] | np.ndarray, *,
                        confidence=conf)
 
 
-@dataclass(frozen=True)
-class PairedDifference:
-    """B − A on the same test sequences (see :func:`paired_difference`)."""
-
-    difference: float  # mean over seeds of (accuracy B − accuracy A)
-    low: float  # bootstrap interval of ``difference``
-    high: float
-    confidence: float
-    accuracy_a: float  # mean over seeds
-    accuracy_b: float
-    seeds: int
-    b_better_seeds: int  # seeds where B's accuracy is higher
-    a_better_seeds: int
-    tied_seeds: int
-    a_only: int  # pooled rows A got right and B wrong (McNemar's b)
-    b_only: int  # pooled rows B got right and A wrong (McNemar's c)
-    mcnemar_p: float  # exact two-sided; 1.0 when no row is discordant
-    verdict: str  # "B better", "A better" or "unresolved"
-    resampling: str  # "within each seed" or "sequences jointly across seeds"
-    n_resamples: int
-    sequences: int  # test rows, all seeds together
-    per_seed: dict[str, float] = field(default_factory=dict)  # seed → B − A
-    note: str = ""  # why the interval is not a bootstrap one, when it is not
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
+# --------------------------------------------------------------------- runs as the unit
 
 
-def _rows(name: str, x: Any, n: int | None) -> np.ndarray:
-    arr = np.asarray(x)
-    if arr.ndim != 1:
-        raise InputError(f"{name} must be one value per test sequence (1-D), "
-                         f"got shape {arr.shape}")
-    if n is not None and arr.shape[0] != n:
-        raise InputError(f"{name} has {arr.shape[0]} rows, y_true has {n}")
-    return arr
+def corrected_t(d: Any, ratio: float, *, confidence: float = 0.95) -> dict[str, np.ndarray]:
+    """The corrected resampled t-test of the per-run differences ``d`` (last axis: runs).
 
+    ``se = sqrt((1/J + ratio) · s²)``, s² the sample variance of ``d`` (ddof = 1),
+    ``t = mean / se`` on J − 1 degrees of freedom (Nadeau & Bengio 2003). ``ratio`` is
+    ``n_test / n_train`` for repeated random splits, ``1 / (K − 1)`` for K folds
+    (Bouckaert & Frank 2004); 0 gives the plain one-sample t-test over runs.
 
-def paired_difference(y_true: Any, pred_a: Any, pred_b: Any, groups: Any, *,
-                      sequence_ids: Any = None, confidence: float = 0.95,
-                      n_resamples: int = N_RESAMPLES, seed: int = 0) -> PairedDifference:
-    """Compare predictions A and B of the same test sequences under several seeds.
-
-    ``y_true``, ``pred_a``, ``pred_b`` and ``groups`` (the seed of each row) are pooled
-    1-D arrays, one row per (seed, test sequence). The difference is B − A: per seed, the
-    mean of ``correct_B − correct_A`` over its rows; then the mean over seeds (each seed
-    weighs the same, as in the accuracy table).
-
-    Its interval is a percentile bootstrap (``scipy.stats.bootstrap``, ``n_resamples``
-    resamples, RNG seeded by ``seed``) of that same statistic, resampling test sequences
-    with replacement *within each seed* (stratified by seed; each seed keeps its size).
-    When ``sequence_ids`` (the test sequence of each row) show that every seed tested
-    exactly the same sequences, one draw of sequences is applied to every seed instead
-    (``resampling = "sequences jointly across seeds"``): the seeds' results on one
-    sequence are not independent, and resampling them together keeps that.
-
-    McNemar's exact test runs on the pooled rows: ``a_only`` rows only A got right,
-    ``b_only`` rows only B got right, ``p = binomtest(b_only, a_only + b_only, 0.5)``
-    two-sided, and 1 when no row is discordant. The verdict is "B better" when the
-    interval lies above zero, "A better" below, else "unresolved"; it is "unresolved"
-    too with fewer than :data:`MIN_SEQUENCES_FOR_VERDICT` test sequences (``note`` says so).
+    Returns arrays over the leading axes: ``mean``, ``se``, ``low``, ``high`` (the
+    interval ``mean ± t_{J−1} · se``), ``p`` (two-sided; 1 where every run is equal and
+    the mean is 0, 0 where every run is equal and the mean is not) and ``df``. Needs
+    J ≥ 2.
     """
     from scipy import stats
 
     conf = _check_confidence(confidence)
-    if isinstance(n_resamples, bool) or not isinstance(n_resamples, (int, np.integer)) \
-            or n_resamples < 100:
-        raise InputError(f"n_resamples must be an integer ≥ 100, got {n_resamples!r}")
-    y = _rows("y_true", y_true, None)
-    n = y.shape[0]
-    if n == 0:
-        raise InputError("paired_difference needs at least one test sequence")
-    a = _rows("pred_a", pred_a, n)
-    b = _rows("pred_b", pred_b, n)
-    g = _rows("groups", groups, n)
-    correct_a = a == y
-    correct_b = b == y
-    d = correct_b.astype(np.float64) - correct_a.astype(np.float64)
+    ratio = _check_ratio(ratio)
+    d = np.asarray(d, dtype=np.float64)
+    j = d.shape[-1]
+    if j < 2:
+        raise InputError(f"a corrected t-test needs at least 2 runs, got {j}")
+    mean = d.mean(axis=-1)
+    var = d.var(axis=-1, ddof=1)
+    se = np.sqrt((1.0 / j + ratio) * var)
+    q = float(stats.t.ppf(0.5 + conf / 2, j - 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(se > 0, mean / np.where(se > 0, se, 1.0), np.where(mean == 0, 0.0, np.inf))
+    p = 2 * stats.t.sf(np.abs(t), j - 1)
+    return {"mean": mean, "se": se, "low": mean - q * se, "high": mean + q * se,
+            "p": np.minimum(1.0, p), "df": np.full(mean.shape, j - 1)}
 
-    seeds = list(dict.fromkeys(g.tolist()))  # first-seen order
-    idx = [np.flatnonzero(g == s) for s in seeds]
-    per_seed = np.array([d[i].mean() for i in idx])
-    acc_a = float(np.mean([correct_a[i].mean() for i in idx]))
-    acc_b = float(np.mean([correct_b[i].mean() for i in idx]))
-    diff = float(per_seed.mean())
 
-    joint = False
-    if sequence_ids is not None:
-        ids = _rows("sequence_ids", sequence_ids, n)
-        order = [i[np.argsort(ids[i], kind="stable")] for i in idx]
-        first = ids[order[0]]
-        joint = (len(np.unique(first)) == len(first)
-                 and all(np.array_equal(ids[o], first) for o in order[1:]))
-        if joint:
-            idx = order  # rows of every seed aligned by sequence
-    units = len(idx[0]) if joint else n  # what is resampled: sequences or rows
-    note = ""
-    if units == 1:
-        low, high = -1.0, 1.0
-        note = "one test sequence: no interval (the full range −1 … 1)"
-    elif np.all(d == d[0]):  # no variation to resample: the interval is the point
-        low = high = diff
+def sign_flip_p(d: Any) -> np.ndarray:
+    """Two-sided p of the sign-flip permutation test of ``mean(d) = 0`` over runs.
+
+    Under "no difference between the procedures" each run's difference is as likely
+    positive as negative; the p-value is the share of the 2^J sign patterns whose
+    |mean| reaches the observed one (exact for J ≤ 16; above, 65 536 random patterns
+    from a fixed seed plus the observed one). With J runs the smallest p is 2 / 2^J
+    (0.0625 for 5 runs): five runs cannot reach 5 %. Vectorised over leading axes.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    j = d.shape[-1]
+    if j < 1:
+        raise InputError("a sign-flip test needs at least one run")
+    if j <= _EXACT_RUNS:
+        bits = (np.arange(1 << j)[:, None] >> np.arange(j)) & 1
+        signs = 1.0 - 2.0 * bits  # (2^J, J); row 0 is the observed pattern
     else:
-        low, high = _bootstrap_interval(d, idx, joint, conf, int(n_resamples), seed)
-        # The percentile interval of a mean always contains the point up to rounding.
-        low, high = min(low, diff), max(high, diff)
-
-    a_only = int(np.sum(correct_a & ~correct_b))
-    b_only = int(np.sum(correct_b & ~correct_a))
-    discordant = a_only + b_only
-    p = 1.0 if discordant == 0 else float(stats.binomtest(b_only, discordant, 0.5).pvalue)
-    verdict = "B better" if low > 0 else "A better" if high < 0 else "unresolved"
-    if units < MIN_SEQUENCES_FOR_VERDICT and verdict != "unresolved":
-        verdict = "unresolved"
-        note = note or (f"{units} test sequences: no verdict below "
-                        f"{MIN_SEQUENCES_FOR_VERDICT} (the interval is too narrow at this size)")
-    return PairedDifference(
-        difference=diff, low=low, high=high, confidence=conf, accuracy_a=acc_a,
-        accuracy_b=acc_b, seeds=len(seeds), b_better_seeds=int(np.sum(per_seed > 0)),
-        a_better_seeds=int(np.sum(per_seed < 0)), tied_seeds=int(np.sum(per_seed == 0)),
-        a_only=a_only, b_only=b_only, mcnemar_p=min(1.0, p), verdict=verdict,
-        resampling="sequences jointly across seeds" if joint else "within each seed",
-        n_resamples=int(n_resamples), sequences=n,
-        per_seed={str(s): float(v) for s, v in zip(seeds, per_seed)}, note=note)
+        rng = np.random.default_rng(0)
+        signs = np.vstack([np.ones((1, j)), rng.choice([-1.0, 1.0], size=(_RANDOM_FLIPS, j))])
+    observed = np.abs(d.mean(axis=-1))[..., None]
+    flipped = np.abs(d @ signs.T) / j
+    # a tolerance for sums that are equal but for rounding
+    reach = flipped >= observed - 1e-12 * np.maximum(1.0, observed)
+    return reach.mean(axis=-1)
 
 
-def _bootstrap_interval(d: np.ndarray, idx: list[np.ndarray], joint: bool, conf: float,
-                        n_resamples: int, seed: int) -> tuple[float, float]:
-    """Percentile bootstrap interval of ``mean over seeds of mean(d[rows of seed])``.
+def holm(p: Any) -> np.ndarray:
+    """Holm's step-down adjusted p-values over the last axis (one family per row).
 
-    Joint: every seed's rows are aligned by sequence and one draw of sequences serves
-    every seed (``paired=True``). Else each seed is resampled alone; seeds with a single
-    row cannot be, so their rows are resampled together as one stratum (the bootstrap
-    over those seeds), or, when only one seed has a single row, it stays as it is.
+    Sorted ascending, ``p_(i) · (m − i)`` (i from 0), made non-decreasing, capped at 1;
+    NaN entries are left out of the family and stay NaN. Valid under any dependence
+    between the comparisons (Holm 1979).
+    """
+    p = np.asarray(p, dtype=np.float64)
+    if p.ndim == 0:
+        return np.minimum(1.0, p)
+    nan = np.isnan(p)
+    filled = np.where(nan, np.inf, p)
+    order = np.argsort(filled, axis=-1, kind="stable")
+    sorted_p = np.take_along_axis(filled, order, axis=-1)
+    m = (~nan).sum(axis=-1, keepdims=True)
+    factor = np.maximum(m - np.arange(p.shape[-1]), 1)
+    adjusted = np.minimum(1.0, np.maximum.accumulate(sorted_p * factor, axis=-1))
+    out = np.empty_like(adjusted)
+    np.put_along_axis(out, order, adjusted, axis=-1)
+    return np.where(nan, np.nan, out)
+
+
+def tost_p(d: Any, ratio: float, margin: float) -> np.ndarray:
+    """p of two one-sided tests that the mean difference lies within ±``margin``.
+
+    Each side is a corrected t-test (:func:`corrected_t`'s standard error, J − 1 df)
+    of ``mean ≤ −margin`` and ``mean ≥ +margin``; the p is the larger (Schuirmann
+    1987). Below α, the procedures are *equivalent within ±margin*: the run-level
+    interval at 1 − 2α lies inside (−margin, +margin).
     """
     from scipy import stats
 
-    n_seeds = len(idx)
-    if joint:
-        strata, weights, constant = [d[i] for i in idx], [1.0] * n_seeds, 0.0
-    else:
-        strata = [d[i] for i in idx if len(i) > 1]
-        weights = [1.0] * len(strata)
-        singles = np.concatenate([d[i] for i in idx if len(i) == 1] or [np.zeros(0)])
-        constant = 0.0
-        if len(singles) > 1:
-            strata.append(singles)
-            weights.append(float(len(singles)))
-        elif len(singles) == 1:
-            constant = float(singles[0])
-    w = np.asarray(weights) / n_seeds
+    if not (isinstance(margin, (int, float)) and math.isfinite(margin) and margin > 0):
+        raise InputError(f"an equivalence margin must be a number > 0, got {margin!r}")
+    ratio = _check_ratio(ratio)
+    d = np.asarray(d, dtype=np.float64)
+    j = d.shape[-1]
+    if j < 2:
+        raise InputError(f"an equivalence test needs at least 2 runs, got {j}")
+    mean = d.mean(axis=-1)
+    se = np.sqrt((1.0 / j + ratio) * d.var(axis=-1, ddof=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lower = np.where(se > 0, (mean + margin) / np.where(se > 0, se, 1.0),
+                         np.where(mean + margin > 0, np.inf, -np.inf))
+        upper = np.where(se > 0, (margin - mean) / np.where(se > 0, se, 1.0),
+                         np.where(margin - mean > 0, np.inf, -np.inf))
+    return np.maximum(stats.t.sf(lower, j - 1), stats.t.sf(upper, j - 1))
 
-    def statistic(*parts, axis=-1):
-        return sum(wi * np.mean(p, axis=axis) for wi, p in zip(w, parts)) + constant / n_seeds
 
-    batch = max(1, _BOOTSTRAP_BATCH_VALUES // len(d))
-    res = stats.bootstrap(tuple(strata), statistic, n_resamples=n_resamples,
-                          confidence_level=conf, method="percentile", paired=joint,
-                          vectorized=True, batch=batch,
-                          random_state=np.random.default_rng(seed))
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+def runs_needed(sd: float | None, ratio: float, half_width: float, *,
+                confidence: float = 0.95) -> int | None:
+    """The fewest runs J (≥ :data:`MIN_RUNS`) whose corrected interval would be at most
+    ±``half_width`` at the observed standard deviation ``sd`` of the per-run differences:
+    ``t_{J−1} · sqrt((1/J + ratio)) · sd ≤ half_width``.
+
+    None when no number of runs gets there: the correction keeps ``ratio · sd²`` however
+    many runs there are (more runs of the *same* data cannot shrink the interval below
+    ``z · sqrt(ratio) · sd``), or more than :data:`MAX_RUNS_SEARCHED` would be needed.
+    With ``sd`` 0 (or None: too few runs to tell) the answer is :data:`MIN_RUNS` or None.
+    """
+    from scipy import stats
+
+    conf = _check_confidence(confidence)
+    ratio = _check_ratio(ratio)
+    if sd is None or not math.isfinite(sd):
+        return None
+    if sd == 0:
+        return MIN_RUNS
+    z = float(stats.norm.ppf(0.5 + conf / 2))
+    if z * math.sqrt(ratio) * sd >= half_width:
+        return None
+    j = np.arange(MIN_RUNS, MAX_RUNS_SEARCHED + 1)
+    width = stats.t.ppf(0.5 + conf / 2, j - 1) * np.sqrt(1.0 / j + ratio) * sd
+    ok = np.flatnonzero(width <= half_width)
+    return int(j[ok[0]]) if ok.size else None
+
+
+#: What :func:`verdict` may return.
+VERDICTS = ("B better", "A better", "equivalent", "unresolved", "too few runs")
+
+
+def verdict(low: float, high: float, p_adjusted: float, runs: int, *,
+            alpha: float = 0.05, discordant_recordings: int | None = None,
+            equivalence_p_adjusted: float | None = None) -> tuple[str, str]:
+    """The verdict of one comparison and why, from its run-level interval and its
+    family-adjusted p.
+
+    - fewer than :data:`MIN_RUNS` runs: "too few runs";
+    - fewer than :data:`MIN_DISCORDANT_RECORDINGS` distinct test recordings on which the
+      cells ever disagree: "unresolved" (the note says so);
+    - adjusted p < ``alpha`` and the interval clear of 0 by more than
+      :data:`ZERO_TOLERANCE`: "B better" (above 0) or "A better" (below);
+    - else, with a margin, equivalence p (adjusted) < ``alpha``: "equivalent";
+    - else "unresolved".
+    """
+    if runs < MIN_RUNS:
+        return "too few runs", (f"{runs} run(s): no verdict below {MIN_RUNS} (one model "
+                                "pair says nothing about the training procedure)")
+    if discordant_recordings is not None and discordant_recordings < MIN_DISCORDANT_RECORDINGS:
+        return "unresolved", (f"the cells disagree on {discordant_recordings} distinct test "
+                              f"recording(s): no verdict below {MIN_DISCORDANT_RECORDINGS}")
+    if p_adjusted < alpha and low > ZERO_TOLERANCE:
+        return "B better", ""
+    if p_adjusted < alpha and high < -ZERO_TOLERANCE:
+        return "A better", ""
+    if equivalence_p_adjusted is not None and equivalence_p_adjusted < alpha:
+        return "equivalent", ""
+    if p_adjusted < alpha:
+        return "unresolved", "the interval touches 0"
+    return "unresolved", ""
+
+
+def mcnemar_p(correct_a: Any, correct_b: Any) -> float:
+    """McNemar's exact two-sided p on one test set's paired outcomes (booleans):
+    ``binomtest(b_only, a_only + b_only, 0.5)``, 1 when no row is discordant.
+
+    A statement about *these two fitted models* on *this* test set only (Dietterich
+    1998), not about the procedures that trained them.
+    """
+    from scipy import stats
+
+    a = np.asarray(correct_a, dtype=bool)
+    b = np.asarray(correct_b, dtype=bool)
+    a_only, b_only = int(np.sum(a & ~b)), int(np.sum(b & ~a))
+    if a_only + b_only == 0:
+        return 1.0
+    return float(min(1.0, stats.binomtest(b_only, a_only + b_only, 0.5).pvalue))
+
+
+def variance_components(values: Any, test_variance: float) -> dict[str, float]:
+    """Split / initialisation / test-sampling variance of one quantity measured on runs
+    laid out as ``values[split seed, init seed]`` (at least 2 × 2).
+
+    Within a split, the test set is fixed and the runs differ only by initialisation:
+    the mean within-split variance estimates ``init``. Between splits, the split means
+    vary by ``split + test + init / n_init``; ``test`` (the sampling variance of the
+    quantity over test sets, ``test_variance``: e.g. p(1 − p)/n_test for an accuracy) is
+    given, so ``split = var(split means) − test − init / n_init``. A negative estimate
+    (noise) is reported as 0 with ``clipped`` listing it. Returns variances in the
+    quantity's units squared: ``split``, ``init``, ``test``, ``clipped``.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim != 2 or v.shape[0] < 2 or v.shape[1] < 2:
+        raise InputError(f"a variance decomposition needs at least 2 split seeds × 2 init "
+                         f"seeds, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise InputError("a variance decomposition needs every (split, init) run")
+    init = float(v.var(axis=1, ddof=1).mean())
+    split = float(v.mean(axis=1).var(ddof=1)) - float(test_variance) - init / v.shape[1]
+    clipped = []
+    if split < 0:
+        split, clipped = 0.0, ["split"]
+    return {"split": split, "init": init, "test": float(test_variance), "clipped": clipped}
+
+
+# --------------------------------------------------------------------- which cells
 
 
 @dataclass(frozen=True)
@@ -296,5 +389,7 @@ def pairs_differing_in_one_factor(cells: Sequence[Mapping[str, Any]]) -> list[Fa
     return [p for *_, p in sorted(found, key=lambda t: t[:3])]
 
 
-__all__ = ["FactorPair", "PairedDifference", "SeedSummary", "paired_difference",
-           "pairs_differing_in_one_factor", "seed_summary"]
+__all__ = ["FactorPair", "MIN_DISCORDANT_RECORDINGS", "MIN_RUNS", "SeedSummary",
+           "TARGET_HALF_WIDTH", "VERDICTS", "ZERO_TOLERANCE", "corrected_t", "holm",
+           "mcnemar_p", "pairs_differing_in_one_factor", "runs_needed", "seed_summary",
+           "sign_flip_p", "tost_p", "variance_components", "verdict"]

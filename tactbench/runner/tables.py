@@ -13,6 +13,12 @@ def _comparison_label(c: dict[str, Any], side: str) -> str:
         return short_name(str(value))
     if c["factor"] == "L":
         return f"L={value}"
+    if c["factor"] == "contrast":  # "encoder=raw,L=6" → "raw L=6"
+        parts = []
+        for item in str(value).split(","):
+            k, _, v = item.partition("=")
+            parts.append(f"L={v}" if k == "L" else v)
+        return " ".join(parts)
     return str(value)
 
 
@@ -22,33 +28,51 @@ def _context(c: dict[str, Any]) -> str:
         if k == c["factor"] or k not in c:
             continue
         parts.append(f"L={c[k]}" if k == "L" else short_name(str(c[k])))
-    return " ".join(parts)
+    return " ".join(parts) or "-"
 
 
-COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)", "95 % interval",
-                     "seeds B>A / A>B / tied", "McNemar p", "verdict"]
+COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
+                     "95 % interval over runs", "runs B>A / A>B / tied",
+                     "p (t / sign-flip)", "Holm p", "runs for ±2 (±margin)", "verdict"]
+
+
+def verdict_text(c: dict[str, Any]) -> str:
+    """The verdict in words: ``farneback better``, ``equivalent within ±2``, ..."""
+    verdict = c["verdict"]
+    if verdict == "B better":
+        return f"{_comparison_label(c, 'b')} better"
+    if verdict == "A better":
+        return f"{_comparison_label(c, 'a')} better"
+    if verdict == "equivalent":
+        return f"equivalent within ±{c['equivalence_margin']:g}"
+    return verdict
+
+
+def _runs_needed(c: dict[str, Any]) -> str:
+    n = c.get("runs_needed")
+    return "unreachable" if n is None else str(n)
 
 
 def comparison_rows(comps: Sequence[dict[str, Any]]) -> list[list[str]]:
-    """Table cells: factor, A, B, where (the shared factors), B − A (points), interval,
-    seeds B>A/A>B/tied, McNemar p, verdict."""
+    """Table cells: factor, A, B, where (the shared factors), B − A (points), the
+    run-level interval, runs B>A/A>B/tied, p of the corrected t and of the sign-flip
+    test, the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
+    and the verdict."""
     rows = []
     for c in comps:
-        verdict = c["verdict"]
-        if verdict == "B better":
-            verdict = f"{_comparison_label(c, 'b')} better"
-        elif verdict == "A better":
-            verdict = f"{_comparison_label(c, 'a')} better"
         rows.append([
             c["factor"], _comparison_label(c, "a"), _comparison_label(c, "b"), _context(c),
             f"{100 * c['difference']:+.1f}",
-            f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]",
-            f"{c['b_better_seeds']}/{c['a_better_seeds']}/{c['tied_seeds']}",
-            _p_value(c["mcnemar_p"]), verdict])
+            f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]" if c["df"] else "-",
+            f"{c['b_better_runs']}/{c['a_better_runs']}/{c['tied_runs']}",
+            f"{_p_value(c['t_p'])} / {_p_value(c['permutation_p'])}",
+            _p_value(c["p_holm"]), _runs_needed(c), verdict_text(c)])
     return rows
 
 
-def _p_value(p: float) -> str:
+def _p_value(p: float | None) -> str:
+    if p is None:
+        return "-"
     return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
@@ -71,11 +95,13 @@ def print_comparisons(comps: Sequence[dict[str, Any]], *,
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title="paired comparisons (B − A; an interval spanning 0 is unresolved)",
+    table = Table(title="paired comparisons over runs (B − A; Holm-adjusted within the run; "
+                        "an interval touching 0 is unresolved)",
                   title_justify="left")
     for col in COMPARISON_HEADER:
         table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
                                                         "verdict") else "right")
+    # the interval beside every verdict is the run-level one (comparison_rows)
     for row in comparison_rows(shown):
         table.add_row(*row)
     console = Console()
@@ -96,7 +122,7 @@ def _pct(mean: float, std: float) -> str:
     return f"{100 * mean:.1f} ± {100 * std:.1f}"
 
 
-TABLE_HEADER = ["encoder", "classifier", "L", "accuracy %", "95 % CI of mean", "seeds",
+TABLE_HEADER = ["encoder", "classifier", "input", "L", "accuracy %", "95 % CI of mean", "seeds",
                 "encode ms/frame",
                 "train s", "infer ms/seq", "peak MB", "peak step"]
 
@@ -105,7 +131,7 @@ def table_rows(summaries: Sequence[dict[str, Any]]) -> list[list[str]]:
     rows = []
     for s in summaries:
         rows.append([
-            s["encoder"], short_name(s["classifier"]), str(s["L"]),
+            s["encoder"], short_name(s["classifier"]), s.get("input", "-"), str(s["L"]),
             _pct(s["accuracy_mean"], s["accuracy_std"]), _interval(s.get("accuracy_ci95")),
             str(len(s["seeds"])),
             f"{s['encode_ms_per_frame_mean']:.3f}",
@@ -124,7 +150,7 @@ def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "") -> None
     table = Table(title=title or None, title_justify="left")
     for col in TABLE_HEADER:
         table.add_column(col, justify="right" if col not in ("encoder", "classifier",
-                                                              "peak step") else "left")
+                                                              "input", "peak step") else "left")
     for row in table_rows(summaries):
         table.add_row(*row)
     console = Console()
@@ -187,3 +213,76 @@ def reference_markdown(reference: Sequence[dict[str, Any]],
                 f" | {_interval(s.get('accuracy_ci95'))} |")
     return "\n".join(lines)
 
+
+
+def per_class_gains_markdown(comps: Sequence[dict[str, Any]]) -> str:
+    """Per-class gains B − A (points) with their run-level intervals, one line per
+    comparison ("" when none has them)."""
+    comps = [c for c in comps if c.get("per_class")]
+    if not comps:
+        return ""
+    classes = list(dict.fromkeys(k for c in comps for k in c["per_class"]))
+    lines = ["| factor | A | B | where | " + " | ".join(classes) + " |",
+             "|" + "---|" * (4 + len(classes))]
+    for c in comps:
+        cells = []
+        for k in classes:
+            g = c["per_class"].get(k)
+            if g is None:
+                cells.append("-")
+            elif g["low"] is None:
+                cells.append(f"{100 * g['difference']:+.1f}")
+            else:
+                cells.append(f"{100 * g['difference']:+.1f} [{100 * g['low']:+.1f}, "
+                             f"{100 * g['high']:+.1f}]")
+        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a')} | "
+                     f"{_comparison_label(c, 'b')} | {_context(c)} | " + " | ".join(cells)
+                     + " |")
+    return "\n".join(lines)
+
+
+def per_user_gains_markdown(comps: Sequence[dict[str, Any]]) -> str:
+    """Per-user gains of every pair: users tested, helped, hurt, median and quartiles
+    (points) ("" when no comparison has them: not a users split, or no user ids)."""
+    comps = [c for c in comps if c.get("per_user")]
+    if not comps:
+        return ""
+    lines = ["| factor | A | B | where | users | helped | hurt | median gain | "
+             "quartiles |", "|---|---|---|---|---|---|---|---|---|"]
+    for c in comps:
+        u = c["per_user"]
+        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a')} | "
+                     f"{_comparison_label(c, 'b')} | {_context(c)} | {u['users']} | "
+                     f"{u['helped']} | {u['hurt']} | {100 * u['median']:+.1f} | "
+                     f"{100 * u['q25']:+.1f} … {100 * u['q75']:+.1f} |")
+    return "\n".join(lines)
+
+
+def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]]) -> str:
+    """Per-user accuracy of every cell (%, mean over the runs testing the user)."""
+    summaries = [s for s in summaries if s.get("per_user_accuracy")]
+    if not summaries:
+        return ""
+    users = sorted({u for s in summaries for u in s["per_user_accuracy"]})
+    lines = ["| encoder | classifier | L | " + " | ".join(users) + " |",
+             "|" + "---|" * (3 + len(users))]
+    for s in summaries:
+        acc = s["per_user_accuracy"]
+        lines.append(f"| {s['encoder']} | {short_name(s['classifier'])} | {s['L']} | "
+                     + " | ".join(f"{100 * acc[u]:.0f}" if u in acc else "-" for u in users)
+                     + " |")
+    return "\n".join(lines)
+
+
+def variance_markdown(parts: Sequence[dict[str, Any]]) -> str:
+    """The variance decomposition of each cell's accuracy (standard deviations, points)."""
+    if not parts:
+        return ""
+    lines = ["| encoder | classifier | L | split seeds × init seeds | split sd | "
+             "initialisation sd | test-sampling sd |", "|---|---|---|---|---|---|---|"]
+    for v in parts:
+        lines.append(f"| {v['encoder']} | {short_name(v['classifier'])} | {v['L']} | "
+                     f"{v['split_seeds']} × {v['init_seeds']} | {v['split_sd']:.1f}"
+                     + (" (clipped at 0)" if "split" in v["clipped"] else "")
+                     + f" | {v['init_sd']:.1f} | {v['test_sd']:.1f} |")
+    return "\n".join(lines)

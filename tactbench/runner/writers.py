@@ -15,13 +15,17 @@ from typing import Any, Iterable, Sequence
 from tactbench.paths import atomic_write_text
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.store import ok_rows, row_status
-from tactbench.runner.summaries import comparisons, summarise
+from tactbench.runner.summaries import comparisons, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_markdown,
     failed_cells_markdown,
     markdown_table,
+    per_class_gains_markdown,
     per_class_markdown,
+    per_user_accuracy_markdown,
+    per_user_gains_markdown,
     reference_markdown,
+    variance_markdown,
 )
 
 #: Every top-level file a run writes (``confusion_*.png`` besides, one per cell).
@@ -61,40 +65,77 @@ def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
 
 def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
                   meta: dict[str, Any] | None = None, plots: bool = True,
-                  reference: Iterable[dict[str, Any]] | None = None) -> dict[str, Path]:
+                  reference: Iterable[dict[str, Any]] | None = None,
+                  contrasts: Sequence[str] = (), margin: float | None = None,
+                  users: Sequence[str] | None = None) -> dict[str, Path]:
     """Write results.json, results.csv, report.md and the plots into ``out``.
 
     ``rows``: every row of the run, ok and failed (failed cells are listed in report.md,
     kept in the JSON and CSV, and left out of summaries and plots). ``reference``: the
     published points to set beside ours (:func:`check_reference`): drawn in
-    ``accuracy_vs_L.png``, tabled in report.md and kept in results.json.
+    ``accuracy_vs_L.png``, tabled in report.md and kept in results.json. ``contrasts``
+    and ``margin`` (points): see :func:`tactbench.runner.summaries.comparisons`;
+    ``users``: the user of each dataset sample (by index), for per-user results.
     """
     out = Path(out)
     reference = check_reference(reference)  # a mistake is refused before any file
     out.mkdir(parents=True, exist_ok=True)
-    summaries = summarise(rows)
-    comps = comparisons(rows)
+    doc = results_document(rows, meta=meta, reference=reference, contrasts=contrasts,
+                           margin=margin, users=users)
     paths = {"json": out / "results.json", "csv": out / "results.csv",
              "markdown": out / "report.md"}
-    doc = {"meta": meta or {}, "summary": summaries, "comparisons": comps,
-           "rows": list(rows)}
-    if reference:
-        doc["reference"] = reference
     atomic_write_text(paths["json"], json.dumps(doc, indent=2))
     atomic_write_text(paths["csv"], rows_csv(rows))
     figures: dict[str, Path] = {}
-    if plots and summaries:
-        figures = write_plots(out, summaries, reference=reference)
+    if plots and doc["summary"]:
+        figures = write_plots(out, doc["summary"], reference=reference)
         paths.update(figures)
-    atomic_write_text(paths["markdown"], markdown_report(summaries, rows, meta or {},
-                                                         figures, comps,
-                                                         reference=reference))
+    atomic_write_text(paths["markdown"], markdown_report(
+        doc["summary"], rows, meta or {}, figures, doc["comparisons"], reference=reference,
+        variance=doc["variance"]))
     return paths
 
 
-def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=()) -> str:
+#: What report.md says above its table of comparisons.
+COMPARISONS_TEXT = (
+    "Every two cells that differ in one factor (and every contrast asked for), compared "
+    "on the same test sequences run by run: B − A is the mean over runs (a run: one split "
+    "seed, its split and initialisation) of the difference of accuracy. The interval is "
+    "the corrected resampled t over runs (Nadeau–Bengio; for K folds Bouckaert–Frank), "
+    "which counts the training variability, not only the test set's; p is the larger of "
+    "its p and the exact sign-flip test over runs; Holm adjusts p within this run's "
+    "comparisons, and the verdict rests on the adjusted p. Fewer than 3 runs give no "
+    "verdict; an interval touching 0 is unresolved; \"runs for ±2\" is how many runs the "
+    "observed variance needs for an interval of ±2 points (or ±margin), \"unreachable\" "
+    "where the correction keeps it wider however many runs of these data there are. "
+    "McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of those trained "
+    "models only. See docs/statistics.md.")
+
+
+def results_document(rows: Sequence[dict[str, Any]], *, meta: dict[str, Any] | None = None,
+                     reference: Sequence[dict[str, Any]] = (), contrasts: Sequence[str] = (),
+                     margin: float | None = None, users: Sequence[str] | None = None
+                     ) -> dict[str, Any]:
+    """results.json's content: ``meta``, ``summary``, ``comparisons`` (with the contrasts
+    and margin they were made with in ``statistics``), ``variance``, ``rows`` and, when
+    given, ``reference``. Everything but ``rows`` and ``meta`` is computed from the rows,
+    so a stored document can be recomputed (``benchmarks/reports.py --from-stored``)."""
+    rows = list(rows)
+    doc = {"meta": meta or {}, "summary": summarise(rows, users=users),
+           "comparisons": comparisons(rows, contrasts=contrasts, margin=margin, users=users),
+           "statistics": {"unit": "run (one split seed)", "contrasts": list(contrasts),
+                          "margin": margin, "per_user": users is not None},
+           "variance": variance_decomposition(rows), "rows": rows}
+    if reference:
+        doc["reference"] = list(reference)
+    return doc
+
+
+def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
+                    variance=()) -> str:
     """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
-    comparisons, published reference points, failed cells, figures with captions."""
+    comparisons over runs (with per-class and per-user gains), the variance
+    decomposition, published reference points, failed cells, figures with captions."""
     done = ok_rows(rows)
     failed = failed_cells_markdown(rows)
     first = done[0] if done else (rows[0] if rows else {})
@@ -124,13 +165,32 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=()) -
         per_class_markdown(summaries), "",
     ]
     if comps:
-        lines += ["## Paired comparisons", "",
-                  "Every two cells that differ in one factor, compared on the same test "
-                  "sequences under the same seeds: the mean difference of accuracy B − A "
-                  "(points) with a 95 % bootstrap interval over test sequences, how many "
-                  "seeds agree on its sign, and McNemar's exact p-value on the pooled paired "
-                  "predictions. A difference whose interval spans zero is *unresolved*, not "
-                  "a win (see docs/statistics.md).", "", comparisons_markdown(comps), ""]
+        lines += ["## Paired comparisons over runs", "", COMPARISONS_TEXT, "",
+                  comparisons_markdown(comps), ""]
+        notes = [c for c in comps if c.get("note")]
+        for note in dict.fromkeys(c["note"] for c in notes):
+            lines.append(f"- {sum(c['note'] == note for c in notes)} comparison(s): {note}.")
+        if notes:
+            lines.append("")
+        gains = per_class_gains_markdown(comps)
+        if gains:
+            lines += ["### Per-class gains (B − A, points, 95 % interval over runs)", "",
+                      gains, ""]
+        people = per_user_gains_markdown(comps)
+        if people:
+            lines += ["### Per-user gains (B − A on each test user's recordings)", "",
+                      "A user is helped when B's accuracy on their recordings, averaged "
+                      "over the runs that test them, is above A's.", "", people, ""]
+    by_user = per_user_accuracy_markdown(summaries)
+    if by_user:
+        lines += ["## Per-user accuracy (%, mean over the runs testing the user)", "",
+                  by_user, ""]
+    if variance:
+        lines += ["## Where the variance comes from", "",
+                  "Runs vary the split and the initialisation separately; each cell's "
+                  "accuracy variance split into split, initialisation and test sampling "
+                  "(p(1 − p)/n_test), as standard deviations in points.", "",
+                  variance_markdown(variance), ""]
     if reference:
         lines += ["## Published reference points", "",
                   "The study's published accuracies (as given to the report), each beside "
