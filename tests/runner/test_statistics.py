@@ -1,5 +1,5 @@
-"""tactbench.runner.statistics against independent computations, simulations and degenerate
-inputs."""
+"""tactbench.runner.statistics against independent computations (scipy), simulations with
+a per-run model effect and test-set noise, and degenerate inputs."""
 
 from __future__ import annotations
 
@@ -10,9 +10,17 @@ import pytest
 
 from tactbench.errors import InputError
 from tactbench.runner.statistics import (
-    paired_difference,
+    MIN_DISCORDANT_RECORDINGS,
+    corrected_t,
+    holm,
+    mcnemar_p,
     pairs_differing_in_one_factor,
+    runs_needed,
     seed_summary,
+    sign_flip_p,
+    tost_p,
+    variance_components,
+    verdict,
 )
 
 # ------------------------------------------------------------------------ seed_summary
@@ -49,178 +57,170 @@ def test_seed_summary_refuses_a_confidence_outside_0_1():
         seed_summary([0.5, 0.6], confidence=95)
 
 
-# ------------------------------------------------------------------- paired_difference
+# ------------------------------------------------------------- tests over runs
 
 
-def _rows(outcomes: list[tuple[bool, bool]], seed_of_row=None):
-    """y_true, pred_a, pred_b, groups from (A right, B right) per row (3 classes)."""
-    y = np.arange(len(outcomes)) % 3
-    a = np.where([o[0] for o in outcomes], y, (y + 1) % 3)
-    b = np.where([o[1] for o in outcomes], y, (y + 2) % 3)
-    g = np.zeros(len(outcomes), int) if seed_of_row is None else np.asarray(seed_of_row)
-    return y, a, b, g
+def test_corrected_t_is_nadeau_bengio_and_without_correction_scipys_t_test():
+    from scipy import stats
+
+    d = np.array([0.10, 0.14, 0.08, 0.12, 0.16])
+    plain = corrected_t(d, 0.0)
+    ref = stats.ttest_1samp(d, 0.0)
+    assert float(plain["p"]) == pytest.approx(ref.pvalue)
+    ci = ref.confidence_interval(0.95)
+    assert (float(plain["low"]), float(plain["high"])) == (pytest.approx(ci.low),
+                                                           pytest.approx(ci.high))
+    ratio = 400 / 1500
+    c = corrected_t(d, ratio)
+    se = math.sqrt((1 / 5 + ratio) * d.var(ddof=1))  # Nadeau & Bengio (2003)
+    assert float(c["se"]) == pytest.approx(se) and int(c["df"]) == 4
+    assert float(c["p"]) == pytest.approx(2 * stats.t.sf(d.mean() / se, 4))
+    assert float(c["high"] - c["low"]) > float(plain["high"] - plain["low"])
 
 
-def test_mcnemar_p_is_the_exact_binomial_enumerated_by_hand():
-    # 2 rows only A got right, 8 only B, 5 both, 3 neither.
-    outcomes = [(True, False)] * 2 + [(False, True)] * 8 + [(True, True)] * 5 \
-        + [(False, False)] * 3
-    r = paired_difference(*_rows(outcomes), n_resamples=200)
-    # two-sided: 2 · P(X ≤ 2), X ~ Binomial(10, 1/2)
-    expected = 2 * sum(math.comb(10, k) for k in range(3)) / 2 ** 10
-    assert (r.a_only, r.b_only) == (2, 8)
-    assert r.mcnemar_p == pytest.approx(expected)  # 0.109375
-    balanced = paired_difference(*_rows([(True, False)] * 3 + [(False, True)] * 3),
-                                 n_resamples=200)
-    assert balanced.mcnemar_p == pytest.approx(1.0)
+def test_the_issues_example_users_split_l5_is_reproduced():
+    """Issue 18: users split, L = 5, raw → farneback: per-seed differences of the stored
+    report; the corrected t gives p ≈ 0.003 and about [+7.7, +18.9]."""
+    d = np.array([0.175, 0.1425, 0.11, 0.10, 0.1375])
+    c = corrected_t(d, 400 / 1500)
+    assert float(c["p"]) == pytest.approx(0.0027, abs=2e-4)
+    assert 100 * float(c["low"]) == pytest.approx(7.7, abs=0.05)
+    assert 100 * float(c["high"]) == pytest.approx(18.9, abs=0.05)
 
 
-def test_difference_is_averaged_over_seeds_and_signs_are_counted():
-    # seed 7: 4 rows, B +2 over A; seed 3: 2 rows, A +1; seed 9: 3 rows, tie.
-    outcomes = ([(False, True)] * 2 + [(True, True)] * 2 + [(True, False), (False, False)]
-                + [(True, True), (False, False), (True, True)])
-    seeds = [7] * 4 + [3] * 2 + [9] * 3
-    r = paired_difference(*_rows(outcomes, seeds), n_resamples=500)
-    per_seed = {"7": 2 / 4, "3": -1 / 2, "9": 0.0}
-    assert r.per_seed == pytest.approx(per_seed)
-    assert r.difference == pytest.approx(np.mean(list(per_seed.values())))
-    assert r.accuracy_a == pytest.approx(np.mean([2 / 4, 1 / 2, 2 / 3]))
-    assert r.accuracy_b == pytest.approx(np.mean([4 / 4, 0 / 2, 2 / 3]))
-    assert (r.b_better_seeds, r.a_better_seeds, r.tied_seeds) == (1, 1, 1)
-    assert r.seeds == 3 and r.sequences == 9 and r.resampling == "within each seed"
-    assert r.low <= r.difference <= r.high
+def test_sign_flip_is_scipys_exact_permutation_test_and_has_a_floor():
+    from scipy import stats
 
-
-def test_the_bootstrap_is_deterministic_given_its_seed():
     rng = np.random.default_rng(1)
-    outcomes = [tuple(x) for x in rng.random((60, 2)) < [0.6, 0.7]]
-    args = _rows(outcomes, np.repeat([0, 1, 2], 20))
-    first = paired_difference(*args, seed=4, n_resamples=500)
-    assert paired_difference(*args, seed=4, n_resamples=500) == first
-    other = paired_difference(*args, seed=5, n_resamples=500)
-    assert (other.low, other.high) != (first.low, first.high)
+    for j in (3, 5, 8):
+        d = rng.normal(0.02, 0.05, size=j)
+        ref = stats.permutation_test((d,), np.mean, permutation_type="samples",
+                                     n_resamples=np.inf).pvalue
+        assert float(sign_flip_p(d)) == pytest.approx(ref)
+    assert float(sign_flip_p(np.full(5, 0.1))) == pytest.approx(2 / 2 ** 5)
+    assert float(sign_flip_p(np.zeros(4))) == 1.0
+    many = rng.normal(0.0, 1.0, size=(7, 6))  # vectorised over leading axes
+    assert np.allclose(sign_flip_p(many), [sign_flip_p(r) for r in many])
 
 
-def test_a_clear_win_is_a_verdict_and_either_way_round():
-    outcomes = [(False, True)] * 30 + [(True, True)] * 30
-    args = _rows(outcomes, np.repeat([0, 1, 2], 20))
-    r = paired_difference(*args, n_resamples=500)
-    assert r.verdict == "B better" and r.low > 0 and r.mcnemar_p < 1e-6
-    y, a, b, g = args
-    swapped = paired_difference(y, b, a, g, n_resamples=500)
-    assert swapped.verdict == "A better" and swapped.high < 0
-    assert swapped.difference == pytest.approx(-r.difference)
+def test_holm_matches_the_step_down_rule_by_hand_and_leaves_nan_out():
+    p = [0.01, 0.04, 0.03, 0.005]
+    # sorted 0.005, 0.01, 0.03, 0.04 × 4, 3, 2, 1 → 0.02, 0.03, 0.06, 0.06 (monotone)
+    assert holm(p).tolist() == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    got = holm([0.01, math.nan, 0.04])
+    assert math.isnan(got[1]) and got[[0, 2]].tolist() == pytest.approx([0.02, 0.04])
+    assert holm([0.9, 0.8]).max() <= 1.0
 
 
-def test_an_interval_spanning_zero_is_unresolved():
-    outcomes = [(True, False)] * 3 + [(False, True)] * 4 + [(True, True)] * 13
-    r = paired_difference(*_rows(outcomes, np.repeat([0, 1], 10)), n_resamples=1000)
-    assert r.low < 0 < r.high and r.verdict == "unresolved"
+def test_tost_shows_equivalence_only_for_a_tight_difference_near_zero():
+    tight = np.array([0.002, -0.003, 0.001, 0.0, -0.001, 0.002])
+    assert float(tost_p(tight, 0.0, 0.02)) < 0.05
+    assert float(tost_p(tight + 0.05, 0.0, 0.02)) > 0.5  # far outside the margin
+    wide = np.array([0.08, -0.07, 0.05, -0.06, 0.02, 0.0])
+    assert float(tost_p(wide, 0.0, 0.02)) > 0.05  # centred, but too uncertain
+    with pytest.raises(InputError, match="margin"):
+        tost_p(tight, 0.0, -1)
 
 
-def _coverage(simulate, true_difference, runs=200, **kw):
-    hits = 0
-    for k in range(runs):
-        y, a, b, g, ids = simulate(np.random.default_rng(1000 + k))
-        r = paired_difference(y, a, b, g, sequence_ids=ids, n_resamples=400, seed=k, **kw)
-        hits += r.low <= true_difference <= r.high
-    return hits / runs
+def test_runs_needed_meets_the_width_and_says_when_no_number_of_runs_does():
+    from scipy import stats
+
+    sd = 0.03
+    j = runs_needed(sd, 0.0, 0.02)
+    width = lambda n: stats.t.ppf(0.975, n - 1) * math.sqrt(1 / n) * sd  # noqa: E731
+    assert width(j) <= 0.02 < width(j - 1)
+    # the correction keeps ratio · sd² however many runs: 0.27 · 0.03² is too wide for ±2
+    assert runs_needed(sd, 400 / 1500, 0.02) is None
+    assert runs_needed(0.0, 0.2, 0.02) == 3 and runs_needed(None, 0.2, 0.02) is None
 
 
-def test_the_interval_covers_the_true_difference_at_about_the_nominal_rate():
-    """200 datasets of 3 seeds × 50 fresh test sequences, A right with p = 0.70 and B
-    with p = 0.78 independently: the 95 % interval covers 0.08 in ~95 % of them."""
-    def simulate(rng):
-        n = 150
-        y = np.zeros(n, int)
-        a = np.where(rng.random(n) < 0.70, 0, 1)
-        b = np.where(rng.random(n) < 0.78, 0, 1)
-        return y, a, b, np.repeat([0, 1, 2], 50), None
-
-    coverage = _coverage(simulate, 0.08)
-    assert 0.89 <= coverage <= 0.99, coverage
+def test_verdict_rules():
+    assert verdict(0.05, 0.1, 0.001, 2)[0] == "too few runs"
+    assert verdict(0.05, 0.1, 0.001, 5)[0] == "B better"
+    assert verdict(-0.1, -0.05, 0.001, 5)[0] == "A better"
+    # an interval whose end is 0 plus floating-point noise touches 0
+    assert verdict(1.7e-18, 0.1, 0.001, 5)[0] == "unresolved"
+    assert verdict(0.05, 0.1, 0.2, 5)[0] == "unresolved"  # adjusted p governs
+    assert verdict(-0.01, 0.01, 0.5, 5, equivalence_p_adjusted=0.01)[0] == "equivalent"
+    few = verdict(0.05, 0.1, 0.001, 5, discordant_recordings=MIN_DISCORDANT_RECORDINGS - 1)
+    assert few[0] == "unresolved" and "recording" in few[1]
 
 
-def test_shared_test_sequences_are_resampled_jointly_and_still_cover():
-    """The same 40 sequences under 3 seeds, each sequence with its own difficulty (so a
-    sequence's results agree across seeds): resampling sequences jointly covers the true
-    difference at about the nominal rate; resampling each seed alone would not."""
-    def simulate(rng):
-        m = 40
-        hard = rng.random(m) < 0.5  # shared by every seed
-        p_a = np.where(hard, 0.1, 0.95)
-        p_b = np.where(hard, 0.9, 0.95)
-        a = np.concatenate([np.where(rng.random(m) < p_a, 0, 1) for _ in range(3)])
-        b = np.concatenate([np.where(rng.random(m) < p_b, 0, 1) for _ in range(3)])
-        ids = np.tile(np.arange(m), 3)
-        return np.zeros(3 * m, int), a, b, np.repeat([0, 1, 2], m), ids
+def test_mcnemar_per_seed_is_the_exact_binomial():
+    from scipy import stats
 
-    # true difference: P(hard) · (0.9 − 0.1) = 0.4
-    joint = _coverage(simulate, 0.4)
-    r = paired_difference(*simulate(np.random.default_rng(0))[:4],
-                          sequence_ids=simulate(np.random.default_rng(0))[4])
-    assert r.resampling == "sequences jointly across seeds"
-    assert 0.89 <= joint <= 0.99, joint
-    alone = _coverage(lambda rng: (*simulate(rng)[:4], None), 0.4)
-    assert alone < 0.9 < joint  # each seed alone: ~0.83 in theory
+    a = np.array([True] * 10 + [False] * 6 + [True] * 2)
+    b = np.array([True] * 10 + [True] * 6 + [False] * 2)
+    assert mcnemar_p(a, b) == pytest.approx(stats.binomtest(6, 8, 0.5).pvalue)
+    assert mcnemar_p(a, a) == 1.0
 
 
-def test_a_handful_of_sequences_gives_an_interval_but_no_verdict():
-    outcomes = [(False, True)] * 9  # B right on all 9, A on none: the interval is [1, 1]
-    few = paired_difference(*_rows(outcomes), n_resamples=200)
-    assert few.low == few.high == 1.0 and few.verdict == "unresolved"
-    assert "9 test sequences: no verdict" in few.note
-    ten = paired_difference(*_rows(outcomes + [(False, True)]), n_resamples=200)
-    assert ten.verdict == "B better" and ten.note == ""
-
-
-def test_all_predictions_agreeing_give_a_zero_difference_and_p_1():
-    y = np.arange(12) % 3
-    r = paired_difference(y, y, y, np.repeat([0, 1], 6))
-    assert (r.difference, r.low, r.high, r.mcnemar_p) == (0, 0, 0, 1.0)
-    assert r.verdict == "unresolved" and r.tied_seeds == 2
-    wrong = (y + 1) % 3  # both always wrong: still no discordant pair
-    assert paired_difference(y, wrong, wrong, np.zeros(12)).mcnemar_p == 1.0
-
-
-def test_one_seed_and_a_seed_with_one_sequence_work():
+def test_variance_components_recover_simulated_split_and_init_variance():
     rng = np.random.default_rng(3)
-    outcomes = [tuple(x) for x in rng.random((30, 2)) < [0.5, 0.8]]
-    one = paired_difference(*_rows(outcomes), n_resamples=300)
-    assert one.seeds == 1 and one.low <= one.difference <= one.high
-    seeds = [0] * 29 + [1]  # seed 1 tested a single sequence
-    mixed = paired_difference(*_rows(outcomes, seeds), n_resamples=300)
-    assert mixed.seeds == 2 and mixed.low <= mixed.difference <= mixed.high
-    singles = paired_difference(*_rows(outcomes[:5], range(5)), n_resamples=300)
-    assert singles.seeds == 5 and singles.low < singles.high  # resampled over the seeds
+    n_split, n_init, sims = 6, 4, 400
+    sd_split, sd_init, sd_test = 0.03, 0.02, 0.015
+    got = []
+    for _ in range(sims):
+        v = (0.7 + rng.normal(0, np.hypot(sd_split, sd_test), (n_split, 1))
+             + rng.normal(0, sd_init, (n_split, n_init)))
+        c = variance_components(v, sd_test ** 2)
+        got.append((c["split"], c["init"]))
+    split, init = np.mean(got, axis=0)
+    assert split == pytest.approx(sd_split ** 2, rel=0.25)
+    assert init == pytest.approx(sd_init ** 2, rel=0.1)
+    with pytest.raises(InputError, match="2 split seeds"):
+        variance_components(np.ones((1, 3)), 0.0)
 
 
-def test_one_sequence_gives_no_interval():
-    r = paired_difference([0], [1], [0], [0])
-    assert (r.difference, r.low, r.high, r.verdict) == (1.0, -1.0, 1.0, "unresolved")
-    assert "one test sequence" in r.note
+# ------------------------------------------------------------- checked by simulation
 
 
-def test_labels_may_be_text():
-    y = np.array(["tap", "pull", "tap", "grasp"] * 5)
-    a = np.array(["tap", "tap", "tap", "grasp"] * 5)
-    r = paired_difference(y, a, y, np.zeros(20), n_resamples=200)
-    assert r.difference == pytest.approx(0.25) and r.b_only == 5
+def _simulate(rng, sims, runs, n_test, delta, sd_run, discord=0.2):
+    """Per-row differences of B − A (−1, 0, +1) counted per run: each run draws a model
+    effect u ~ N(0, sd_run) (training variability) and then its test rows (test-set
+    noise). Returns counts (sims, runs, 3) of (−1, 0, +1) rows and the run means."""
+    u = rng.normal(0.0, sd_run, size=(sims, runs))
+    eff = np.clip(delta + u, -discord + 1e-3, discord - 1e-3)
+    probs = np.stack([(discord - eff) / 2, 1 - discord + 0 * eff, (discord + eff) / 2], -1)
+    counts = rng.multinomial(n_test, probs)
+    return counts, (counts[..., 2] - counts[..., 0]) / n_test
 
 
-@pytest.mark.parametrize("args, match", [
-    (([0, 1], [0], [0, 1], [0, 0]), "pred_a has 1 rows"),
-    (([[0, 1]], [[0, 1]], [[0, 1]], [[0, 0]]), "1-D"),
-    (([], [], [], []), "at least one"),
-])
-def test_bad_inputs_are_one_line(args, match):
-    with pytest.raises(InputError, match=match):
-        paired_difference(*args)
+def _old_sequence_bootstrap(rng, counts, n_test, n_resamples=400, conf=0.95):
+    """The old interval: test rows resampled within each seed, the models held fixed."""
+    props = counts / n_test  # (sims, runs, 3)
+    draws = rng.multinomial(n_test, props[:, :, None, :].repeat(n_resamples, axis=2))
+    means = ((draws[..., 2] - draws[..., 0]) / n_test).mean(axis=1)  # (sims, resamples)
+    return (np.quantile(means, (1 - conf) / 2, axis=-1),
+            np.quantile(means, (1 + conf) / 2, axis=-1))
 
 
-def test_too_few_resamples_are_refused():
-    with pytest.raises(InputError, match="n_resamples"):
-        paired_difference([0, 1], [0, 1], [1, 1], [0, 0], n_resamples=10)
+def test_the_run_level_interval_covers_where_the_sequence_bootstrap_falls_short():
+    rng = np.random.default_rng(18)
+    sims, runs, n_test, delta = 1500, 5, 400, 0.05
+    counts, d = _simulate(rng, sims, runs, n_test, delta, sd_run=0.03)
+    for ratio in (0.0, n_test / 1500):  # the plain t over runs, and Nadeau–Bengio's
+        c = corrected_t(d, ratio)
+        covered = np.mean((c["low"] <= delta) & (delta <= c["high"]))
+        assert covered >= 0.93, (ratio, covered)
+    low, high = _old_sequence_bootstrap(rng, counts[:500], n_test)
+    old = np.mean((low <= delta) & (delta <= high))
+    assert old < 0.85, old  # it sees the test set's noise only
+
+
+def test_false_verdicts_under_no_difference_stay_within_5_percent_per_family():
+    rng = np.random.default_rng(20)
+    families, m, runs, n_test = 1000, 8, 8, 400
+    _, d = _simulate(rng, families * m, runs, n_test, 0.0, sd_run=0.03)
+    d = d.reshape(families, m, runs)
+    c = corrected_t(d, n_test / 1500)
+    p = np.maximum(c["p"], sign_flip_p(d))  # the stricter governs
+    adjusted = holm(p)
+    false = (adjusted < 0.05) & ((c["low"] > 0) | (c["high"] < 0))
+    assert false.any(axis=1).mean() <= 0.05
+    # the same families judged by a plain t over runs, unadjusted: many false verdicts
+    # (so the simulation can show them, and the check above is not empty)
+    assert (corrected_t(d, 0.0)["p"] < 0.05).any(axis=1).mean() > 0.2
 
 
 # -------------------------------------------------------- pairs_differing_in_one_factor
