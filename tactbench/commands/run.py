@@ -52,12 +52,25 @@ from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 @click.option("--rerun", is_flag=True, default=None, help="Recompute finished cells.")
 @click.option("--save-models", is_flag=True, default=None,
               help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
+@click.option("--margin", type=float, metavar="POINTS",
+              help="Equivalence margin in accuracy points: a comparison whose run-level "
+                   "interval lies within ±POINTS (two one-sided tests) is \"equivalent\".")
+@click.option("--contrast", "contrasts", multiple=True, metavar="A..B",
+              help="Also compare two cells differing in several factors, paired over "
+                   "runs, repeatable: --contrast encoder=raw,L=6..encoder=farneback,L=3 "
+                   "(B − A; factors encoder, classifier, L).")
+@click.option("--input", "input_kind", type=click.Choice(["images", "vectors"]),
+              help="What a classifier taking either input is fed (part of its cells' "
+                   "identity). [default: images where the dataset has a layout]")
+@click.option("--init-seed", "init_seeds", multiple=True,
+              help="Initialisation seeds varied apart from the split seeds (--seed), "
+                   "repeatable or a range; report.md then splits the variance.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, test_window,
             profile,
             pixel_mm, precision, device, threads, executor, workers, scheduler, out, rerun,
-            save_models, as_json, no_plots) -> None:
+            save_models, margin, contrasts, input_kind, init_seeds, as_json, no_plots) -> None:
     """Run a benchmark grid and report accuracy beside its cost.
 
     Finished cells are kept in OUT/cells and skipped when the same command runs again;
@@ -79,7 +92,9 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
              "test_window": test_window, "profile": profile,
              "pixel_mm": pixel_mm, "precision": precision, "device": device,
              "threads": threads, "executor": executor, "workers": workers,
-             "scheduler": scheduler, "out": out, "rerun": rerun, "save_models": save_models}
+             "scheduler": scheduler, "out": out, "rerun": rerun, "save_models": save_models,
+             "margin": margin, "contrasts": list(contrasts) or None, "input": input_kind,
+             "init_seeds": parse_seeds(init_seeds) if init_seeds else None}
     fields.update({k: v for k, v in given.items() if v is not None})
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
@@ -90,8 +105,10 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
             "git": result.rows[0]["run"]["git"] if result.rows else None,
             "computed": result.computed, "skipped": result.skipped,
             "seconds": result.seconds}
-    paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots)
-    summaries = summarise(result.rows)
+    users = list(result.plan.dataset.users)
+    paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots,
+                          contrasts=scene.contrasts or (), margin=scene.margin, users=users)
+    summaries = summarise(result.rows, users=users)
     failed = failed_cells(result.rows)
     if as_json:
         comps = json.loads(paths["json"].read_text())["comparisons"]
@@ -101,7 +118,8 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
     else:
         print_table(summaries, title=f"{scene.dataset} · split {scene.split} · test window "
                                      f"{scene.test_window} · profile {scene.profile}")
-        print_comparisons(json.loads(paths["json"].read_text())["comparisons"])
+        print_comparisons(json.loads(paths["json"].read_text())["comparisons"],
+                          factors=("encoder", "classifier", "contrast"))
         click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
                    f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
                    f"results.csv, results.json, plots)")

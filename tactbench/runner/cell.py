@@ -198,7 +198,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
             rss0 = memory.peak_mb
         # one split keeps the seed it always had; the folds of a k-fold split differ
         seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length,
-                           *(() if len(splits) == 1 else (f"fold {fold}",)))
+                           *(() if len(splits) == 1 else (f"fold {fold}",)),
+                           *(() if cell.init_seed is None else (f"init {cell.init_seed}",)))
         with memory.track("fit"):
             t0 = time.perf_counter()
             fits.append(clf.fit(train, None, seed=seed, device=job.device,

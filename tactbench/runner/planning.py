@@ -58,6 +58,7 @@ class Cell:
     length: int  # window length L, frames
     seed: int
     key: str
+    init_seed: int | None = None  # the initialisation's seed when varied apart from the split's
 
     def label(self) -> str:
         """A short human name: ``raw × small-cnn-lstm L=5 seed=0``."""
@@ -234,7 +235,8 @@ def _check_scene(scene: Scene) -> None:
     loader_workers(None)
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
-               * len(set(scene.lengths)) * len(set(scene.seeds)))
+               * len(set(scene.lengths)) * len(set(scene.seeds))
+               * len(set(scene.init_seeds or [None])))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
@@ -244,6 +246,23 @@ def _check_scene(scene: Scene) -> None:
 
         select_device(scene.device)
     check_out_folder(scene.out, models=scene.save_models)
+    _check_statistics(scene)
+
+
+#: What ``--input`` may ask a classifier that takes either input for.
+INPUT_KINDS = ("images", "vectors")
+
+
+def _check_statistics(scene: Scene) -> None:
+    """The margin, contrasts' syntax and input kind of a scene (see docs/statistics.md)."""
+    from tactbench.runner.summaries import parse_contrast
+
+    if scene.margin is not None:
+        check_positive_float(scene.margin, "--margin (points)")
+    for text in scene.contrasts or ():
+        parse_contrast(text)
+    if scene.input is not None:
+        check_choice(scene.input, "--input", INPUT_KINDS)
 
 
 def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset, *,
@@ -367,7 +386,11 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
 
     dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
     has_layout = dataset.layout is not None
-    kinds = {clf: input_kind(rank, has_layout) for clf, rank in frame_ranks.items()}
+    if scene.input == "images" and not has_layout:
+        raise InputError(f"--input images: dataset '{dataset.name}' has no taxel layout to "
+                         f"make images; use --input vectors, or give the dataset a layout")
+    kinds = {clf: (scene.input if scene.input and rank is None else input_kind(rank, has_layout))
+             for clf, rank in frame_ranks.items()}
     for clf in classifier_specs:
         for enc in encoders:
             _check_inputs(clf, enc, kinds[clf], frame_ranks[clf], dataset,
@@ -387,7 +410,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     for enc in encoders:
         for clf in classifier_specs:
             for length in scene.lengths:
-                for seed in dict.fromkeys(scene.seeds):  # a seed listed twice is one cell
+                for seed, init in ((s, i) for s in dict.fromkeys(scene.seeds)
+                                   for i in dict.fromkeys(scene.init_seeds or [None])):
                     identity = {
                         "schema": ROW_SCHEMA,
                         "dataset": dataset.name,
@@ -405,9 +429,19 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                         "profile": scene.profile,
                         "L": int(length),
                         "seed": int(seed),
+                        # only where asked for, so every other cell keeps its key
+                        **({} if init is None else {"init_seed": int(init)}),
+                        **({"input": kinds[clf]} if scene.input and frame_ranks[clf] is None
+                           else {}),
                     }
                     key = digest(identity)
-                    cells.append(Cell(enc, clf, int(length), int(seed), key))
+                    cells.append(Cell(enc, clf, int(length), int(seed), key,
+                                      None if init is None else int(init)))
                     identities[key] = identity
+    if scene.contrasts:
+        from tactbench.runner.summaries import check_contrasts
+
+        check_contrasts(scene.contrasts, [{"encoder": c.encoder, "classifier": c.classifier,
+                                           "L": c.length} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 kinds, cells, identities, registry)

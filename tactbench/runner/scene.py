@@ -50,6 +50,13 @@ class Scene:
     out: str = "tactbench-out"
     rerun: bool = False
     save_models: bool = False  # OUT/models/<cell key>.safetensors, usable by `tactbench live`
+    # statistics and inputs (docs/statistics.md): an equivalence margin in points; paired
+    # contrasts "A..B" of cells differing in several factors; what a classifier taking
+    # either input is fed; initialisation seeds varied apart from the split seeds
+    margin: float | None = None
+    contrasts: list[str] | None = None
+    input: str | None = None  # images or vectors; None: images where there is a layout
+    init_seeds: list[int] | None = None
 
     def resolved_pixel_mm(self) -> float:
         """The tactile-image pixel size in mm: the scene's, else its profile's."""
@@ -145,7 +152,7 @@ def parse_seeds(values: Iterable[str | int]) -> list[int]:
 
 
 _ALIASES = {"encoder": "encoders", "classifier": "classifiers", "L": "lengths",
-            "seed": "seeds"}
+            "seed": "seeds", "contrast": "contrasts", "init_seed": "init_seeds"}
 
 #: What each field holds: text, optional text, list of text, list of integers, window
 #: lengths, integer ≥ 1 (optional), number > 0 (optional), or a boolean.
@@ -155,6 +162,7 @@ _KINDS: dict[str, str] = {
     "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
     "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
     "out": "text", "rerun": "bool", "save_models": "bool",
+    "margin": "number?", "contrasts": "texts?", "input": "text?", "init_seeds": "seeds?",
 }
 
 
