@@ -417,9 +417,8 @@ def study(root: Path, m: dict) -> str:
             lines.append(f"- {label} split, the study's \"flow at half the L beats "
                          f"pressure\", paired over the same runs and test recordings: "
                          f"{say(half, 'raw at L = 6', 'farneback at L = 3')}"
-                         + (f" Every run has it {'higher' if half['difference'] > 0 else 'lower'}"
-                            " — the runs contradict the claim here." if half["difference"] < 0
-                            and half["a_better_runs"] == half["runs"] else ""))
+                         + (" Every run has farneback at L = 3 lower: no run supports the "
+                            "claim here." if half["a_better_runs"] == half["runs"] else ""))
     lines += ["", "## What it does not show", "",
               f"- {SHORT_NOTE}",
               f"- The classifier is a small CNN trained on 8000 windows (`{CNN}`), not the "
@@ -490,30 +489,19 @@ def which_flow(root: Path, m: dict) -> str:
             and ("raw" in (c["a"], c["b"]) or "farneback" in (c["a"], c["b"]))]
     lines += [comparison_table(keep), ""] + figures(part, Path("which-flow")) + [""]
     # does lower endpoint error mean higher accuracy?
-    fb = root / "flow-error" / "flowbench.json"
     lines += ["## Flow error against accuracy", ""]
-    if fb.is_file():
-        from scipy.stats import spearmanr
-
-        bench = json.loads(fb.read_text())
-        epe = {r["encoder"]: r["epe_px"] for r in bench["results"]
-               if r["resolution"] == "72x67"}
-        pts = []
-        for enc, e in sorted(epe.items()):
-            s = find(results, encoder=enc, classifier="small-cnn-lstm")
-            if s is not None:
-                pts.append((enc, e, s["accuracy_mean"]))
+    link = epe_vs_accuracy(root, results)
+    if link:
+        pts, rho, p = link
         lines += ["| encoder | endpoint error (px, flowbench, 72 × 67) | accuracy % |",
                   "|---|---|---|"]
         lines += [f"| {enc} | {e:.2f} | {pct(a)} |" for enc, e, a in pts]
-        if len(pts) >= 3:
-            rho, p = spearmanr([e for _, e, _ in pts], [a for _, _, a in pts])
-            lines += ["", f"Spearman's ρ between endpoint error and accuracy over these "
-                      f"{len(pts)} flow encoders: {rho:+.2f} (p = {p:.2f}). "
-                      + ("With so few encoders this is no evidence either way: it neither "
-                         "shows nor rules out a link between endpoint error and accuracy."
-                         if p >= 0.05 else
-                         "A negative ρ would mean lower error goes with higher accuracy.")]
+        lines += ["", f"Spearman's ρ between endpoint error and accuracy over these "
+                  f"{len(pts)} flow encoders: {rho:+.2f} (p = {p:.2f}). "
+                  + ("With so few encoders this is no evidence either way: it neither "
+                     "shows nor rules out a link between endpoint error and accuracy."
+                     if p >= 0.05 else
+                     "A negative ρ would mean lower error goes with higher accuracy.")]
     else:
         lines.append("(run `python benchmarks/reports.py flow-error` first for this table)")
     lines += ["", "## What it shows", ""]
@@ -802,13 +790,13 @@ def findings(root: Path) -> list[str]:
                 "image is " + " and ".join(parts) + "; leaving users out, every run favours "
                 "flow at L = " + (", ".join(map(str, sorted(every))) or "none") + ".")
         if all(half):
-            text += (" The study's \"flow at half the L beats pressure\" does not hold "
-                     "here: paired over the same runs, farneback at L = 3 minus raw at "
-                     "L = 6 is " + " and ".join(
+            text += (" The study's \"flow at half the L beats pressure\", paired over the "
+                     "same runs: farneback at L = 3 minus raw at L = 6 is " + " and ".join(
                          f"{100 * h['difference']:+.1f} [{100 * h['low']:+.1f}, "
-                         f"{100 * h['high']:+.1f}]" for h in half) + " points (paper, "
-                     "users split)" if all(h["difference"] < 0 for h in half) else "")
-            text += "."
+                         f"{100 * h['high']:+.1f}] ({verdict_words(h, 'raw L=6', 'farneback L=3')})"
+                         for h in half) + " points (paper, users split)"
+                     + ("; no run supports the claim." if all(
+                         h["a_better_runs"] == h["runs"] for h in half) else "."))
         text += (f" {_verdict_count([paper, users])} Our absolute accuracies are far below "
                  "the study's 80.7 % / 89.1 % (its model is an ImageNet-pretrained "
                  "EfficientNet-B0 trained 100 epochs on a GPU).")
@@ -825,8 +813,13 @@ def findings(root: Path) -> list[str]:
         if fd:
             text += (f"; farneback − frame-diff is {100 * fd['difference']:+.1f} points "
                      f"[{100 * fd['low']:+.1f}, {100 * fd['high']:+.1f}] over runs")
-        text += (". Whether lower endpoint error goes with higher accuracy cannot be told "
-                 "from 5 flow methods. " + _verdict_count([flow]))
+        link = epe_vs_accuracy(root, flow)
+        if link:
+            pts, rho, p = link
+            text += (f". Endpoint error against accuracy over {len(pts)} flow methods: "
+                     f"Spearman ρ = {rho:+.2f}, p = {p:.2f}"
+                     + (": no evidence either way" if p >= 0.05 else ""))
+        text += ". " + _verdict_count([flow])
         out.append(text)
     images = _load(root, "which-classifier", "images")
     if images:
@@ -856,9 +849,8 @@ def findings(root: Path) -> list[str]:
                                  f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]")
         out.append("[Real data](docs/reports/real-data.md) (real CySkin and iCub skins, taxel "
                    "vectors, no user ids): the sweep-to-sweep change against the raw vectors, "
-                   "points over runs: " + "; ".join(items) + ". It does not help anywhere "
-                   "the runs agree on, so the simulator's flow gains should not be read as a "
-                   "property of real skin. " + _verdict_count(real))
+                   "points over runs: " + "; ".join(items) + ". "
+                   + _real_agreement(real) + " " + _verdict_count(real))
     bench = root / "flow-error" / "flowbench.json"
     if bench.is_file():
         rows = [r for r in json.loads(bench.read_text())["results"]
@@ -870,10 +862,44 @@ def findings(root: Path) -> list[str]:
             out.append("[Flow error against run time](docs/reports/flow-error.md): on "
                        "ground-truth tactile scenes at 72 × 67, "
                        + (" and ".join(f"`{r['encoder']}`" for r in better) or "no encoder")
-                       + " is both faster and more accurate than Farnebäck (endpoint error "
+                       + (" are" if len(better) > 1 else " is") + " both faster and more accurate than Farnebäck (endpoint error "
                        + ", ".join(f"{r['epe_px']:.2f}" for r in better)
                        + f" px against {fb['epe_px']:.2f} px).")
     return out
+
+
+def _real_agreement(real: list[dict]) -> str:
+    """Where every run agrees on the sweep-to-sweep change, from the stored comparisons."""
+    comps = [c for r in real for c in r["comparisons"] if c["factor"] == "encoder"]
+    helped = [c for c in comps if c["b_better_runs"] == c["runs"]]
+    hurt = [c for c in comps if c["a_better_runs"] == c["runs"]]
+    text = (f"Every run favours the change in {len(helped)} of {len(comps)} comparisons "
+            f"and the raw vectors in {len(hurt)}")
+    if not helped:
+        text += ": nothing here says the change helps on real skin, so the simulator's "
+        text += "flow gains should not be read as a property of real skin"
+    return text + "."
+
+
+def epe_vs_accuracy(root: Path, results: dict):
+    """(points, Spearman ρ, p) of flowbench's endpoint error (72 × 67) against the CNN's
+    accuracy per flow encoder; None without flowbench.json or with fewer than 3."""
+    from scipy.stats import spearmanr
+
+    fb = root / "flow-error" / "flowbench.json"
+    if not fb.is_file():
+        return None
+    epe = {r["encoder"]: r["epe_px"] for r in json.loads(fb.read_text())["results"]
+           if r["resolution"] == "72x67"}
+    pts = []
+    for enc, e in sorted(epe.items()):
+        s = find(results, encoder=enc, classifier="small-cnn-lstm")
+        if s is not None:
+            pts.append((enc, e, s["accuracy_mean"]))
+    if len(pts) < 3:
+        return None
+    rho, p = spearmanr([e for _, e, _ in pts], [a for _, _, a in pts])
+    return pts, float(rho), float(p)
 
 
 def short(spec: str) -> str:
