@@ -462,8 +462,10 @@ def _runs_note(results: dict) -> str:
              "smallest p must be below 0.05 / that number. ")
     unreachable = sum(c["runs_needed"] is None for c in comps)
     text += (f"For an interval of ±{comps[0]['runs_needed_half_width']:g} points, "
-             + (f"{min(needed)}–{max(needed)} runs would do for {len(needed)} comparisons"
-                if needed else "no comparison")
+             + ((f"{min(needed)}" if min(needed) == max(needed)
+                 else f"{min(needed)}–{max(needed)}") + " runs would do for "
+                + (f"{len(needed)} comparisons" if len(needed) > 1 else "1 comparison")
+                if needed else "no comparison would")
              + (f"; for {unreachable} no number of runs of these data would, since the "
                 "correction for overlapping training sets keeps n_test/n_train of the "
                 "variance" if unreachable else "") + ".")
