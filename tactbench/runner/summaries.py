@@ -380,6 +380,15 @@ def paired_runs(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[st
     acc_b = float(np.mean([per_seed[k][3].mean() for k in per_seed]))
     j = len(d_run)
     diff = float(d_run.mean())
+    # K folds repeated over seeds, with the users known: Bouckaert & Frank's k·r per-fold
+    # differences carry the t; the sign-flip test stays over the seeds
+    d_t = d_run
+    folds = rows_a[0].get("folds")
+    if folds and users is not None:
+        per_fold = _fold_differences(per_seed, splits, runs_a, users, int(folds))
+        if per_fold is not None:
+            d_t = per_fold
+            method += f" over {len(per_fold)} fold differences"
     res: dict[str, Any] = {
         "difference": diff, "low": diff, "high": diff, "confidence": confidence,
         "method": method, "ratio": ratio, "df": None, "runs": j,
@@ -391,7 +400,7 @@ def paired_runs(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[st
     }
     sd = float(d_run.std(ddof=1)) if j > 1 else None
     if j >= 2:
-        t = corrected_t(d_run, ratio, confidence=confidence)
+        t = corrected_t(d_t, ratio, confidence=confidence)
         res.update(low=float(t["low"]), high=float(t["high"]), df=int(t["df"]),
                    t_p=float(t["p"]))
         res["p"] = (max(res["t_p"], res["permutation_p"]) if PERMUTATION_GOVERNS
@@ -416,6 +425,43 @@ def paired_runs(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[st
     res["per_class"] = _per_class_gains(per_seed, splits, classes, ratio, confidence)
     res["per_user"] = (_per_user_gains(per_seed, users) if users is not None else None)
     return res
+
+
+def _fold_differences(per_seed, splits, runs, users, folds: int):
+    """The differences B − A of every (split seed, fold) of a ``users:folds=K`` run —
+    each fold's test recordings found again from the seed, as the cell drew them
+    (:func:`tactbench.data.splits.user_folds`), a split seed's init seeds averaged — or
+    None when the folds cannot be made again here."""
+    import numpy as np
+
+    from tactbench.data.splits import user_folds
+    from tactbench.errors import InputError
+
+    users = [str(u) for u in users]
+    out = []
+    for seed, keys in splits.items():
+        row = runs[keys[0]]
+        tp = row["test_predictions"]
+        labels = np.zeros(len(users), dtype=np.int64)
+        try:
+            labels[np.asarray(tp["indices"], dtype=np.int64)] = tp["labels"]
+            made = user_folds(users, labels, seed=int(row.get("split_seed", seed)),
+                              folds=folds)
+        except (InputError, IndexError):
+            return None
+        fold_of = np.full(len(users), -1)
+        for k, split in enumerate(made):
+            fold_of[split.test] = k
+        for k in range(folds):
+            vals = []
+            for key in keys:
+                ids, _, ca, cb = per_seed[key]
+                m = fold_of[ids] == k
+                if m.any():
+                    vals.append(float(cb[m].mean() - ca[m].mean()))
+            if vals:
+                out.append(float(np.mean(vals)))
+    return np.array(out) if len(out) >= 2 else None
 
 
 def _seed_label(key: tuple) -> str:

@@ -523,3 +523,29 @@ def test_short_names_keep_the_estimator():
     assert short_name("small-cnn-lstm:epochs=4,width=16") == "small-cnn-lstm"
     assert short_name("sklearn:C=10,estimator=SVC") == "sklearn:SVC"
     assert short_name("logreg") == "logreg"
+
+
+def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differences():
+    from tactbench.data.splits import user_folds
+    from tactbench.runner.summaries import comparisons
+
+    users = [f"u{i // 4}" for i in range(40)]  # ten users, four recordings each
+    truth = [i % 2 for i in range(40)]
+    rows = []
+    for seed in range(4):
+        folds = user_folds(users, truth, seed=seed, folds=5)
+        order = [int(i) for f in folds for i in f.test]  # the cell's pooled fold order
+        for enc, wrong in (("raw", {o for o in order if (o + seed) % 5 == 0}),
+                           ("farneback", {o for o in order if (o + seed) % 9 == 0})):
+            y = [truth[i] for i in order]
+            pred = [1 - truth[i] if i in wrong else truth[i] for i in order]
+            r = _row(enc, seed, y, pred, indices=order)
+            r.update(split="users:folds=5", folds=5, split_seed=seed, n_train=32, n_test=40)
+            rows.append(r)
+    [c] = comparisons(rows, users=users)
+    assert c["method"].startswith("corrected repeated 5-fold t (Bouckaert–Frank) over 20")
+    assert c["df"] == 19 and c["ratio"] == pytest.approx(1 / 4)
+    [plain] = comparisons(rows)  # without the users the folds cannot be told: seed means
+    assert plain["df"] == 3 and plain["difference"] == pytest.approx(c["difference"])
+    assert plain["method"] == "corrected repeated 5-fold t (Bouckaert–Frank)"
+    assert c["permutation_p"] == plain["permutation_p"]  # the sign-flip is over seeds
