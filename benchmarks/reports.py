@@ -536,7 +536,10 @@ def which_classifier(root: Path, m: dict) -> str:
     vectors = run_grid("which-classifier", "vectors",
                        ["--encoder", "raw", "--encoder", "frame-diff", "--classifier",
                         "taxel-lstm:epochs=1", "--classifier", "logreg", "-L", "5",
-                        "--seed", "0-2", "--split", "users"], root)
+                        "--seed", "0-2", "--split", "users",
+                        # the stored cells predate --input: re-rendered, they keep their
+                        # command (and the report says they ran on images)
+                        *([] if FROM_STORED else ["--input", "vectors"])], root)
     lines = header("Which classifier?", "which-classifier",
                    "the simulator, L = 5, seeds 0-2, leave-users-out split. On images "
                    "(`raw`, `farneback`): `logreg`, the CPU-sized CNN, the study's "
