@@ -401,8 +401,9 @@ def paired_runs(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[st
     sd = float(d_run.std(ddof=1)) if j > 1 else None
     if j >= 2:
         t = corrected_t(d_t, ratio, confidence=confidence)
-        res.update(low=float(t["low"]), high=float(t["high"]), df=int(t["df"]),
-                   t_p=float(t["p"]))
+        # a difference of accuracies lies in [−1, 1]; the t-interval of a few runs can pass it
+        res.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])),
+                   df=int(t["df"]), t_p=float(t["p"]))
         res["p"] = (max(res["t_p"], res["permutation_p"]) if PERMUTATION_GOVERNS
                     else res["t_p"])
     half = (margin / 100) if margin else TARGET_HALF_WIDTH
@@ -489,7 +490,7 @@ def _per_class_gains(per_seed, splits, classes, ratio, confidence) -> dict[str, 
         entry = {"difference": float(np.mean(d)), "low": None, "high": None, "runs": len(d)}
         if len(d) >= 2:
             t = corrected_t(np.array(d), ratio, confidence=confidence)
-            entry.update(low=float(t["low"]), high=float(t["high"]))
+            entry.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])))
         out[name] = entry
     return out
 
