@@ -9,8 +9,8 @@ command a user can type, printed in the report), then writes ``OUT/NAME.md`` wit
 command, machine, date, versions, wall time and what the data are, the tables (accuracy
 with its interval over seeds, paired comparisons over runs: the corrected t interval,
 the sign-flip test, Holm-adjusted p, the runs a ±2-point interval needs), figures, and
-what the result shows and does not — its sentences generated from results.json. The runs' own folders
-(report.md, results.json/csv, plots) are ``OUT/NAME/PART/``; their cells are kept
+what the result shows and does not — its sentences generated from results.json. The runs'
+own folders (report.md, results.json/csv, plots) are ``OUT/NAME/PART/``; their cells are kept
 there too, so a second invocation only re-reads results (and keeps the wall time of the
 run that computed them, in ``OUT/NAME/PART.timing.json``).
 
@@ -764,7 +764,8 @@ TITLES = {
 }
 
 
-FINDINGS_START = "<!-- findings: written by benchmarks/reports.py from docs/reports/*/results.json -->"
+FINDINGS_START = ("<!-- findings: written by benchmarks/reports.py from "
+                  "docs/reports/*/results.json -->")
 FINDINGS_END = "<!-- /findings -->"
 
 
@@ -798,7 +799,8 @@ def findings(root: Path) -> list[str]:
             text += (" The study's \"flow at half the L beats pressure\", paired over the "
                      "same runs: farneback at L = 3 minus raw at L = 6 is " + " and ".join(
                          f"{100 * h['difference']:+.1f} [{100 * h['low']:+.1f}, "
-                         f"{100 * h['high']:+.1f}] ({verdict_words(h, 'raw L=6', 'farneback L=3')})"
+                         f"{100 * h['high']:+.1f}] "
+                         f"({verdict_words(h, 'raw L=6', 'farneback L=3')})"
                          for h in half) + " points (paper, users split)"
                      + ("; no run supports the claim." if all(
                          h["a_better_runs"] == h["runs"] for h in half) else "."))
@@ -867,7 +869,8 @@ def findings(root: Path) -> list[str]:
             out.append("[Flow error against run time](docs/reports/flow-error.md): on "
                        "ground-truth tactile scenes at 72 × 67, "
                        + (" and ".join(f"`{r['encoder']}`" for r in better) or "no encoder")
-                       + (" are" if len(better) > 1 else " is") + " both faster and more accurate than Farnebäck (endpoint error "
+                       + (" are" if len(better) > 1 else " is")
+                       + " both faster and more accurate than Farnebäck (endpoint error "
                        + ", ".join(f"{r['epe_px']:.2f}" for r in better)
                        + f" px against {fb['epe_px']:.2f} px).")
     return out

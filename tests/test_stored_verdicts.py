@@ -43,7 +43,8 @@ def test_each_stored_comparison_is_what_its_rows_give(path, recomputed):
     stored = doc["comparisons"]
     assert len(stored) == len(comps)
     for old, new in zip(stored, comps):
-        where = f"{old['factor']} {old['a']} → {old['b']} ({old.get('L')}, {old.get('classifier')})"
+        where = (f"{old['factor']} {old['a']} → {old['b']} "
+                 f"({old.get('L')}, {old.get('classifier')})")
         for field in FIELDS:
             if isinstance(new[field], float):
                 assert old[field] == pytest.approx(new[field], rel=1e-9, abs=1e-12), \

@@ -15,12 +15,8 @@ from typing import Any, Iterable, Sequence
 from tactbench.runner.store import failed_rows, ok_rows
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
-
-
 #: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).
 FACTORS = ("encoder", "classifier", "L")
-
-
 CONFIDENCE = 0.95
 #: The verdict's p is the larger of the corrected t's and the sign-flip test's (the
 #: stricter governs; docs/statistics.md). False: the corrected t's alone, the sign-flip

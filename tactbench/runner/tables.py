@@ -7,6 +7,7 @@ from typing import Any, Iterable, Sequence
 
 from tactbench.runner.summaries import FACTORS, failed_cells, short_name
 
+
 def _comparison_label(c: dict[str, Any], side: str) -> str:
     value = c[side]
     if c["factor"] == "classifier":
@@ -212,7 +213,6 @@ def reference_markdown(reference: Sequence[dict[str, Any]],
                 f"{short_name(s['classifier'])} | {_pct(s['accuracy_mean'], s['accuracy_std'])}"
                 f" | {_interval(s.get('accuracy_ci95'))} |")
     return "\n".join(lines)
-
 
 
 def per_class_gains_markdown(comps: Sequence[dict[str, Any]]) -> str:
