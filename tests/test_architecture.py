@@ -78,6 +78,7 @@ STILL_TO_CONVERT = {
     "tactbench/classifiers/models.py": 6,
     "tactbench/classifiers/sklearn.py": 1,
     "tactbench/classifiers/testing.py": 4,
+    "tactbench/commands/inspect.py": 1,
     "tactbench/commands/live.py": 4,
     "tactbench/commands/run.py": 5,
     "tactbench/data/splits.py": 1,
@@ -88,10 +89,10 @@ STILL_TO_CONVERT = {
     "tactbench/runner/cell.py": 1,
     "tactbench/runner/entries.py": 10,
     "tactbench/runner/executors.py": 2,
-    "tactbench/runner/planning.py": 4,
-    "tactbench/runner/reports.py": 2,
+    "tactbench/runner/planning.py": 6,
     "tactbench/runner/results.py": 1,
     "tactbench/runner/scene.py": 6,
+    "tactbench/runner/summaries.py": 10,
     "tactbench/runner/system.py": 3,
 }
 #: Import cycles among tactbench's modules still to break (helper runner-house's); only

@@ -78,6 +78,14 @@ def test_list_filters_by_kind():
     assert doc["components"] and {c["kind"] for c in doc["components"]} == {"encoder"}
 
 
+def test_list_says_what_each_classifier_is_fed():
+    doc = json.loads(CliRunner().invoke(cli, ["list", "--kind", "classifier", "--json"]).stdout)
+    fed = {c["name"]: c["input"] for c in doc["components"]}
+    assert fed["small-cnn-lstm"] == "images" and fed["taxel-lstm"] == "vectors"
+    assert fed["logreg"] == "images or vectors (--input)"
+    assert "input" in run("list", "--kind", "classifier").output
+
+
 def test_list_table_shows_requirements():
     result = run("list")
     assert result.exit_code == 0 and "raw" in result.output and "frame-diff" in result.output

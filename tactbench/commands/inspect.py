@@ -23,6 +23,24 @@ def _component_dict(comp) -> dict:
     }
 
 
+#: What a classifier of each frame rank is fed (the contract's ``frame_rank``).
+_INPUTS = {3: "images", 1: "vectors", None: "images or vectors (--input)"}
+
+
+def _classifier_input(comp) -> str:
+    """``images``, ``vectors`` or ``images or vectors (--input)``; ``-`` when the
+    classifier cannot be loaded here (a missing requirement)."""
+    if comp.missing_requirements():
+        return "-"
+    from tactbench.contracts import CLASSIFIER
+
+    try:
+        rank = CLASSIFIER.get(comp.load(), "frame_rank")  # the contract's default where unset
+    except Exception:  # noqa: BLE001 - a broken plugin is listed, not fatal to `list`
+        return "-"
+    return _INPUTS.get(rank, "-")
+
+
 def _problem_dict(problem) -> dict:
     return {"plugin": problem.plugin, "distribution": problem.distribution,
             "error": problem.message}
@@ -35,7 +53,11 @@ def _problem_dict(problem) -> dict:
 def list_cmd(kind: str | None, as_json: bool) -> None:
     """List registered sensors, datasets, encoders and classifiers."""
     registry = get_registry()
-    rows = [_component_dict(c) for c in registry.components(kind)]
+    components = list(registry.components(kind))
+    rows = [_component_dict(c) for c in components]
+    for comp, row in zip(components, rows):
+        if comp.kind == "classifier":
+            row["input"] = _classifier_input(comp)
     if as_json:
         click.echo(json.dumps({"components": rows,
                                "problems": [_problem_dict(p) for p in registry.problems]},
@@ -45,12 +67,13 @@ def list_cmd(kind: str | None, as_json: bool) -> None:
     from rich.table import Table
 
     table = Table(title="tactbench components", title_justify="left")
-    for col in ("kind", "name", "summary", "plugin", "requires"):
+    for col in ("kind", "name", "summary", "input", "plugin", "requires"):
         table.add_column(col)
     for row in rows:
         reqs = " ".join(f"{r['module']} {'✓' if r['available'] else '✗ missing'}"
                         for r in row["requires"]) or "-"
-        table.add_row(row["kind"], row["name"], row["summary"], row["plugin"], reqs)
+        table.add_row(row["kind"], row["name"], row["summary"], row.get("input", "-"),
+                      row["plugin"], reqs)
     Console().print(table)
 
 

@@ -12,13 +12,9 @@ import click
 from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 from tactbench.runner import Scene, load_scene_file, parse_lengths, run
-from tactbench.runner.reports import (
-    failed_cells,
-    print_comparisons,
-    print_table,
-    summarise,
-    write_reports,
-)
+from tactbench.runner.summaries import failed_cells, summarise
+from tactbench.runner.tables import print_comparisons, print_table
+from tactbench.runner.writers import write_reports
 from tactbench.runner.scene import parse_seeds
 
 
@@ -148,6 +144,23 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
               help="Recompute finished cells.")
 @scene_option("--save-models", field="save_models", is_flag=True, default=None,
               help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
+@scene_option("--margin", field="margin", type=float, metavar="POINTS",
+              none="none (no equivalence test)",
+              help="Equivalence margin in accuracy points: a comparison whose run-level "
+                   "interval lies within ±POINTS (two one-sided tests) is \"equivalent\".")
+@scene_option("--contrast", "contrasts", field="contrasts", multiple=True, metavar="A..B",
+              none="none",
+              help="Also compare two cells differing in several factors, paired over "
+                   "runs, repeatable: --contrast encoder=raw,L=6..encoder=farneback,L=3 "
+                   "(B − A; factors encoder, classifier, L).")
+@scene_option("--input", "input_kind", field="input", type=click.Choice(["images", "vectors"]),
+              none="images where the dataset has a layout",
+              help="What a classifier taking either input is fed (part of its cells' "
+                   "identity).")
+@scene_option("--init-seed", "init_seeds", field="init_seeds", multiple=True, convert=_seeds,
+              none="the split seed",
+              help="Initialisation seeds varied apart from the split seeds (--seed), "
+                   "repeatable or a range; report.md then splits the variance.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.pass_context
@@ -175,8 +188,10 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
             "git": result.rows[0]["run"]["git"] if result.rows else None,
             "computed": result.computed, "skipped": result.skipped,
             "seconds": result.seconds}
-    paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots)
-    summaries = summarise(result.rows)
+    users = list(result.plan.dataset.users)
+    paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots,
+                          contrasts=scene.contrasts or (), margin=scene.margin, users=users)
+    summaries = summarise(result.rows, users=users)
     failed = failed_cells(result.rows)
     if as_json:
         comps = json.loads(paths["json"].read_text())["comparisons"]
@@ -186,7 +201,8 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     else:
         print_table(summaries, title=f"{scene.dataset} · split {scene.split} · test window "
                                      f"{scene.test_window} · profile {scene.profile}")
-        print_comparisons(json.loads(paths["json"].read_text())["comparisons"])
+        print_comparisons(json.loads(paths["json"].read_text())["comparisons"],
+                          factors=("encoder", "classifier", "contrast"))
         click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
                    f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
                    f"results.csv, results.json, plots)")

@@ -30,7 +30,11 @@ that encodes a dataset is :mod:`tactbench.encoders.encoding`),
 :mod:`~tactbench.runner.executors` (local, processes, dask),
 :mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
 memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
-:mod:`~tactbench.runner.reports` (tables, files, plots).
+:mod:`~tactbench.runner.summaries` (aggregation over seeds, paired comparisons),
+:mod:`~tactbench.runner.statistics` (the tests, with the training run as the unit),
+:mod:`~tactbench.runner.tables` (terminal and Markdown tables),
+:mod:`~tactbench.runner.writers` (results.json/csv, report.md),
+:mod:`~tactbench.runner.plots` (one function per figure).
 """
 
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)

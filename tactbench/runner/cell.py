@@ -205,7 +205,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
             rss0 = memory.peak_mb
         # one split keeps the seed it always had; the folds of a k-fold split differ
         seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length,
-                           *(() if len(splits) == 1 else (f"fold {fold}",)))
+                           *(() if len(splits) == 1 else (f"fold {fold}",)),
+                           *(() if cell.init_seed is None else (f"init {cell.init_seed}",)))
         with memory.track("fit"):
             t0 = time.perf_counter()
             fits.append(clf.fit(train, None, seed=seed, device=scene.device,
@@ -241,7 +242,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
-        # per test sequence, for paired comparisons between cells (runner.reports)
+        # per test sequence, for paired comparisons between cells (runner.summaries)
         "test_predictions": {"indices": test_index.tolist(),
                              "labels": truth.tolist(), "predictions": predicted.tolist()},
         # cost on one core: wall time × workers that shared the encoding, per frame

@@ -38,6 +38,7 @@ from tactbench.profiles import PRECISIONS, get_profile, profile_options
 from tactbench.budget import check_budget
 from tactbench.specs import parse_spec
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
+from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
 #: model, and a larger grid is a typo (its plan alone would grow without bound).
@@ -45,8 +46,6 @@ MAX_CELLS = 10_000
 
 #: What tactbench writes at the top of an out folder (see :func:`check_out_folder`).
 OUT_FOLDERS = ("cells", "models")
-OUT_FILES = ("results.json", "results.csv", "report.md", "accuracy_vs_L.png",
-             "cost_vs_accuracy.png", "per_class_vs_L.png")
 _OUT_PATTERNS = (re.compile(r"confusion_.+\.png"),)
 #: What file managers leave in any folder they show (tactbench neither reads nor writes it).
 OUT_LITTER = (".DS_Store", "Thumbs.db", "desktop.ini")
@@ -68,6 +67,7 @@ class Cell:
     length: int  # window length L, frames
     seed: int
     key: str
+    init_seed: int | None = None  # the initialisation's seed when varied apart from the split's
 
     def label(self) -> str:
         """A short human name: ``raw × small-cnn-lstm L=5 seed=0``."""
@@ -239,11 +239,29 @@ def check_scene(scene: Scene) -> None:
         check_positive_int(scene.threads, "--threads")
     check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
-               * len(set(scene.L)) * len(set(scene.seeds)))
+               * len(set(scene.L)) * len(set(scene.seeds))
+               * len(set(scene.init_seeds or [None])))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
     check_out_folder(scene.out, models=scene.save_models)
+    _check_statistics(scene)
+
+
+#: What ``--input`` may ask a classifier that takes either input for.
+INPUT_KINDS = ("images", "vectors")
+
+
+def _check_statistics(scene: Scene) -> None:
+    """The margin, contrasts' syntax and input kind of a scene (see docs/statistics.md)."""
+    from tactbench.runner.summaries import parse_contrast
+
+    if scene.margin is not None:
+        check_positive_float(scene.margin, "--margin (points)")
+    for text in scene.contrasts or ():
+        parse_contrast(text)
+    if scene.input is not None:
+        check_choice(scene.input, "--input", INPUT_KINDS)
 
 
 def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset, *,
@@ -355,8 +373,13 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
 
 def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
                   encoder_version: str, classifier: str, length: int,
-                  seed: int) -> dict[str, Any]:
-    """Everything that decides a cell's result; its :func:`digest` is the cell's key."""
+                  seed: int, init_seed: int | None = None, *,
+                  either_input: bool = False) -> dict[str, Any]:
+    """Everything that decides a cell's result; its :func:`digest` is the cell's key.
+
+    ``init_seed`` (``--init-seed``) and the input kind of a classifier taking either
+    (``either_input``, when ``--input`` is given) enter only where asked for, so every
+    other cell keeps its key."""
     return {
         "schema": ROW_SCHEMA,
         "dataset": dataset.name,
@@ -373,6 +396,8 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
         "profile": scene.profile,
         "L": int(length),
         "seed": int(seed),
+        **({} if init_seed is None else {"init_seed": int(init_seed)}),
+        **({"input": kind} if scene.input and either_input else {}),
     }
 
 
@@ -396,7 +421,11 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
 
     dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
     has_layout = dataset.layout is not None
-    kinds = {clf: input_kind(rank, has_layout) for clf, rank in frame_ranks.items()}
+    if scene.input == "images" and not has_layout:
+        raise InputError(f"--input images: dataset '{dataset.name}' has no taxel layout to "
+                         f"make images; use --input vectors, or give the dataset a layout")
+    kinds = {clf: (scene.input if scene.input and rank is None else input_kind(rank, has_layout))
+             for clf, rank in frame_ranks.items()}
     for clf in classifier_specs:
         for enc in encoders:
             _check_inputs(clf, enc, kinds[clf], frame_ranks[clf], dataset,
@@ -412,11 +441,19 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     for enc in encoders:
         for clf in classifier_specs:
             for length in scene.L:
-                for seed in dict.fromkeys(scene.seeds):  # a seed listed twice is one cell
+                for seed, init in ((s, i) for s in dict.fromkeys(scene.seeds)
+                                   for i in dict.fromkeys(scene.init_seeds or [None])):
                     identity = cell_identity(scene, dataset, dataset_hash, kinds[clf], enc,
-                                             versions[enc], clf, length, seed)
+                                             versions[enc], clf, length, seed, init,
+                                             either_input=frame_ranks[clf] is None)
                     key = digest(identity)
-                    cells.append(Cell(enc, clf, int(length), int(seed), key))
+                    cells.append(Cell(enc, clf, int(length), int(seed), key,
+                                      None if init is None else int(init)))
                     identities[key] = identity
+    if scene.contrasts:
+        from tactbench.runner.summaries import check_contrasts
+
+        check_contrasts(scene.contrasts, [{"encoder": c.encoder, "classifier": c.classifier,
+                                           "L": c.length} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 kinds, cells, identities, registry)

@@ -52,6 +52,13 @@ class Scene:
     out: str = "tactbench-out"
     rerun: bool = False
     save_models: bool = False  # OUT/models/<cell key>.safetensors, usable by `tactbench live`
+    # statistics and inputs (docs/statistics.md): an equivalence margin in points; paired
+    # contrasts "A..B" of cells differing in several factors; what a classifier taking
+    # either input is fed; initialisation seeds varied apart from the split seeds
+    margin: float | None = None
+    contrasts: list[str] | None = None
+    input: str | None = None  # images or vectors; None: images where there is a layout
+    init_seeds: list[int] | None = None
 
     def resolved_pixel_mm(self) -> float:
         """The tactile-image pixel size in mm: the scene's, else its profile's."""
@@ -137,7 +144,8 @@ def parse_seeds(values: Iterable[str | int]) -> list[int]:
     return parse_numbers(values, "seed", "0-9")
 
 
-_ALIASES = {"encoder": "encoders", "classifier": "classifiers", "seed": "seeds"}
+_ALIASES = {"encoder": "encoders", "classifier": "classifiers", "seed": "seeds",
+            "contrast": "contrasts", "init_seed": "init_seeds"}
 #: Field names that changed: refused with a line naming the new one (no silent aliases).
 RENAMED = {"lengths": "L"}
 
@@ -150,6 +158,7 @@ _KINDS: dict[str, str] = {
     "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
     "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
     "out": "text", "rerun": "bool", "save_models": "bool",
+    "margin": "number?", "contrasts": "texts?", "input": "text?", "init_seeds": "seeds?",
 }
 
 

@@ -228,3 +228,26 @@ def test_the_run_help_shows_the_scene_defaults(monkeypatch):
     monkeypatch.setattr(Scene.__dataclass_fields__["out"], "default", "elsewhere")
     help_text = CliRunner().invoke(cli, ["run", "--help"]).output
     assert "Output folder. [default: elsewhere]" in " ".join(help_text.split())
+def test_statistics_options_from_the_command_line_and_a_scene_file(tmp_path, monkeypatch):
+    """--margin, --contrast, --init-seed and --input (logreg takes either input) reach
+    the cells and results.json; the scene file spells them as fields."""
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    scene = tmp_path / "scene.toml"
+    scene.write_text('test_per_class = 1\ncontrast = "encoder=raw,L=2..encoder=frame-diff,L=3"\n'
+                     'input = "vectors"\n')
+    args = ["run", "--dataset", TINY_DATASET, "--encoder", "raw", "--encoder", "frame-diff",
+            "--classifier", "logreg:max_iter=20", "-L", "2", "-L", "3", "--seed", "0-2",
+            "--init-seed", "0-1", "--margin", "5", "--threads", "1",
+            "--out", str(tmp_path / "out"), "--json", "--no-plots", str(scene)]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert len(doc["rows"]) == 2 * 2 * 3 * 2  # encoders × L × split seeds × init seeds
+    assert {r["init_seed"] for r in doc["rows"]} == {0, 1}
+    assert {r["input"] for r in doc["rows"]} == {"vectors"}
+    assert {s["input"] for s in doc["summary"]} == {"vectors"}
+    contrast = [c for c in doc["comparisons"] if c["factor"] == "contrast"]
+    assert [(c["a"], c["b"]) for c in contrast] == [("encoder=raw,L=2", "encoder=frame-diff,L=3")]
+    assert all(c["runs"] == 3 and c["equivalence_margin"] == 5 for c in doc["comparisons"])
+    assert doc["statistics"]["margin"] == 5 and doc["variance"]
+    assert "## Where the variance comes from" in (tmp_path / "out" / "report.md").read_text()

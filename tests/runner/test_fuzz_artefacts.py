@@ -199,7 +199,7 @@ def _reseal_row(doc):
 @FUZZ
 @given(data=st.data(), kind=st.sampled_from(MUTATIONS))
 def test_a_mutated_cell_row_is_refused_or_read_unchanged(rows, memory_cap, data, kind):
-    from tactbench.runner.reports import summarise
+    from tactbench.runner.summaries import summarise
 
     store, want, files = rows
     _restore(store.out, files)

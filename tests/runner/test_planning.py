@@ -210,7 +210,7 @@ def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_sc
 
     scene = tiny_scene(encoders=["raw"], classifiers=["logreg:max_iter=20"], seeds=[0])
     run(scene, progress=False, cache=cache)
-    from tactbench.runner.reports import write_reports
+    from tactbench.runner.writers import write_reports
 
     out = tmp_path / "out"
     write_reports(out, [], meta={}, plots=False)
@@ -286,3 +286,53 @@ def test_a_device_this_machine_lacks_is_refused_before_any_work(tmp_path, cache,
     with pytest.raises(InputError, match=match):
         run(tiny_scene(device=device), progress=False, cache=cache)
     _nothing_done(tmp_path, cache)
+
+
+# ------------------------------------------------ statistics options: inputs, seeds, contrasts
+
+
+def test_input_kind_is_in_the_identity_only_when_asked_for_and_the_classifier_takes_either(
+        tiny_scene):
+    plain = plan(tiny_scene(encoders=["raw"], classifiers=["logreg", "taxel-lstm"]))
+    asked = plan(tiny_scene(encoders=["raw"], classifiers=["logreg", "taxel-lstm"],
+                            input="vectors"))
+    logreg = [k for k in plain.input_kind if k.startswith("logreg")][0]
+    assert plain.input_kind[logreg] == "images" and asked.input_kind[logreg] == "vectors"
+    by_clf = lambda p: {(c.classifier.split(":")[0], c.seed): c.key for c in p.cells}  # noqa: E731
+    a, b = by_clf(plain), by_clf(asked)
+    assert all(a["taxel-lstm", s] == b["taxel-lstm", s] for s in (0, 1))  # unchanged
+    assert all(a["logreg", s] != b["logreg", s] for s in (0, 1))
+    assert all("input" not in i for i in plain.identities.values())
+    assert {i.get("input") for i in asked.identities.values()} == {None, "vectors"}
+
+
+def test_images_asked_of_a_dataset_without_layout_is_one_clear_error(tiny_scene,
+                                                                     nolayout_dataset):
+    scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["raw"],
+                       classifiers=["logreg"], input="images")
+    with pytest.raises(InputError, match="--input images: dataset 'nolayout' has no taxel "
+                                         "layout"):
+        plan(scene)
+    with pytest.raises(InputError, match="unknown --input 'pixels'|--input"):
+        plan(tiny_scene(input="pixels"))
+
+
+def test_init_seeds_multiply_the_cells_and_keep_other_keys(tiny_scene):
+    plain = plan(tiny_scene())
+    varied = plan(tiny_scene(init_seeds=[0, 1, 2]))
+    assert len(varied.cells) == 3 * len(plain.cells)
+    assert {c.init_seed for c in varied.cells} == {0, 1, 2}
+    assert {c.init_seed for c in plain.cells} == {None}
+    assert not {c.key for c in plain.cells} & {c.key for c in varied.cells}
+    assert all("init_seed" not in i for i in plain.identities.values())
+
+
+def test_margin_and_contrasts_are_checked_before_any_work(tiny_scene):
+    with pytest.raises(InputError, match="--margin"):
+        plan(tiny_scene(margin=-1.0))
+    with pytest.raises(InputError, match="'..'"):
+        plan(tiny_scene(contrasts=["raw"]))
+    with pytest.raises(InputError, match="names no two cells"):
+        plan(tiny_scene(contrasts=["encoder=raw,L=3..encoder=frame-diff,L=9"]))
+    p = plan(tiny_scene(contrasts=["encoder=raw..encoder=frame-diff"], margin=2.0))
+    assert len(p.cells) == 4

@@ -9,7 +9,8 @@ import json
 import pytest
 
 from tactbench.runner import run
-from tactbench.runner.reports import failed_cells, summarise, write_reports
+from tactbench.runner.summaries import failed_cells, summarise
+from tactbench.runner.writers import write_reports
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -27,7 +28,9 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
     # the two encoders share split and seed: one paired comparison, raw first
     [comp] = doc["comparisons"]
     assert (comp["factor"], comp["a"], comp["b"]) == ("encoder", "raw", "frame-diff")
-    assert comp["sequences"] == doc["rows"][0]["n_test"]
+    assert comp["test_recordings"] == doc["rows"][0]["n_test"]
+    assert comp["runs"] == 1 and comp["verdict"] == "too few runs"
+    assert "## Paired comparisons over runs" in paths["markdown"].read_text()
     csv_lines = paths["csv"].read_text().splitlines()
     assert len(csv_lines) == 3 and "acc_" in csv_lines[0]
     summary = summarise(result.rows)[0]
@@ -43,7 +46,7 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
 
 
 def test_the_peak_step_of_a_summary_is_the_most_common_over_seeds():
-    from tactbench.runner.reports import peak_step
+    from tactbench.runner.summaries import peak_step
 
     assert peak_step([{"peak_step": "fit"}, {"peak_step": "predict"},
                       {"peak_step": "predict"}]) == "predict"
@@ -101,77 +104,169 @@ def _row(encoder, seed, truth, predicted, *, L=5, classifier="logreg", indices=N
             "status": "ok", "classes": ["a", "b"], "accuracy": acc,
             "per_class_accuracy": {"a": acc, "b": acc}, "confusion": [[1, 0], [0, 1]],
             "encode_ms_per_frame": 1.0, "train_s": 1.0, "inference_ms_per_sequence": 1.0,
-            "peak_rss_mb": 1.0,
+            "peak_rss_mb": 1.0, "n_train": 3 * len(truth), "n_test": len(truth),
             "test_predictions": {"indices": indices, "labels": list(truth),
                                  "predictions": list(predicted)}}
 
 
-def test_pairs_differing_in_one_factor_are_compared_sequence_by_sequence():
-    from tactbench.runner.reports import comparisons
-
-    truth = [0, 1] * 20
+def _clear_win_rows(seeds=range(7), n=40, **kw):
+    """B (farneback) right everywhere but one row per seed; A (raw) wrong on ~12 more."""
+    truth = [0, 1] * (n // 2)
     rows = []
-    for seed in (0, 1, 2):
-        wrong_raw = {seed, seed + 3, seed + 6, 10, 11, 12, 13, 14, 15, 16}  # ~25 % wrong
+    for seed in seeds:
+        wrong_raw = {seed % n, (seed + 3) % n, (seed + 6) % n, *range(10, 19 + seed % 3)}
         rows.append(_row("raw", seed, truth,
-                         [1 - t if i in wrong_raw else t for i, t in enumerate(truth)]))
+                         [1 - t if i in wrong_raw else t for i, t in enumerate(truth)], **kw))
         rows.append(_row("farneback", seed, truth,
-                         [1 - t if i == seed else t for i, t in enumerate(truth)]))
-    comps = comparisons(rows, n_resamples=999)
-    assert len(comps) == 1
-    c = comps[0]
+                         [1 - t if i == seed % n else t for i, t in enumerate(truth)], **kw))
+    return rows
+
+
+def test_pairs_differing_in_one_factor_are_compared_run_by_run():
+    from scipy import stats
+
+    from tactbench.runner.summaries import comparisons
+
+    rows = _clear_win_rows()
+    [c] = comparisons(rows)
     assert (c["factor"], c["a"], c["b"], c["classifier"], c["L"]) == \
         ("encoder", "raw", "farneback", "logreg", 5)  # A: the first in the run
-    # the mean difference is the mean over seeds of accuracy B − A
     by = {(r["encoder"], r["seed"]): r["accuracy"] for r in rows}
-    expected = sum(by["farneback", s] - by["raw", s] for s in range(3)) / 3
-    assert c["difference"] == pytest.approx(expected)
-    assert c["low"] > 0 and c["verdict"] == "B better" and c["b_better_seeds"] == 3
-    assert c["a_only"] == 0 and c["b_only"] == 27 and c["mcnemar_p"] < 1e-6
-    assert c["resampling"] == "sequences jointly across seeds"
+    d = [by["farneback", s] - by["raw", s] for s in range(7)]
+    assert c["per_run"] == {str(s): pytest.approx(v) for s, v in enumerate(d)}
+    assert c["difference"] == pytest.approx(sum(d) / 7) and c["runs"] == 7
+    # the interval is the corrected resampled t over runs, n_test/n_train = 1/3
+    se = (stats.tvar(d) * (1 / 7 + 1 / 3)) ** 0.5
+    half = stats.t.ppf(0.975, 6) * se
+    assert (c["low"], c["high"]) == (pytest.approx(c["difference"] - half),
+                                     pytest.approx(c["difference"] + half))
+    assert c["permutation_p"] == pytest.approx(2 / 2 ** 7) and c["p"] >= c["t_p"]
+    assert c["p_holm"] == c["p"] and c["family_size"] == 1  # a family of one
+    assert c["verdict"] == "B better" and c["b_better_runs"] == 7
+    assert set(c["mcnemar_per_seed"]) == {str(s) for s in range(7)}
+    assert c["discordant_recordings"] >= 10 and c["test_recordings"] == 40
+    assert set(c["per_class"]) == {"a", "b"} and c["per_class"]["a"]["low"] is not None
 
 
-def test_a_difference_whose_interval_spans_zero_is_unresolved_in_every_output(tmp_path):
-    from tactbench.runner.reports import comparisons
+def test_five_runs_cannot_give_a_verdict_and_the_note_says_why():
+    from tactbench.runner.summaries import comparisons
+
+    [c] = comparisons(_clear_win_rows(seeds=range(5)))
+    assert c["t_p"] < 0.05 and c["permutation_p"] == pytest.approx(2 / 32)
+    assert c["verdict"] == "unresolved" and "sign-flip" in c["note"]
+
+
+def test_fewer_than_3_runs_give_no_verdict_in_every_output(tmp_path):
+    from tactbench.runner.summaries import comparisons
+
+    rows = _clear_win_rows(seeds=(0, 1))
+    c = comparisons(rows)[0]
+    assert c["verdict"] == "too few runs" and c["p_holm"] is not None
+    paths = write_reports(tmp_path / "out", rows, plots=False)
+    report = paths["markdown"].read_text()
+    assert "## Paired comparisons over runs" in report and "| too few runs |" in report
+    assert "test window: `first`" in report
+    assert json.loads(paths["json"].read_text())["comparisons"][0]["verdict"] == \
+        "too few runs"
+
+
+def test_a_few_discordant_recordings_give_no_verdict_however_many_rows():
+    from tactbench.runner.summaries import comparisons
 
     truth = [0, 1] * 20
     rows = []
-    for seed in (0, 1):
-        rows.append(_row("raw", seed, truth, [1 - t if i in (seed, 5) else t
+    for seed in range(8):  # B always wins on the same 3 recordings, and only there
+        rows.append(_row("raw", seed, truth, [1 - t if i < 3 else t
                                               for i, t in enumerate(truth)]))
-        rows.append(_row("farneback", seed, truth, [1 - t if i in (seed + 1, 7) else t
-                                                    for i, t in enumerate(truth)]))
-    c = comparisons(rows, n_resamples=999)[0]
-    assert c["low"] <= 0 <= c["high"] and c["verdict"] == "unresolved"
-    paths = write_reports(tmp_path / "out", rows, plots=False)
-    report = paths["markdown"].read_text()
-    assert "## Paired comparisons" in report and "| unresolved |" in report
-    assert "test window: `first`" in report
-    assert json.loads(paths["json"].read_text())["comparisons"][0]["verdict"] == "unresolved"
+        rows.append(_row("farneback", seed, truth, truth))
+    [c] = comparisons(rows)
+    assert c["b_only"] == 24 and c["discordant_recordings"] == 3
+    assert c["verdict"] == "unresolved" and "3 distinct test recording" in c["note"]
 
 
-def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
-    from tactbench.runner.reports import comparisons
+def test_holm_adjusts_within_the_family_and_a_margin_shows_equivalence():
+    from tactbench.runner.summaries import comparisons
 
-    truth = [0, 1] * 10
-    a = _row("raw", 0, truth, truth)
-    b = _row("farneback", 0, truth[:10], truth[:10], indices=list(range(5, 15)))
-    b["test_predictions"]["labels"] = [truth[i] for i in range(5, 15)]
-    extra_seed = _row("farneback", 1, truth, truth)
-    c = comparisons([a, b, extra_seed], n_resamples=999)[0]
-    assert c["sequences"] == 10 and c["seeds"] == 1
-    old = dict(a)
-    del old["test_predictions"]
-    assert comparisons([old, b]) == []
+    truth = [0, 1] * 20
+    rows = []
+    for seed in range(8):  # equal accuracy, different mistakes: a tie
+        for enc, shift in (("raw", 0), ("farneback", 20)):
+            rows.append(_row(enc, seed, truth, [1 - t if (i + shift + seed) % 40 < 4 else t
+                                                for i, t in enumerate(truth)]))
+    rows += [dict(r, L=3, key=r["key"] + "-3") for r in rows]
+    comps = comparisons(rows, margin=2.0)
+    assert len(comps) == 4 and {c["family_size"] for c in comps} == {4}
+    for c in comps:
+        assert c["p_holm"] >= c["p"]
+    enc = [c for c in comps if c["factor"] == "encoder"]
+    assert all(c["difference"] == 0 for c in enc)
+    assert all(c["verdict"] == "equivalent" and c["equivalence_margin"] == 2.0 for c in enc)
+
+
+def test_a_contrast_pairs_two_cells_differing_in_two_factors():
+    from tactbench.errors import InputError
+    from tactbench.runner.summaries import comparisons, parse_contrast
+
+    rows = _clear_win_rows(seeds=range(6), L=3) + [
+        dict(r, L=6, key=r["key"] + "-6") for r in _clear_win_rows(seeds=range(6))
+        if r["encoder"] == "raw"]
+    comps = comparisons(rows, contrasts=["encoder=raw,L=6..encoder=farneback,L=3"])
+    [c] = [c for c in comps if c["factor"] == "contrast"]
+    assert (c["a"], c["b"], c["classifier"]) == ("encoder=raw,L=6", "encoder=farneback,L=3",
+                                                 "logreg")
+    assert c["difference"] > 0 and c["runs"] == 6
+    assert len(comps) == 3 and all(x["family_size"] == 3 for x in comps)
+    for bad, match in (("raw..farneback", "factor=value"), ("encoder=raw", "'..'"),
+                       ("encoder=raw..L=3", "same factors"), ("seed=1..seed=2", "unknown"),
+                       ("encoder=raw..encoder=raw", "itself")):
+        with pytest.raises(InputError, match=match):
+            parse_contrast(bad)
+    with pytest.raises(InputError, match="names no two cells"):
+        from tactbench.runner.summaries import check_contrasts
+
+        check_contrasts(["encoder=dis..encoder=raw"], [{"encoder": "raw", "classifier": "x",
+                                                        "L": 5}])
+
+
+def test_per_user_accuracy_and_gains_on_a_users_split(tmp_path):
+    from tactbench.runner.summaries import comparisons
+
+    rows = _clear_win_rows(seeds=range(6))
+    users = [f"u{i // 10}" for i in range(40)]  # four users, ten recordings each
+    [c] = comparisons(rows, users=users)
+    u = c["per_user"]
+    assert u["users"] == 4 and u["helped"] + u["hurt"] <= 4 and u["helped"] >= 1
+    assert set(u["gains"]) == {"u0", "u1", "u2", "u3"}
+    raw = [s for s in summarise(rows, users=users) if s["encoder"] == "raw"][0]
+    assert set(raw["per_user_accuracy"]) == set(u["gains"])
+    report = write_reports(tmp_path, rows, plots=False, users=users)["markdown"].read_text()
+    assert "### Per-user gains" in report and "## Per-user accuracy" in report
+
+
+def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_path):
+    from tactbench.runner.summaries import comparisons, variance_decomposition
+
+    rows = []
+    for split in range(3):
+        for init in range(2):
+            for r in _clear_win_rows(seeds=[split]):
+                rows.append(dict(r, init_seed=init, key=f"{r['key']}-{init}"))
+    [v] = [v for v in variance_decomposition(rows) if v["encoder"] == "raw"]
+    assert (v["split_seeds"], v["init_seeds"]) == (3, 2) and v["init_sd"] == 0
+    [c] = comparisons(rows)
+    assert c["runs"] == 3  # a split is the unit; its init seeds are averaged
+    report = write_reports(tmp_path, rows, plots=False)["markdown"].read_text()
+    assert "## Where the variance comes from" in report
 
 
 def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
-    from tactbench.runner.reports import comparisons, markdown_table
+    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.tables import markdown_table
 
     truth = [0, 1] * 10
     rows = [_row("raw", s, truth, truth, L=L, classifier=clf)
             for s in (0, 1, 2) for L in (3, 5) for clf in ("logreg", "taxel-lstm:epochs=3")]
-    factors = sorted(c["factor"] for c in comparisons(rows, n_resamples=999))
+    factors = sorted(c["factor"] for c in comparisons(rows))
     assert factors == ["L", "L", "classifier", "classifier"]
     rows[0]["accuracy"] = 0.9
     summary = [s for s in summarise(rows) if s["L"] == 3 and s["classifier"] == "logreg"][0]
@@ -183,6 +278,21 @@ def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
     near_one = summarise([_row("raw", s, [0, 1] * 10, [0, 1] * 10 if s else [0, 1] * 9 + [0, 0])
                           for s in (0, 1, 2)])[0]
     assert near_one["accuracy_ci95"][1] == 1.0  # clipped: a mean accuracy is at most 1
+
+
+def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
+    from tactbench.runner.summaries import comparisons
+
+    truth = [0, 1] * 10
+    a = _row("raw", 0, truth, truth)
+    b = _row("farneback", 0, truth[:10], truth[:10], indices=list(range(5, 15)))
+    b["test_predictions"]["labels"] = [truth[i] for i in range(5, 15)]
+    extra_seed = _row("farneback", 1, truth, truth)
+    c = comparisons([a, b, extra_seed])[0]
+    assert c["test_recordings"] == 10 and c["runs"] == 1
+    old = dict(a)
+    del old["test_predictions"]
+    assert comparisons([old, b]) == []
 
 
 def test_a_row_with_broken_predictions_is_a_damaged_row():
@@ -243,7 +353,7 @@ def _grid(seeds=(0, 1, 2), lengths=(3, 5)):
 
 
 def test_pareto_front_by_hand():
-    from tactbench.runner.reports import pareto_front
+    from tactbench.runner.plots import pareto_front
 
     points = [(1.0, 0.8),  # 0: front
               (2.0, 0.9),  # 1: front
@@ -329,7 +439,7 @@ def test_one_seed_gives_lines_without_bands(tmp_path, drawn):
 
 
 def test_the_band_falls_back_to_the_std_and_then_to_none():
-    from tactbench.runner.reports import accuracy_band, band_note
+    from tactbench.runner.plots import accuracy_band, band_note
 
     s = {"seeds": [0, 1], "accuracy_mean": 0.8, "accuracy_std": 0.1,
          "accuracy_ci95": [0.7, 0.9]}
@@ -408,8 +518,34 @@ def test_a_line_with_one_seed_at_some_l_says_where_it_has_no_band(tmp_path, draw
 
 
 def test_short_names_keep_the_estimator():
-    from tactbench.runner.reports import short_name
+    from tactbench.runner.summaries import short_name
 
     assert short_name("small-cnn-lstm:epochs=4,width=16") == "small-cnn-lstm"
     assert short_name("sklearn:C=10,estimator=SVC") == "sklearn:SVC"
     assert short_name("logreg") == "logreg"
+
+
+def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differences():
+    from tactbench.data.splits import user_folds
+    from tactbench.runner.summaries import comparisons
+
+    users = [f"u{i // 4}" for i in range(40)]  # ten users, four recordings each
+    truth = [i % 2 for i in range(40)]
+    rows = []
+    for seed in range(4):
+        folds = user_folds(users, truth, seed=seed, folds=5)
+        order = [int(i) for f in folds for i in f.test]  # the cell's pooled fold order
+        for enc, wrong in (("raw", {o for o in order if (o + seed) % 5 == 0}),
+                           ("farneback", {o for o in order if (o + seed) % 9 == 0})):
+            y = [truth[i] for i in order]
+            pred = [1 - truth[i] if i in wrong else truth[i] for i in order]
+            r = _row(enc, seed, y, pred, indices=order)
+            r.update(split="users:folds=5", folds=5, split_seed=seed, n_train=32, n_test=40)
+            rows.append(r)
+    [c] = comparisons(rows, users=users)
+    assert c["method"].startswith("corrected repeated 5-fold t (Bouckaert–Frank) over 20")
+    assert c["df"] == 19 and c["ratio"] == pytest.approx(1 / 4)
+    [plain] = comparisons(rows)  # without the users the folds cannot be told: seed means
+    assert plain["df"] == 3 and plain["difference"] == pytest.approx(c["difference"])
+    assert plain["method"] == "corrected repeated 5-fold t (Bouckaert–Frank)"
+    assert c["permutation_p"] == plain["permutation_p"]  # the sign-flip is over seeds

@@ -1,0 +1,288 @@
+"""Tables of summaries and comparisons: for the terminal (rich) and for Markdown."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable, Sequence
+
+from tactbench.runner.summaries import FACTORS, failed_cells, short_name
+
+
+def _comparison_label(c: dict[str, Any], side: str) -> str:
+    value = c[side]
+    if c["factor"] == "classifier":
+        return short_name(str(value))
+    if c["factor"] == "L":
+        return f"L={value}"
+    if c["factor"] == "contrast":  # "encoder=raw,L=6" → "raw L=6"
+        parts = []
+        for item in str(value).split(","):
+            k, _, v = item.partition("=")
+            parts.append(f"L={v}" if k == "L" else v)
+        return " ".join(parts)
+    return str(value)
+
+
+def _context(c: dict[str, Any]) -> str:
+    parts = []
+    for k in FACTORS:
+        if k == c["factor"] or k not in c:
+            continue
+        parts.append(f"L={c[k]}" if k == "L" else short_name(str(c[k])))
+    return " ".join(parts) or "-"
+
+
+COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
+                     "95 % interval over runs", "runs B>A / A>B / tied",
+                     "p (t / sign-flip)", "Holm p", "runs for ±2 (±margin)", "verdict"]
+
+
+def verdict_text(c: dict[str, Any]) -> str:
+    """The verdict in words: ``farneback better``, ``equivalent within ±2``, ..."""
+    verdict = c["verdict"]
+    if verdict == "B better":
+        return f"{_comparison_label(c, 'b')} better"
+    if verdict == "A better":
+        return f"{_comparison_label(c, 'a')} better"
+    if verdict == "equivalent":
+        return f"equivalent within ±{c['equivalence_margin']:g}"
+    return verdict
+
+
+def _runs_needed(c: dict[str, Any]) -> str:
+    n = c.get("runs_needed")
+    return "unreachable" if n is None else str(n)
+
+
+def comparison_rows(comps: Sequence[dict[str, Any]]) -> list[list[str]]:
+    """Table cells: factor, A, B, where (the shared factors), B − A (points), the
+    run-level interval, runs B>A/A>B/tied, p of the corrected t and of the sign-flip
+    test, the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
+    and the verdict."""
+    rows = []
+    for c in comps:
+        rows.append([
+            c["factor"], _comparison_label(c, "a"), _comparison_label(c, "b"), _context(c),
+            f"{100 * c['difference']:+.1f}",
+            f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]" if c["df"] else "-",
+            f"{c['b_better_runs']}/{c['a_better_runs']}/{c['tied_runs']}",
+            f"{_p_value(c['t_p'])} / {_p_value(c['permutation_p'])}",
+            _p_value(c["p_holm"]), _runs_needed(c), verdict_text(c)])
+    return rows
+
+
+def _p_value(p: float | None) -> str:
+    if p is None:
+        return "-"
+    return "< 0.001" if p < 0.001 else f"{p:.3f}"
+
+
+def comparisons_markdown(comps: Sequence[dict[str, Any]]) -> str:
+    if not comps:
+        return ""
+    lines = ["| " + " | ".join(COMPARISON_HEADER) + " |",
+             "|" + "---|" * len(COMPARISON_HEADER)]
+    lines += ["| " + " | ".join(r) + " |" for r in comparison_rows(comps)]
+    return "\n".join(lines)
+
+
+def print_comparisons(comps: Sequence[dict[str, Any]], *,
+                      factors: Sequence[str] = ("encoder", "classifier")) -> None:
+    """The terminal's table of paired comparisons (by default of encoders and classifiers;
+    report.md and results.json hold every factor)."""
+    shown = [c for c in comps if c["factor"] in factors]
+    if not shown:
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="paired comparisons over runs (B − A; Holm-adjusted within the run; "
+                        "an interval touching 0 is unresolved)",
+                  title_justify="left")
+    for col in COMPARISON_HEADER:
+        table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
+                                                        "verdict") else "right")
+    # the interval beside every verdict is the run-level one (comparison_rows)
+    for row in comparison_rows(shown):
+        table.add_row(*row)
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=160)
+    console.print(table)
+
+
+def _interval(ci: Sequence[float] | None) -> str:
+    if not ci:
+        return "-"
+    return f"{100 * ci[0]:.1f}–{100 * ci[1]:.1f}"
+
+
+def _pct(mean: float, std: float) -> str:
+    if math.isnan(mean):
+        return "-"
+    return f"{100 * mean:.1f} ± {100 * std:.1f}"
+
+
+TABLE_HEADER = ["encoder", "classifier", "input", "L", "accuracy %", "95 % CI of mean", "seeds",
+                "encode ms/frame",
+                "train s", "infer ms/seq", "peak MB", "peak step"]
+
+
+def table_rows(summaries: Sequence[dict[str, Any]]) -> list[list[str]]:
+    rows = []
+    for s in summaries:
+        rows.append([
+            s["encoder"], short_name(s["classifier"]), s.get("input", "-"), str(s["L"]),
+            _pct(s["accuracy_mean"], s["accuracy_std"]), _interval(s.get("accuracy_ci95")),
+            str(len(s["seeds"])),
+            f"{s['encode_ms_per_frame_mean']:.3f}",
+            f"{s['train_s_mean']:.1f}",
+            f"{s['inference_ms_per_sequence_mean']:.2f}",
+            f"{s['peak_rss_mb_mean']:.0f}",
+            s.get("peak_step", "-"),
+        ])
+    return rows
+
+
+def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "") -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title or None, title_justify="left")
+    for col in TABLE_HEADER:
+        table.add_column(col, justify="right" if col not in ("encoder", "classifier",
+                                                              "input", "peak step") else "left")
+    for row in table_rows(summaries):
+        table.add_row(*row)
+    console = Console()
+    if not console.is_terminal:  # logs and pipes: no wrapping at 80 columns
+        console = Console(width=160)
+    console.print(table)
+
+
+def markdown_table(summaries: Sequence[dict[str, Any]]) -> str:
+    lines = ["| " + " | ".join(TABLE_HEADER) + " |",
+             "|" + "---|" * len(TABLE_HEADER)]
+    lines += ["| " + " | ".join(r) + " |" for r in table_rows(summaries)]
+    return "\n".join(lines)
+
+
+def per_class_markdown(summaries: Sequence[dict[str, Any]]) -> str:
+    if not summaries:
+        return ""
+    classes = summaries[0]["classes"]
+    lines = ["| encoder | classifier | L | " + " | ".join(classes) + " |",
+             "|" + "---|" * (3 + len(classes))]
+    for s in summaries:
+        cells = [f"{100 * s['per_class_accuracy'][c]:.1f}"
+                 if s["per_class_accuracy"][c] is not None
+                 and not math.isnan(s["per_class_accuracy"][c]) else "-" for c in classes]
+        lines.append(f"| {s['encoder']} | {short_name(s['classifier'])} | {s['L']} | "
+                     + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def failed_cells_markdown(rows: Iterable[dict[str, Any]]) -> str:
+    """A Markdown table of the failed cells ("" when none failed)."""
+    failed = failed_cells(rows)
+    if not failed:
+        return ""
+    lines = ["| encoder | classifier | L | seed | error | row |", "|---|---|---|---|---|---|"]
+    for f in failed:
+        error = f["error"].replace("|", "\\|")
+        lines.append(f"| {f['encoder']} | {f['classifier']} | {f['L']} | {f['seed']} | "
+                     f"{error} | `cells/{f['key']}.json` |")
+    return "\n".join(lines)
+
+
+def reference_markdown(reference: Sequence[dict[str, Any]],
+                       summaries: Sequence[dict[str, Any]]) -> str:
+    """A table: each published point, and our cells it compares with ("-" where none)."""
+    lines = ["| published | L | published % | ours (cell) | ours % | 95 % CI of mean |",
+             "|---|---|---|---|---|---|"]
+    for p in reference:
+        published = f"{100 * p['accuracy']:.1f}" + (
+            f" ± {100 * p['err']:.1f}" if p["err"] is not None else "")
+        ours = [s for s in summaries if s["L"] == p["L"] and p["label"] in (
+            s["encoder"], f"{s['encoder']} / {short_name(s['classifier'])}")]
+        if not ours:
+            lines.append(f"| {p['label']} | {p['L']} | {published} | - | - | - |")
+        for s in ours:
+            lines.append(
+                f"| {p['label']} | {p['L']} | {published} | {s['encoder']} / "
+                f"{short_name(s['classifier'])} | {_pct(s['accuracy_mean'], s['accuracy_std'])}"
+                f" | {_interval(s.get('accuracy_ci95'))} |")
+    return "\n".join(lines)
+
+
+def per_class_gains_markdown(comps: Sequence[dict[str, Any]]) -> str:
+    """Per-class gains B − A (points) with their run-level intervals, one line per
+    comparison ("" when none has them)."""
+    comps = [c for c in comps if c.get("per_class")]
+    if not comps:
+        return ""
+    classes = list(dict.fromkeys(k for c in comps for k in c["per_class"]))
+    lines = ["| factor | A | B | where | " + " | ".join(classes) + " |",
+             "|" + "---|" * (4 + len(classes))]
+    for c in comps:
+        cells = []
+        for k in classes:
+            g = c["per_class"].get(k)
+            if g is None:
+                cells.append("-")
+            elif g["low"] is None:
+                cells.append(f"{100 * g['difference']:+.1f}")
+            else:
+                cells.append(f"{100 * g['difference']:+.1f} [{100 * g['low']:+.1f}, "
+                             f"{100 * g['high']:+.1f}]")
+        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a')} | "
+                     f"{_comparison_label(c, 'b')} | {_context(c)} | " + " | ".join(cells)
+                     + " |")
+    return "\n".join(lines)
+
+
+def per_user_gains_markdown(comps: Sequence[dict[str, Any]]) -> str:
+    """Per-user gains of every pair: users tested, helped, hurt, median and quartiles
+    (points) ("" when no comparison has them: not a users split, or no user ids)."""
+    comps = [c for c in comps if c.get("per_user")]
+    if not comps:
+        return ""
+    lines = ["| factor | A | B | where | users | helped | hurt | median gain | "
+             "quartiles |", "|---|---|---|---|---|---|---|---|---|"]
+    for c in comps:
+        u = c["per_user"]
+        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a')} | "
+                     f"{_comparison_label(c, 'b')} | {_context(c)} | {u['users']} | "
+                     f"{u['helped']} | {u['hurt']} | {100 * u['median']:+.1f} | "
+                     f"{100 * u['q25']:+.1f} … {100 * u['q75']:+.1f} |")
+    return "\n".join(lines)
+
+
+def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]]) -> str:
+    """Per-user accuracy of every cell (%, mean over the runs testing the user)."""
+    summaries = [s for s in summaries if s.get("per_user_accuracy")]
+    if not summaries:
+        return ""
+    users = sorted({u for s in summaries for u in s["per_user_accuracy"]})
+    lines = ["| encoder | classifier | L | " + " | ".join(users) + " |",
+             "|" + "---|" * (3 + len(users))]
+    for s in summaries:
+        acc = s["per_user_accuracy"]
+        lines.append(f"| {s['encoder']} | {short_name(s['classifier'])} | {s['L']} | "
+                     + " | ".join(f"{100 * acc[u]:.0f}" if u in acc else "-" for u in users)
+                     + " |")
+    return "\n".join(lines)
+
+
+def variance_markdown(parts: Sequence[dict[str, Any]]) -> str:
+    """The variance decomposition of each cell's accuracy (standard deviations, points)."""
+    if not parts:
+        return ""
+    lines = ["| encoder | classifier | L | split seeds × init seeds | split sd | "
+             "initialisation sd | test-sampling sd |", "|---|---|---|---|---|---|---|"]
+    for v in parts:
+        lines.append(f"| {v['encoder']} | {short_name(v['classifier'])} | {v['L']} | "
+                     f"{v['split_seeds']} × {v['init_seeds']} | {v['split_sd']:.1f}"
+                     + (" (clipped at 0)" if "split" in v["clipped"] else "")
+                     + f" | {v['init_sd']:.1f} | {v['test_sd']:.1f} |")
+    return "\n".join(lines)

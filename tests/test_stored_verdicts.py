@@ -1,0 +1,80 @@
+"""Every verdict the stored reports state is the one their stored rows give.
+
+docs/reports/*/*/results.json keep every row with its per-sequence predictions, so each
+comparison is recomputed here from the rows (with the contrasts and margin the run was
+made with) and must equal the stored one; every table of comparisons in the reports'
+Markdown must be a row of the recomputed tables. A report that states another verdict,
+interval or p fails.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+REPORTS = Path(__file__).resolve().parents[1] / "docs" / "reports"
+STORED = sorted(REPORTS.glob("*/*/results.json"))
+FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "p_holm",
+          "runs", "runs_needed", "discordant_recordings", "equivalence_p_holm")
+
+
+def _recompute(path: Path) -> tuple[dict, list[dict]]:
+    from tactbench.runner.summaries import comparisons
+
+    doc = json.loads(path.read_text())
+    stats = doc["statistics"]
+    return doc, comparisons(doc["rows"], contrasts=stats["contrasts"], margin=stats["margin"])
+
+
+@pytest.fixture(scope="module")
+def recomputed() -> dict[Path, tuple[dict, list[dict]]]:
+    return {path: _recompute(path) for path in STORED}
+
+
+def test_there_are_stored_reports_to_check():
+    assert len(STORED) >= 5
+
+
+@pytest.mark.parametrize("path", STORED, ids=lambda p: f"{p.parent.parent.name}/{p.parent.name}")
+def test_each_stored_comparison_is_what_its_rows_give(path, recomputed):
+    doc, comps = recomputed[path]
+    stored = doc["comparisons"]
+    assert len(stored) == len(comps)
+    for old, new in zip(stored, comps):
+        where = (f"{old['factor']} {old['a']} → {old['b']} "
+                 f"({old.get('L')}, {old.get('classifier')})")
+        for field in FIELDS:
+            if isinstance(new[field], float):
+                assert old[field] == pytest.approx(new[field], rel=1e-9, abs=1e-12), \
+                    f"{path}: {where}: {field}"
+            else:
+                assert old[field] == new[field], f"{path}: {where}: {field}"
+
+
+def _comparison_lines(text: str, width: int) -> list[str]:
+    from tactbench.runner.summaries import FACTORS
+
+    kinds = {*FACTORS, "contrast"}
+    return [line for line in text.splitlines()
+            if line.startswith("| ") and line.count(" | ") == width - 1
+            and line[2:].split(" | ", 1)[0] in kinds]
+
+
+def test_every_table_of_comparisons_in_the_reports_is_recomputed(recomputed):
+    from tactbench.runner.tables import COMPARISON_HEADER, comparison_rows
+
+    width = len(COMPARISON_HEADER)
+    checked = 0
+    for md in sorted(REPORTS.glob("*.md")) + sorted(REPORTS.glob("*/*/report.md")):
+        parts = ([md.parent / "results.json"] if md.name == "report.md"
+                 else sorted((REPORTS / md.stem).glob("*/results.json")))
+        expected = {"| " + " | ".join(r) + " |"
+                    for p in parts if p in recomputed for r in comparison_rows(recomputed[p][1])}
+        text = md.read_text()
+        assert "McNemar p |" not in text, f"{md}: a table of the old, pooled statistics"
+        for line in _comparison_lines(text, width):
+            assert line in expected, f"{md}: states a comparison its rows do not give:\n{line}"
+            checked += 1
+    assert checked > 50
