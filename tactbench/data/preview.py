@@ -148,5 +148,19 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
 
     check_shape(image, "H W rgb", "image", rgb=3)
     buf = io.BytesIO()
-    imsave(buf, np.clip(image, 0.0, 1.0), format="png")
+    imsave(buf, np.clip(image, 0.0, 1.0), format="png", metadata={"Software": PNG_MARK})
     atomic_write_bytes(path, buf.getvalue())
+
+
+#: The PNG text chunk that marks a picture tactbench wrote (it may replace those only).
+PNG_MARK = "tactbench"
+
+
+def written_by_tactbench(path: str | Path) -> bool:
+    """Whether ``path`` is a PNG file :func:`write_png` wrote (its Software text chunk)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    return head.startswith(b"\x89PNG") and b"tEXtSoftware\x00" + PNG_MARK.encode() in head

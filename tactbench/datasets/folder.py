@@ -45,6 +45,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
 import re
 import zipfile
 from dataclasses import dataclass
@@ -263,6 +264,7 @@ def find_recordings(root: Path, *, users: str | None = None
                          f".npy|.npz|.csv)")
     found: dict[str, list[Path]] = {}
     for folder in folders:
+        _check_name(folder, "a class folder's name is its class name")
         files = []
         for p in folder.rglob("*"):
             if not p.is_file() or p.suffix.lower() not in SUFFIXES \
@@ -275,6 +277,7 @@ def find_recordings(root: Path, *, users: str | None = None
             if users != "folder" and depth != 1:
                 raise InputError(f"{p}: recordings sit directly in their class folder "
                                  f"(use users=folder for ROOT/<class>/<user>/<recording>)")
+            _check_name(p, "recordings are named in results")
             files.append(p)
         if not files:
             raise InputError(f"{folder}: empty class folder (no .npy, .npz or .csv "
@@ -282,6 +285,17 @@ def find_recordings(root: Path, *, users: str | None = None
         found[folder.name] = sorted(files, key=lambda p: natural_key(p.relative_to(root)
                                                                       .as_posix()))
     return found
+
+
+def _check_name(path: Path, why: str) -> None:
+    """Refuse a name that is not valid UTF-8 (Python keeps its bytes as surrogates):
+    results, reports and CSV files could not be written with it, after the work."""
+    try:
+        path.name.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(path.name).decode("utf-8", "backslashreplace")
+        raise InputError(f"{path.parent / shown}: the name is not valid UTF-8 text "
+                         f"({why}); rename it") from None
 
 
 def _order_classes(found: dict[str, list[Path]], classes: str | None, root: Path) -> list[str]:

@@ -80,6 +80,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
         store.clean()
+        claim = store.claim(c.key for c in p.cells)  # one grid per out folder
         models = Path(scene.out) / "models" if scene.save_models else None
         pending = [c for c in p.cells if scene.rerun
                    or not store.finished(c.key, p.identities[c.key])
@@ -92,12 +93,13 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
         def finish(row: dict[str, Any]) -> None:
             row["run"] = run_meta
-            store.put(row)
+            row = store.put(row)  # as stored: a row too large to keep is a failed one
             if on_row is not None:
                 on_row(row)
 
         if jobs:
             execute(scene, jobs, finish, bars, memory)
     rows = store.rows(c.key for c in p.cells)
+    claim.unlink(missing_ok=True)
     return RunResult(p, rows, computed=len(pending), skipped=len(p.cells) - len(pending),
                      seconds=time.perf_counter() - start)

@@ -162,6 +162,9 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
     refused, never overwritten.
     """
     out = Path(out)
+    from tactbench.paths import check_not_in_cache
+
+    check_not_in_cache(out)  # 'cache clear' would delete the results
     try:
         if out.exists():
             if not out.is_dir():
