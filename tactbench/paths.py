@@ -308,7 +308,9 @@ def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
             held = sorted(p.name for p in path.iterdir())
             if held and (ours is None or not ours(path)):
                 shown = ", ".join(repr(n) for n in held[:3]) + (", …" if len(held) > 3 else "")
-                raise InputError(f"{option} {path} already holds files ({shown}); "
+                what = ("a tactbench dataset" if (path / "manifest.json").is_file()
+                        else f"files ({shown})")
+                raise InputError(f"{option} {path} already holds {what}; "
                                  f"tactbench does not replace them: give a new or empty "
                                  f"folder (nothing was written)")
             _writable_parent(path / ".probe", option)

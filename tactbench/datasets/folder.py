@@ -190,8 +190,10 @@ def _read_csv(path: Path, timestamp_column: str | int | None
     delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
     rows = [(n, [c.strip() for c in row]) for (n, _), row in
             zip(lines, csv.reader([line for _, line in lines], delimiter=delimiter))]
+    if all(row and row[-1] == "" for _, row in rows):  # a delimiter ending every line
+        rows = [(n, row[:-1]) for n, row in rows]
     header = None
-    if any(not is_number(c) for c in rows[0][1]):
+    if is_header(rows[0][1]):
         header = rows[0][1]
         rows = rows[1:]
         if not rows:
@@ -231,6 +233,19 @@ def _timestamp_index(column: str | int | None, header: list[str] | None, width: 
     where = f"header ({', '.join(header[:6])}{', …' if len(header) > 6 else ''})" \
         if header is not None else "file (it has no header row)"
     raise InputError(f"{path}: no column {column!r} in the {where} for timestamp_column")
+
+
+#: Fields that mean "no reading" in a data row, never a column name.
+MISSING_MARKERS = frozenset({"", "-", "--", "?", "na", "n/a", "nan", "null", "none"})
+
+
+def is_header(fields: list[str]) -> bool:
+    """Whether a CSV's first row is a header: every field a name (not blank, not a
+    missing-reading marker such as ``-`` or ``NA``) and at least one not a number.
+    A first row with a blank or ``-`` field is a data row, and is refused like the same
+    field on any other line; it is never dropped as a header."""
+    return (all(f.strip().lower() not in MISSING_MARKERS for f in fields)
+            and any(not is_number(f) for f in fields))
 
 
 def is_number(text: str) -> bool:
@@ -361,14 +376,24 @@ def _users_from_csv(path: Path, files: dict[str, list[Path]], root: Path) -> dic
         if len(row) != len(head):
             raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {len(head)}")
         rec = row[i_rec].strip().replace("\\", "/")
-        by_key[rec] = (row[i_user].strip(), None if i_cls is None else row[i_cls].strip(),
-                       lineno)
+        entry = (row[i_user].strip(), None if i_cls is None else row[i_cls].strip(), lineno)
+        if rec in by_key and by_key[rec][:2] != entry[:2]:
+            raise InputError(f"{path}, line {lineno}: recording {rec!r} is listed again "
+                             f"(first on line {by_key[rec][2]}) with another "
+                             f"{'user' if by_key[rec][0] != entry[0] else 'class'}; "
+                             f"list each recording once")
+        by_key.setdefault(rec, entry)
     out: dict[Path, str] = {}
     for cls, paths in files.items():
         for p in paths:
             rel = p.relative_to(root).as_posix()
             keys = (rel, rel[: -len(p.suffix)], p.name, p.stem)
-            hit = next((by_key[k] for k in keys if k in by_key), None)
+            hits = [by_key[k] for k in dict.fromkeys(keys) if k in by_key]
+            if len({h[:2] for h in hits}) > 1:
+                raise InputError(f"{path}, lines {hits[0][2]} and {hits[1][2]}: {rel} is "
+                                 f"listed twice with different users or classes; list "
+                                 f"each recording once")
+            hit = hits[0] if hits else None
             if hit is None:
                 raise InputError(f"{p}: not listed in {path} (a row recording,user with "
                                  f"{rel!r} or {p.stem!r})")
@@ -520,8 +545,13 @@ def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise InputError(f"{what} must be a finite number, got {v!r}")
     if hi <= lo:
-        if vmin is not None and vmax is not None:
-            raise InputError(f"vmax ({vmax}) must be greater than vmin ({vmin})")
+        if vmin is not None or vmax is not None:  # a bound the user gave is never replaced
+            given = (f"vmax ({vmax}) must be greater than vmin ({vmin})"
+                     if vmin is not None and vmax is not None else
+                     f"vmax ({vmax}) must be greater than the smallest reading ({lo:g})"
+                     if vmax is not None else
+                     f"vmin ({vmin}) must be less than the largest reading ({hi:g})")
+            raise InputError(given)
         hi = lo + 1.0  # constant data: any scale maps it to one value
     return f"fixed:offset={float(lo)!r},scale={float(hi - lo)!r}"
 

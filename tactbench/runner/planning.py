@@ -367,9 +367,10 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         batch_sizes[canonical] = size if isinstance(size, int) and size > 0 else 1
     classifier_specs = list(frame_ranks)
 
-    from tactbench.datasets.loading import load_dataset
+    from tactbench.datasets.loading import check_informative, load_dataset
 
     dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
+    check_informative(dataset)  # all-NaN or constant: nothing to score
     has_layout = dataset.layout is not None
     kinds = {clf: input_kind(rank, has_layout) for clf, rank in frame_ranks.items()}
     for clf in classifier_specs:
