@@ -73,6 +73,43 @@ class TactbenchGroup(click.Group):
             if os.environ.get(DEBUG_ENV):
                 raise
             raise UserError(" ".join(str(exc).split())) from exc
+        except KeyboardInterrupt:  # Ctrl-C: not a failure, not a bug
+            interrupted()
+
+
+#: Exit statuses of every command (the CLI reference lists them).
+EXIT_OK, EXIT_FAILED, EXIT_USER_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_CODES_TEXT = ("Exit status: 0 everything done; 1 a run's cells failed (listed), or a "
+                   "bug (with its traceback); 2 a mistake in what was given (one 'Error:' "
+                   "line, nothing done); 130 interrupted (Ctrl-C).")
+
+
+def json_text(doc: Any, **dumps: Any) -> str:
+    """``doc`` as standard JSON for ``--json`` output: a NaN or infinite number (no JSON
+    value) becomes ``null``, so any JSON reader can parse what tactbench prints."""
+    import json
+    import math
+
+    def clean(value: Any) -> Any:
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v) for v in value]
+        if type(value).__module__ == "numpy":  # numpy scalars and arrays
+            return clean(value.tolist()) if hasattr(value, "tolist") else value
+        return value
+
+    return json.dumps(clean(doc), allow_nan=False, **dumps)
+
+
+def interrupted() -> None:
+    """End the command after Ctrl-C: one line, exit status 130 (128 + SIGINT), what was
+    finished is kept."""
+    click.echo("tactbench: interrupted; finished work is kept, running it again goes on "
+               "from there", err=True)
+    raise click.exceptions.Exit(EXIT_INTERRUPTED)
 
 
 class UserError(click.ClickException):
@@ -121,7 +158,8 @@ def get_registry(ctx: click.Context | None = None, *, warn: bool = True):
     return state["registry"]
 
 
-@click.group(cls=TactbenchGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=TactbenchGroup, context_settings={"help_option_names": ["-h", "--help"]},
+             epilog=EXIT_CODES_TEXT)
 @click.version_option(__version__, "--version", prog_name="tactbench")
 def cli() -> None:
     """Benchmark preprocessing of tactile data for gesture recognition.
@@ -140,14 +178,30 @@ BUG_REPORT = ("tactbench: this is a bug (in tactbench or in the plugin named in 
 def main(argv: list[str] | None = None) -> None:
     """The console script: user errors are one line (exit 2); a bug keeps its traceback
     and says how to report it (exit 1)."""
+    _safe_output()
     try:
         cli.main(args=argv, prog_name="tactbench")
+    except KeyboardInterrupt:  # outside a command (plugins loading)
+        click.echo("tactbench: interrupted", err=True)
+        sys.exit(EXIT_INTERRUPTED)
     except Exception:  # click has handled every user-facing error already
         import traceback
 
         traceback.print_exc()
         click.echo(BUG_REPORT, err=True)
         sys.exit(1)
+
+
+def _safe_output() -> None:
+    """Never crash on a character the terminal's encoding lacks (a forced ASCII locale
+    and "×" in a message): such characters are written as escapes instead."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
+            try:
+                reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a closed or detached stream
+                pass
 
 
 if __name__ == "__main__":  # pragma: no cover

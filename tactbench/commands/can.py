@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import click
+
+from tactbench.cli import json_text
 
 from tactbench.errors import TactbenchError
 
@@ -123,7 +124,7 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
             bus.shutdown()
         result.update(interface=interface, channel=channel, messages=sent)
     if as_json:
-        click.echo(json.dumps(result, indent=2))
+        click.echo(json_text(result, indent=2))
     else:
         where = result.get("out") or f"{interface}:{channel}"
         _err(f"sent {result['messages']} messages ({result['samples']} samples, "
@@ -178,7 +179,7 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     finally:
         bus.shutdown()
     if as_json:
-        click.echo(json.dumps(result.to_dict(), indent=2))
+        click.echo(json_text(result.to_dict(), indent=2))
     else:
         load = result.bus_load_measured
         if result.stopped == "interrupted":
@@ -221,7 +222,7 @@ def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bi
     load = bus_load(TaxelMap(ids, fmt), bitrate=bitrate, rate_hz=rate_hz,
                     data_bitrate=data_bitrate)
     if as_json:
-        click.echo(json.dumps({"format": fmt.to_dict(), **load.to_dict()}, indent=2))
+        click.echo(json_text({"format": fmt.to_dict(), **load.to_dict()}, indent=2))
         return
     from rich.console import Console
     from rich.table import Table
@@ -260,7 +261,7 @@ def info_cmd(log: str, taxel_ids: str | None, format_spec: str, format_file: str
     ids = parse_taxel_ids(taxel_ids) if taxel_ids else None
     summary = read_log(Path(log), taxel_ids=ids, fmt=fmt).summary()
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(json_text(summary, indent=2))
         return
     from rich.console import Console
     from rich.table import Table

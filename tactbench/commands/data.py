@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import click
+
+from tactbench.cli import json_text
 
 
 @click.group("data")
@@ -62,7 +63,7 @@ def info_cmd(path: str, as_json: bool) -> None:
     summary = ds.summary()
     summary["path"] = path
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(json_text(summary, indent=2))
         return
     from rich.console import Console
     from rich.table import Table

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from tactbench.cli import json_text
+
 from tactbench.errors import InputError, MissingFileError
 
 
@@ -79,7 +81,7 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
             "ms_per_frame": round(1000 * seconds / max(1, out.shape[0]), 4)}
     atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
     if as_json:
-        click.echo(json.dumps({**meta, "metadata": str(meta_path)}, indent=2))
+        click.echo(json_text({**meta, "metadata": str(meta_path)}, indent=2))
         return
     click.echo(f"{src} {tuple(seq.shape)} {seq.dtype} → {dst} {tuple(out.shape)} float32 "
                f"[{', '.join(meta.get('channels', []))}] in {seconds:.3f} s; "

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from typing import Any
 
 import click
+
+from tactbench.cli import json_text
 
 
 def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
@@ -129,7 +130,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
                 if as_json:
                     rows.append(pred.to_dict(model.classes))
                 elif jsonl:
-                    click.echo(json.dumps(pred.to_dict(model.classes)))
+                    click.echo(json_text(pred.to_dict(model.classes)))
                     sys.stdout.flush()
                 else:
                     _print_prediction(pred, model.classes)
@@ -137,7 +138,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
         click.echo("live: stopped", err=True)
     summary = run_summary(live, latencies, sensor)
     if as_json:
-        click.echo(json.dumps({"model": model_path, "classes": model.classes,
+        click.echo(json_text({"model": model_path, "classes": model.classes,
                                "length": model.length, "encoder": model.encoder_spec,
                                "predictions": rows, "summary": summary}, indent=2))
     elif not jsonl and latencies:

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from tactbench.cli import json_text
+
 from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 
@@ -99,7 +101,7 @@ def run_cmd(scene_file, dataset, encoders, classifiers, lengths, seeds, split, t
     failed = failed_cells(result.rows)
     if as_json:
         comps = json.loads(paths["json"].read_text())["comparisons"]
-        click.echo(json.dumps({"meta": meta, "summary": summaries, "comparisons": comps,
+        click.echo(json_text({"meta": meta, "summary": summaries, "comparisons": comps,
                                "failed": failed,
                                "files": {k: str(v) for k, v in paths.items()}}, indent=2))
     else:

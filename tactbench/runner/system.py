@@ -159,3 +159,21 @@ def git_revision() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return (rev + ("+dirty" if dirty else "")) or None
+
+
+def ignore_interrupts() -> None:
+    """In a worker process: leave Ctrl-C (SIGINT, sent to the whole process group) to the
+    parent, which stops the workers itself (:func:`stop_workers`); a worker would
+    otherwise print its own traceback of the interrupt."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def stop_workers(pool) -> None:
+    """Stop a ``ProcessPoolExecutor`` now: drop its queue and end its workers, so that
+    the interpreter does not wait for running cells on its way out."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        if process.is_alive():
+            process.terminate()
