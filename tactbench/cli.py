@@ -104,6 +104,34 @@ def json_text(doc: Any, **dumps: Any) -> str:
     return json.dumps(clean(doc), allow_nan=False, **dumps)
 
 
+class Number(click.ParamType):
+    """A CLI number checked against its meaning by the one shared check
+    (:func:`tactbench.errors.check_number`): finite, within its range, whole where it
+    counts something. ``Number(minimum=0, exclusive_minimum=True)`` is a positive float,
+    ``Number(minimum=1, integer=True)`` a count. A bad value is a usage error (exit 2)."""
+
+    def __init__(self, *, minimum: float | None = None, maximum: float | None = None,
+                 exclusive_minimum: bool = False, integer: bool = False) -> None:
+        self.bounds = dict(minimum=minimum, maximum=maximum,
+                           exclusive_minimum=exclusive_minimum, integer=integer)
+        self.name = "integer" if integer else "number"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None):
+        from tactbench.errors import InputError, check_number
+
+        if isinstance(value, str):
+            text = value.strip()
+            try:
+                value = int(text) if self.bounds["integer"] and len(text) < 400 \
+                    and text.lstrip("+-").isdigit() else float(text)
+            except ValueError:
+                self.fail(f"{value!r} is not a number", param, ctx)
+        try:
+            return check_number(value, "the value", **self.bounds)
+        except InputError as exc:
+            self.fail(str(exc).replace("the value ", "", 1), param, ctx)
+
+
 def interrupted() -> None:
     """End the command after Ctrl-C: one line, exit status 130 (128 + SIGINT), what was
     finished is kept."""

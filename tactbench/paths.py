@@ -276,7 +276,11 @@ def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
         if path.is_dir():
             raise InputError(f"{option} {path} is a folder; give a file name")
         if path.exists() or path.is_symlink():
-            if ours is None or not ours(path):
+            if ours is None:
+                raise InputError(f"{option} {path} exists, and this command does not "
+                                 f"replace files; give a new name, or remove it first "
+                                 f"(nothing was written)")
+            if not ours(path):
                 raise InputError(f"{option} {path} exists and tactbench did not write it; "
                                  f"give a new name, or remove it first (nothing was written)")
         _writable_parent(path, option)

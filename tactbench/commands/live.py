@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from tactbench.cli import json_text
+from tactbench.cli import Number, json_text
 
 
 def _build_sensor(ctx: click.Context, spec: str, source: str | None, model: Any,
@@ -57,17 +57,22 @@ def _print_prediction(pred: Any, classes: list[str]) -> None:
 @click.argument("source", required=False)
 @click.option("--interface", default=None, help="cyskin-can: python-can interface.")
 @click.option("--channel", default=None, help="cyskin-can: interface channel.")
-@click.option("--bitrate", type=int, default=None, help="cyskin-can: bitrate, bit/s.")
+@click.option("--bitrate", type=Number(minimum=1, maximum=100_000_000, integer=True),
+              default=None, help="cyskin-can: bitrate, bit/s.")
 @click.option("--format", "format_spec", default=None, help="cyskin-can: frame format spec.")
 @click.option("--layout", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Layout file, when the model's metadata has none.")
 @click.option("--encoder", default=None, help="Override the model's encoder spec.")
-@click.option("--length", "length", type=int, default=None, help="Override the window length L.")
-@click.option("--pixel-mm", type=float, default=None, help="Override the image pixel size.")
+@click.option("--length", "length", type=Number(minimum=1, maximum=100_000, integer=True),
+              default=None, help="Override the window length L.")
+@click.option("--pixel-mm", type=Number(minimum=0, exclusive_minimum=True),
+              default=None, help="Override the image pixel size.")
 @click.option("--warmup", type=click.Choice(["wait", "pad"]), default="wait", show_default=True,
               help="Before L sweeps: predict nothing, or pad with blank frames.")
-@click.option("--max-sweeps", type=int, default=None, help="Stop after N sweeps.")
-@click.option("--threads", type=int, default=1, show_default=True,
+@click.option("--max-sweeps", type=Number(minimum=1, integer=True), default=None,
+              help="Stop after N sweeps.")
+@click.option("--threads", type=Number(minimum=1, maximum=1024, integer=True),
+              default=1, show_default=True,
               help="torch threads: one window at a time gains nothing from more, and the "
                    "bus reader needs a core.")
 @click.option("--jsonl", is_flag=True, help="One JSON object per prediction, as they come.")

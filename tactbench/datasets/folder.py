@@ -57,7 +57,7 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.recording import Recording, Sample
-from tactbench.errors import InputError, MissingFileError, check_positive_float
+from tactbench.errors import InputError, MissingFileError, check_number, check_positive_float
 
 SUFFIXES = (".npy", ".npz", ".csv")
 #: Grid pitch assumed when none is given: the quick profile's pixel, so one pixel per cell.
@@ -66,6 +66,9 @@ DEFAULT_PITCH_MM = 5.0
 DEFAULT_RATE_HZ = 10.0
 #: A mapping recording → user picked up from the dataset's root when present.
 USERS_FILE = "users.csv"
+#: A taxel pitch is a physical length: between a micrometre and ten metres (1e-300 mm
+#: would reach the imaging as a degenerate triangulation).
+MIN_PITCH_MM, MAX_PITCH_MM = 1e-3, 1e4
 USER_RULES = ("prefix", "folder")
 
 
@@ -173,10 +176,12 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.n
 
 def _read_csv(path: Path, timestamp_column: str | int | None
               ) -> tuple[np.ndarray, np.ndarray | None]:
+    """One frame per line; parsed a line at a time into one array (never a list of
+    every field as text, which costs ~50 bytes a field)."""
     from tactbench.integrity import check_budget
 
-    # a CSV cell of a number is ≥ 2 bytes ("0,"), and becomes 8 bytes as float64
-    check_budget(path.stat().st_size * 4, f"reading {path}")
+    size = path.stat().st_size
+    check_budget(2 * size, f"reading {path}")  # its bytes and their text
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -184,24 +189,42 @@ def _read_csv(path: Path, timestamp_column: str | int | None
     if "\x00" in text:
         raise InputError(f"{path}: not a text CSV file (it holds NUL bytes; binary data?)")
     lines = [(n, line) for n, line in enumerate(text.splitlines(), 1) if line.strip()]
+    del text
     if not lines:
         raise InputError(f"{path}: empty CSV file (expected one frame per row)")
     first = lines[0][1]
     delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
-    rows = [(n, [c.strip() for c in row]) for (n, _), row in
-            zip(lines, csv.reader([line for _, line in lines], delimiter=delimiter))]
-    if all(row and row[-1] == "" for _, row in rows):  # a delimiter ending every line
-        rows = [(n, row[:-1]) for n, row in rows]
+
+    line_of = {id(line): n for n, line in lines}
+
+    def fields(line: str) -> list[str]:
+        try:
+            return [c.strip() for c in next(csv.reader([line], delimiter=delimiter), [])]
+        except csv.Error as exc:  # a field beyond the csv module's limit, a stray quote
+            raise InputError(f"{path}, line {line_of.get(id(line), '?')}: not a CSV row "
+                             f"({exc})") from None
+
+    # a delimiter ending every line is no column
+    trailing = all(line.rstrip().endswith(delimiter) for _, line in lines)
+
+    def row_of(line: str) -> list[str]:
+        row = fields(line)
+        return row[:-1] if trailing and row and row[-1] == "" else row
+
     header = None
-    if is_header(rows[0][1]):
-        header = rows[0][1]
-        rows = rows[1:]
-        if not rows:
+    start = 0
+    if is_header(row_of(first)):
+        header = row_of(first)
+        start = 1
+        if len(lines) == 1:
             raise InputError(f"{path}: only a header row, no frames")
-    width = len(header) if header is not None else len(rows[0][1])
+    width = len(header) if header is not None else len(row_of(first))
     ts_col = _timestamp_index(timestamp_column, header, width, path)
-    out = np.empty((len(rows), width), dtype=np.float64)
-    for k, (lineno, row) in enumerate(rows):
+    check_budget(8 * width * (len(lines) - start) + 2 * size,
+                 f"reading {path} ({len(lines) - start} rows × {width} fields)")
+    out = np.empty((len(lines) - start, width), dtype=np.float64)
+    for k, (lineno, line) in enumerate(lines[start:]):
+        row = row_of(line)
         if len(row) != width:
             raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {width} "
                              f"({'as the header' if header is not None else 'as the first row'};"
@@ -430,7 +453,7 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
     after each file.
     """
     root = Path(root)
-    pitch = check_positive_float(pitch_mm, "pitch_mm")
+    pitch = check_number(pitch_mm, "pitch_mm (mm)", minimum=MIN_PITCH_MM, maximum=MAX_PITCH_MM)
     rate_hz = DEFAULT_RATE_HZ if rate is None else check_positive_float(rate, "rate")
     if not users_sep:
         raise InputError("users_sep must not be empty")
@@ -442,6 +465,7 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
         raise InputError("give grid= or layout=, not both")
 
     total = sum(len(v) for v in found.values())
+    _check_total_budget(root, [p for cls in class_names for p in found[cls]])
     reads: list[tuple[int, _Read]] = []
     first: _Read | None = None
     done = 0
@@ -504,6 +528,51 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
               else f"{rate_hz:g} Hz{' (assumed)' if rate is None else ''}")
     return Dataset(name or root.resolve().name, samples, class_names, lay, norm,
                    description=f"{len(samples)} recordings ({kind}; {timing}) from {root}")
+
+
+def _check_total_budget(root: Path, paths: list[Path]) -> None:
+    """The memory budget counts the whole folder, not a file at a time: every recording
+    is held while the dataset is built (its values and their float32 copy)."""
+    from tactbench.integrity import check_budget
+
+    need = sum(_estimated_bytes(p) for p in paths)
+    check_budget(need, f"reading the {len(paths)} recordings under {root}")
+
+
+def _estimated_bytes(path: Path) -> int:
+    """Memory a recording takes once read: its numbers (from the npy headers; ~4 bytes a
+    CSV field) and their float32 copy. 0 where the file cannot tell (its reader then
+    reports the problem)."""
+    from tactbench.integrity import read_npy_header
+
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".csv":
+            return int(path.stat().st_size) * 6  # ≥ 2 bytes a field → 8 + 4 bytes
+        if suffix == ".npy":
+            with path.open("rb") as fh:
+                return _held(read_npy_header(fh), path.stat().st_size)
+        if suffix == ".npz":
+            total = 0
+            with zipfile.ZipFile(path) as zf:
+                for info in zf.infolist():
+                    if info.filename.endswith(".npy"):
+                        with zf.open(info) as fh:
+                            total += _held(read_npy_header(fh), info.file_size)
+            return total
+    except Exception:  # noqa: BLE001 — an estimate only; the reader names the problem
+        return 0
+    return 0
+
+
+def _held(header: tuple[Any, ...], available: int) -> int:
+    """Bytes an npy array and its float32 copy take, when its file can hold it (a header
+    claiming more is the reader's to refuse, naming the file)."""
+    shape, _, dtype = header
+    count = math.prod(shape)
+    if count * dtype.itemsize > available:
+        return 0
+    return count * (dtype.itemsize + 4)
 
 
 def _check_frames(item: _Read, first: _Read | None, grid_shape: tuple[int, int] | None) -> None:
@@ -569,7 +638,8 @@ class FolderDataset:
                  normalisation: str | None = None, classes: str | None = None,
                  name: str | None = None) -> None:
         self.path = str(path)
-        self.options = dict(pitch_mm=check_positive_float(pitch_mm, "folder option pitch_mm"),
+        self.options = dict(pitch_mm=check_number(pitch_mm, "folder option pitch_mm (mm)",
+                                                  minimum=MIN_PITCH_MM, maximum=MAX_PITCH_MM),
                             layout=layout, timestamp_column=timestamp_column, users=users,
                             users_sep=str(users_sep), grid=grid, vmin=vmin, vmax=vmax,
                             normalisation=normalisation, classes=classes, name=name,

@@ -309,6 +309,9 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
         pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
         h, w = image_shape(dataset.layout, pixel_mm)
         frame_shape["images"] = (h, w)
+        for obj in encoders.values():  # windows larger than the image: before any work
+            if hasattr(obj, "check_image_size"):
+                obj.check_image_size(h, w)
         what = f"tactile images at {pixel_mm:g} mm ({h}×{w} px)"
         check_budget(imager_build_bytes(dataset.layout, pixel_mm, method),
                      f"the imaging operator for {what}")
