@@ -207,6 +207,14 @@ def main(argv: list[str] | None = None) -> None:
     """The console script: user errors are one line (exit 2); a bug keeps its traceback
     and says how to report it (exit 1)."""
     _safe_output()
+    from tactbench.errors import TactbenchError
+    from tactbench.runner.system import pin_cpu_kernels
+
+    try:
+        pin_cpu_kernels()  # before anything imports torch
+    except TactbenchError as exc:
+        click.echo(f"Error: {exc}", err=True)
+        sys.exit(EXIT_USER_ERROR)
     try:
         cli.main(args=argv, prog_name="tactbench")
     except KeyboardInterrupt:  # outside a command (plugins loading)

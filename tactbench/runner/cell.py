@@ -22,7 +22,7 @@ from typing import Any, Callable, Sequence
 
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.store import FAILED, OK
-from tactbench.runner.system import MemoryTracker, host, now, versions
+from tactbench.runner.system import MemoryTracker, host, machine, now, versions
 
 #: How many of the innermost traceback frames a failed row keeps.
 TRACEBACK_FRAMES = 5
@@ -148,6 +148,7 @@ def failed_row(job: CellJob, exc: BaseException,
         "memory": memory.as_dict(),
         "versions": versions(),
         "host": host(),
+        "machine": machine(),
         "finished": now(),
     }
 
@@ -264,6 +265,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "threads": job.threads,
         "versions": versions(),
         "host": host(),
+        "machine": machine(),
         "finished": now(),
     }
 

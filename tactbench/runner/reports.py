@@ -27,6 +27,7 @@ from typing import Any, Iterable, Sequence
 from tactbench.errors import InputError
 from tactbench.paths import atomic_write_text
 from tactbench.runner.store import failed_rows, ok_rows, row_status
+from tactbench.runner.system import describe_machines
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
 #: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).
@@ -436,6 +437,8 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=()) -
         + f"; command: `{meta.get('command', '')}`",
         f"- git: `{meta.get('git')}`; versions: "
         + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
+        f"- machine: {describe_machines(rows)} (see docs/reliability.md, 'Numbers "
+        f"across machines')",
         "",
         "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
         "mean over seeds (test set: "
