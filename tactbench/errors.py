@@ -169,5 +169,22 @@ class CorruptArtefactError(TactbenchError):
         return (type(self), (self.artefact, self.problem))
 
 
+class StorageError(TactbenchError, OSError):
+    """The disk refused a write tactbench had to make (full, over quota, read-only): one
+    line naming the file; nothing half-written is left under the final name."""
+
+
+#: errno values that mean "the disk will not take it", whoever asked.
+STORAGE_ERRNOS = (28, 122, 30)  # ENOSPC, EDQUOT, EROFS
+
+
+def storage_error(exc: OSError, path: Any) -> StorageError | None:
+    """A :class:`StorageError` for ``exc`` when it is the disk's refusal, else None."""
+    if getattr(exc, "errno", None) in STORAGE_ERRNOS:
+        return StorageError(f"cannot write {path}: {exc.strerror or exc}; free space "
+                            f"(or choose another folder) and run again")
+    return None
+
+
 class BudgetError(InputError):
     """A step would need more memory than the budget allows (see tactbench.integrity)."""

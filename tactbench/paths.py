@@ -39,7 +39,15 @@ def cache_dir(*parts: str) -> Path:
         xdg = os.environ.get("XDG_CACHE_HOME")
         base = (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
     path = base.joinpath(*parts)
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file, read-only, no permission: known before any work
+        from tactbench.errors import InputError
+
+        where = f"${CACHE_ENV}={root}" if root else f"the cache folder {base}"
+        raise InputError(f"{where} cannot be used: {path} cannot be made "
+                         f"({exc.strerror or exc}); set {CACHE_ENV} to a writable "
+                         f"folder") from None
     return path
 
 
@@ -160,8 +168,14 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            from tactbench.errors import storage_error
+
+            full = storage_error(exc, path)
+            if full is not None:
+                raise full from None
         raise
 
 
@@ -191,6 +205,13 @@ def atomic_folder(folder: str | Path) -> Iterator[Path]:
         except OSError as exc:
             if exc.errno not in _TAKEN or not folder.is_dir():  # not a lost race
                 raise
+    except OSError as exc:  # a full disk while the folder was written: one line
+        from tactbench.errors import storage_error
+
+        full = storage_error(exc, folder)
+        if full is not None:
+            raise full from None
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -57,7 +57,13 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.recording import Recording, Sample
-from tactbench.errors import InputError, MissingFileError, check_number, check_positive_float
+from tactbench.errors import (
+    InputError,
+    MissingFileError,
+    TactbenchError,
+    check_number,
+    check_positive_float,
+)
 
 SUFFIXES = (".npy", ".npz", ".csv")
 #: Grid pitch assumed when none is given: the quick profile's pixel, so one pixel per cell.
@@ -94,13 +100,18 @@ def read_array_file(path: Path, *, timestamp_column: str | int | None = None
                     ) -> tuple[np.ndarray, np.ndarray | None]:
     """``(values, timestamps or None)`` of one ``.npy``, ``.npz`` or ``.csv`` file."""
     suffix = path.suffix.lower()
-    if suffix == ".npy":
-        with path.open("rb") as fh:
-            return _read_npy(fh, path, path.stat().st_size, "the file"), None
-    if suffix == ".npz":
-        return _read_npz(path)
-    if suffix == ".csv":
-        return _read_csv(path, timestamp_column)
+    try:
+        if suffix == ".npy":
+            with path.open("rb") as fh:
+                return _read_npy(fh, path, path.stat().st_size, "the file"), None
+        if suffix == ".npz":
+            return _read_npz(path)
+        if suffix == ".csv":
+            return _read_csv(path, timestamp_column)
+    except OSError as exc:  # no permission, a FIFO, an I/O error: the file, one line
+        if isinstance(exc, TactbenchError):
+            raise
+        raise InputError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     raise InputError(f"{path}: unknown suffix {suffix!r}; expected one of {', '.join(SUFFIXES)}")
 
 
@@ -303,6 +314,9 @@ def find_recordings(root: Path, *, users: str | None = None
     found: dict[str, list[Path]] = {}
     for folder in folders:
         _check_name(folder, "a class folder's name is its class name")
+        if not os.access(folder, os.R_OK | os.X_OK):
+            raise InputError(f"{folder}: cannot read this class folder (permission "
+                             f"denied)")
         files = []
         for p in folder.rglob("*"):
             if not p.is_file() or p.suffix.lower() not in SUFFIXES \
@@ -334,6 +348,9 @@ def _check_name(path: Path, why: str) -> None:
         shown = os.fsencode(path.name).decode("utf-8", "backslashreplace")
         raise InputError(f"{path.parent / shown}: the name is not valid UTF-8 text "
                          f"({why}); rename it") from None
+    if any(ord(c) < 32 or ord(c) == 127 for c in path.name):  # a newline breaks reports
+        raise InputError(f"{path.parent / ascii(path.name)[1:-1]}: the name holds a "
+                         f"control character (a newline, a tab; {why}); rename it")
 
 
 def _order_classes(found: dict[str, list[Path]], classes: str | None, root: Path) -> list[str]:
@@ -385,6 +402,9 @@ def _users_from_csv(path: Path, files: dict[str, list[Path]], root: Path) -> dic
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text CSV file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the users file ({exc.strerror or exc})"
+                         ) from None
     rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
     if not rows:
         raise InputError(f"{path}: empty users file (expected a header recording,user)")
@@ -482,6 +502,13 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
                 progress(done, total)
     assert first is not None  # find_recordings refuses an empty tree
 
+    if grid_shape is not None and len(first.values.shape) == 3:
+        raise InputError(f"{first.path}: grid= is for (T, N) taxel vectors; these "
+                         f"recordings are (T, H, W) grids already")
+    if timestamp_column is not None and not any(
+            p.suffix.lower() == ".csv" for ps in found.values() for p in ps):
+        raise InputError(f"timestamp_column= names a CSV column, and {root} holds no CSV "
+                         f"recordings (an .npz carries its timestamps as a member)")
     frame_shape = first.values.shape[1:]
     if len(frame_shape) == 1 and grid_shape is not None:
         frame_shape = grid_shape

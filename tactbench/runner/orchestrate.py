@@ -72,6 +72,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     go on; ``on_row(row)`` is called with each row as it is stored.
     """
     start = time.perf_counter()
+    cache = cache or EncodingCache()  # an unusable cache folder: before any work
     memory = MemoryTracker()  # which of this process's steps sets its peak memory
     with Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
@@ -85,7 +86,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         pending = [c for c in p.cells if scene.rerun
                    or not store.finished(c.key, p.identities[c.key])
                    or (models and not _model_is_sound(models, p, c))]
-        folders = ensure_encodings(p, cache or EncodingCache(), pending, bars)
+        folders = ensure_encodings(p, cache, pending, bars)
         memory.step("encode")
         jobs = make_jobs(p, pending, folders, models)
         run_meta = {"command": " ".join(sys.argv), "git": git_revision(),

@@ -223,6 +223,10 @@ def _check_scene(scene: Scene) -> None:
                          f"{scene.split!r} trains one per fold; save models with "
                          f"--split users or paper")
     check_choice(scene.executor, "executor", EXECUTORS)
+    if scene.scheduler:
+        from tactbench.runner.system import check_scheduler
+
+        check_scheduler(scene.scheduler)
     if not scene.encoders or not scene.classifiers or not scene.lengths or not scene.seeds:
         raise InputError("a run needs at least one encoder, classifier, L and seed")
     bad_l = [n for n in scene.lengths if int(n) < 1]

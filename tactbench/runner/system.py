@@ -281,3 +281,19 @@ def describe_machines(rows) -> str:
             extra.append("pinned: " + ", ".join(f"{k}={v}" for k, v in sorted(pinned.items())))
         seen.setdefault(text + (f" ({'; '.join(extra)})" if extra else ""))
     return "; ".join(seen) if seen else "none"
+
+
+def check_scheduler(address: str) -> str:
+    """A dask scheduler address as dask takes it (``tcp://host:port``, ``host:port``,
+    ``tls://...``), checked before any work: dask's own error comes after the encoding,
+    as a traceback."""
+    import re
+
+    from tactbench.errors import InputError
+
+    text = str(address).strip()
+    if not re.fullmatch(r"(?:(?:tcp|tls|ws|wss|ucx|inproc)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}/?",
+                        text):
+        raise InputError(f"--scheduler {address!r} is not a dask scheduler address; give "
+                         f"tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786)")
+    return text
