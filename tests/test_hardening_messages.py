@@ -100,3 +100,28 @@ def test_a_class_name_with_a_newline_is_refused_before_it_breaks_a_report(tmp_pa
     os.rename(root / "b", root / "b\nc")
     with pytest.raises(InputError, match=r"holds a control character"):
         read_folder(root)
+
+
+def test_a_finite_huge_reading_is_not_called_infinite():
+    from tactbench.data.recording import Recording
+
+    values = np.zeros((2, 3))
+    values[1, 2] = 1e300
+    with pytest.raises(InputError, match=r"value of 1e\+300 .*beyond the ±3.4e38"):
+        Recording(values, np.arange(2.0), np.arange(3))
+    values[1, 2] = np.inf
+    with pytest.raises(InputError, match="infinite values"):
+        Recording(values, np.arange(2.0), np.arange(3))
+
+
+def test_a_model_path_that_is_a_folder_or_a_pipe_says_so(tmp_path):
+    from tactbench.classifiers.io import read_header
+    from tactbench.errors import TactbenchError
+
+    with pytest.raises(TactbenchError, match="is a folder, not a model file"):
+        read_header(tmp_path)
+    os.mkfifo(tmp_path / "pipe")
+    with pytest.raises(TactbenchError, match="not a regular file"):
+        read_header(tmp_path / "pipe")
+    with pytest.raises(TactbenchError, match="does not exist"):
+        read_header(tmp_path / "none.safetensors")
