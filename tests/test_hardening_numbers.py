@@ -136,3 +136,18 @@ def test_a_csv_field_over_the_csv_modules_limit_is_one_line(tmp_path):
     path.write_text('1,2\n3,"' + "4" * 200_000 + '"\n')
     with pytest.raises(InputError, match=r"r.csv, line 2: not a CSV row"):
         read_array_file(path)
+
+
+def test_a_preview_at_a_fine_pixel_is_refused_under_the_budget(monkeypatch, tmp_path):
+    from tactbench.cli import cli as app
+
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "64")
+    spec = "synthetic-forearm:users=1,repetitions=1,positions=1"
+    result = CliRunner().invoke(app, ["data", "preview", spec, "--pixel-mm", "0.05",
+                                      "--out", str(tmp_path / "p.png")])
+    assert result.exit_code == 2 and "more than the memory budget" in result.output, \
+        result.output
+    assert not (tmp_path / "p.png").exists()
+    result = CliRunner().invoke(app, ["data", "preview", spec, "--pixel-mm", "nan",
+                                      "--out", str(tmp_path / "p.png")])
+    assert result.exit_code == 2 and "Invalid value" in result.output

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from tactbench.cli import json_text
+from tactbench.cli import Number, json_text
 
 
 @click.group("data")
@@ -159,7 +159,8 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
               help="PNG file to write (replaced only when tactbench wrote it).")
 @click.option("--encoder", default=None,
               help="Show this encoder's channels as RGB (e.g. farneback).")
-@click.option("--pixel-mm", default=4.0, show_default=True, type=float,
+@click.option("--pixel-mm", default=4.0, show_default=True,
+              type=Number(minimum=0, exclusive_minimum=True),
               help="Image pixel size in mm (taxels are ~7.5 mm apart).")
 @click.option("--method", default="linear", show_default=True,
               type=click.Choice(["linear", "gaussian"]), help="Imaging method.")

@@ -70,6 +70,15 @@ def preview_strip(dataset: Any, index: int, *, encoder: Any = None, pixel_mm: fl
                              f"taxel values")
         vectors = np.nan_to_num(dataset.normalise(raw), nan=0.0)
         return Preview(taxel_bands(vectors), int(vectors.shape[0]), None, int(raw.shape[1]))
+    from tactbench.data.imaging import image_shape
+    from tactbench.integrity import check_budget
+
+    h, w = image_shape(dataset.layout, pixel_mm)
+    t = int(raw.shape[0])
+    c = len(tuple(getattr(encoder, "channels", ()))) if encoder is not None else 0
+    # the images, their encoding, and the RGB strip of the frames shown
+    check_budget(4 * t * h * w * (1 + c) + 12 * min(t, max_frames) * h * w * max(c, 1),
+                 f"previewing sample {index} ({t} frames of {h}×{w} px at {pixel_mm:g} mm)")
     seq = dataset.imager(pixel_mm, method).apply(dataset.normalise(raw))
     np.clip(seq, 0.0, 1.0, out=seq)
     if encoder is None:
