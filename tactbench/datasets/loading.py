@@ -116,6 +116,13 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
     name = text.split(":", 1)[0].strip()
     if name not in registry.names("dataset") and path.exists():
         return load_path(path, progress=progress)  # a bare word naming a local folder
+    if path.exists():
+        import logging
+
+        logging.getLogger("tactbench.datasets").warning(
+            "tactbench: warning: %r names the registered dataset %r; the %s %s here is "
+            "not read (write ./%s to read it)", text, name,
+            "folder" if path.is_dir() else "file", text, text)
     source = registry.build("dataset", text)
     if progress is not None and takes_progress(source.load):
         dataset = source.load(progress=progress)
