@@ -111,6 +111,71 @@ class TactbenchGroup(click.Group):
             if os.environ.get(DEBUG_ENV):
                 raise
             raise UserError(" ".join(str(exc).split())) from exc
+        except KeyboardInterrupt:  # Ctrl-C: not a failure, not a bug
+            interrupted()
+
+
+#: Exit statuses of every command (the CLI reference lists them).
+EXIT_OK, EXIT_FAILED, EXIT_USER_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_CODES_TEXT = ("Exit status: 0 everything done; 1 a run's cells failed (listed), or a "
+                   "bug (with its traceback); 2 a mistake in what was given (one 'Error:' "
+                   "line, nothing done); 130 interrupted (Ctrl-C).")
+
+
+def json_text(doc: Any, **dumps: Any) -> str:
+    """``doc`` as standard JSON for ``--json`` output: a NaN or infinite number (no JSON
+    value) becomes ``null``, so any JSON reader can parse what tactbench prints."""
+    import json
+    import math
+
+    def clean(value: Any) -> Any:
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v) for v in value]
+        if type(value).__module__ == "numpy":  # numpy scalars and arrays
+            return clean(value.tolist()) if hasattr(value, "tolist") else value
+        return value
+
+    return json.dumps(clean(doc), allow_nan=False, **dumps)
+
+
+class Number(click.ParamType):
+    """A CLI number checked against its meaning by the one shared check
+    (:func:`tactbench.errors.check_number`): finite, within its range, whole where it
+    counts something. ``Number(minimum=0, exclusive_minimum=True)`` is a positive float,
+    ``Number(minimum=1, integer=True)`` a count. A bad value is a usage error (exit 2)."""
+
+    def __init__(self, *, minimum: float | None = None, maximum: float | None = None,
+                 exclusive_minimum: bool = False, integer: bool = False) -> None:
+        self.bounds = dict(minimum=minimum, maximum=maximum,
+                           exclusive_minimum=exclusive_minimum, integer=integer)
+        self.name = "integer" if integer else "number"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None):
+        from tactbench.errors import InputError, check_number
+
+        if isinstance(value, str):
+            text = value.strip()
+            try:
+                value = int(text) if self.bounds["integer"] and len(text) < 400 \
+                    and text.lstrip("+-").isdigit() else float(text)
+            except ValueError:
+                self.fail(f"{value!r} is not a number", param, ctx)
+        try:
+            return check_number(value, "the value", **self.bounds)
+        except InputError as exc:
+            self.fail(str(exc).replace("the value ", "", 1), param, ctx)
+
+
+def interrupted() -> None:
+    """End the command after Ctrl-C: one line, exit status 130 (128 + SIGINT), what was
+    finished is kept."""
+    click.echo("tactbench: interrupted; finished work is kept, running it again goes on "
+               "from there", err=True)
+    raise click.exceptions.Exit(EXIT_INTERRUPTED)
 
 
 class UserError(click.ClickException):
@@ -153,7 +218,8 @@ def get_registry(ctx: click.Context | None = None, *, warn: bool = True):
     return state["registry"]
 
 
-@click.group(cls=TactbenchGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=TactbenchGroup, context_settings={"help_option_names": ["-h", "--help"]},
+             epilog=EXIT_CODES_TEXT)
 @click.version_option(__version__, "--version", prog_name="tactbench")
 def cli() -> None:
     """Benchmark preprocessing of tactile data for gesture recognition.
@@ -172,12 +238,36 @@ BUG_REPORT = ("tactbench: this is a bug (in tactbench or in the plugin named in 
 def main(argv: list[str] | None = None) -> None:
     """The console script: user errors are one line (exit 2); a bug keeps its traceback
     and says how to report it (exit 1)."""
+    _safe_output()
+    from tactbench.errors import TactbenchError
+    from tactbench.runner.system import pin_cpu_kernels
+
+    try:
+        pin_cpu_kernels()  # before anything imports torch
+    except TactbenchError as exc:
+        click.echo(f"Error: {exc}", err=True)
+        sys.exit(EXIT_USER_ERROR)
     try:
         cli.main(args=argv, prog_name="tactbench")
+    except KeyboardInterrupt:  # outside a command (plugins loading)
+        click.echo("tactbench: interrupted", err=True)
+        sys.exit(EXIT_INTERRUPTED)
     except Exception:  # click has handled every user-facing error already
         traceback.print_exc()
         click.echo(BUG_REPORT, err=True)
         sys.exit(1)
+
+
+def _safe_output() -> None:
+    """Never crash on a character the terminal's encoding lacks (a forced ASCII locale
+    and "×" in a message): such characters are written as escapes instead."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
+            try:
+                reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a closed or detached stream
+                pass
 
 
 if __name__ == "__main__":  # pragma: no cover

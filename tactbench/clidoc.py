@@ -20,9 +20,20 @@ WIDTH = 96
 HEADER = """# Command-line reference
 
 Generated from the click application by `python -m tactbench.clidoc --write`; the test
-suite fails when this file is stale. Every command also answers `-h`/`--help`. A user's
-mistake ends the command with one `Error: ...` line and exit status 2; a bug prints its
-traceback and exits with status 1.
+suite fails when this file is stale. Every command also answers `-h`/`--help`.
+
+Exit status, for every command:
+
+| status | meaning |
+|---|---|
+| 0 | everything asked for was done |
+| 1 | a run's cells failed (the run finished the others and lists them), or a bug in tactbench or a plugin (its traceback is printed, with a line saying it is a bug) |
+| 2 | a mistake in what was given (an option, a file, a folder, a value): one `Error: ...` line, before any work where it can be known before |
+| 130 | interrupted (Ctrl-C): one line; finished work (cache entries, cell rows) is kept, and running the command again goes on from there; worker processes stop without tracebacks |
+
+`--json` output is standard JSON: a number that is not finite is printed as `null`. A
+terminal whose encoding lacks a character (a forced ASCII locale) shows it as an escape
+(`\xd7` for ×) instead of failing.
 """
 
 

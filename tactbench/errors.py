@@ -49,27 +49,79 @@ class ComponentLoadError(TactbenchError):
 # ----------------------------------------------------------------------------- checks
 
 
-def check_positive_int(value: Any, name: str, *, minimum: int = 1) -> int:
-    """``value`` as an ``int`` ≥ ``minimum``; bools, floats with a fraction, text refused."""
+def check_positive_int(value: Any, name: str, *, minimum: int = 1,
+                       maximum: int | None = None) -> int:
+    """``value`` as an ``int`` in [``minimum``, ``maximum``]; bools, floats with a
+    fraction, NaN, infinities and text refused."""
+    import math
+    import numbers
+
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         if isinstance(value, numbers.Real) and not isinstance(value, bool) \
-                and float(value).is_integer():
+                and math.isfinite(float(value)) and float(value).is_integer():
             value = int(value)
         else:
             raise InputError(f"{name} must be an integer ≥ {minimum}, got {value!r}")
     if int(value) < minimum:
         raise InputError(f"{name} must be ≥ {minimum}, got {value}")
+    if maximum is not None and int(value) > maximum:
+        raise InputError(f"{name} must be ≤ {maximum}, got {_short(value)}")
     return int(value)
 
 
-def check_positive_float(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    """``value`` as a finite ``float`` > 0 (≥ 0 with ``allow_zero``)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
-            or not math.isfinite(float(value)):
-        raise InputError(f"{name} must be a finite number, got {value!r}")
-    if float(value) < 0 or (float(value) == 0 and not allow_zero):
-        raise InputError(f"{name} must be {'≥' if allow_zero else '>'} 0, got {value}")
-    return float(value)
+def check_positive_float(value: Any, name: str, *, allow_zero: bool = False,
+                         maximum: float | None = None) -> float:
+    """``value`` as a finite ``float`` > 0 (≥ 0 with ``allow_zero``), ≤ ``maximum``."""
+    return check_number(value, name, minimum=0.0, exclusive_minimum=not allow_zero,
+                        maximum=maximum)
+
+
+def check_number(value: Any, name: str, *, minimum: float | None = None,
+                 maximum: float | None = None, exclusive_minimum: bool = False,
+                 integer: bool = False) -> float:
+    """The one check of a number a user gives (an option, a CLI value, a file field),
+    against its meaning, before any work: a real number (not a bool or text), finite
+    (NaN never compares, so an unchecked NaN timeout never ends), within
+    [``minimum``, ``maximum``] (``exclusive_minimum``: above ``minimum``), and with
+    ``integer`` a whole number. Returns it as a ``float`` (an ``int`` with ``integer``).
+    Bounds that follow from the data (a window no larger than the image) are checked
+    where the data is known, with :func:`check_at_most`.
+    """
+    import math
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InputError(f"{name} must be a finite number, got {str(value)[:40]!r}")
+    if isinstance(value, numbers.Integral):
+        number = float(value) if abs(int(value)) < 2 ** 1023 else math.copysign(math.inf,
+                                                                                   int(value))
+    else:
+        number = float(value)
+    if not math.isfinite(number):
+        raise InputError(f"{name} must be a finite number, got {_short(value)}")
+    if integer and not number.is_integer():
+        raise InputError(f"{name} must be a whole number, got {value!r}")
+    if minimum is not None and (number < minimum or exclusive_minimum and number == minimum):
+        raise InputError(f"{name} must be {'>' if exclusive_minimum else '≥'} {minimum:g}, "
+                         f"got {_short(value)}")
+    if maximum is not None and number > maximum:
+        raise InputError(f"{name} must be ≤ {maximum:g}, got {_short(value)}")
+    return int(number) if integer else number
+
+
+def check_at_most(value: float, limit: float, name: str, what: str) -> None:
+    """Refuse ``value`` above a bound that follows from the input, naming both:
+    ``winsize 99999 is larger than the image (32×28 px)``."""
+    if value > limit:
+        raise InputError(f"{name} {_short(value)} is larger than {what}")
+
+
+def _short(value: Any) -> str:
+    """A number as a user wrote it, shortened (a 5000-digit integer is not echoed)."""
+    text = repr(value)
+    if len(text) > 30:
+        text = f"{float(value):.6g}" if abs(float(value)) < 1e308 else text[:12] + "…"
+    return text
 
 
 def check_choice(value: Any, name: str, choices: "tuple[str, ...] | list[str]") -> str:
@@ -117,6 +169,23 @@ class CorruptArtefactError(TactbenchError):
 
     def __reduce__(self):  # rebuilt from (artefact, problem) in a worker's parent process
         return (type(self), (self.artefact, self.problem))
+
+
+class StorageError(TactbenchError, OSError):
+    """The disk refused a write tactbench had to make (full, over quota, read-only): one
+    line naming the file; nothing half-written is left under the final name."""
+
+
+#: errno values that mean "the disk will not take it", whoever asked.
+STORAGE_ERRNOS = (28, 122, 30)  # ENOSPC, EDQUOT, EROFS
+
+
+def storage_error(exc: OSError, path: Any) -> StorageError | None:
+    """A :class:`StorageError` for ``exc`` when it is the disk's refusal, else None."""
+    if getattr(exc, "errno", None) in STORAGE_ERRNOS:
+        return StorageError(f"cannot write {path}: {exc.strerror or exc}; free space "
+                            f"(or choose another folder) and run again")
+    return None
 
 
 class BudgetError(InputError):

@@ -41,7 +41,15 @@ def cache_dir(*parts: str) -> Path:
         xdg = os.environ.get("XDG_CACHE_HOME")
         base = (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
     path = base.joinpath(*parts)
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file, read-only, no permission: known before any work
+        from tactbench.errors import InputError
+
+        where = f"${CACHE_ENV}={root}" if root else f"the cache folder {base}"
+        raise InputError(f"{where} cannot be used: {path} cannot be made "
+                         f"({exc.strerror or exc}); set {CACHE_ENV} to a writable "
+                         f"folder") from None
     return path
 
 
@@ -159,8 +167,14 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            from tactbench.errors import storage_error
+
+            full = storage_error(exc, path)
+            if full is not None:
+                raise full from None
         raise
 
 
@@ -190,5 +204,146 @@ def atomic_folder(folder: str | Path) -> Iterator[Path]:
         except OSError as exc:
             if exc.errno not in _TAKEN or not folder.is_dir():  # not a lost race
                 raise
+    except OSError as exc:  # a full disk while the folder was written: one line
+        from tactbench.errors import storage_error
+
+        full = storage_error(exc, folder)
+        if full is not None:
+            raise full from None
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+# ------------------------------------------------------------------ what a command may write
+#
+# One rule for every command that writes a file or folder the user named: it never
+# replaces its own input, never writes inside the cache folder (``cache clear`` deletes
+# what is there), and never replaces what tactbench did not write. Each command says how
+# it recognises its own earlier output (``ours``); anything else that exists is refused
+# with one line before any work starts.
+
+
+def _same_or_inside(path: Path, other: Path) -> bool:
+    try:
+        a, b = path.resolve(), other.resolve()
+    except (OSError, RuntimeError):
+        return False
+    return a == b or b in a.parents
+
+
+def _in_cache(path: Path) -> Path | None:
+    """The cache folder when ``path`` is it or lies inside it (without creating it)."""
+    root = os.environ.get(CACHE_ENV)
+    if root:
+        base = Path(root)
+    else:
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        base = (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
+    return base if _same_or_inside(path, base) else None
+
+
+def check_not_in_cache(path: str | Path, option: str = "--out") -> None:
+    """Refuse an output that is the cache folder or inside it: ``tactbench cache clear``
+    removes what is there, and ``cache ls`` would call it damaged."""
+    from tactbench.errors import InputError
+
+    cache = _in_cache(Path(path))
+    if cache is not None:
+        raise InputError(f"{option} {path} is inside the cache folder {cache} "
+                         f"(${CACHE_ENV}), which 'tactbench cache clear' empties; write "
+                         f"results elsewhere")
+
+
+def _writable_parent(path: Path, option: str) -> None:
+    import tempfile
+
+    from tactbench.errors import InputError
+
+    folder = path.absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"{option} {path} cannot be written: {folder} is a file, not a "
+                         f"folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
+    except OSError as exc:
+        raise InputError(f"{option} {path} cannot be written: {exc.strerror or exc} "
+                         f"({folder})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
+                      ours=None) -> Path:
+    """Refuse, before any work, an output file that would lose something (the rule above).
+
+    ``inputs``: the files the command reads (the output may be none of them);
+    ``ours(path)``: whether an existing ``path`` is tactbench's earlier output of this
+    command, which it may replace. Also refused: a folder at ``path``, a parent that is
+    a file or cannot be written, a path in the cache folder. Returns ``path``.
+    """
+    from tactbench.errors import InputError
+
+    path = Path(path)
+    try:
+        for src in inputs:
+            if _same_or_inside(path, Path(src)):
+                raise InputError(f"{option} {path} is the input {src}; tactbench never "
+                                 f"replaces its input, give another name")
+        check_not_in_cache(path, option)
+        if path.is_dir():
+            raise InputError(f"{option} {path} is a folder; give a file name")
+        if path.exists() or path.is_symlink():
+            if ours is None:
+                raise InputError(f"{option} {path} exists, and this command does not "
+                                 f"replace files; give a new name, or remove it first "
+                                 f"(nothing was written)")
+            if not ours(path):
+                raise InputError(f"{option} {path} exists and tactbench did not write it; "
+                                 f"give a new name, or remove it first (nothing was written)")
+        _writable_parent(path, option)
+    except ValueError as exc:  # a NUL in the name (InputError is a ValueError too)
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{option} {path!r} is not a usable path: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"{option} {path} cannot be used: {exc.strerror or exc}") from None
+    return path
+
+
+def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
+                        ours=None) -> Path:
+    """:func:`check_output_file` for a folder: it may not exist yet, or be empty, or be
+    ``ours(path)``; a folder holding anything else is refused, naming what it holds."""
+    from tactbench.errors import InputError
+
+    path = Path(path)
+    try:
+        for src in inputs:
+            if _same_or_inside(path, Path(src)) or _same_or_inside(Path(src), path):
+                raise InputError(f"{option} {path} overlaps the input {src}; tactbench "
+                                 f"never writes over its input, give another folder")
+        check_not_in_cache(path, option)
+        if path.exists() and not path.is_dir():
+            raise InputError(f"{option} {path} exists and is not a folder")
+        if path.is_dir():
+            held = sorted(p.name for p in path.iterdir())
+            if held and (ours is None or not ours(path)):
+                shown = ", ".join(repr(n) for n in held[:3]) + (", …" if len(held) > 3 else "")
+                what = ("a tactbench dataset" if (path / "manifest.json").is_file()
+                        else f"files ({shown})")
+                raise InputError(f"{option} {path} already holds {what}; "
+                                 f"tactbench does not replace them: give a new or empty "
+                                 f"folder (nothing was written)")
+            _writable_parent(path / ".probe", option)
+        else:
+            _writable_parent(path, option)
+    except ValueError as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{option} {path!r} is not a usable path: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"{option} {path} cannot be used: {exc.strerror or exc}") from None
+    return path

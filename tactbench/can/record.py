@@ -74,6 +74,13 @@ def record(bus: Any, out: str | Path, *, duration: float | None = None,
         ``progress(messages, max_messages, seconds=...)``, at most every
         :data:`PROGRESS_EVERY_S` seconds and once at the end.
     """
+    from tactbench.errors import check_number
+
+    for value, name in ((duration, "duration"), (idle_timeout, "idle_timeout")):
+        if value is not None:  # NaN never compares: a NaN limit would never stop
+            check_number(value, name, minimum=0, exclusive_minimum=True)
+    if max_messages is not None:
+        check_number(max_messages, "max_messages", minimum=1, integer=True)
     writer = open_writer(out)
     n = meta = 0
     bits = 0.0  # nominal bit times of the data frames received (for the measured load)

@@ -390,6 +390,12 @@ def loader_workers(device) -> int:
     return max(0, min(4, (os.cpu_count() or 1) - 1))
 
 
+#: Upper bounds of the training options, checked when a classifier is built (at planning,
+#: before any encoding): beyond them a run is a typo (``epochs=1e9``), not a study.
+MAX_EPOCHS = 100_000
+MAX_BATCH = 10_000_000
+
+
 @dataclass(eq=False, repr=False, kw_only=True)
 class TorchSequenceClassifier(SequenceClassifier):
     """A torch network trained with :func:`tactbench.classifiers.training.train_loop`.
@@ -419,10 +425,11 @@ class TorchSequenceClassifier(SequenceClassifier):
     def __post_init__(self) -> None:
         super().__post_init__()
         # Checked, not converted: options() goes into cache keys and result rows as given.
-        check_positive_int(self.epochs, "epochs", minimum=0)
-        check_positive_int(self.batch_size, "batch_size")
+        # epochs=0 would train nothing and report an untrained model's guesses as a cell
+        check_positive_int(self.epochs, "epochs", maximum=MAX_EPOCHS)
+        check_positive_int(self.batch_size, "batch_size", maximum=MAX_BATCH)
         check_positive_int(self.windows_per_epoch, "windows_per_epoch (0: every window)",
-                           minimum=0)
+                           minimum=0, maximum=MAX_BATCH)
         check_choice(str(self.optimizer).lower(), "optimizer", OPTIMIZERS)
         check_positive_float(self.lr, "lr")
         check_positive_float(self.momentum, "momentum", allow_zero=True)

@@ -187,7 +187,9 @@ def read_header(path: str | os.PathLike) -> dict[str, Any]:
 
     p = Path(path)
     if not p.is_file():
-        raise ModelFileError(p, "model file does not exist")
+        raise ModelFileError(p, "is a folder, not a model file" if p.is_dir() else
+                             "is not a regular file (a pipe or a device?), not a model file"
+                             if p.exists() else "model file does not exist")
     try:
         with safe_open(str(p), framework="pt") as f:
             raw = (f.metadata() or {}).get(HEADER_KEY)

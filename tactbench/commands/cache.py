@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
-from tactbench.runner import EncodingCache
+from tactbench.cli import json_text
 
 
 @click.group("cache")
@@ -24,7 +22,7 @@ def cache_ls(as_json: bool) -> None:
     entries = cache.entries()
     temporaries = cache.temporaries()
     if as_json:
-        click.echo(json.dumps({"root": str(cache.root), "entries": entries,
+        click.echo(json_text({"root": str(cache.root), "entries": entries,
                                "temporaries": temporaries}, indent=2, default=str))
         return
     from rich.console import Console

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -15,9 +14,18 @@ from tactbench.can.codec import FrameFormat, TaxelMap
 from tactbench.can.logs import check_log_out, read_log
 from tactbench.can.record import record
 from tactbench.can.simulate import load_samples, send_samples, write_samples
+from tactbench.cli import Number, json_text
 from tactbench.errors import TactbenchError
+from tactbench.paths import check_output_file
 from tactbench.sensors.cyskin_can import parse_taxel_ids, resolve_taxel_ids
 from tactbench.ui import Progress
+
+#: The numbers of these commands, checked before the bus opens (a NaN duration or
+#: timeout would never end; a bitrate of 0 is no bus).
+BITRATE = Number(minimum=1, maximum=100_000_000, integer=True)
+COUNT = Number(minimum=1, integer=True)
+RATE = Number(minimum=0, maximum=1e6, exclusive_minimum=True)
+SECONDS = Number(minimum=0, maximum=1e9, exclusive_minimum=True)
 
 
 def _err(text: str) -> None:
@@ -31,9 +39,9 @@ def bus_options(func):
                      help="python-can interface (virtual, socketcan, pcan, udp_multicast, ...)."),
         click.option("--channel", default="tactbench", show_default=True,
                      help="Interface channel (vcan0, PCAN_USBBUS1, any name for virtual)."),
-        click.option("--bitrate", default=1_000_000, show_default=True, type=int,
+        click.option("--bitrate", default=1_000_000, show_default=True, type=BITRATE,
                      help="Nominal bitrate, bit/s."),
-        click.option("--data-bitrate", type=int, default=None,
+        click.option("--data-bitrate", type=BITRATE, default=None,
                      help="CAN FD data-phase bitrate, bit/s."),
         click.option("--format", "format_spec", default="", metavar="SPEC",
                      help="Frame format, e.g. 'ids=standard,base_id=0x200,fd=true' "
@@ -64,12 +72,13 @@ def can_group() -> None:
 @bus_options
 @click.option("--out", type=click.Path(dir_okay=False), default=None,
               help="Write the traffic to a log (.blf/.asc) instead of a bus.")
-@click.option("--samples", "limit", type=int, default=None, help="Play at most N samples.")
-@click.option("--speed", type=float, default=1.0, show_default=True,
+@click.option("--samples", "limit", type=COUNT, default=None, help="Play at most N samples.")
+@click.option("--speed", type=Number(minimum=0, maximum=1e6), default=1.0,
+              show_default=True,
               help="Playback speed; 0 sends as fast as possible.")
-@click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
+@click.option("--rate", "rate_hz", type=RATE, default=10.0, show_default=True,
               help="Sweep rate (Hz) for samples without timestamps, and for the bus load.")
-@click.option("--gap", "gap_s", type=float, default=0.5, show_default=True,
+@click.option("--gap", "gap_s", type=Number(minimum=0, maximum=86_400), default=0.5, show_default=True,
               help="Seconds between samples.")
 @click.option("--no-markers", is_flag=True, help="Send no label markers.")
 @click.option("--loop", is_flag=True, help="Repeat until interrupted (bus only).")
@@ -91,6 +100,7 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
         raise click.UsageError("--loop needs a bus, not --out")
     if out is not None:
         check_log_out(out)  # before the samples are loaded
+        check_output_file(out, inputs=[source] if Path(source).exists() else [])
     samples, ids = load_samples(source, rate_hz=rate_hz)
     if limit is not None:
         samples = samples[:max(0, limit)]
@@ -121,7 +131,7 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
             bus.shutdown()
         result.update(interface=interface, channel=channel, messages=sent)
     if as_json:
-        click.echo(json.dumps(result, indent=2))
+        click.echo(json_text(result, indent=2))
     else:
         where = result.get("out") or f"{interface}:{channel}"
         _err(f"sent {result['messages']} messages ({result['samples']} samples, "
@@ -132,10 +142,10 @@ def simulate_cmd(source: str, interface: str, channel: str, bitrate: int,
 @click.option("--out", required=True, type=click.Path(dir_okay=False),
               help="Log file to write: .blf or .asc (also .log, .csv, .trc).")
 @bus_options
-@click.option("--duration", type=float, default=None, help="Stop after this many seconds.")
-@click.option("--idle-timeout", type=float, default=None,
+@click.option("--duration", type=SECONDS, default=None, help="Stop after this many seconds.")
+@click.option("--idle-timeout", type=SECONDS, default=None,
               help="Stop after this many seconds without a message.")
-@click.option("--max-messages", type=int, default=None, help="Stop after N messages.")
+@click.option("--max-messages", type=COUNT, default=None, help="Stop after N messages.")
 @click.option("--label", default=None,
               help="Write a label start marker before and an end marker after the recording.")
 @click.option("--user", default=None, help="User recorded in the label marker.")
@@ -156,6 +166,7 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     """
     fmt = _format(format_spec, format_file)
     check_log_out(out)  # before the bus is opened: nothing recorded is lost to a bad --out
+    check_output_file(out)  # an earlier recording is never replaced
     if duration is None and idle_timeout is None and max_messages is None and sys.stdin.isatty():
         _err("recording until Ctrl-C")
     ids = resolve_taxel_ids(taxel_ids, layout) if (taxel_ids or layout) else None
@@ -170,7 +181,7 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
     finally:
         bus.shutdown()
     if as_json:
-        click.echo(json.dumps(result.to_dict(), indent=2))
+        click.echo(json_text(result.to_dict(), indent=2))
     else:
         load = result.bus_load_measured
         if result.stopped == "interrupted":
@@ -181,13 +192,13 @@ def record_cmd(out: str, interface: str, channel: str, bitrate: int, data_bitrat
 
 
 @can_group.command("load")
-@click.option("--taxels", "n_taxels", type=int, default=None,
+@click.option("--taxels", "n_taxels", type=COUNT, default=None,
               help="A CySkin-like layout of N taxels (modules of 11 in slots 0-10).")
 @click.option("--taxel-ids", default=None, help="Taxel ids, e.g. '0-10,16-26'.")
 @click.option("--layout", type=click.Path(dir_okay=False), default=None, help="Layout file.")
-@click.option("--bitrate", default=1_000_000, show_default=True, type=int)
-@click.option("--data-bitrate", type=int, default=None, help="CAN FD data-phase bitrate.")
-@click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
+@click.option("--bitrate", default=1_000_000, show_default=True, type=BITRATE)
+@click.option("--data-bitrate", type=BITRATE, default=None, help="CAN FD data-phase bitrate.")
+@click.option("--rate", "rate_hz", type=RATE, default=10.0, show_default=True,
               help="Sweeps per second.")
 @click.option("--format", "format_spec", default="", metavar="SPEC", help="Frame format.")
 @click.option("--format-file", type=click.Path(dir_okay=False), default=None)
@@ -209,7 +220,7 @@ def load_cmd(n_taxels: int | None, taxel_ids: str | None, layout: str | None, bi
     load = bus_load(TaxelMap(ids, fmt), bitrate=bitrate, rate_hz=rate_hz,
                     data_bitrate=data_bitrate)
     if as_json:
-        click.echo(json.dumps({"format": fmt.to_dict(), **load.to_dict()}, indent=2))
+        click.echo(json_text({"format": fmt.to_dict(), **load.to_dict()}, indent=2))
         return
     from rich.console import Console
     from rich.table import Table
@@ -245,7 +256,7 @@ def info_cmd(log: str, taxel_ids: str | None, format_spec: str, format_file: str
     ids = parse_taxel_ids(taxel_ids) if taxel_ids else None
     summary = read_log(Path(log), taxel_ids=ids, fmt=fmt).summary()
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(json_text(summary, indent=2))
         return
     from rich.console import Console
     from rich.table import Table

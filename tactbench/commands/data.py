@@ -2,20 +2,20 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import click
 
-from tactbench.cli import get_registry
+from tactbench.cli import Number, get_registry, json_text
 from tactbench.data.dataset import Dataset
-from tactbench.data.preview import preview_strip, write_png
+from tactbench.data.preview import preview_strip, write_png, written_by_tactbench
 from tactbench.data.store import MANIFEST
 from tactbench.datasets.loading import check_loaded, load_dataset, takes_progress
 from tactbench.datasets.synthetic import generate
 from tactbench.errors import InputError, MissingFileError
 from tactbench.specs import parse_spec
+from tactbench.paths import check_output_file, check_output_folder
 from tactbench.ui import Progress
 
 
@@ -62,7 +62,7 @@ def info_cmd(path: str, as_json: bool) -> None:
     summary = ds.summary()
     summary["path"] = path
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(json_text(summary, indent=2))
         return
     from rich.console import Console
     from rich.table import Table
@@ -96,7 +96,7 @@ def info_cmd(path: str, as_json: bool) -> None:
 
 @data_group.command("synth")
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False),
-              help="Folder to write the dataset to.")
+              help="Folder to write the dataset to (new or empty).")
 @click.option("--users", default=38, show_default=True, type=click.IntRange(1),
               help="Simulated users.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
@@ -105,7 +105,9 @@ def info_cmd(path: str, as_json: bool) -> None:
 @click.option("--positions", default=2, show_default=True, type=click.IntRange(1, 2),
               help="Positions (1: front only, 2: front and side).")
 def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int) -> None:
-    """Generate the synthetic-forearm gesture dataset into a folder."""
+    """Generate the synthetic-forearm gesture dataset into a new or empty folder."""
+    check_output_folder(out)
+
     with Progress() as bars:
         ds = generate(users=users, positions=positions, repetitions=repetitions, seed=seed,
                       progress=bars.callback("simulating gestures"))
@@ -129,13 +131,7 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
     folder) or a registered dataset spec. The folder written is verified by reading it
     back: its content hash must equal the source's.
     """
-    dest = Path(out)
-    if dest.exists() and not dest.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    if dest.is_dir() and any(dest.iterdir()):
-        what = "a tactbench dataset" if (dest / MANIFEST).is_file() else "files"
-        raise InputError(f"--out {out}: already holds {what}; choose a new or empty folder "
-                         f"(nothing was written)")
+    dest = check_output_folder(out, inputs=[src] if Path(src).exists() else [])
     ds = _load(src) if fmt is None else _load_as(fmt, src)
     ds.save(dest)
     back = Dataset.load(dest)  # verifies the stored content hash against the arrays
@@ -152,10 +148,11 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
 @click.option("--sample", "index", default=0, show_default=True, type=click.IntRange(0),
               help="Which sample (0-based).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False),
-              help="PNG file to write.")
+              help="PNG file to write (replaced only when tactbench wrote it).")
 @click.option("--encoder", default=None,
               help="Show this encoder's channels as RGB (e.g. farneback).")
-@click.option("--pixel-mm", default=4.0, show_default=True, type=float,
+@click.option("--pixel-mm", default=4.0, show_default=True,
+              type=Number(minimum=0, exclusive_minimum=True),
               help="Image pixel size in mm (taxels are ~7.5 mm apart).")
 @click.option("--method", default="linear", show_default=True,
               type=click.Choice(["linear", "gaussian"]), help="Imaging method.")
@@ -168,6 +165,8 @@ def preview_cmd(path: str, index: int, out: str, encoder: str | None, pixel_mm: 
     A dataset without a layout is shown as its taxel values over time
     (frames down, taxels across).
     """
+    check_output_file(out, inputs=[path] if Path(path).exists() else [],
+                      ours=written_by_tactbench)
     ds = _load(path)
     enc = None
     if encoder:

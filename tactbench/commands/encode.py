@@ -5,18 +5,17 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 import time
 from pathlib import Path
 
 import click
 
 from tactbench.budget import check_budget
-from tactbench.cli import get_registry
+from tactbench.cli import get_registry, json_text
 from tactbench.contracts import ENCODER
 from tactbench.errors import InputError, MissingFileError
 from tactbench.integrity import read_npy_header
-from tactbench.paths import atomic_write_text
+from tactbench.paths import atomic_write_text, check_output_file, temp_name
 
 
 @click.command("encode")
@@ -25,8 +24,10 @@ from tactbench.paths import atomic_write_text
 @click.option("--input", "-i", "input_path", required=True, type=click.Path(dir_okay=False),
               help="A .npy file with a (T, H, W) sequence: float in [0, 1] or unsigned ints.")
 @click.option("--out", "-o", "out_path", required=True, type=click.Path(dir_okay=False),
-              help="Where to write the float32 (T, C, H, W) .npy; metadata goes beside it "
-                   "as .json.")
+              help="Where to write the float32 (T, C, H, W) .npy (.npy is added when OUT "
+                   "lacks it); metadata goes beside it as .json. An existing file is "
+                   "replaced only when an earlier 'tactbench encode' wrote it; never the "
+                   "input.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None:
     """Encode a (T, H, W) sequence into (T, C, H, W) feature images.
@@ -41,8 +42,10 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     src = Path(input_path)
     if not src.is_file():
         raise MissingFileError(f"{src}: no such file")
-    dst = Path(out_path)
-    _check_writable(dst)
+    dst = output_paths(out_path)
+    meta_path = dst.with_suffix(".json")
+    for target in (dst, meta_path):
+        check_output_file(target, option="--out", inputs=[src], ours=_ours)
     encoder = get_registry(warn=not as_json).build("encoder", spec)
     shape, dtype = _npy_header(src)
     if len(shape) == 3:  # the input, its float32 copy, and the (T, C, H, W) output
@@ -61,7 +64,13 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
         raise InputError(f"{src}: {exc}") from exc
     seconds = time.perf_counter() - t0
     dst.parent.mkdir(parents=True, exist_ok=True)
-    np.save(dst, out)
+    tmp = dst.with_name(temp_name(dst.name))  # written whole, then renamed over dst
+    try:
+        with open(tmp, "wb") as fh:
+            np.save(fh, out)
+        os.replace(tmp, dst)
+    finally:
+        tmp.unlink(missing_ok=True)
     metadata = ENCODER.get(encoder, "metadata")
     meta = metadata() if metadata is not None else {
         "encoder": spec, "channels": list(encoder.channels)}
@@ -69,31 +78,34 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
             "input_dtype": str(seq.dtype), "output": str(dst), "output_shape": list(out.shape),
             "seconds": round(seconds, 4),
             "ms_per_frame": round(1000 * seconds / max(1, out.shape[0]), 4)}
-    meta_path = dst.with_suffix(".json")
     atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
     if as_json:
-        click.echo(json.dumps({**meta, "metadata": str(meta_path)}, indent=2))
+        click.echo(json_text({**meta, "metadata": str(meta_path)}, indent=2))
         return
     click.echo(f"{src} {tuple(seq.shape)} {seq.dtype} → {dst} {tuple(out.shape)} float32 "
                f"[{', '.join(meta.get('channels', []))}] in {seconds:.3f} s; "
                f"metadata: {meta_path}")
 
 
-def _check_writable(dst: Path) -> None:
-    """Refuse, before encoding, an output under a file or in a folder that cannot be
-    written (a probe file is made and removed: permissions alone do not tell)."""
-    folder = dst.absolute().parent
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    if not folder.is_dir():
-        raise InputError(f"--out {dst} cannot be written: {folder} is a file, not a folder")
+def output_paths(out_path: str) -> Path:
+    """The .npy file ``-o`` names: OUT itself when it ends in ``.npy``, else OUT.npy
+    (what numpy would write); this is the name printed and recorded."""
+    dst = Path(out_path)
+    return dst if dst.suffix.lower() == ".npy" else dst.with_name(dst.name + ".npy")
+
+
+def _ours(path: Path) -> bool:
+    """Whether ``path`` (an encoding or its metadata) is an earlier ``tactbench encode``
+    output: the metadata beside it parses and records that encoding as its output."""
+    meta_path = path.with_suffix(".json")
     try:
-        fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
-    except OSError as exc:
-        raise InputError(f"--out {dst} cannot be written: {exc.strerror or exc} "
-                         f"({folder})") from None
-    os.close(fd)
-    os.unlink(probe)
+        with open(meta_path, "rb") as fh:
+            meta = json.loads(fh.read(1 << 20))
+        recorded = Path(meta["output"])
+        return (isinstance(meta, dict) and "spec" in meta
+                and recorded.name == path.with_suffix(".npy").name)
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
 
 
 def _npy_header(src: Path):

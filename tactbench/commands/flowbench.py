@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import platform
 from pathlib import Path
 
 import click
 
-from tactbench.cli import get_registry
-from tactbench.encoders.evaluation import flowbench as fb
-from tactbench.encoders.parallel import default_workers
-from tactbench.ui import Progress
+from tactbench.cli import json_text
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -62,7 +58,7 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
         paths = fb.write_outputs(results, Path(out_dir), meta)
         doc["files"] = {k: str(v) for k, v in paths.items()}
     if as_json:
-        click.echo(json.dumps(doc, indent=2))
+        click.echo(json_text(doc, indent=2))
         return
     from rich.console import Console
     from rich.table import Table

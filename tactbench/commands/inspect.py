@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
+
+from tactbench.cli import json_text
 
 from tactbench.cli import get_registry
 
@@ -59,7 +59,7 @@ def list_cmd(kind: str | None, as_json: bool) -> None:
         if comp.kind == "classifier":
             row["input"] = _classifier_input(comp)
     if as_json:
-        click.echo(json.dumps({"components": rows,
+        click.echo(json_text({"components": rows,
                                "problems": [_problem_dict(p) for p in registry.problems]},
                               indent=2))
         return
@@ -89,7 +89,7 @@ def plugins_cmd(as_json: bool) -> None:
              "source": p.source, "hooks": list(p.hooks),
              "errors": by_plugin.get(p.name, [])} for p in registry.plugins]
     if as_json:
-        click.echo(json.dumps({"plugins": rows}, indent=2))
+        click.echo(json_text({"plugins": rows}, indent=2))
         return
     from rich.console import Console
     from rich.table import Table

@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
-from tactbench.data.imaging import image_shape
-from tactbench.data.layout_io import load_layout, write_layout_csv
-from tactbench.datasets.forearm import cyskin_forearm
+from tactbench.cli import json_text
 
 
 @click.group("layout")
@@ -30,7 +26,7 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
     summary["image_shapes"] = {f"{p:g}": list(image_shape(layout, p))
                                for p in (pixel_mm or (1.0, 4.0, 5.0))}
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(json_text(summary, indent=2))
         return
     w, h = summary["extent_mm"]
     click.echo(f"{file}: {summary['taxels']} taxels in {summary['modules']} modules "

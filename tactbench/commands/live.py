@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from typing import Any
 
 import click
 
-from tactbench.cli import get_registry
+from tactbench.cli import Number, get_registry, json_text
 from tactbench.contracts import SENSOR
 from tactbench.live import LiveClassifier, LiveModel, run_summary
 from tactbench.specs import parse_spec
@@ -70,18 +69,23 @@ def _print_prediction(pred: Any, classes: list[str]) -> None:
 @click.argument("source", required=False)
 @click.option("--interface", default=None, help="cyskin-can: python-can interface.")
 @click.option("--channel", default=None, help="cyskin-can: interface channel.")
-@click.option("--bitrate", type=int, default=None, help="cyskin-can: bitrate, bit/s.")
+@click.option("--bitrate", type=Number(minimum=1, maximum=100_000_000, integer=True),
+              default=None, help="cyskin-can: bitrate, bit/s.")
 @click.option("--format", "format_spec", default=None, help="cyskin-can: frame format spec.")
 @click.option("--layout", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Layout file, when the model's metadata has none.")
 @click.option("--encoder", default=None, help="Override the model's encoder spec.")
-@click.option("-L", "L", type=int, default=None, help="Override the window length L (frames).")
+@click.option("-L", "L", type=Number(minimum=1, maximum=100_000, integer=True),
+              default=None, help="Override the window length L (frames).")
 @_renamed("--length", "-L")
-@click.option("--pixel-mm", type=float, default=None, help="Override the image pixel size.")
+@click.option("--pixel-mm", type=Number(minimum=0, exclusive_minimum=True),
+              default=None, help="Override the image pixel size.")
 @click.option("--warmup", type=click.Choice(["wait", "pad"]), default="wait", show_default=True,
               help="Before L sweeps: predict nothing, or pad with blank frames.")
-@click.option("--max-sweeps", type=int, default=None, help="Stop after N sweeps.")
-@click.option("--threads", type=int, default=1, show_default=True,
+@click.option("--max-sweeps", type=Number(minimum=1, integer=True), default=None,
+              help="Stop after N sweeps.")
+@click.option("--threads", type=Number(minimum=1, maximum=1024, integer=True),
+              default=1, show_default=True,
               help="torch threads: one window at a time gains nothing from more, and the "
                    "bus reader needs a core.")
 @click.option("--jsonl", is_flag=True, help="One JSON object per prediction, as they come.")
@@ -114,10 +118,6 @@ def live_cmd(ctx: click.Context, model_path: str, sensor_spec: str, source: str 
 
 def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, format_spec,
           layout, encoder, L, pixel_mm, warmup, max_sweeps, jsonl, as_json) -> None:
-    from tactbench.cli import get_registry
-    from tactbench.contracts import SENSOR
-    from tactbench.live import LiveClassifier, LiveModel, run_summary
-
     quiet = as_json or jsonl
     registry = get_registry(ctx, warn=not quiet)
     # The model is loaded and verified (checksum, finite weights, classes against the
@@ -144,7 +144,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
                 if as_json:
                     rows.append(pred.to_dict(model.classes))
                 elif jsonl:
-                    click.echo(json.dumps(pred.to_dict(model.classes)))
+                    click.echo(json_text(pred.to_dict(model.classes)))
                     sys.stdout.flush()
                 else:
                     _print_prediction(pred, model.classes)
@@ -152,7 +152,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
         click.echo("live: stopped", err=True)
     summary = run_summary(live, latencies, sensor)
     if as_json:
-        click.echo(json.dumps({"model": model_path, "classes": model.classes,
+        click.echo(json_text({"model": model_path, "classes": model.classes,
                                "L": model.length, "encoder": model.encoder_spec,
                                "predictions": rows, "summary": summary}, indent=2))
     elif not jsonl and latencies:

@@ -9,6 +9,8 @@ from typing import Any, Callable
 
 import click
 
+from tactbench.cli import json_text
+
 from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 from tactbench.runner import Scene, load_scene_file, parse_lengths, run
@@ -195,7 +197,7 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     failed = failed_cells(result.rows)
     if as_json:
         comps = json.loads(paths["json"].read_text())["comparisons"]
-        click.echo(json.dumps({"meta": meta, "summary": summaries, "comparisons": comps,
+        click.echo(json_text({"meta": meta, "summary": summaries, "comparisons": comps,
                                "failed": failed,
                                "files": {k: str(v) for k, v in paths.items()}}, indent=2))
     else:

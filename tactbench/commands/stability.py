@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
 import click
 
-from tactbench.cli import get_registry
-from tactbench.encoders.evaluation import stability as st
-from tactbench.ui import Progress
+from tactbench.cli import json_text
 
 
 @click.command("stability")
@@ -44,7 +41,7 @@ def stability_cmd(specs: tuple[str, ...], cases: tuple[str, ...], as_json: bool)
                  for spec, reason in unbuildable.items() for case in all_cases]
     failed = [o for o in outcomes if not o.passed]
     if as_json:
-        click.echo(json.dumps({
+        click.echo(json_text({
             "passed": not failed, "failed": len(failed), "total": len(outcomes),
             "cases": [{"name": c.name, "description": c.description,
                        "expects_error": c.expect_error} for c in all_cases],

@@ -73,6 +73,15 @@ def preview_strip(dataset: Any, index: int, *, encoder: Any = None, pixel_mm: fl
                              f"taxel values")
         vectors = np.nan_to_num(dataset.normalise(raw), nan=0.0)
         return Preview(taxel_bands(vectors), int(vectors.shape[0]), None, int(raw.shape[1]))
+    from tactbench.data.imaging import image_shape
+    from tactbench.budget import check_budget
+
+    h, w = image_shape(dataset.layout, pixel_mm)
+    t = int(raw.shape[0])
+    c = len(tuple(getattr(encoder, "channels", ()))) if encoder is not None else 0
+    # the images, their encoding, and the RGB strip of the frames shown
+    check_budget(4 * t * h * w * (1 + c) + 12 * min(t, max_frames) * h * w * max(c, 1),
+                 f"previewing sample {index} ({t} frames of {h}×{w} px at {pixel_mm:g} mm)")
     seq = dataset.imager(pixel_mm, method).apply(dataset.normalise(raw))
     np.clip(seq, 0.0, 1.0, out=seq)
     if encoder is None:
@@ -146,5 +155,19 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
 
     check_shape(image, "H W rgb", "image", rgb=3)
     buf = io.BytesIO()
-    imsave(buf, np.clip(image, 0.0, 1.0), format="png")
+    imsave(buf, np.clip(image, 0.0, 1.0), format="png", metadata={"Software": PNG_MARK})
     atomic_write_bytes(path, buf.getvalue())
+
+
+#: The PNG text chunk that marks a picture tactbench wrote (it may replace those only).
+PNG_MARK = "tactbench"
+
+
+def written_by_tactbench(path: str | Path) -> bool:
+    """Whether ``path`` is a PNG file :func:`write_png` wrote (its Software text chunk)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    return head.startswith(b"\x89PNG") and b"tEXtSoftware\x00" + PNG_MARK.encode() in head

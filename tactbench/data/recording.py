@@ -46,9 +46,14 @@ class Recording:
                              f"got {values.shape}")
         if not (np.issubdtype(values.dtype, np.number) or values.dtype == np.bool_):
             raise InputError(f"recording values must be numeric, got dtype {values.dtype}")
+        given = values
         values = values.astype(np.float32, copy=False)
         if np.isinf(values).any():
             t, n = np.argwhere(np.isinf(values))[0]
+            if np.isfinite(given[t, n]):  # finite, but beyond what float32 holds
+                raise InputError(f"recording has a value of {float(given[t, n]):.6g} (first "
+                                 f"at frame {t}, taxel column {n}), beyond the ±3.4e38 a "
+                                 f"float32 reading holds")
             raise InputError(f"recording has infinite values (first at frame {t}, taxel "
                              f"column {n}); use NaN for a missing reading")
         ts = np.asarray(self.timestamps, dtype=np.float64)

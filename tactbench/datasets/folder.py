@@ -45,6 +45,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
 import re
 import zipfile
 from dataclasses import dataclass
@@ -58,7 +59,13 @@ from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.layout_io import load_layout
 from tactbench.data.recording import Recording, Sample
-from tactbench.errors import InputError, MissingFileError, check_positive_float
+from tactbench.errors import (
+    InputError,
+    MissingFileError,
+    TactbenchError,
+    check_number,
+    check_positive_float,
+)
 from tactbench.integrity import read_npy_header, zip_read_errors
 
 SUFFIXES = (".npy", ".npz", ".csv")
@@ -68,6 +75,9 @@ DEFAULT_PITCH_MM = 5.0
 DEFAULT_RATE_HZ = 10.0
 #: A mapping recording → user picked up from the dataset's root when present.
 USERS_FILE = "users.csv"
+#: A taxel pitch is a physical length: between a micrometre and ten metres (1e-300 mm
+#: would reach the imaging as a degenerate triangulation).
+MIN_PITCH_MM, MAX_PITCH_MM = 1e-3, 1e4
 USER_RULES = ("prefix", "folder")
 
 
@@ -93,13 +103,18 @@ def read_array_file(path: Path, *, timestamp_column: str | int | None = None
                     ) -> tuple[np.ndarray, np.ndarray | None]:
     """``(values, timestamps or None)`` of one ``.npy``, ``.npz`` or ``.csv`` file."""
     suffix = path.suffix.lower()
-    if suffix == ".npy":
-        with path.open("rb") as fh:
-            return _read_npy(fh, path, path.stat().st_size, "the file"), None
-    if suffix == ".npz":
-        return _read_npz(path)
-    if suffix == ".csv":
-        return _read_csv(path, timestamp_column)
+    try:
+        if suffix == ".npy":
+            with path.open("rb") as fh:
+                return _read_npy(fh, path, path.stat().st_size, "the file"), None
+        if suffix == ".npz":
+            return _read_npz(path)
+        if suffix == ".csv":
+            return _read_csv(path, timestamp_column)
+    except OSError as exc:  # no permission, a FIFO, an I/O error: the file, one line
+        if isinstance(exc, TactbenchError):
+            raise
+        raise InputError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     raise InputError(f"{path}: unknown suffix {suffix!r}; expected one of {', '.join(SUFFIXES)}")
 
 
@@ -169,8 +184,10 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.n
 
 def _read_csv(path: Path, timestamp_column: str | int | None
               ) -> tuple[np.ndarray, np.ndarray | None]:
-    # a CSV cell of a number is ≥ 2 bytes ("0,"), and becomes 8 bytes as float64
-    check_budget(path.stat().st_size * 4, f"reading {path}")
+    """One frame per line; parsed a line at a time into one array (never a list of
+    every field as text, which costs ~50 bytes a field)."""
+    size = path.stat().st_size
+    check_budget(2 * size, f"reading {path}")  # its bytes and their text
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -178,22 +195,42 @@ def _read_csv(path: Path, timestamp_column: str | int | None
     if "\x00" in text:
         raise InputError(f"{path}: not a text CSV file (it holds NUL bytes; binary data?)")
     lines = [(n, line) for n, line in enumerate(text.splitlines(), 1) if line.strip()]
+    del text
     if not lines:
         raise InputError(f"{path}: empty CSV file (expected one frame per row)")
     first = lines[0][1]
     delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
-    rows = [(n, [c.strip() for c in row]) for (n, _), row in
-            zip(lines, csv.reader([line for _, line in lines], delimiter=delimiter))]
+
+    line_of = {id(line): n for n, line in lines}
+
+    def fields(line: str) -> list[str]:
+        try:
+            return [c.strip() for c in next(csv.reader([line], delimiter=delimiter), [])]
+        except csv.Error as exc:  # a field beyond the csv module's limit, a stray quote
+            raise InputError(f"{path}, line {line_of.get(id(line), '?')}: not a CSV row "
+                             f"({exc})") from None
+
+    # a delimiter ending every line is no column
+    trailing = all(line.rstrip().endswith(delimiter) for _, line in lines)
+
+    def row_of(line: str) -> list[str]:
+        row = fields(line)
+        return row[:-1] if trailing and row and row[-1] == "" else row
+
     header = None
-    if any(not is_number(c) for c in rows[0][1]):
-        header = rows[0][1]
-        rows = rows[1:]
-        if not rows:
+    start = 0
+    if is_header(row_of(first)):
+        header = row_of(first)
+        start = 1
+        if len(lines) == 1:
             raise InputError(f"{path}: only a header row, no frames")
-    width = len(header) if header is not None else len(rows[0][1])
+    width = len(header) if header is not None else len(row_of(first))
     ts_col = _timestamp_index(timestamp_column, header, width, path)
-    out = np.empty((len(rows), width), dtype=np.float64)
-    for k, (lineno, row) in enumerate(rows):
+    check_budget(8 * width * (len(lines) - start) + 2 * size,
+                 f"reading {path} ({len(lines) - start} rows × {width} fields)")
+    out = np.empty((len(lines) - start, width), dtype=np.float64)
+    for k, (lineno, line) in enumerate(lines[start:]):
+        row = row_of(line)
         if len(row) != width:
             raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {width} "
                              f"({'as the header' if header is not None else 'as the first row'};"
@@ -227,6 +264,19 @@ def _timestamp_index(column: str | int | None, header: list[str] | None, width: 
     raise InputError(f"{path}: no column {column!r} in the {where} for timestamp_column")
 
 
+#: Fields that mean "no reading" in a data row, never a column name.
+MISSING_MARKERS = frozenset({"", "-", "--", "?", "na", "n/a", "nan", "null", "none"})
+
+
+def is_header(fields: list[str]) -> bool:
+    """Whether a CSV's first row is a header: every field a name (not blank, not a
+    missing-reading marker such as ``-`` or ``NA``) and at least one not a number.
+    A first row with a blank or ``-`` field is a data row, and is refused like the same
+    field on any other line; it is never dropped as a header."""
+    return (all(f.strip().lower() not in MISSING_MARKERS for f in fields)
+            and any(not is_number(f) for f in fields))
+
+
 def is_number(text: str) -> bool:
     """Whether ``text`` reads as a float (``nan`` and ``inf`` do)."""
     try:
@@ -258,6 +308,10 @@ def find_recordings(root: Path, *, users: str | None = None
                          f".npy|.npz|.csv)")
     found: dict[str, list[Path]] = {}
     for folder in folders:
+        _check_name(folder, "a class folder's name is its class name")
+        if not os.access(folder, os.R_OK | os.X_OK):
+            raise InputError(f"{folder}: cannot read this class folder (permission "
+                             f"denied)")
         files = []
         for p in folder.rglob("*"):
             if not p.is_file() or p.suffix.lower() not in SUFFIXES \
@@ -270,6 +324,7 @@ def find_recordings(root: Path, *, users: str | None = None
             if users != "folder" and depth != 1:
                 raise InputError(f"{p}: recordings sit directly in their class folder "
                                  f"(use users=folder for ROOT/<class>/<user>/<recording>)")
+            _check_name(p, "recordings are named in results")
             files.append(p)
         if not files:
             raise InputError(f"{folder}: empty class folder (no .npy, .npz or .csv "
@@ -277,6 +332,20 @@ def find_recordings(root: Path, *, users: str | None = None
         found[folder.name] = sorted(files, key=lambda p: natural_key(p.relative_to(root)
                                                                       .as_posix()))
     return found
+
+
+def _check_name(path: Path, why: str) -> None:
+    """Refuse a name that is not valid UTF-8 (Python keeps its bytes as surrogates):
+    results, reports and CSV files could not be written with it, after the work."""
+    try:
+        path.name.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(path.name).decode("utf-8", "backslashreplace")
+        raise InputError(f"{path.parent / shown}: the name is not valid UTF-8 text "
+                         f"({why}); rename it") from None
+    if any(ord(c) < 32 or ord(c) == 127 for c in path.name):  # a newline breaks reports
+        raise InputError(f"{path.parent / ascii(path.name)[1:-1]}: the name holds a "
+                         f"control character (a newline, a tab; {why}); rename it")
 
 
 def _order_classes(found: dict[str, list[Path]], classes: str | None, root: Path) -> list[str]:
@@ -328,6 +397,9 @@ def _users_from_csv(path: Path, files: dict[str, list[Path]], root: Path) -> dic
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text CSV file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the users file ({exc.strerror or exc})"
+                         ) from None
     rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
     if not rows:
         raise InputError(f"{path}: empty users file (expected a header recording,user)")
@@ -342,14 +414,24 @@ def _users_from_csv(path: Path, files: dict[str, list[Path]], root: Path) -> dic
         if len(row) != len(head):
             raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {len(head)}")
         rec = row[i_rec].strip().replace("\\", "/")
-        by_key[rec] = (row[i_user].strip(), None if i_cls is None else row[i_cls].strip(),
-                       lineno)
+        entry = (row[i_user].strip(), None if i_cls is None else row[i_cls].strip(), lineno)
+        if rec in by_key and by_key[rec][:2] != entry[:2]:
+            raise InputError(f"{path}, line {lineno}: recording {rec!r} is listed again "
+                             f"(first on line {by_key[rec][2]}) with another "
+                             f"{'user' if by_key[rec][0] != entry[0] else 'class'}; "
+                             f"list each recording once")
+        by_key.setdefault(rec, entry)
     out: dict[Path, str] = {}
     for cls, paths in files.items():
         for p in paths:
             rel = p.relative_to(root).as_posix()
             keys = (rel, rel[: -len(p.suffix)], p.name, p.stem)
-            hit = next((by_key[k] for k in keys if k in by_key), None)
+            hits = [by_key[k] for k in dict.fromkeys(keys) if k in by_key]
+            if len({h[:2] for h in hits}) > 1:
+                raise InputError(f"{path}, lines {hits[0][2]} and {hits[1][2]}: {rel} is "
+                                 f"listed twice with different users or classes; list "
+                                 f"each recording once")
+            hit = hits[0] if hits else None
             if hit is None:
                 raise InputError(f"{p}: not listed in {path} (a row recording,user with "
                                  f"{rel!r} or {p.stem!r})")
@@ -386,7 +468,7 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
     after each file.
     """
     root = Path(root)
-    pitch = check_positive_float(pitch_mm, "pitch_mm")
+    pitch = check_number(pitch_mm, "pitch_mm (mm)", minimum=MIN_PITCH_MM, maximum=MAX_PITCH_MM)
     rate_hz = DEFAULT_RATE_HZ if rate is None else check_positive_float(rate, "rate")
     if not users_sep:
         raise InputError("users_sep must not be empty")
@@ -398,6 +480,7 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
         raise InputError("give grid= or layout=, not both")
 
     total = sum(len(v) for v in found.values())
+    _check_total_budget(root, [p for cls in class_names for p in found[cls]])
     reads: list[tuple[int, _Read]] = []
     first: _Read | None = None
     done = 0
@@ -414,6 +497,13 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
                 progress(done, total)
     assert first is not None  # find_recordings refuses an empty tree
 
+    if grid_shape is not None and len(first.values.shape) == 3:
+        raise InputError(f"{first.path}: grid= is for (T, N) taxel vectors; these "
+                         f"recordings are (T, H, W) grids already")
+    if timestamp_column is not None and not any(
+            p.suffix.lower() == ".csv" for ps in found.values() for p in ps):
+        raise InputError(f"timestamp_column= names a CSV column, and {root} holds no CSV "
+                         f"recordings (an .npz carries its timestamps as a member)")
     frame_shape = first.values.shape[1:]
     if len(frame_shape) == 1 and grid_shape is not None:
         frame_shape = grid_shape
@@ -460,6 +550,51 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
                    description=f"{len(samples)} recordings ({kind}; {timing}) from {root}")
 
 
+def _check_total_budget(root: Path, paths: list[Path]) -> None:
+    """The memory budget counts the whole folder, not a file at a time: every recording
+    is held while the dataset is built (its values and their float32 copy)."""
+    from tactbench.budget import check_budget
+
+    need = sum(_estimated_bytes(p) for p in paths)
+    check_budget(need, f"reading the {len(paths)} recordings under {root}")
+
+
+def _estimated_bytes(path: Path) -> int:
+    """Memory a recording takes once read: its numbers (from the npy headers; ~4 bytes a
+    CSV field) and their float32 copy. 0 where the file cannot tell (its reader then
+    reports the problem)."""
+    from tactbench.integrity import read_npy_header
+
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".csv":
+            return int(path.stat().st_size) * 6  # ≥ 2 bytes a field → 8 + 4 bytes
+        if suffix == ".npy":
+            with path.open("rb") as fh:
+                return _held(read_npy_header(fh), path.stat().st_size)
+        if suffix == ".npz":
+            total = 0
+            with zipfile.ZipFile(path) as zf:
+                for info in zf.infolist():
+                    if info.filename.endswith(".npy"):
+                        with zf.open(info) as fh:
+                            total += _held(read_npy_header(fh), info.file_size)
+            return total
+    except Exception:  # noqa: BLE001 — an estimate only; the reader names the problem
+        return 0
+    return 0
+
+
+def _held(header: tuple[Any, ...], available: int) -> int:
+    """Bytes an npy array and its float32 copy take, when its file can hold it (a header
+    claiming more is the reader's to refuse, naming the file)."""
+    shape, _, dtype = header
+    count = math.prod(shape)
+    if count * dtype.itemsize > available:
+        return 0
+    return count * (dtype.itemsize + 4)
+
+
 def _check_frames(item: _Read, first: _Read | None, grid_shape: tuple[int, int] | None) -> None:
     shape = item.values.shape
     if item.values.ndim not in (2, 3):
@@ -499,8 +634,13 @@ def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise InputError(f"{what} must be a finite number, got {v!r}")
     if hi <= lo:
-        if vmin is not None and vmax is not None:
-            raise InputError(f"vmax ({vmax}) must be greater than vmin ({vmin})")
+        if vmin is not None or vmax is not None:  # a bound the user gave is never replaced
+            given = (f"vmax ({vmax}) must be greater than vmin ({vmin})"
+                     if vmin is not None and vmax is not None else
+                     f"vmax ({vmax}) must be greater than the smallest reading ({lo:g})"
+                     if vmax is not None else
+                     f"vmin ({vmin}) must be less than the largest reading ({hi:g})")
+            raise InputError(given)
         hi = lo + 1.0  # constant data: any scale maps it to one value
     return f"fixed:offset={float(lo)!r},scale={float(hi - lo)!r}"
 
@@ -518,7 +658,8 @@ class FolderDataset:
                  normalisation: str | None = None, classes: str | None = None,
                  name: str | None = None) -> None:
         self.path = str(path)
-        self.options = dict(pitch_mm=check_positive_float(pitch_mm, "folder option pitch_mm"),
+        self.options = dict(pitch_mm=check_number(pitch_mm, "folder option pitch_mm (mm)",
+                                                  minimum=MIN_PITCH_MM, maximum=MAX_PITCH_MM),
                             layout=layout, timestamp_column=timestamp_column, users=users,
                             users_sep=str(users_sep), grid=grid, vmin=vmin, vmax=vmax,
                             normalisation=normalisation, classes=classes, name=name,

@@ -71,20 +71,30 @@ def load_path(path: str | Path, *, progress: Callable[..., None] | None = None) 
     return read_cost_csv(path)
 
 
-def _looks_like_path(text: str) -> bool:
-    return ("/" in text or "\\" in text or text.startswith(".")
-            or Path(text).suffix.lower() in (".txt", ".csv", ".json"))
+def is_path_spec(text: str) -> bool:
+    """Whether ``text`` names a file or folder rather than a registered dataset.
+
+    The rule: **a name is a name, a path says it is one.** Text with a ``/`` (or ``\\``),
+    or starting with ``.`` or ``~``, or ending in a data suffix (``.txt``, ``.csv``,
+    ``.json``, a CAN log's) is a path. A bare word is a registered dataset's name (with
+    options after ``:``); only a bare word that names no registered dataset is read as a
+    file or folder of the working folder, so a folder named like a registered dataset
+    never replaces it: write ``./NAME`` to read the folder.
+    """
+    head = text.split(":", 1)[0] if ":" in text.split("/")[0] else text
+    return ("/" in head or "\\" in head or head.startswith((".", "~"))
+            or Path(head).suffix.lower() in (".txt", ".csv", ".json", *CAN_LOG_SUFFIXES))
 
 
 def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
                  progress: Callable[..., None] | None = None) -> Dataset:
-    """A :class:`Dataset` from a path or a registered dataset spec.
+    """A :class:`Dataset` from a path or a registered dataset spec (see
+    :func:`is_path_spec` for which is which).
 
-    An existing path is read by :func:`load_path`. Anything else is a spec
-    ``"name:key=value,..."`` built through the registry
-    (``registry.build("dataset", spec).load()``; the installed registry when
-    ``registry`` is ``None``). A spec that names no registered dataset and
-    looks like a path reports the missing path.
+    A path is read by :func:`load_path`. A spec ``"name:key=value,..."`` is built
+    through the registry (``registry.build("dataset", spec).load()``; the installed
+    registry when ``registry`` is ``None``). A bare word naming no registered dataset
+    but an existing file or folder is read from there.
 
     ``progress(done, total)`` is handed to the dataset's ``load`` when that takes a
     ``progress`` argument (the contract's ``load()`` need not: see
@@ -92,18 +102,49 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
     """
     text = str(spec_or_path)
     path = Path(text).expanduser()
-    if path.exists():
-        return load_path(path, progress=progress)
-    if isinstance(spec_or_path, Path) or _looks_like_path(text) and ":" not in text.split("/")[0]:
+    if isinstance(spec_or_path, Path) or is_path_spec(text):
+        if path.exists():
+            return load_path(path, progress=progress)
         raise MissingFileError(f"{text}: no such file or folder (and not a dataset name)")
     if registry is None:
         registry = load_registry()
+    name = text.split(":", 1)[0].strip()
+    if name not in registry.names("dataset") and path.exists():
+        return load_path(path, progress=progress)  # a bare word naming a local folder
+    if path.exists():
+        import logging
+
+        logging.getLogger("tactbench.datasets").warning(
+            "tactbench: warning: %r names the registered dataset %r; the %s %s here is "
+            "not read (write ./%s to read it)", text, name,
+            "folder" if path.is_dir() else "file", text, text)
     source = registry.build("dataset", text)
     if progress is not None and takes_progress(source.load):
         dataset = source.load(progress=progress)
     else:
         dataset = source.load()
     return check_loaded(dataset, text)
+
+
+def check_informative(dataset: Dataset) -> None:
+    """Refuse a dataset that holds nothing to classify, before any work: every reading
+    missing (NaN), or every reading the same value. A classifier would report chance
+    accuracy as if it were a finding."""
+    import numpy as np
+
+    lo, hi, seen = np.inf, -np.inf, 0
+    for sample in dataset.samples:
+        values = np.asarray(sample.recording.values)
+        finite = values[np.isfinite(values)]
+        if finite.size:
+            seen += finite.size
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+    if seen == 0:
+        raise InputError(f"dataset '{dataset.name}': every reading is missing (NaN); "
+                         f"there is nothing to classify")
+    if lo == hi:
+        raise InputError(f"dataset '{dataset.name}': every reading is {lo:g}; there is "
+                         f"nothing to classify")
 
 
 def check_loaded(dataset: Any, spec: str) -> Dataset:

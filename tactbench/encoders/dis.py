@@ -25,6 +25,8 @@ class DIS(FlowEncoder):
     version = "1"
     min_size = 16
 
+    image_sized = ("patch_size",)
+
     def __init__(self, *, preset: str = "medium", patch_size: int | None = None,
                  variational_iterations: int | None = None,
                  max_flow: float = DEFAULT_MAX_FLOW,
@@ -35,7 +37,8 @@ class DIS(FlowEncoder):
                            else check_positive_int(patch_size, "patch_size", minimum=2))
         self.variational_iterations = (
             None if variational_iterations is None
-            else check_positive_int(variational_iterations, "variational_iterations", minimum=0))
+            else check_positive_int(variational_iterations, "variational_iterations", minimum=0,
+                                    maximum=10_000))
 
     def _make(self):
         import cv2

@@ -8,6 +8,13 @@ from tactbench.encoders.flow import DEFAULT_MAX_FLOW, DEFAULT_MIN_MAGNITUDE, Flo
 from tactbench.errors import InputError, check_positive_float, check_positive_int
 
 
+#: Upper bounds that follow from no image (a pyramid of 30 halvings is below one pixel
+#: for any image; iterations beyond thousands are a typo, and each costs a full pass).
+MAX_LEVELS = 30
+MAX_ITERATIONS = 10_000
+MAX_MARGIN = 1024
+
+
 class Farneback(FlowEncoder):
     """Pressure, flow magnitude and direction from ``cv2.calcOpticalFlowFarneback``.
 
@@ -37,6 +44,8 @@ class Farneback(FlowEncoder):
     name = "farneback"
     version = "2"
 
+    image_sized = ("winsize",)
+
     def __init__(self, *, pyr_scale: float = 0.5, levels: int = 3, winsize: int = 15,
                  iterations: int = 3, poly_n: int = 5, poly_sigma: float = 1.2,
                  gaussian: bool = False, margin: int = 8, max_flow: float = DEFAULT_MAX_FLOW,
@@ -45,15 +54,16 @@ class Farneback(FlowEncoder):
         self.pyr_scale = check_positive_float(pyr_scale, "pyr_scale")
         if self.pyr_scale >= 1:
             raise InputError(f"pyr_scale must lie in (0, 1), got {pyr_scale!r}")
-        self.levels = check_positive_int(levels, "levels", minimum=0)
+        self.levels = check_positive_int(levels, "levels", minimum=0, maximum=MAX_LEVELS)
         self.winsize = check_positive_int(winsize, "winsize")
-        self.iterations = check_positive_int(iterations, "iterations")
+        self.iterations = check_positive_int(iterations, "iterations",
+                                             maximum=MAX_ITERATIONS)
         if poly_n not in (5, 7):
             raise InputError(f"poly_n must be 5 or 7, got {poly_n!r}")
         self.poly_n = poly_n
         self.poly_sigma = check_positive_float(poly_sigma, "poly_sigma")
         self.gaussian = bool(gaussian)
-        self.margin = check_positive_int(margin, "margin", minimum=0)
+        self.margin = check_positive_int(margin, "margin", minimum=0, maximum=MAX_MARGIN)
 
     def _prepare(self, images: np.ndarray) -> np.ndarray:
         return images * np.float32(255.0)

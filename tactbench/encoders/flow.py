@@ -157,6 +157,11 @@ class FlowEncoder(Encoder):
     min_size: ClassVar[int] = 1
     #: True for methods that process many pairs in one call (see :meth:`_pairs_per_call`).
     batched: ClassVar[bool] = False
+    #: Options that are sizes in pixels of the working image (windows, patches, filter
+    #: sizes): one larger than the image is an error naming both, checked at planning
+    #: (:meth:`check_image_size`) and before each encoding; the method would otherwise
+    #: compute for minutes over padding.
+    image_sized: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, *, max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
@@ -181,6 +186,7 @@ class FlowEncoder(Encoder):
         if prev.shape[0] == 0:
             return np.zeros((*prev.shape, 2), dtype=np.float32)
         size = prev.shape[1:]
+        self.check_image_size(*size)
         return self._finish(self._flow(self._to_grid(prev), self._to_grid(curr)), size)
 
     def metadata(self) -> dict[str, Any]:
@@ -193,10 +199,32 @@ class FlowEncoder(Encoder):
             "flow": "forward, from I_{k-1} to I_k, I_{-1} = 0",
         }
 
+    def check_image_size(self, h: int, w: int) -> None:
+        """Refuse an option of :attr:`image_sized` larger than an ``h × w`` image (at the
+        working size, after ``downscale``, with any padding the method adds), naming
+        both. Values up to the option's default are always accepted: the methods handle
+        images smaller than their default windows."""
+        import inspect
+
+        from tactbench.errors import check_at_most
+
+        hs, ws = self._grid_size((h, w))
+        side = max(hs, ws, self.min_size) + 2 * int(getattr(self, "margin", 0) or 0)
+        defaults = inspect.signature(type(self).__init__).parameters
+        for name in self.image_sized:
+            value = getattr(self, name, None)
+            default = getattr(defaults.get(name), "default", None)
+            limit = max(side, default if isinstance(default, (int, float)) else 0)
+            if value is not None:
+                where = f" at downscale {self.downscale}" if self.downscale > 1 else ""
+                check_at_most(value, limit, f"{self.name or type(self).__name__} {name}",
+                              f"the image ({hs}×{ws} px{where}); use at most {limit:g}")
+
     # ------------------------------------------------------------------ internals
 
     def _encode(self, seq: np.ndarray) -> np.ndarray:
         t, h, w = seq.shape
+        self.check_image_size(h, w)
         grid = self._to_grid(np.concatenate([np.zeros_like(seq[:1]), seq]))
         out = np.empty((t, 3, h, w), dtype=np.float32)
         out[:, 0] = seq

@@ -70,13 +70,15 @@ class KorniaFlow(FlowEncoder):
     min_size = 4
     batched = True
 
+    image_sized = ("window",)
+
     def __init__(self, *, levels: int = 4, warps: int = 1, window: float = 3.0,
                  reg: float = 1e-5, device: str = "auto", batch: int = 64, threads: int = 1,
                  max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
-        self.levels = check_positive_int(levels, "levels")
-        self.warps = check_positive_int(warps, "warps")
+        self.levels = check_positive_int(levels, "levels", maximum=30)
+        self.warps = check_positive_int(warps, "warps", maximum=10_000)
         self.window = check_positive_float(window, "window (Gaussian σ, px)")
         self.reg = check_positive_float(reg, "reg", allow_zero=True)
         self.device = check_choice(device, "device", ["auto", "cpu", "cuda"])

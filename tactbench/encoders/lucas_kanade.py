@@ -59,13 +59,15 @@ class LucasKanade(FlowEncoder):
     version = "1"
     min_size = 2
 
+    image_sized = ("winsize", "step")
+
     def __init__(self, *, winsize: int = 21, levels: int = 3, iterations: int = 10,
                  step: int = 2, min_eigen: float = 1e-4, max_flow: float = DEFAULT_MAX_FLOW,
                  min_magnitude: float = DEFAULT_MIN_MAGNITUDE, downscale: int = 1) -> None:
         super().__init__(max_flow=max_flow, min_magnitude=min_magnitude, downscale=downscale)
         self.winsize = check_positive_int(winsize, "winsize", minimum=3)
-        self.levels = check_positive_int(levels, "levels", minimum=0)
-        self.iterations = check_positive_int(iterations, "iterations")
+        self.levels = check_positive_int(levels, "levels", minimum=0, maximum=30)
+        self.iterations = check_positive_int(iterations, "iterations", maximum=10_000)
         self.step = check_positive_int(step, "step")
         self.min_eigen = check_positive_float(min_eigen, "min_eigen")
 

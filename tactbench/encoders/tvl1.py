@@ -25,6 +25,8 @@ class TVL1(FlowEncoder):
     name = "tvl1"
     version = "1"
 
+    image_sized = ("median",)
+
     def __init__(self, *, tau: float = 0.25, lam: float = 0.15, theta: float = 0.3,
                  scales: int = 5, warps: int = 5, epsilon: float = 0.01,
                  iterations: int = 1, inner_iterations: int = 10, median: int = 5,
@@ -34,11 +36,12 @@ class TVL1(FlowEncoder):
         self.tau = check_positive_float(tau, "tau")
         self.lam = check_positive_float(lam, "lam")
         self.theta = check_positive_float(theta, "theta")
-        self.scales = check_positive_int(scales, "scales")
-        self.warps = check_positive_int(warps, "warps")
+        self.scales = check_positive_int(scales, "scales", maximum=30)
+        self.warps = check_positive_int(warps, "warps", maximum=10_000)
         self.epsilon = check_positive_float(epsilon, "epsilon")
-        self.iterations = check_positive_int(iterations, "iterations")
-        self.inner_iterations = check_positive_int(inner_iterations, "inner_iterations")
+        self.iterations = check_positive_int(iterations, "iterations", maximum=10_000)
+        self.inner_iterations = check_positive_int(inner_iterations, "inner_iterations",
+                                                   maximum=10_000)
         self.median = check_positive_int(median, "median", minimum=0)
 
     def _prepare(self, images: np.ndarray) -> np.ndarray:

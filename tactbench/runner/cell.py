@@ -29,7 +29,7 @@ from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
-from tactbench.runner.system import MemoryTracker, host, now, versions
+from tactbench.runner.system import MemoryTracker, host, machine, now, versions
 from tactbench.seeds import derive_seed
 
 if TYPE_CHECKING:
@@ -164,6 +164,7 @@ def failed_row(job: CellJob, exc: BaseException,
         "memory": memory.as_dict(),
         "versions": versions(),
         "host": host(),
+        "machine": machine(),
         "finished": now(),
     }
 
@@ -261,6 +262,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "threads": job.threads,
         "versions": versions(),
         "host": host(),
+        "machine": machine(),
         "finished": now(),
     }
 

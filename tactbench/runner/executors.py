@@ -64,14 +64,16 @@ def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    pool = ProcessPoolExecutor(max_workers=workers,
+    from tactbench.runner.system import ignore_interrupts, stop_workers
+
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts,
                                mp_context=multiprocessing.get_context("spawn"))
     try:
         futures = {pool.submit(run_cell, job): job for job in jobs}
         for fut in as_completed(futures):
             finish(_row(fut, futures[fut]))
     except BaseException:  # Ctrl-C or a failing finish(): do not wait for the queue
-        pool.shutdown(wait=False, cancel_futures=True)
+        stop_workers(pool)  # Ctrl-C is the parent's: workers end quietly, not mid-cell
         raise
     pool.shutdown()
 

@@ -72,6 +72,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     go on; ``on_row(row)`` is called with each row as it is stored.
     """
     start = time.perf_counter()
+    cache = cache or EncodingCache()  # an unusable cache folder: before any work
     memory = MemoryTracker()  # which of this process's steps sets its peak memory
     with Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
@@ -80,11 +81,12 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
         store.clean()
+        claim = store.claim(c.key for c in p.cells)  # one grid per out folder
         models = Path(scene.out) / "models" if scene.save_models else None
         pending = [c for c in p.cells if scene.rerun
                    or not store.finished(c.key, p.identities[c.key])
                    or (models and not _model_is_sound(models, p, c))]
-        folders = ensure_encodings(p, cache or EncodingCache(), pending, bars)
+        folders = ensure_encodings(p, cache, pending, bars)
         memory.step("encode")
         jobs = make_jobs(p, pending, folders, models)
         run_meta = {"command": " ".join(sys.argv), "git": git_revision(),
@@ -92,12 +94,13 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
         def finish(row: dict[str, Any]) -> None:
             row["run"] = run_meta
-            store.put(row)
+            row = store.put(row)  # as stored: a row too large to keep is a failed one
             if on_row is not None:
                 on_row(row)
 
         if jobs:
             execute(scene, jobs, finish, bars, memory)
     rows = store.rows(c.key for c in p.cells)
+    claim.unlink(missing_ok=True)
     return RunResult(p, rows, computed=len(pending), skipped=len(p.cells) - len(pending),
                      seconds=time.perf_counter() - start)

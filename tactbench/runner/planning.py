@@ -26,7 +26,7 @@ from tactbench.contracts import CLASSIFIER, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
 from tactbench.data.splits import canonical_split, make_splits, parse_split
 from tactbench.data.windows import TEST_WINDOWS
-from tactbench.datasets.loading import load_dataset
+from tactbench.datasets.loading import check_informative, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import (
     InputError,
@@ -38,6 +38,7 @@ from tactbench.profiles import PRECISIONS, get_profile, profile_options
 from tactbench.budget import check_budget
 from tactbench.specs import parse_spec
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
+from tactbench.runner.system import check_scheduler
 from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
@@ -171,6 +172,9 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
     refused, never overwritten.
     """
     out = Path(out)
+    from tactbench.paths import check_not_in_cache
+
+    check_not_in_cache(out)  # 'cache clear' would delete the results
     try:
         if out.exists():
             if not out.is_dir():
@@ -229,6 +233,8 @@ def check_scene(scene: Scene) -> None:
                          f"{scene.split!r} trains one per fold; save models with "
                          f"--split users or paper")
     check_choice(scene.executor, "executor", EXECUTORS)
+    if scene.scheduler:
+        check_scheduler(scene.scheduler)
     if not scene.encoders or not scene.classifiers or not scene.L or not scene.seeds:
         raise InputError("a run needs at least one encoder, classifier, L and seed")
     bad_l = [n for n in scene.L if int(n) < 1]
@@ -317,6 +323,9 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
         pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
         h, w = image_shape(dataset.layout, pixel_mm)
         frame_shape["images"] = (h, w)
+        for obj in encoders.values():  # windows larger than the image: before any work
+            if hasattr(obj, "check_image_size"):
+                obj.check_image_size(h, w)
         what = f"tactile images at {pixel_mm:g} mm ({h}×{w} px)"
         check_budget(imager_build_bytes(dataset.layout, pixel_mm, method),
                      f"the imaging operator for {what}")
@@ -420,6 +429,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     classifier_specs = list(frame_ranks)
 
     dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
+    check_informative(dataset)  # all-NaN or constant: nothing to score
     has_layout = dataset.layout is not None
     if scene.input == "images" and not has_layout:
         raise InputError(f"--input images: dataset '{dataset.name}' has no taxel layout to "

@@ -186,12 +186,31 @@ class ResultStore:
         row = self.get(key, identity)
         return row is not None and row_status(row) == OK
 
-    def put(self, row: dict[str, Any]) -> None:
-        """Write ``row`` (with its ``key``) and its checksum, atomically."""
+    def put(self, row: dict[str, Any]) -> dict[str, Any]:
+        """Write ``row`` (with its ``key``) and its checksum, atomically; returns the row
+        as stored. A row too large to be read back (:data:`ROW_MAX_BYTES`, even as
+        compact JSON: a confusion of thousands of classes) is stored as a failed row
+        saying so, so that the run reports it and exits 1 instead of dropping it."""
         # the checksum of the row as it will be read back (tuples as lists, ...)
         row = json.loads(json.dumps({k: v for k, v in row.items() if k != "checksum"}))
         row["checksum"] = row_checksum(row)
-        atomic_write_text(self.path(row["key"]), json.dumps(row, indent=2))
+        text = json.dumps(row, indent=2)
+        if len(text) > ROW_MAX_BYTES // 4:  # rows are a few kB: large ones compact
+            text = json.dumps(row, separators=(",", ":"))
+        if len(text.encode()) > ROW_MAX_BYTES:
+            big = len(text.encode())
+            row = {k: v for k, v in row.items() if k not in (
+                "checksum", "confusion", "per_class_accuracy", "test_predictions",
+                "accuracy", "classes") and len(json.dumps(v)) < 4096}
+            row.update(status=FAILED, error={
+                "type": "RowTooLargeError", "traceback": "",
+                "message": f"the cell's result row is {big} bytes, over the "
+                           f"{ROW_MAX_BYTES}-byte limit of a cell row (too many classes "
+                           f"or test sequences to store); nothing was kept"})
+            row["checksum"] = row_checksum(row)
+            text = json.dumps(row, indent=2)
+        atomic_write_text(self.path(row["key"]), text)
+        return row
 
     def clean(self) -> list[Temporary]:
         """Remove temporary row files whose writing process is gone; returns them."""
@@ -200,3 +219,81 @@ class ResultStore:
     def rows(self, keys: Iterable[str]) -> list[dict[str, Any]]:
         """The stored rows of ``keys``, in that order, skipping cells without a sound one."""
         return [row for key in keys if (row := self.get(key)) is not None]
+
+    # ------------------------------------------------------- runs sharing an out folder
+
+    def claim(self, keys: Iterable[str]) -> Path:
+        """Refuse a grid that would drop another grid's cells from the report of this out
+        folder, then mark the folder as used by this run (delete the returned file when
+        the run ends; a claim whose process is gone is ignored, then cleaned).
+
+        The rule: one out folder holds one grid, and a run may extend it (more seeds,
+        L, encoders) but not leave out cells already there: those are another grid's,
+        whose report this run would replace. Two runs at once must plan the same grid;
+        of two different ones, the later is refused, naming the first.
+        """
+        import os
+
+        from tactbench.errors import InputError
+        from tactbench.paths import parse_temporary, temp_name
+
+        keys = sorted(set(keys))
+        planned = set(keys)
+        out = self.out
+        stray = sorted(p.stem for p in self.cells.glob("*.json")
+                       if not p.name.startswith(".") and p.stem not in planned) \
+            if self.cells.is_dir() else []
+        if stray:
+            first = _describe(self.path(stray[0]))
+            raise InputError(f"out folder {out} holds {len(stray)} cell(s) of another grid "
+                             f"({first}) that this run does not plan, and its report "
+                             f"would leave them out; give a new --out, or a grid that "
+                             f"includes them")
+        self.cells.mkdir(parents=True, exist_ok=True)
+        mine = self.cells / temp_name("run")
+        from tactbench.paths import atomic_write_text as write
+        write(mine, json.dumps({"keys": keys, "command": _command()}))
+        for claim in sorted(self.cells.glob(".run.tmp-*"), key=_claim_order):
+            info = parse_temporary(claim)
+            if claim == mine or info is None or info.pid == os.getpid() \
+                    or info.state != "in progress":
+                continue
+            if _claim_order(claim) > _claim_order(mine):
+                continue  # started after this run: that one is refused, not this one
+            try:
+                other = json.loads(claim.read_text())
+            except (OSError, ValueError):
+                continue  # gone meanwhile, or being written
+            if isinstance(other, dict) and other.get("keys") != keys:
+                mine.unlink(missing_ok=True)
+                raise InputError(f"out folder {out} is in use by another run of a "
+                                 f"different grid (process {info.pid}: "
+                                 f"{str(other.get('command'))[:200]}); give a new --out, "
+                                 f"or wait for it to finish")
+        return mine
+
+
+def _claim_order(path: Path) -> tuple[int, str]:
+    try:
+        return path.stat().st_mtime_ns, path.name
+    except OSError:
+        return 0, path.name
+
+
+def _command() -> str:
+    import sys
+
+    return " ".join(["tactbench", *sys.argv[1:]])
+
+
+def _describe(path: Path) -> str:
+    """``encoder × classifier L=.. seed=.. from `command``` for a stored row, as far as
+    it reads."""
+    try:
+        row = json.loads(path.read_bytes()[:ROW_MAX_BYTES])
+        label = (f"{row['encoder']} × {str(row['classifier']).split(':')[0]} L={row['L']} "
+                 f"seed={row['seed']}")
+        command = (row.get("run") or {}).get("command")
+        return label + (f", from `{command}`" if command else "")
+    except Exception:  # noqa: BLE001 — only a description; the file is named instead
+        return path.name

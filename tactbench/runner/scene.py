@@ -326,4 +326,17 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
                              f"'{given_as[name]}' and '{key}')")
         given_as[name] = key
         raw[name] = value
-    return check_fields(raw, str(path))
+    return _relative_to(check_fields(raw, str(path)), path.parent)
+
+
+def _relative_to(values: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """A scene file's paths (``out``, a ``dataset`` path) with ``~`` expanded and,
+    when relative, taken from the scene file's folder, not the working folder."""
+    from tactbench.datasets.loading import is_path_spec
+
+    for name in ("out", "dataset"):
+        text = values.get(name)
+        if isinstance(text, str) and (name == "out" or is_path_spec(text)):
+            path = Path(os.path.expanduser(text))
+            values[name] = str(path if path.is_absolute() else folder / path)
+    return values

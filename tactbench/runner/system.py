@@ -159,3 +159,141 @@ def git_revision() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return (rev + ("+dirty" if dirty else "")) or None
+
+
+def ignore_interrupts() -> None:
+    """In a worker process: leave Ctrl-C (SIGINT, sent to the whole process group) to the
+    parent, which stops the workers itself (:func:`stop_workers`); a worker would
+    otherwise print its own traceback of the interrupt."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def stop_workers(pool) -> None:
+    """Stop a ``ProcessPoolExecutor`` now: drop its queue and end its workers, so that
+    the interpreter does not wait for running cells on its way out."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        if process.is_alive():
+            process.terminate()
+
+
+# ----------------------------------------------------------- which CPU kernels computed
+
+#: ``TACTBENCH_CPU_KERNELS``: pin the CPU kernels of torch (ATen), oneDNN and MKL to one
+#: instruction set, so that two x86 machines give bit-identical predictions (see
+#: docs/reliability.md, "Numbers across machines"). Each level sets the libraries' own
+#: variables, unless set.
+KERNELS_ENV = "TACTBENCH_CPU_KERNELS"
+#: MKL's ``COMPATIBLE`` branch at every level: it is the one MKL computes alike on Intel
+#: and AMD processors (``MKL_CBWR=AVX2`` falls back to ``AUTO`` on an AMD EPYC).
+KERNEL_LEVELS = {  # level → (ATEN_CPU_CAPABILITY, ONEDNN_MAX_CPU_ISA, MKL_CBWR, cpu flag)
+    "default": ("default", "SSE41", "COMPATIBLE", None),
+    "avx2": ("avx2", "AVX2", "COMPATIBLE", "avx2"),
+    "avx512": ("avx512", "AVX512_CORE", "COMPATIBLE", "avx512f"),
+}
+KERNEL_VARIABLES = ("ATEN_CPU_CAPABILITY", "ONEDNN_MAX_CPU_ISA", "MKL_CBWR")
+
+
+def cpu_model() -> str:
+    """The processor's model name (``/proc/cpuinfo``; ``platform`` elsewhere)."""
+    import platform
+
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return " ".join(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or ""
+
+
+def _cpu_flags() -> set[str] | None:
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return None  # not Linux: cannot tell
+
+
+def pin_cpu_kernels(environ: "dict[str, str] | None" = None) -> str | None:
+    """Apply ``TACTBENCH_CPU_KERNELS`` (``default``, ``avx2``, ``avx512``) to the
+    libraries' own variables before torch is imported (the CLI calls this first; worker
+    processes inherit the environment). A level this CPU lacks is refused: torch would
+    take the variable's word and run instructions the CPU does not have. Returns the
+    level, or None when the variable is not set."""
+    from tactbench.errors import InputError, check_choice
+
+    env = os.environ if environ is None else environ
+    level = env.get(KERNELS_ENV, "").strip().lower()
+    if not level:
+        return None
+    check_choice(level, KERNELS_ENV, list(KERNEL_LEVELS))
+    *values, flag = KERNEL_LEVELS[level]
+    flags = _cpu_flags()
+    if flag is not None and flags is not None and flag not in flags:
+        raise InputError(f"{KERNELS_ENV}={level}: this CPU ({cpu_model()}) has no {flag}; "
+                         f"use a level it has (default, or avx2)")
+    for name, value in zip(KERNEL_VARIABLES, values):
+        env.setdefault(name, value)
+    return level
+
+
+def machine() -> dict[str, object]:
+    """What decides a cell's floating-point results besides its identity: the CPU model,
+    the instruction set torch's CPU kernels use (``torch.backends.cpu
+    .get_cpu_capability()``, when torch is imported), and the variables that pin the
+    kernels (see :func:`pin_cpu_kernels`). Recorded in every row and the report."""
+    out: dict[str, object] = {"cpu": cpu_model(), "cores": os.cpu_count() or 0}
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        try:
+            out["cpu_kernels"] = str(torch.backends.cpu.get_cpu_capability())
+        except Exception:  # noqa: BLE001 — an older torch without it: not recorded
+            pass
+    pinned = {name: os.environ[name] for name in (KERNELS_ENV, *KERNEL_VARIABLES)
+              if os.environ.get(name)}
+    if pinned:
+        out["pinned"] = pinned
+    return out
+
+
+def describe_machines(rows) -> str:
+    """The machines that computed ``rows``, for a report: ``AMD EPYC 7B13 (torch CPU
+    kernels AVX2)``, each distinct one once; results are bit-identical only on one of
+    them at one thread count (docs/reliability.md, "Numbers across machines")."""
+    seen: dict[str, None] = {}
+    for row in rows:
+        facts = row.get("machine") if isinstance(row, dict) else None
+        if not isinstance(facts, dict):
+            seen.setdefault("not recorded (rows from before machines were recorded)")
+            continue
+        text = str(facts.get("cpu") or "unknown CPU")
+        extra = [f"torch CPU kernels {facts['cpu_kernels']}"] if facts.get("cpu_kernels") \
+            else []
+        pinned = facts.get("pinned")
+        if isinstance(pinned, dict) and pinned:
+            extra.append("pinned: " + ", ".join(f"{k}={v}" for k, v in sorted(pinned.items())))
+        seen.setdefault(text + (f" ({'; '.join(extra)})" if extra else ""))
+    return "; ".join(seen) if seen else "none"
+
+
+def check_scheduler(address: str) -> str:
+    """A dask scheduler address as dask takes it (``tcp://host:port``, ``host:port``,
+    ``tls://...``), checked before any work: dask's own error comes after the encoding,
+    as a traceback."""
+    import re
+
+    from tactbench.errors import InputError
+
+    text = str(address).strip()
+    if not re.fullmatch(r"(?:(?:tcp|tls|ws|wss|ucx|inproc)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}/?",
+                        text):
+        raise InputError(f"--scheduler {address!r} is not a dask scheduler address; give "
+                         f"tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786)")
+    return text

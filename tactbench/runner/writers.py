@@ -15,6 +15,7 @@ from typing import Any, Iterable, Sequence
 from tactbench.paths import atomic_write_text
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import ok_rows, row_status
+from tactbench.runner.system import describe_machines
 from tactbench.runner.summaries import comparisons, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_markdown,
@@ -152,6 +153,8 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
         + f"; command: `{meta.get('command', '')}`",
         f"- git: `{meta.get('git')}`; versions: "
         + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
+        f"- machine: {describe_machines(rows)} (see docs/reliability.md, 'Numbers "
+        f"across machines')",
         "",
         "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
         "mean over seeds (test set: "

@@ -131,9 +131,16 @@ class CySkinCAN:
         self.taxel_ids = self.taxel_map.taxel_ids
         self.assembler = SweepAssembler(self.taxel_map, missing=missing, window=window)
         self.bitrate, self.data_bitrate, self.rate_hz = bitrate, data_bitrate, rate_hz
-        self.flush_after = float(flush_after)
-        self.idle_timeout = idle_timeout
-        self.max_sweeps = max_sweeps
+        from tactbench.errors import check_number
+
+        self.flush_after = check_number(flush_after, "flush_after", minimum=0)
+        # NaN never compares: a NaN timeout would never end
+        self.idle_timeout = None if idle_timeout is None else check_number(
+            idle_timeout, "idle_timeout", minimum=0, exclusive_minimum=True)
+        self.max_sweeps = None if max_sweeps is None else check_number(
+            max_sweeps, "max_sweeps", minimum=1, integer=True)
+        check_number(rate_hz, "rate_hz", minimum=0, exclusive_minimum=True)
+        check_number(bitrate, "bitrate", minimum=1, integer=True)
         self.label: str | None = None
         self._meta = MetaAssembler()
         self._closed = threading.Event()

@@ -110,7 +110,7 @@ def test_errors_are_one_line(tmp_path):
     res = runner.invoke(cli, ["can", "load", "--taxels", "10", "--format", "ids=nope"])
     assert res.exit_code != 0 and "ids must be" in res.output
     res = runner.invoke(cli, ["can", "record", "--out", str(tmp_path / "x.txt"),
-                              "--duration", "0"])
+                              "--duration", "1"])
     assert res.exit_code != 0 and "not a CAN log file name" in res.output
 
 
@@ -129,16 +129,16 @@ def test_an_out_under_a_file_is_refused_before_the_bus_opens(tmp_path):
     (tmp_path / "file").write_text("x")
     under = str(tmp_path / "file" / "rec.blf")
     one_error_line(runner.invoke(cli, ["can", "record", "--out", under, "--interface",
-                                       "no-such-interface", "--duration", "0"]),
+                                       "no-such-interface", "--duration", "1"]),
                    "rec.blf", "is a file, not a folder")
     deeper = str(tmp_path / "file" / "a" / "b" / "rec.asc")
     one_error_line(runner.invoke(cli, ["can", "record", "--out", deeper, "--interface",
-                                       "no-such-interface", "--duration", "0"]),
+                                       "no-such-interface", "--duration", "1"]),
                    "is a file, not a folder")
     folder = tmp_path / "folder.blf"
     folder.mkdir()
     res = runner.invoke(cli, ["can", "record", "--out", str(folder), "--interface",
-                              "no-such-interface", "--duration", "0"])
+                              "no-such-interface", "--duration", "1"])
     assert res.exit_code == 2 and "is a directory" in res.output  # click's own check
     # simulate checks --out before it loads the samples
     one_error_line(runner.invoke(cli, ["can", "simulate", "no-such-dataset", "--out", under]),
@@ -156,7 +156,7 @@ def test_an_out_under_a_file_is_refused_before_the_bus_opens(tmp_path):
     (["can", "info", "LOG", "--taxel-ids", "10-5"], "the range 10-5 is empty"),
     (["can", "load", "--taxel-ids", "0-40000,50000-99999"], "more than 65536 taxels"),
     (["can", "load", "--taxels", "99999999999"], "at most 65536"),
-    (["can", "record", "--out", "OUT", "--taxel-ids", "0-99999999999", "--duration", "0"],
+    (["can", "record", "--out", "OUT", "--taxel-ids", "0-99999999999", "--duration", "1"],
      "more than 65536 taxels"),
 ])
 def test_huge_taxel_id_ranges_are_refused_before_expanding(tmp_path, memory_cap, args, needle):

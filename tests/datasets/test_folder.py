@@ -324,6 +324,8 @@ def test_import_of_any_readable_source_and_its_errors(tmp_path):
         ([str(tmp_path / "syn"), "--format", "folder:path=x", "--out", str(tmp_path / "o")],
          "give the path as SRC"),
         ([str(tmp_path / "cost.csv"), "--out", str(tmp_path / "cost.csv")],
+         "overlaps the input"),
+        ([str(tmp_path / "syn"), "--out", str(tmp_path / "cost.csv")],
          "exists and is not a folder"),
     ]:
         res = CliRunner().invoke(cli, ["data", "import", *args])

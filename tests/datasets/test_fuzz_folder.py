@@ -117,3 +117,35 @@ def test_mutated_tree(move, memory_cap):
         else:
             (root / "users.csv").write_text("recording,user\n")
         _read(root, memory_cap)
+
+
+@FUZZ
+@given(rows=st.integers(1, 4), width=st.integers(1, 5), field=st.integers(0, 4),
+       value=st.sampled_from(["", "-", " ", "NA", "n/a", "?", "null", "nan", "1.5"]),
+       header=st.booleans(), trailing=st.sampled_from(["none", "first", "all"]))
+def test_a_csv_first_row_is_never_dropped_silently(rows, width, field, value, header,
+                                                   trailing):
+    """Whatever the first data row holds (a blank or '-' reading, a trailing comma), it
+    is read as a frame or refused in one line; only a header of names is skipped."""
+    from tactbench.datasets.folder import read_array_file
+
+    if width == 1 and not value.strip() and trailing == "none":
+        return  # an empty line, which CSV files may hold anywhere (skipped: documented)
+    rng = np.random.default_rng(rows * 7 + width)
+    data = [[str(v) for v in rng.integers(0, 99, width)] for _ in range(rows)]
+    data[0][field % width] = value
+    lines = [",".join(r) for r in data]
+    if header:
+        lines.insert(0, ",".join(f"k{i}" for i in range(width)))
+    if trailing == "all":
+        lines = [line + "," for line in lines]
+    elif trailing == "first":
+        lines[0] += ","
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "r.csv"
+        path.write_text("\n".join(lines) + "\n")
+        try:
+            values, _ = read_array_file(path)
+        except TactbenchError:
+            return
+    assert values.shape == (rows, width)  # every data row, none taken as a header

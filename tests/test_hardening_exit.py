@@ -1,0 +1,92 @@
+"""Exit statuses mean one thing each (0 ok, 1 failed cells or a bug, 2 a user's mistake,
+130 interrupted), output never crashes on the terminal's encoding, --json is JSON."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tactbench.cli import EXIT_CODES_TEXT, cli, json_text
+
+
+def _strict(text: str):
+    def refuse(name):
+        raise ValueError(f"{name} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_output_never_holds_nan_or_infinity():
+    doc = {"a": float("nan"), "b": [1.0, float("inf"), -float("inf")],
+           "c": np.float32("nan"), "d": np.array([0.5, np.nan]), "e": "NaN"}
+    assert _strict(json_text(doc)) == {"a": None, "b": [1.0, None, None], "c": None,
+                                       "d": [0.5, None], "e": "NaN"}
+
+
+def test_ctrl_c_in_a_command_exits_130_in_one_line(monkeypatch):
+    from tactbench.commands import inspect
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(inspect.list_cmd, "callback", interrupted)
+    result = CliRunner().invoke(cli, ["list"])
+    assert result.exit_code == 130, result.output
+    assert "interrupted" in result.output and "Traceback" not in result.output
+
+
+def test_the_exit_statuses_are_in_the_cli_reference():
+    from tactbench.clidoc import render
+
+    text = render()
+    for status in ("| 0 |", "| 1 |", "| 2 |", "| 130 |"):
+        assert status in text
+    assert "130 interrupted" in EXIT_CODES_TEXT
+
+
+def test_a_forced_ascii_terminal_does_not_crash_on_the_times_sign(tmp_path):
+    root = tmp_path / "d"
+    for cls in ("a", "b"):
+        (root / cls).mkdir(parents=True)
+        np.save(root / cls / "r.npy", np.random.default_rng(0).random((4, 3, 3)))
+    env = {**os.environ, "PYTHONIOENCODING": "ascii", "LC_ALL": "C"}
+    done = subprocess.run([sys.executable, "-m", "tactbench", "data", "info", str(root)],
+                          env=env, capture_output=True, timeout=120)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    assert b"\\xd7" in done.stdout  # "×" as an escape, not a UnicodeEncodeError
+
+
+@pytest.mark.slow
+def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
+    out = tmp_path / "out"
+    env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}
+    clf = "small-cnn-lstm:epochs=50,windows_per_epoch=256,batch_size=16,input_size=16"
+    scene = tmp_path / "scene.toml"
+    scene.write_text("test_per_class = 1\n")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tactbench", "run", "--dataset",
+         "synthetic-forearm:users=2,repetitions=1", "--encoder", "raw", "--classifier", clf,
+         "-L", "2", "--seed", "0", "--seed", "1", "--pixel-mm", "10", "--threads", "1",
+         "--workers", "2", "--out", str(out), "--no-plots", str(scene)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    deadline = time.time() + 180
+    # wait until the workers train: the encodings are cached and no cell has finished
+    while time.time() < deadline and proc.poll() is None and not any(
+            (tmp_path / "cache").rglob("meta.json")):
+        time.sleep(0.1)
+    time.sleep(8)  # the spawned workers import torch and start their cells
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
+    stdout, stderr = proc.communicate(timeout=120)
+    text = stderr.decode(errors="replace")
+    assert proc.returncode == 130, text[-2000:]
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-2000:]
+    assert "interrupted" in text
+    assert len(list((out / "cells").glob("*.json"))) < 2, "interrupted after the grid ended"

@@ -1,0 +1,99 @@
+"""Numbers across machines: a row records the CPU and the kernels torch used; one machine
+gives identical predictions whatever runs beside it; TACTBENCH_CPU_KERNELS pins them."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tactbench.errors import InputError
+from tactbench.runner.system import (
+    KERNELS_ENV,
+    _cpu_flags,
+    describe_machines,
+    machine,
+    pin_cpu_kernels,
+)
+
+
+def test_machine_facts_name_the_cpu_and_the_kernels():
+    import torch
+
+    facts = machine()
+    assert facts["cpu"] and facts["cores"] >= 1
+    assert facts["cpu_kernels"] == torch.backends.cpu.get_cpu_capability()
+    text = describe_machines([{"machine": facts}, {"machine": facts}, {}])
+    assert text.count(facts["cpu"]) == 1 and "not recorded" in text
+
+
+def test_pinning_the_kernels_sets_what_torch_honours():
+    env = {KERNELS_ENV: "default", "ONEDNN_MAX_CPU_ISA": "AVX2"}
+    assert pin_cpu_kernels(env) == "default"
+    assert env["ATEN_CPU_CAPABILITY"] == "default" and env["MKL_CBWR"] == "COMPATIBLE"
+    assert env["ONEDNN_MAX_CPU_ISA"] == "AVX2"  # a variable already set is kept
+    code = ("from tactbench.runner.system import machine, pin_cpu_kernels; "
+            "pin_cpu_kernels(); import torch, json; torch.ones(1); "
+            "print(json.dumps(machine()))")
+    child = {k: v for k, v in os.environ.items() if k not in (
+        "ATEN_CPU_CAPABILITY", "ONEDNN_MAX_CPU_ISA", "MKL_CBWR")}
+    child[KERNELS_ENV] = "default"
+    done = subprocess.run([sys.executable, "-c", code], env=child, capture_output=True,
+                          text=True, timeout=120)
+    facts = json.loads(done.stdout)
+    assert facts["cpu_kernels"] == "DEFAULT"  # torch took the pin
+    assert facts["pinned"] == {KERNELS_ENV: "default", "ATEN_CPU_CAPABILITY": "default",
+                               "ONEDNN_MAX_CPU_ISA": "SSE41", "MKL_CBWR": "COMPATIBLE"}
+
+
+def test_a_kernel_level_the_cpu_lacks_is_refused():
+    with pytest.raises(InputError, match="unknown TACTBENCH_CPU_KERNELS 'sse9'"):
+        pin_cpu_kernels({KERNELS_ENV: "sse9"})
+    flags = _cpu_flags()
+    if flags is None or "avx512f" in flags:
+        pytest.skip("this CPU has AVX-512 (or does not say): no level above it to refuse")
+    with pytest.raises(InputError, match="has no avx512f"):
+        pin_cpu_kernels({KERNELS_ENV: "avx512"})
+    out = subprocess.run([sys.executable, "-m", "tactbench", "list"],
+                         env={**os.environ, KERNELS_ENV: "avx512"}, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 2 and out.stderr.startswith("Error: TACTBENCH_CPU_KERNELS")
+
+
+@pytest.mark.slow
+def test_one_cell_gives_identical_predictions_in_fresh_processes_under_load(tmp_path):
+    """The guarantee the docs state: one machine, one thread count, whatever runs
+    beside it. Two fresh processes (own caches), the second beside a CPU-bound load."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text("test_per_class = 2\n")
+    clf = "small-cnn-lstm:epochs=1,windows_per_epoch=96,batch_size=16,input_size=16"
+
+    def cell(name: str) -> dict:
+        out = tmp_path / name
+        env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / f"cache-{name}")}
+        done = subprocess.run(
+            [sys.executable, "-m", "tactbench", "run", "--dataset",
+             "synthetic-forearm:users=2,repetitions=1", "--encoder", "raw",
+             "--classifier", clf, "-L", "3", "--seed", "0", "--pixel-mm", "10",
+             "--threads", "2", "--out", str(out), "--no-plots", "--json", str(scene)],
+            env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        [row] = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+        assert "machine:" in (out / "report.md").read_text()
+        return row
+
+    quiet = cell("quiet")
+    burner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        loaded = cell("loaded")
+    finally:
+        burner.kill()
+        burner.wait()
+    assert quiet["key"] == loaded["key"]
+    assert quiet["test_predictions"] == loaded["test_predictions"]
+    assert quiet["confusion"] == loaded["confusion"]
+    assert quiet["accuracy"] == loaded["accuracy"]
+    assert quiet["machine"]["cpu"] and quiet["machine"] == loaded["machine"]
