@@ -53,9 +53,6 @@ def check_positive_int(value: Any, name: str, *, minimum: int = 1,
                        maximum: int | None = None) -> int:
     """``value`` as an ``int`` in [``minimum``, ``maximum``]; bools, floats with a
     fraction, NaN, infinities and text refused."""
-    import math
-    import numbers
-
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         if isinstance(value, numbers.Real) and not isinstance(value, bool) \
                 and math.isfinite(float(value)) and float(value).is_integer():
@@ -87,9 +84,6 @@ def check_number(value: Any, name: str, *, minimum: float | None = None,
     Bounds that follow from the data (a window no larger than the image) are checked
     where the data is known, with :func:`check_at_most`.
     """
-    import math
-    import numbers
-
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise InputError(f"{name} must be a finite number, got {str(value)[:40]!r}")
     if isinstance(value, numbers.Integral):

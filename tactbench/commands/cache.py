@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from tactbench.cli import json_text
+from tactbench.runner import EncodingCache
 
 
 @click.group("cache")

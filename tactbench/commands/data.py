@@ -10,7 +10,6 @@ import click
 from tactbench.cli import Number, get_registry, json_text
 from tactbench.data.dataset import Dataset
 from tactbench.data.preview import preview_strip, write_png, written_by_tactbench
-from tactbench.data.store import MANIFEST
 from tactbench.datasets.loading import check_loaded, load_dataset, takes_progress
 from tactbench.datasets.synthetic import generate
 from tactbench.errors import InputError, MissingFileError

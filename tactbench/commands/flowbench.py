@@ -7,7 +7,10 @@ from pathlib import Path
 
 import click
 
-from tactbench.cli import json_text
+from tactbench.cli import get_registry, json_text
+from tactbench.encoders.evaluation import flowbench as fb
+from tactbench.encoders.parallel import default_workers
+from tactbench.ui import Progress
 
 
 def _parse_size(text: str) -> tuple[int, int]:

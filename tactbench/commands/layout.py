@@ -5,6 +5,9 @@ from __future__ import annotations
 import click
 
 from tactbench.cli import json_text
+from tactbench.data.imaging import image_shape
+from tactbench.data.layout_io import load_layout, write_layout_csv
+from tactbench.datasets.forearm import cyskin_forearm
 
 
 @click.group("layout")

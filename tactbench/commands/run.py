@@ -13,11 +13,11 @@ from tactbench.cli import json_text
 
 from tactbench.cli import get_registry
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES
-from tactbench.runner import Scene, load_scene_file, parse_lengths, run
+from tactbench.runner import Scene, load_scene_file, run
+from tactbench.runner.scene import parse_lengths, parse_seeds
 from tactbench.runner.summaries import failed_cells, summarise
 from tactbench.runner.tables import print_comparisons, print_table
 from tactbench.runner.writers import write_reports
-from tactbench.runner.scene import parse_seeds
 
 
 class SceneOption(click.Option):
@@ -86,18 +86,6 @@ def _by_profile(attribute: str) -> Callable[[], str]:
     return text
 
 
-def _lengths(values: list[str]) -> list[int]:
-    from tactbench.runner.scene import parse_lengths
-
-    return parse_lengths(values)
-
-
-def _seeds(values: list[str]) -> list[int]:
-    from tactbench.runner.scene import parse_seeds
-
-    return parse_seeds(values)
-
-
 def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]:
     """``click.option`` for the Scene field ``field`` (see :class:`SceneOption`)."""
     return click.option(*decls, cls=SceneOption, field=field, **kwargs)
@@ -111,9 +99,9 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
               help="Encoder, repeatable, with options: farneback:winsize=9.")
 @scene_option("--classifier", "classifiers", field="classifiers", multiple=True,
               help="Classifier, repeatable, with options.")
-@scene_option("-L", "L", field="L", multiple=True, convert=_lengths,
+@scene_option("-L", "L", field="L", multiple=True, convert=parse_lengths,
               help="Window length in frames, repeatable or a range: -L 5, -L 1-6.")
-@scene_option("--seed", "seeds", field="seeds", multiple=True, convert=_seeds,
+@scene_option("--seed", "seeds", field="seeds", multiple=True, convert=parse_seeds,
               help="Seed, repeatable or a range: --seed 0-9.")
 @scene_option("--split", field="split",
               help="paper: 30 random test samples per class (the study's); users: "
@@ -159,7 +147,7 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
               none="images where the dataset has a layout",
               help="What a classifier taking either input is fed (part of its cells' "
                    "identity).")
-@scene_option("--init-seed", "init_seeds", field="init_seeds", multiple=True, convert=_seeds,
+@scene_option("--init-seed", "init_seeds", field="init_seeds", multiple=True, convert=parse_seeds,
               none="the split seed",
               help="Initialisation seeds varied apart from the split seeds (--seed), "
                    "repeatable or a range; report.md then splits the variance.")

@@ -6,7 +6,9 @@ import sys
 
 import click
 
-from tactbench.cli import json_text
+from tactbench.cli import get_registry, json_text
+from tactbench.encoders.evaluation import stability as st
+from tactbench.ui import Progress
 
 
 @click.command("stability")
