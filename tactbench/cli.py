@@ -18,6 +18,7 @@ import click
 
 from tactbench import __version__
 from tactbench.errors import PluginError, TactbenchError
+from tactbench.machine import pin_cpu_kernels
 from tactbench.plugins import collect_registry, make_plugin_manager
 
 #: command name → "module:attribute" of its click command, imported on use.
@@ -239,9 +240,6 @@ def main(argv: list[str] | None = None) -> None:
     """The console script: user errors are one line (exit 2); a bug keeps its traceback
     and says how to report it (exit 1)."""
     _safe_output()
-    from tactbench.errors import TactbenchError
-    from tactbench.runner.system import pin_cpu_kernels
-
     try:
         pin_cpu_kernels()  # before anything imports torch
     except TactbenchError as exc:

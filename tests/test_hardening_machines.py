@@ -11,13 +11,8 @@ import sys
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.system import (
-    KERNELS_ENV,
-    _cpu_flags,
-    describe_machines,
-    machine,
-    pin_cpu_kernels,
-)
+from tactbench.machine import KERNELS_ENV, _cpu_flags, machine, pin_cpu_kernels
+from tactbench.runner.system import describe_machines
 
 
 def test_machine_facts_name_the_cpu_and_the_kernels():
@@ -35,7 +30,7 @@ def test_pinning_the_kernels_sets_what_torch_honours():
     assert pin_cpu_kernels(env) == "default"
     assert env["ATEN_CPU_CAPABILITY"] == "default" and env["MKL_CBWR"] == "COMPATIBLE"
     assert env["ONEDNN_MAX_CPU_ISA"] == "AVX2"  # a variable already set is kept
-    code = ("from tactbench.runner.system import machine, pin_cpu_kernels; "
+    code = ("from tactbench.machine import machine, pin_cpu_kernels; "
             "pin_cpu_kernels(); import torch, json; torch.ones(1); "
             "print(json.dumps(machine()))")
     child = {k: v for k, v in os.environ.items() if k not in (

@@ -29,7 +29,8 @@ from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
-from tactbench.runner.system import MemoryTracker, host, machine, now, versions
+from tactbench.machine import machine
+from tactbench.runner.system import MemoryTracker, host, now, versions
 from tactbench.seeds import derive_seed
 
 if TYPE_CHECKING:
