@@ -239,7 +239,7 @@ def header(title: str, name: str, what: str, parts: list[dict], m: dict,
     if parts:
         lines.append("- **Statistics**: the training run (one seed: its split and "
                      "initialisation) is the unit; intervals are corrected t over runs, "
-                     "p the stricter of that and the sign-flip test, Holm-adjusted within "
+                     "p that test's (the exact sign-flip p beside it), Holm-adjusted within "
                      "each run ([docs/statistics.md](../statistics.md))"
                      + (f"; {'; '.join(notes)}" if notes else "") + ".")
     return lines + [""]
@@ -456,8 +456,9 @@ def _runs_note(results: dict) -> str:
     text = (f"{runs} runs per cell. The sign-flip test over {runs} runs cannot go below "
             f"p = {floor:.3g}")
     if floor >= 0.05:
-        text += (", so no comparison here can reach a verdict at 5 %, however large; "
-                 "\"unresolved\" says \"too few runs\", not \"no difference\"")
+        text += (": verdicts rest on the corrected t (which assumes the per-run "
+                 "differences roughly normal), and the sign-flip p shown beside each is "
+                 "the distribution-free check they cannot pass at this number of runs")
     text += (f". With Holm over the {comps[0]['family_size']} comparisons of a run, the "
              "smallest p must be below 0.05 / that number. ")
     unreachable = sum(c["runs_needed"] is None for c in comps)

@@ -11,7 +11,7 @@ The functions here are pure (numpy arrays in, numbers out); scipy is imported in
   K-fold split repeated over seeds the same correction with ``n_test/n_train = 1/(K − 1)``
   (Bouckaert & Frank 2004). Its interval is the one shown beside every verdict.
 - :func:`sign_flip_p`: the exact sign-flip permutation test over runs; with J runs its
-  smallest two-sided p is ``2 / 2^J``. The stricter of the two p-values governs.
+  smallest two-sided p is ``2 / 2^J``; reported beside the corrected t's p, which governs.
 - :func:`holm`: Holm's step-down adjustment within a family of comparisons.
 - :func:`tost_p`: two one-sided tests (Schuirmann 1987) for equivalence within ±margin.
 - :func:`runs_needed`: how many runs the observed variance needs for an interval of ±h.

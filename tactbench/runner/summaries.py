@@ -18,10 +18,10 @@ GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
 #: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).
 FACTORS = ("encoder", "classifier", "L")
 CONFIDENCE = 0.95
-#: The verdict's p is the larger of the corrected t's and the sign-flip test's (the
-#: stricter governs; docs/statistics.md). False: the corrected t's alone, the sign-flip
-#: p reported beside it.
-PERMUTATION_GOVERNS = True
+#: The verdict's p: False (the choice, docs/statistics.md), the corrected t's, with the
+#: exact sign-flip p reported beside it as a distribution-free check; True, the larger of
+#: the two (the sign-flip's floor 2 / 2^J then forbids any verdict below 6 runs).
+PERMUTATION_GOVERNS = False
 
 
 def _mean_std(values: Sequence[float]) -> tuple[float, float]:
@@ -217,8 +217,8 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     cell that comes first in the run (the scene's order), so a run listing ``raw`` before
     ``farneback`` reports farneback − raw; a contrast gives its own A and B.
 
-    Every comparison of one run forms one family: its p-values (the stricter of the
-    corrected t and the sign-flip test) are Holm-adjusted together, and the verdicts
+    Every comparison of one run forms one family: its p-values (the corrected t's; see
+    :data:`PERMUTATION_GOVERNS`) are Holm-adjusted together, and the verdicts
     rest on the adjusted ones (:func:`tactbench.runner.statistics.verdict`). ``margin``
     (points) adds the equivalence test; ``users`` (the user of each dataset sample, by
     index) adds per-user gains. See :func:`paired_runs` for each entry's fields.
@@ -266,9 +266,13 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
             alpha=alpha, discordant_recordings=c["discordant_recordings"],
             equivalence_p_adjusted=c["equivalence_p_holm"])
         floor = 2.0 ** (1 - c["runs"])
-        if c["verdict"] == "unresolved" and not c["note"] and floor >= alpha:
+        if PERMUTATION_GOVERNS and c["verdict"] == "unresolved" and not c["note"] \
+                and floor >= alpha:
             c["note"] = (f"{c['runs']} runs: the sign-flip floor is p = {floor:.3g}; a "
                          f"verdict needs ≥ {_runs_for_floor(alpha)} runs")
+        elif c["verdict"] in ("A better", "B better") and floor >= alpha:
+            c["note"] = (f"rests on the corrected t: with {c['runs']} runs the exact "
+                         f"sign-flip test cannot go below p = {floor:.3g}")
     return out
 
 

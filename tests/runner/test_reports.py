@@ -148,11 +148,19 @@ def test_pairs_differing_in_one_factor_are_compared_run_by_run():
     assert set(c["per_class"]) == {"a", "b"} and c["per_class"]["a"]["low"] is not None
 
 
-def test_five_runs_cannot_give_a_verdict_and_the_note_says_why():
+def test_five_runs_rest_on_the_corrected_t_and_the_note_says_so(monkeypatch):
+    """The corrected t governs; the sign-flip p (floor 2/2^5) stands beside it, and a
+    verdict it cannot confirm says so. With the sign-flip governing instead, 5 runs
+    give no verdict and the note says why."""
+    from tactbench.runner import summaries
     from tactbench.runner.summaries import comparisons
 
     [c] = comparisons(_clear_win_rows(seeds=range(5)))
     assert c["t_p"] < 0.05 and c["permutation_p"] == pytest.approx(2 / 32)
+    assert c["p"] == c["t_p"]
+    assert c["verdict"] == "B better" and "sign-flip" in c["note"]
+    monkeypatch.setattr(summaries, "PERMUTATION_GOVERNS", True)
+    [c] = comparisons(_clear_win_rows(seeds=range(5)))
     assert c["verdict"] == "unresolved" and "sign-flip" in c["note"]
 
 
