@@ -29,7 +29,9 @@ from tactbench.profiles import PRECISIONS, PROFILE_NAMES
 @click.option("--split",
               help="paper: 30 random test samples per class (the study's); users: "
                    "leave a random fifth of the users out; users:folds=K: K-fold over "
-                   "users, every user tested once. [default: paper]")
+                   "users, every user tested once; group:KEY[:folds=K|:test=A] the same "
+                   "over any metadata (position, repetition): group:position:test=side "
+                   "trains on the front, tests on the side. [default: paper]")
 @click.option("--test-window", type=click.Choice(["first", "onset", "vote"]),
               help="Which frames a test sequence is classified on: first (its first L "
                    "frames, the study's), onset (L frames from contact onset) or vote "

@@ -47,6 +47,7 @@ class CellJob:
     model_meta: dict[str, Any] | None = None
     test_window: str = "first"  # tactbench.data.windows.TEST_WINDOWS
     onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
+    groups: dict[str, tuple[str, ...]] | None = None  # metadata of group:KEY splits
 
 
 def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
@@ -59,6 +60,9 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
     labels = tuple(int(x) for x in p.dataset.labels)  # once, shared by every job
     users = tuple(str(u) for u in p.dataset.users)
     onsets = dataset_onsets(p.dataset) if scene.test_window == "onset" else None
+    from tactbench.data.splits import dataset_groups
+
+    groups = {k: tuple(v) for k, v in dataset_groups(p.dataset).items()}
     return [CellJob(cell=c, identity=p.identities[c.key],
                     classifier=p.classifier_component(c.classifier),
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
@@ -67,7 +71,7 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
                     device=scene.device, threads=scene.resolved_threads(),
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
                     model_meta=model_metadata(p, c) if models else None,
-                    test_window=scene.test_window, onsets=onsets)
+                    test_window=scene.test_window, onsets=onsets, groups=groups)
             for c in cells]
 
 
@@ -177,7 +181,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         sequences, meta = load_encoding(job.encoding_dir)
     labels = np.asarray(job.labels, dtype=np.int64)
     splits = make_splits(job.split, labels=labels, users=job.users, seed=cell.seed,
-                         test_per_class=job.test_per_class)
+                         test_per_class=job.test_per_class, groups=job.groups)
     rss0 = 0.0
     train_s = infer_s = 0.0
     n_train = n_test = 0

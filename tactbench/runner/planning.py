@@ -218,7 +218,7 @@ def _check_scene(scene: Scene) -> None:
     if parse_split(scene.split)[1] is not None and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
                          f"{scene.split!r} trains one per fold; save models with "
-                         f"--split users or paper")
+                         f"--split users, group:KEY or paper")
     check_choice(scene.executor, "executor", EXECUTORS)
     if not scene.encoders or not scene.classifiers or not scene.lengths or not scene.seeds:
         raise InputError("a run needs at least one encoder, classifier, L and seed")
@@ -376,10 +376,11 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     _check_lengths(scene, dataset)
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
-    from tactbench.data.splits import canonical_split, make_splits
+    from tactbench.data.splits import canonical_split, dataset_groups, make_splits
 
     make_splits(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
-                test_per_class=scene.test_per_class)  # fails early on an impossible split
+                test_per_class=scene.test_per_class,
+                groups=dataset_groups(dataset))  # fails early on an impossible split
     split_spec = canonical_split(scene.split)
 
     cells: list[Cell] = []
