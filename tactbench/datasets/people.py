@@ -54,6 +54,7 @@ RELEASE_TAU_S = (0.06, 0.25)  # how fast the hand lets go, uniform, × tempo
 LEAD_IN_S = (0.6, 0.45, 0.1, 2.0)  # median lead-in: lognormal median, σ, clip
 TAIL_S = (0.5, 0.45, 0.1, 2.0)  # median tail after release: same
 HABIT_ROUND_MM = 15.0  # where round the arm a person habitually puts the hand (sd)
+FINGERTIP_GRIP = 0.4  # a person grasps, twists or pulls with the fingertips only (each)
 
 # ---- a session (one person at one position) shifts the style a little
 SESSION_PLACE_MM = 5.0  # sd of the placement shift
@@ -92,6 +93,7 @@ class Person:
     spread: float  # factor on finger spacing
     finger_weights: np.ndarray  # (4,) index..little
     grip_parts: tuple[bool, bool, bool, bool, bool]  # palm, little, middle, proximal, thumb
+    fingertips: tuple[bool, bool, bool]  # Grasp, Twist, Pull with the fingertips only
     y_pref: float  # along the arm, mm
     x_habit: float  # round the arm from the top, mm
     x_side: float  # how far round the arm the side position is
@@ -108,7 +110,6 @@ class Person:
     twist_kappa: float  # how much fingertip pressure rises while twisting
     pull_sign: tuple[float, float]  # per position
     pull_mm: float
-    pull_fingertips: bool  # fingertip (hooked) pull, else whole-hand
     pull_kappa: float
     push_flat: bool  # flat-hand push, else fingertips
     push_along: bool  # hand along the arm when pushing, else across
@@ -137,6 +138,7 @@ def make_person(seed: int, index: int) -> Person:
         spread=float(r.lognormal(0.0, SPREAD_SIGMA)),
         finger_weights=np.array([1.0, 1.0, 0.85, 0.65]) * r.lognormal(0.0, 0.2, 4),
         grip_parts=tuple(bool(p) for p in parts),
+        fingertips=tuple(bool(f) for f in r.random(3) < FINGERTIP_GRIP),
         y_pref=float(r.uniform(0.3, 0.7) * LENGTH_MM),
         x_habit=float(r.normal(0.0, HABIT_ROUND_MM)),
         x_side=float(r.uniform(35.0, 75.0)) * (1 if right else -1),
@@ -153,7 +155,6 @@ def make_person(seed: int, index: int) -> Person:
         twist_kappa=float(r.uniform(0.3, 0.8)),
         pull_sign=(float(r.choice([-1.0, 1.0])), float(r.choice([-1.0, 1.0]))),
         pull_mm=float(r.uniform(5.0, 15.0)),
-        pull_fingertips=bool(r.random() < 0.5),
         pull_kappa=float(r.uniform(0.1, 0.4)),
         push_flat=bool(r.random() < 0.55),
         push_along=bool(r.random() < 0.5),
@@ -306,8 +307,12 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
     overshoot = float(np.clip(person.overshoot + rep.shift(0.04), 0.0, 0.4))
     x0 -= d * 40 * k
 
+    if gesture in ("Grasp", "Twist", "Pull"):  # the person's variant, now and then the other
+        tips_only = person.fingertips[("Grasp", "Twist", "Pull").index(gesture)] \
+            != rep.flip(REP_VARIANT_FLIP)
     if gesture == "Grasp":
-        _grip(p, grip_hand(person, rep, x0, y0, d), t, force, tau, overshoot, rep)
+        _grip(p, grip_hand(person, rep, x0, y0, d, fingertips=tips_only), t, force, tau,
+              overshoot, rep)
     elif gesture == "2hGrasp":
         sep = person.two_hand_mm * k * rep.factor(0.05)
         delay = max(0.0, person.two_hand_delay + rep.shift(0.05))
@@ -318,7 +323,6 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
         _grip(p, h2, t - delay, force * share[1], tau * rep.factor(0.1), overshoot, rep)
     elif gesture in ("Twist", "Pull"):
         twist = gesture == "Twist"
-        tips_only = (not twist) and (person.pull_fingertips != rep.flip(REP_VARIANT_FLIP))
         hand = grip_hand(person, rep, x0, y0, d, fingertips=tips_only)
         n = len(hand.x)
         start = person.stroke_start * tempo

@@ -548,7 +548,7 @@ class SyntheticForearm:
         self.cache = bool(cache)
 
     def cache_key(self) -> str:
-        text = json.dumps({"version": GENERATOR_VERSION, **self.options}, sort_keys=True)
+        text = json.dumps({"generator": GENERATOR_VERSION, **self.options}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def cache_path(self) -> Path:
