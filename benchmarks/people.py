@@ -245,9 +245,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--md", default=str(REPO / "docs" / "people.md"))
     ap.add_argument("--work", help="folder for the runs (default: a temporary one)")
     args = ap.parse_args(argv)
-    shown = " ".join(["python benchmarks/people.py", *(argv if argv is not None
-                                                       else sys.argv[1:])])
-    meta = {"command": shown.strip(),
+    given, shown = list(argv if argv is not None else sys.argv[1:]), []
+    while given:  # the command as run, less where it kept its runs
+        a = given.pop(0)
+        if a == "--work":
+            given = given[1:]
+        elif not a.startswith("--work="):
+            shown.append(a)
+    meta = {"command": " ".join(["python benchmarks/people.py", *shown]),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
                        f"{platform.python_implementation()} {platform.python_version()}",
             "date": datetime.now(timezone.utc).strftime("%Y-%m-%d")}
