@@ -3,9 +3,10 @@
     python benchmarks/simulator.py [--users 38] [--version 2] [--json docs/simulator-stats.json]
 
 Generates ``synthetic-forearm`` (no cache, one process; ``--version 1`` the first
-simulator) and reports, each recording taken over its contact span (from the first to the
-last frame whose total pressure is 10 % of its range above the quietest frame; version 2's
-recordings have a lead-in and a tail without contact around it):
+simulator) and reports, each recording taken over its contact (from the first frame whose
+total pressure is 10 % of its range above the quietest frame to the one before the last
+that is 50 % above it: the hold, before the release; version 2's recordings have a lead-in and a tail without
+contact around it):
 
 - generation time (goal, issue 3: the default 1900 samples in ≤ 60 s on one core);
 - per class: frames per sample, mean total pressure, time for the total
@@ -79,12 +80,16 @@ def main() -> None:
     for s, whole in zip(ds, vec):
         ts = s.recording.timestamps
         total = whole.sum(1)
-        contact = np.flatnonzero(total - total.min() > 0.1 * max(np.ptp(total), 1e-9))
-        first, last = (int(contact[0]), int(contact[-1])) if len(contact) else (0, len(total) - 1)
+        rise = total - total.min()
+        contact = np.flatnonzero(rise > 0.1 * max(np.ptp(total), 1e-9))
+        first, end = (int(contact[0]), int(contact[-1])) if len(contact) else (0, len(total) - 1)
+        held = np.flatnonzero(rise >= 0.5 * max(np.ptp(total), 1e-9))
+        # the frame before the last at half the range: the hold, before the release
+        last = max(first, int(held[-1]) - 1) if len(held) else end
         lead.append(first)
-        contact_frames.append(last - first + 1)
+        contact_frames.append(end - first + 1)
         feats["lead-in frames"].append(float(first))
-        feats["frames in contact"].append(float(last - first + 1))
+        feats["frames in contact"].append(float(end - first + 1))
         feats["peak total pressure"].append(float(total.max()))
         v, ts, total = whole[first:last + 1], ts[first:last + 1], total[first:last + 1]
         final = total[-1]
