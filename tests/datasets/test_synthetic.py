@@ -270,3 +270,22 @@ def test_load_reports_progress_through_its_callback_and_never_draws(tmp_path, mo
     out, err = capfd.readouterr()
     assert out == "" and err == ""
     assert [p.name for p in (tmp_path / "datasets").iterdir()] == [source.cache_path().name]
+
+
+def test_data_synth_writes_either_version(tmp_path):
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+    from tactbench.data.dataset import Dataset
+
+    for version in (1, 2):
+        out = tmp_path / f"v{version}"
+        done = CliRunner().invoke(cli, ["data", "synth", "--out", str(out), "--users", "1",
+                                        "--repetitions", "1", "--positions", "1",
+                                        "--version", str(version)])
+        assert done.exit_code == 0, done.output
+        expected = generate(users=1, repetitions=1, positions=1, version=version)
+        assert Dataset.load(out).content_hash() == expected.content_hash()
+    bad = CliRunner().invoke(cli, ["data", "synth", "--out", str(tmp_path / "x"),
+                                   "--version", "3"])
+    assert bad.exit_code == 2 and "--version" in bad.output
