@@ -762,6 +762,9 @@ TITLES = {
     "real-data": "Real data: CySkin fingers and iCub grasps, raw vectors against their "
                  "sweep-to-sweep change",
     "cost": "Cost: imaging, encoder throughput, training, live latency; GPU if present",
+    # made by its own script (benchmarks/which_window.py), listed here so the index keeps it
+    "which-window": "Which test window? first L frames, from the contact onset, or a vote "
+                    "over every window; simulator and real sets",
 }
 
 
@@ -951,7 +954,7 @@ def write_index(root: Path) -> None:
              "by `python benchmarks/reports.py`) and says its command, machine, date, "
              "versions, wall time and data, then what it shows and what it does not. "
              "Statistics: [docs/statistics.md](../statistics.md).", ""]
-    for name in ORDER:
+    for name in [*ORDER, *OWN_SCRIPT]:
         mark = "" if (root / f"{name}.md").is_file() else " (not generated yet)"
         lines.append(f"- [{name}]({name}.md): {TITLES[name]}{mark}")
     (root / "README.md").write_text("\n".join(lines) + "\n")
@@ -993,6 +996,8 @@ def _encoder_tables(d: dict) -> list[str]:
 REPORTS = {"study": study, "which-flow": which_flow, "which-classifier": which_classifier,
            "flow-error": flow_error, "real-data": real_data, "cost": cost}
 ORDER = ["flow-error", "study", "which-flow", "which-classifier", "real-data", "cost"]
+#: Reports made by scripts of their own, listed in the index after ORDER's.
+OWN_SCRIPT = ["which-window"]
 
 
 def main(argv: list[str] | None = None) -> int:

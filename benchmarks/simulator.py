@@ -1,8 +1,12 @@
 """The gesture simulator: generation time, and what its classes look like.
 
-    python benchmarks/simulator.py [--users 38] [--json docs/simulator-stats.json]
+    python benchmarks/simulator.py [--users 38] [--version 2] [--json docs/simulator-stats.json]
 
-Generates ``synthetic-forearm`` (no cache, one process) and reports:
+Generates ``synthetic-forearm`` (no cache, one process; ``--version 1`` the first
+simulator) and reports, each recording taken over its contact (from the first frame whose
+total pressure is 10 % of its range above the quietest frame to the one before the last
+that is 50 % above it: the hold, before the release; version 2's recordings have a lead-in and a tail without
+contact around it):
 
 - generation time (goal, issue 3: the default 1900 samples in ≤ 60 s on one core);
 - per class: frames per sample, mean total pressure, time for the total
@@ -50,6 +54,7 @@ def one_feature_accuracy(x: np.ndarray, y: np.ndarray, users: np.ndarray) -> flo
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--users", type=int, default=38)
+    parser.add_argument("--version", type=int, default=2)
     parser.add_argument("--json", dest="json_out")
     args = parser.parse_args()
 
@@ -57,7 +62,7 @@ def main() -> None:
 
     start = time.perf_counter()
     cpu0 = time.process_time()
-    ds = generate(users=args.users)
+    ds = generate(users=args.users, version=args.version)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu0
     print(f"generated {len(ds)} samples in {wall:.1f} s wall, {cpu:.1f} s CPU "
           f"(goal ≤ {GOAL_S:.0f} s for 1900 on one core)")
@@ -69,11 +74,24 @@ def main() -> None:
     per = []
     feats: dict[str, list[float]] = {k: [] for k in (
         "length", "mean total pressure", "final total pressure", "final contact area",
-        "centroid x", "centroid y")}
-    settle, move_x, move_y = [], [], []
-    for s, v in zip(ds, vec):
+        "centroid x", "centroid y", "peak total pressure", "lead-in frames",
+        "frames in contact")}
+    settle, move_x, move_y, lead, contact_frames = [], [], [], [], []
+    for s, whole in zip(ds, vec):
         ts = s.recording.timestamps
-        total = v.sum(1)
+        total = whole.sum(1)
+        rise = total - total.min()
+        contact = np.flatnonzero(rise > 0.1 * max(np.ptp(total), 1e-9))
+        first, end = (int(contact[0]), int(contact[-1])) if len(contact) else (0, len(total) - 1)
+        held = np.flatnonzero(rise >= 0.5 * max(np.ptp(total), 1e-9))
+        # the frame before the last at half the range: the hold, before the release
+        last = max(first, int(held[-1]) - 1) if len(held) else end
+        lead.append(first)
+        contact_frames.append(end - first + 1)
+        feats["lead-in frames"].append(float(first))
+        feats["frames in contact"].append(float(end - first + 1))
+        feats["peak total pressure"].append(float(total.max()))
+        v, ts, total = whole[first:last + 1], ts[first:last + 1], total[first:last + 1]
         final = total[-1]
         off = np.abs(total - final) > 0.1 * max(final, 1e-9)
         settle.append(float(ts[np.nonzero(off)[0][-1] + 1] - ts[0]) if off.any() else 0.0)
@@ -82,7 +100,7 @@ def main() -> None:
         late = ts - ts[0] >= 0.3
         move_x.append(float(np.ptp(cx[late])) if late.sum() > 1 else 0.0)
         move_y.append(float(np.ptp(cy[late])) if late.sum() > 1 else 0.0)
-        feats["length"].append(len(v))
+        feats["length"].append(len(whole))
         feats["mean total pressure"].append(float(total.mean()))
         feats["final total pressure"].append(float(final))
         feats["final contact area"].append(float((v[-1] > 0.05).sum()))
@@ -97,6 +115,8 @@ def main() -> None:
         row = {"class": name, "samples": int(m.sum()),
                "frames_median": float(np.median(lengths[m])),
                "frames_min": int(lengths[m].min()), "frames_max": int(lengths[m].max()),
+               "lead_in_frames_median": float(np.median(np.array(lead)[m])),
+               "contact_frames_median": float(np.median(np.array(contact_frames)[m])),
                "settle_s_median": float(np.median(settle[m])),
                "centroid_move_x_mm_median": float(np.median(move_x[m])),
                "centroid_move_y_mm_median": float(np.median(move_y[m])),
@@ -112,7 +132,8 @@ def main() -> None:
         print(f"  {k:<22}{acc:.2f}")
     doc = {"benchmark": "simulator", "command": " ".join(["python"] + sys.argv),
            "machine": platform.platform(), "cpus": os.cpu_count(), "threads": 1,
-           "date": time.strftime("%Y-%m-%d"), "samples": len(ds),
+           "date": time.strftime("%Y-%m-%d"), "samples": len(ds), "version": args.version,
+           "content_hash": ds.content_hash(),
            "generation_wall_s": wall, "generation_cpu_s": cpu, "goal_s": GOAL_S,
            "classes": per, "one_feature_accuracy": cues}
     if args.json_out:

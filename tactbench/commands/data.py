@@ -103,13 +103,16 @@ def info_cmd(path: str, as_json: bool) -> None:
               help="Repetitions of each gesture per position.")
 @click.option("--positions", default=2, show_default=True, type=click.IntRange(1, 2),
               help="Positions (1: front only, 2: front and side).")
-def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int) -> None:
+@click.option("--version", "version", default=1, show_default=True, type=click.IntRange(1, 2),
+              help="Simulator version: 1 the first (the default), 2 the person model.")
+def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int,
+              version: int) -> None:
     """Generate the synthetic-forearm gesture dataset into a new or empty folder."""
     check_output_folder(out)
 
     with Progress() as bars:
         ds = generate(users=users, positions=positions, repetitions=repetitions, seed=seed,
-                      progress=bars.callback("simulating gestures"))
+                      version=version, progress=bars.callback("simulating gestures"))
     ds.save(out)
     click.echo(f"wrote {len(ds)} samples ({len(ds.classes)} classes, {users} users) to {out}; "
                f"content hash {ds.content_hash()[:16]}", err=True)

@@ -106,7 +106,9 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
 @scene_option("--split", field="split",
               help="paper: 30 random test samples per class (the study's); users: "
                    "leave a random fifth of the users out; users:folds=K: K-fold over "
-                   "users, every user tested once.")
+                   "users, every user tested once; group:KEY[:folds=K|:test=A] the same "
+                   "over any metadata (position, repetition): group:position:test=side "
+                   "trains on the front, tests on the side.")
 @scene_option("--test-window", field="test_window",
               type=click.Choice(["first", "onset", "vote"]),
               help="Which frames a test sequence is classified on: first (its first L "

@@ -130,12 +130,15 @@ test_windows.__test__ = False  # not a pytest test, despite the name
 
 #: Where a sequence's test window starts: see the module docstring.
 TEST_WINDOWS = ("first", "onset", "vote")
-#: Contact onset: the first frame whose total pressure reaches this fraction of the peak.
+#: Contact onset: the first frame whose total pressure reaches this fraction of the peak
+#: (both above the recording's quietest frame).
 ONSET_FRACTION = 0.1
 
 
 def onset_frame(pressure: np.ndarray, fraction: float = ONSET_FRACTION) -> int:
-    """The first frame whose total pressure reaches ``fraction`` of the recording's peak.
+    """The first frame whose total pressure reaches ``fraction`` of the recording's peak,
+    both measured from its quietest frame (the sensor's noise floor, summed over many
+    taxels, is not contact).
 
     ``pressure`` is the recording's normalised values ``(T, N)`` (or already summed,
     ``(T,)``); NaN (a missing reading) counts as 0. A recording without any pressure has
@@ -143,6 +146,7 @@ def onset_frame(pressure: np.ndarray, fraction: float = ONSET_FRACTION) -> int:
     """
     p = np.asarray(pressure, dtype=np.float64)
     total = np.nansum(p.reshape(p.shape[0], -1), axis=1) if p.ndim > 1 else np.nan_to_num(p)
+    total = total - total.min() if total.size else total
     peak = float(total.max()) if total.size else 0.0
     if not peak > 0:
         return 0

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from tactbench.classifiers.io import live_metadata, load_model, read_header
 from tactbench.contracts import CLASSIFIER
-from tactbench.data.splits import describe_splits, make_splits
+from tactbench.data.splits import dataset_groups, describe_splits, make_splits
 from tactbench.data.windows import dataset_onsets, test_windows_for, training_windows_for
 from tactbench.errors import TactbenchError
 from tactbench.runner.entries import load_encoding
@@ -49,6 +49,7 @@ class DatasetFacts:
     users: tuple[str, ...]  # user of every sample
     classes: tuple[str, ...]
     onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
+    groups: dict[str, tuple[str, ...]] | None = None  # metadata of group:KEY splits
 
     @classmethod
     def of(cls, dataset: Any, *, onsets: bool = False) -> "DatasetFacts":
@@ -56,7 +57,8 @@ class DatasetFacts:
         return cls(labels=tuple(int(x) for x in dataset.labels),
                    users=tuple(str(u) for u in dataset.users),
                    classes=tuple(dataset.classes),
-                   onsets=dataset_onsets(dataset) if onsets else None)
+                   onsets=dataset_onsets(dataset) if onsets else None,
+                   groups={k: tuple(v) for k, v in dataset_groups(dataset).items()})
 
 
 @dataclass(frozen=True)
@@ -192,7 +194,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     scene, data = job.scene, job.data
     labels = np.asarray(data.labels, dtype=np.int64)
     splits = make_splits(scene.split, labels=labels, users=data.users, seed=cell.seed,
-                         test_per_class=scene.test_per_class)
+                         test_per_class=scene.test_per_class,
+                         groups=data.groups)
     rss0 = 0.0
     train_s = infer_s = 0.0
     n_train = n_test = 0

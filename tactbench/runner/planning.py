@@ -24,7 +24,7 @@ from typing import Any
 
 from tactbench.contracts import CLASSIFIER, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
-from tactbench.data.splits import canonical_split, make_splits, parse_split
+from tactbench.data.splits import canonical_split, dataset_groups, make_splits, parse_split
 from tactbench.data.windows import TEST_WINDOWS
 from tactbench.datasets.loading import check_informative, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
@@ -231,7 +231,7 @@ def check_scene(scene: Scene) -> None:
     if parse_split(scene.split)[1] is not None and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
                          f"{scene.split!r} trains one per fold; save models with "
-                         f"--split users or paper")
+                         f"--split users, group:KEY or paper")
     check_choice(scene.executor, "executor", EXECUTORS)
     if scene.scheduler:
         check_scheduler(scene.scheduler)
@@ -444,7 +444,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
     make_splits(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
-                test_per_class=scene.test_per_class)  # fails early on an impossible split
+                test_per_class=scene.test_per_class,
+                groups=dataset_groups(dataset))  # fails early on an impossible split
 
     cells: list[Cell] = []
     identities: dict[str, dict[str, Any]] = {}

@@ -37,7 +37,7 @@ class Scene:
     classifiers: list[str] = field(default_factory=lambda: ["small-cnn-lstm"])
     L: list[int] = field(default_factory=lambda: [5])  # window lengths, frames
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
-    split: str = "paper"  # paper, users, or users:folds=K
+    split: str = "paper"  # paper, users, users:folds=K or group:KEY[:folds=K]
     test_window: str = "first"  # first (the study's), onset or vote: see data/windows.py
     test_per_class: int = 30
     profile: str = "quick"

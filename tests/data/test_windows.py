@@ -121,6 +121,7 @@ def test_onset_is_the_first_frame_reaching_a_tenth_of_the_peak():
     with_nan = pressure.copy()
     with_nan[1, 0] = np.nan
     assert onset_frame(with_nan) == 4
+    assert onset_frame(pressure + 0.3) == 4  # a noise floor is not contact
 
 
 def test_each_test_window_mode_picks_its_frames():

@@ -1,0 +1,290 @@
+"""Do simulated people differ like real ones? Two measurements on the simulator.
+
+    python benchmarks/people.py [--dataset synthetic-forearm] [--encoders raw farneback]
+        [--classifier logreg] [-L 5] [--seeds 0-4] [--test-window onset]
+        [--json docs/people.json] [--md docs/people.md]
+
+1. **Leaving people out costs accuracy.** The same grid (encoders × classifier, L, seeds)
+   runs with the random split (``paper``: 30 test samples per class) and the users split
+   (a fifth of the people left out); per seed, the difference users − random is one paired
+   run-level observation. The interval is Nadeau and Bengio's corrected resampled t
+   (Machine Learning 52, 2003): variance ``(1/J + n_test/n_train) · S²`` over the ``J``
+   seeds, t with ``J − 1`` degrees of freedom (``scipy.stats.t``), with ``n_test/n_train``
+   the larger of the two splits' (the users split's), so the interval is the wider one.
+   Computed here, not by tactbench's run statistics.
+2. **Accuracy differs between people beyond binomial noise.** One run with
+   ``users:folds=5`` at the first seed (every person tested once, by a model that never
+   saw them); per
+   person, ``k`` of ``n`` test recordings right. The between-person variance of accuracy
+   is the method-of-moments variance component ``Var(p̂_i) − mean(p̂_i (1 − p̂_i)/(n_i − 1))``
+   (what the spread of per-person accuracy adds to what binomial noise alone would give),
+   with a percentile bootstrap interval over people (2000 resamples), and the χ² test of
+   homogeneity of the ``k_i / n_i`` (``scipy.stats.chi2_contingency``).
+
+The cells run through :func:`tactbench.runner.run` (the same code as ``tactbench run``;
+the equivalent commands are printed in the markdown). The test window is ``onset`` by
+default: version 2's recordings start before contact, so the study's ``first`` window of 5
+frames mostly sees no touch at all (``--test-window first`` measures that). Nothing here is
+tuned: the simulator's distributions are set in ``tactbench/datasets/people.py`` from the
+sources in ``docs/simulator.md``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import platform  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from datetime import datetime, timezone  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Sequence  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIDENCE = 0.95
+BOOTSTRAP = 2000
+
+
+# ------------------------------------------------------------------- statistics
+
+
+def corrected_t_interval(differences: Sequence[float], test_train_ratio: float,
+                         confidence: float = CONFIDENCE) -> dict:
+    """Nadeau–Bengio corrected resampled t over ``J`` paired run-level differences:
+    mean, interval and two-sided p. ``test_train_ratio`` is ``n_test / n_train``."""
+    from scipy import stats
+
+    d = np.asarray(differences, dtype=float)
+    j = len(d)
+    if j < 2:
+        raise ValueError("a corrected t interval needs ≥ 2 runs")
+    mean = float(d.mean())
+    var = (1.0 / j + float(test_train_ratio)) * float(d.var(ddof=1))
+    se = math.sqrt(var)
+    q = float(stats.t.ppf(0.5 + confidence / 2, j - 1))
+    p = float(2 * stats.t.sf(abs(mean) / se, j - 1)) if se > 0 else (0.0 if mean else 1.0)
+    return {"mean": mean, "low": mean - q * se, "high": mean + q * se, "p": p, "runs": j,
+            "test_train_ratio": float(test_train_ratio), "confidence": confidence}
+
+
+def _variance_component(k: np.ndarray, n: np.ndarray) -> float:
+    p = k / n
+    return float(p.var(ddof=1) - np.mean(p * (1 - p) / np.maximum(n - 1, 1)))
+
+
+def between_person_variance(correct: Sequence[bool], people: Sequence[str], *,
+                            seed: int = 0, confidence: float = CONFIDENCE,
+                            resamples: int = BOOTSTRAP) -> dict:
+    """How much accuracy varies between people beyond binomial noise: the variance
+    component (method of moments), its bootstrap interval over people, its square root in
+    accuracy points, the observed spread, and the χ² homogeneity test's p."""
+    from scipy.stats import chi2_contingency
+
+    correct = np.asarray(correct, dtype=bool)
+    people = np.asarray([str(p) for p in people])
+    names = np.unique(people)
+    k = np.array([correct[people == u].sum() for u in names], dtype=float)
+    n = np.array([(people == u).sum() for u in names], dtype=float)
+    estimate = _variance_component(k, n)
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, len(names), (resamples, len(names)))
+    boot = np.array([_variance_component(k[i], n[i]) for i in draws])
+    lo, hi = np.quantile(boot, [(1 - confidence) / 2, (1 + confidence) / 2])
+    table = np.column_stack([k, n - k])
+    table = table[:, table.sum(0) > 0]
+    p_chi2 = float(chi2_contingency(table)[1]) if table.shape[1] == 2 else 1.0
+    acc = k / n
+    return {"people": int(len(names)), "tests_per_person": float(n.mean()),
+            "accuracy": float(k.sum() / n.sum()),
+            "per_person_sd": float(acc.std(ddof=1)),
+            "binomial_sd": float(np.sqrt(np.mean(acc * (1 - acc) / np.maximum(n - 1, 1)))),
+            "variance": estimate, "low": float(lo), "high": float(hi),
+            "sd_points": 100 * math.sqrt(max(estimate, 0.0)),
+            "sd_points_low": 100 * math.sqrt(max(float(lo), 0.0)),
+            "sd_points_high": 100 * math.sqrt(max(float(hi), 0.0)),
+            "chi2_p": p_chi2, "confidence": confidence,
+            "per_person": {str(u): [int(a), int(b)] for u, a, b in zip(names, k, n)}}
+
+
+# --------------------------------------------------------------------- running
+
+
+def _seeds(text: str) -> list[int]:
+    if "-" in text:
+        lo, hi = text.split("-", 1)
+        return list(range(int(lo), int(hi) + 1))
+    return [int(s) for s in text.split(",")]
+
+
+def run_grid(dataset: str, encoders: list[str], classifier: str, length: int,
+             seeds: list[int], split: str, test_window: str, work: Path) -> list[dict]:
+    from tactbench.runner import EncodingCache, Scene, run
+
+    scene = Scene(dataset=dataset, encoders=encoders, classifiers=[classifier],
+                  L=[length], seeds=seeds, split=split, test_window=test_window,
+                  threads=1, out=str(work / split.replace(":", "-").replace("=", "")))
+    result = run(scene, progress=False, cache=EncodingCache(work / "cache"))
+    bad = [r for r in result.rows if r["status"] != "ok"]
+    if bad:
+        raise SystemExit(f"{len(bad)} cell(s) failed: {bad[0].get('error')}")
+    return result.rows
+
+
+def command(dataset: str, encoders: list[str], classifier: str, length: int, seeds: str,
+            split: str, test_window: str) -> str:
+    enc = " ".join(f"--encoder {e}" for e in encoders)
+    return (f"tactbench run --dataset {dataset} {enc} --classifier {classifier} -L {length} "
+            f"--seed {seeds} --split {split} --test-window {test_window} --threads 1")
+
+
+def measure(args: argparse.Namespace, work: Path) -> dict:
+    from tactbench.datasets.loading import load_dataset
+
+    seeds = _seeds(args.seeds)
+    t0 = time.perf_counter()
+    ds = load_dataset(args.dataset)
+    users = np.asarray(ds.users)
+    splits = ("paper", "users") + (() if args.gap_only else ("users:folds=5",))
+    rows = {split: run_grid(args.dataset, args.encoders, args.classifier, args.length,
+                            seeds if split != "users:folds=5" else seeds[:1],
+                            split, args.test_window, work)
+            for split in splits}
+    out = {"gap": {}, "people": {}, "accuracy": {}}
+    for enc in args.encoders:
+        acc = {split: {r["seed"]: r["accuracy"] for r in rows[split] if r["encoder"] == enc}
+               for split in ("paper", "users")}
+        diffs = [acc["users"][s] - acc["paper"][s] for s in seeds]
+        ratio = max(r["n_test"] / r["n_train"] for split in ("paper", "users")
+                    for r in rows[split] if r["encoder"] == enc)
+        gap = corrected_t_interval(diffs, ratio)
+        gap["per_seed"] = diffs
+        out["gap"][enc] = gap
+        out["accuracy"][enc] = {split: float(np.mean(list(acc[split].values())))
+                                for split in acc}
+        if args.gap_only:
+            continue
+        [fold_row] = [r for r in rows["users:folds=5"] if r["encoder"] == enc
+                      and r["seed"] == seeds[0]]
+        pred = fold_row["test_predictions"]
+        idx = np.asarray(pred["indices"])
+        correct = np.asarray(pred["labels"]) == np.asarray(pred["predictions"])
+        out["people"][enc] = between_person_variance(correct, users[idx], seed=seeds[0])
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def markdown(args: argparse.Namespace, res: dict, meta: dict) -> str:
+    pct = lambda x: f"{100 * x:+.1f}"  # noqa: E731
+    lines = [
+        "# Do simulated people differ? (generated)",
+        "",
+        f"`{meta['command']}` — {meta['machine']}, {meta['date']}, "
+        f"{res['wall_s'] / 60:.1f} min wall.",
+        "",
+        f"Dataset `{args.dataset}`; classifier `{args.classifier}`, L = {args.length}, "
+        f"seeds {args.seeds}, test window `{args.test_window}`. The same cells as:",
+        "",
+        "```bash",
+        *(command(args.dataset, args.encoders, args.classifier, args.length, args.seeds, s,
+                  args.test_window) for s in ("paper", "users")),
+        *([] if args.gap_only else [command(args.dataset, args.encoders, args.classifier,
+                                            args.length, str(_seeds(args.seeds)[0]),
+                                            "users:folds=5", args.test_window)]),
+        "```",
+        "",
+        "## Leaving people out (users − random split, paired by seed)",
+        "",
+        "Nadeau–Bengio corrected resampled t over seeds, computed by this script "
+        "(`scipy.stats.t`); n_test/n_train is the users split's.",
+        "",
+        "| encoder | random split | users split | users − random (points) | "
+        f"{int(100 * CONFIDENCE)} % interval | p |",
+        "|---|---|---|---|---|---|",
+    ]
+    for enc, g in res["gap"].items():
+        a = res["accuracy"][enc]
+        lines.append(f"| {enc} | {100 * a['paper']:.1f} % | {100 * a['users']:.1f} % | "
+                     f"{pct(g['mean'])} | [{pct(g['low'])}, {pct(g['high'])}] | "
+                     f"{g['p']:.2g} |")
+    if args.gap_only:
+        lines += ["", "Regenerate with the command above; numbers in "
+                  f"[{Path(args.json).name}]({Path(args.json).name}).", ""]
+        return "\n".join(lines)
+    lines += [
+        "",
+        "## Accuracy per person (users:folds=5, first seed)",
+        "",
+        "Variance component between people (method of moments, beyond binomial noise) with "
+        "a percentile bootstrap interval over people; χ² test of homogeneity.",
+        "",
+        "| encoder | people | tests each | accuracy | sd of per-person accuracy | of which "
+        "binomial noise | between-person sd (points) | interval | χ² p |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for enc, v in res["people"].items():
+        lines.append(f"| {enc} | {v['people']} | {v['tests_per_person']:.0f} | "
+                     f"{100 * v['accuracy']:.1f} % | {100 * v['per_person_sd']:.1f} | "
+                     f"{100 * v['binomial_sd']:.1f} | {v['sd_points']:.1f} | "
+                     f"[{v['sd_points_low']:.1f}, {v['sd_points_high']:.1f}] | "
+                     f"{v['chi2_p']:.2g} |")
+    lines += ["", "Regenerate with the command above; numbers in "
+              f"[{Path(args.json).name}]({Path(args.json).name}).", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--dataset", default="synthetic-forearm:version=2")
+    ap.add_argument("--encoders", nargs="+", default=["raw", "farneback"])
+    ap.add_argument("--classifier", default="logreg")
+    ap.add_argument("-L", "--length", type=int, default=5)
+    ap.add_argument("--seeds", default="0-4")
+    ap.add_argument("--test-window", default="onset", choices=["first", "onset", "vote"])
+    ap.add_argument("--json", default=str(REPO / "docs" / "people.json"))
+    ap.add_argument("--md", default=str(REPO / "docs" / "people.md"))
+    ap.add_argument("--gap-only", action="store_true",
+                    help="measure the users − random gap only (no users:folds=5 run)")
+    ap.add_argument("--work", help="folder for the runs (default: a temporary one)")
+    args = ap.parse_args(argv)
+    given, shown = list(argv if argv is not None else sys.argv[1:]), []
+    while given:  # the command as run, less where it kept its runs
+        a = given.pop(0)
+        if a == "--work":
+            given = given[1:]
+        elif not a.startswith("--work="):
+            shown.append(a)
+    meta = {"command": " ".join(["python benchmarks/people.py", *shown]),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
+                       f"{platform.python_implementation()} {platform.python_version()}",
+            "date": datetime.now(timezone.utc).strftime("%Y-%m-%d")}
+    if args.work:
+        res = measure(args, Path(args.work))
+    else:
+        with tempfile.TemporaryDirectory(prefix="tactbench-people-") as tmp:
+            res = measure(args, Path(tmp))
+    from tactbench.paths import atomic_write_text
+
+    doc = {**meta, "options": vars(args) | {"json": None, "md": None, "work": None}, **res}
+    atomic_write_text(Path(args.json), json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(Path(args.md), markdown(args, res, meta))
+    for enc, g in res["gap"].items():
+        print(f"{enc}: users − random {100 * g['mean']:+.1f} points "
+              f"[{100 * g['low']:+.1f}, {100 * g['high']:+.1f}]")
+        v = res["people"].get(enc)
+        if v:
+            print(f"  between-person sd {v['sd_points']:.1f} points [{v['sd_points_low']:.1f}, "
+                  f"{v['sd_points_high']:.1f}], χ² p {v['chi2_p']:.2g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

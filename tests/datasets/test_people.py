@@ -1,0 +1,120 @@
+"""The person model (synthetic-forearm version 2): people differ in ways a classifier feels.
+
+A reduced set (6 people × 5 gestures × 2 positions × 5 repetitions), a 1-nearest-neighbour
+classifier on the onset window's pressure pooled per skin module: leaving people out costs
+accuracy (a corrected-t interval over 8 seeds below 0), and accuracy differs between people
+beyond binomial noise. The estimators are those of benchmarks/people.py, which measures
+both on the default set with tactbench's own encoders and classifier.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactbench.data.splits import make_splits
+from tactbench.data.windows import dataset_onsets, window_starts
+from tactbench.datasets import people
+from tactbench.datasets.synthetic import generate
+
+REPO = Path(__file__).resolve().parents[2]
+L = 5
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("people_bench", REPO / "benchmarks" /
+                                                  "people.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def reduced():
+    ds = generate(users=6, repetitions=5, version=2)
+    starts = window_starts([s.recording.n_frames for s in ds], L, dataset_onsets(ds))
+    _, module = np.unique(ds.layout.ids // 16, return_inverse=True)
+    feats = []
+    for s, a in zip(ds, starts):
+        v = np.nan_to_num(ds.normalise(s.recording.values))[a:a + L]
+        pooled = np.zeros((module.max() + 1, L))
+        np.add.at(pooled, module, v.T)
+        feats.append(pooled.ravel())
+    return ds, np.array(feats)
+
+
+def _nearest(x, y, train, test):
+    mu, sd = x[train].mean(0), x[train].std(0) + 1e-6
+    z = (x - mu) / sd
+    d = ((z[test][:, None, :] - z[train][None]) ** 2).sum(-1)
+    return y[train][d.argmin(1)]
+
+
+def test_leaving_people_out_costs_accuracy(reduced):
+    ds, x = reduced
+    y, users = ds.labels, np.asarray(ds.users)
+    diffs, ratios = [], []
+    for seed in range(8):
+        acc = {}
+        for split in ("paper", "users"):
+            [s] = make_splits(split, labels=y, users=users, seed=seed, test_per_class=6)
+            acc[split] = (_nearest(x, y, s.train, s.test) == y[s.test]).mean()
+            ratios.append(len(s.test) / len(s.train))
+        diffs.append(acc["users"] - acc["paper"])
+    gap = _bench().corrected_t_interval(diffs, max(ratios))
+    assert gap["high"] < 0, gap  # users split harder, interval excludes 0
+    assert gap["mean"] < -0.1
+
+
+def test_accuracy_differs_between_people_beyond_binomial_noise(reduced):
+    ds, x = reduced
+    y, users = ds.labels, np.asarray(ds.users)
+    correct = np.zeros(len(y), dtype=bool)
+    for fold in make_splits("users:folds=3", labels=y, users=users, seed=0):
+        correct[fold.test] = _nearest(x, y, fold.train, fold.test) == y[fold.test]
+    v = _bench().between_person_variance(correct, users)
+    assert v["people"] == 6 and v["tests_per_person"] == 50
+    assert v["per_person_sd"] > v["binomial_sd"] and v["variance"] > 0
+    assert v["chi2_p"] < 0.05
+    # the estimator itself: people who all score alike show no variance beyond noise
+    rng = np.random.default_rng(0)
+    alike = _bench().between_person_variance(rng.random(4000) < 0.6,
+                                             np.repeat([f"p{i}" for i in range(40)], 100))
+    assert alike["low"] < 0 < alike["high"] and alike["chi2_p"] > 0.05
+
+
+def test_recordings_start_before_contact_and_end_after_release(reduced):
+    ds, _ = reduced
+    onsets = np.asarray(dataset_onsets(ds))
+    names = np.asarray(ds.users)
+    assert np.median(onsets) >= 3 and (onsets == 0).mean() < 0.1  # a lead-in without touch
+    # the lead-in is a personal habit: people differ more than one person's recordings do
+    per_person = [onsets[names == u] for u in np.unique(names)]
+    assert np.var([p.mean() for p in per_person]) > np.mean([p.var() for p in per_person]) / 50
+    tails = []
+    for s in ds:
+        total = np.nansum(ds.normalise(s.recording.values), axis=1)
+        contact = total - total.min() > 0.1 * np.ptp(total)
+        tails.append(len(contact) - 1 - np.flatnonzero(contact)[-1])
+    assert np.median(tails) >= 3  # released, then frames without contact
+
+
+def test_people_are_drawn_from_the_documented_distributions():
+    ps = [people.make_person(0, i) for i in range(400)]
+    hands = np.array([p.hand_mm for p in ps])
+    assert hands.min() >= 160 and hands.max() <= 200 and abs(np.median(hands) - 180) < 2
+    slop = np.array([p.sloppiness for p in ps])
+    assert 0.9 < np.median(slop) < 1.1 and np.percentile(slop, 90) > 1.6  # some are sloppy
+    tips = np.array([p.fingertips for p in ps])
+    assert np.allclose(tips.mean(0), people.FINGERTIP_GRIP, atol=0.07)  # alike for the three
+    assert 0.4 < np.mean([p.push_flat for p in ps]) < 0.7
+    lead = np.array([p.lead_in for p in ps])
+    assert lead.min() >= 0.1 and lead.max() <= 2.0 and 0.5 < np.median(lead) < 0.7
+    # a person is the same whoever else is generated, and a session shifts them a little
+    assert repr(people.make_person(0, 7)) == repr(ps[7])
+    a = people.make_session(0, ps[0], "front")
+    b = people.make_session(0, ps[0], "side")
+    assert a != b and abs(a.force - 1) < 0.4 and abs(a.dx) < 25
