@@ -620,19 +620,28 @@ def main(argv=None) -> int:
                  ("cnn-lstm", small, max(1, args.steps // 5))]
         result["overhead"] = measure_overhead(cases, repeats=args.repeats)
         result["logreg"] = measure_logreg(small)
+    def save() -> None:  # after every part: a part cut short keeps those before it
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+
     if "speed" not in args.skip:
         vectors = taxel_windows(small)
         cases = [("small-cnn-lstm", small, args.steps), ("taxel-lstm", vectors, args.steps),
                  ("cnn-lstm", small, max(1, args.steps // 5))]
         result["speed"] = measure_speed(cases, repeats=args.repeats, threads=args.threads)
+        save()
     if "threads" not in args.skip:
         result["threads_per_cell"] = measure_threads(small, steps=10, repeats=args.repeats)
+        save()
     if "compile" not in args.skip:
         result["compile"] = measure_compile(small, steps=10, repeats=args.repeats)
+        save()
     if "quick" not in args.skip:
         result["quick"] = measure_quick(args.sequences, args.seeds, args.channels)
+        save()
     if "paper-step" not in args.skip:
         result["paper_step"] = measure_paper_step()
+        save()
     if "paper-epoch" not in args.skip:
         result["paper_epoch"] = measure_paper_epoch(small)
     args.out.parent.mkdir(parents=True, exist_ok=True)
