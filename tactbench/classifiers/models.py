@@ -15,7 +15,7 @@ from tactbench.errors import InputError, check_choice, check_positive_float, che
 
 #: From this input size (px) up, ``cnn-lstm`` trains with gradient checkpointing of its
 #: backbone (every stage's inner activations recomputed in the backward pass): at 224 px
-#: one step of batch 16 × 5 frames holds ~7.8 GB of activations without it, ~1.5 GB
+#: one step of batch 16 × 5 frames peaks at 7.3 GB resident without it, 3.0 GB
 #: with it (docs/classifiers.md). The same updates either way, to float rounding.
 CHECKPOINT_FROM_PX = 112
 
