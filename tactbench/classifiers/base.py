@@ -449,7 +449,7 @@ class TorchSequenceClassifier(SequenceClassifier):
     bn_recalibration_batches: int = 0
     #: 1: batches are drawn as runs of up to L consecutive windows of one sequence
     #: (windows starting at kL .. kL+L-1), and each distinct frame of a batch goes
-    #: through the frame encoder once (the LSTM still sees every window): ~2.8× less
+    #: through the frame encoder once (the LSTM still sees every window): ~2.6× less
     #: encoder work at L = 5. It changes the sampling, so it is part of a cell's
     #: identity; 0 (default): windows drawn independently, every frame of every window
     #: encoded. See docs/classifiers.md for what it does to accuracy.
