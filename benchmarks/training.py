@@ -1,6 +1,6 @@
 """Training throughput and the quick profile's budget.
 
-Three measurements, on a synthetic gesture-like task made here (5 classes of
+Measurements on a synthetic gesture-like task made here (5 classes of
 moving/settling Gaussian contacts, sequences of 5–27 frames of 60×70 px: the
 size the runner's quick profile images at ~5 mm/px):
 
@@ -13,7 +13,18 @@ size the runner's quick profile images at ~5 mm/px):
    windows of L = 5 (C = 1 and C = 3), seconds and test accuracy; the runner's
    goal is six of these (raw vs farneback × 3 seeds) plus data and encoding in
    ≤ 10 minutes on 2 cores.
-3. ``paper-epoch`` (only with CUDA): one epoch of the paper profile
+3. ``speed``: windows per second of each model's fit loop (``small-cnn-lstm``,
+   ``taxel-lstm``, ``cnn-lstm`` at quick sizes), the old path ("before": NCHW
+   encoding) against today's ("after": channels-last) and with
+   ``shared_features=1``, interleaved in one process; FLOPs per window (forward +
+   backward, ``FlopCounterMode``) against the dense-GEMM rate measured here.
+4. ``threads``: one step loop at 1 and 2 threads (2 threads per cell, or two
+   1-thread cells at once); ``compile``: ``torch.compile`` (inductor) against eager,
+   compile time included.
+5. ``paper-step``: the peak RSS of one ``paper``-profile ``cnn-lstm`` training step
+   on the CPU (224 px, batch 16 × 5 frames) without and with gradient
+   checkpointing, each in a fresh process.
+6. ``paper-epoch`` (only with CUDA): one epoch of the paper profile
    (``cnn-lstm``, 224 px, SGD 1e-3, batch 16) on the GPU.
 
 Usage::
@@ -270,6 +281,307 @@ def measure_paper_epoch(train) -> dict | None:
     return row
 
 
+# --------------------------------------------------------------------------- speed (issue 21)
+
+#: What each variant of ``measure_speed`` changes against the old path ("before":
+#: NCHW encoding, every frame of every window encoded).
+VARIANTS = {
+    "before": {"channels_last": False, "options": {}},
+    "after": {"channels_last": True, "options": {}},
+    "after+shared_features": {"channels_last": True, "options": {"shared_features": 1}},
+}
+
+
+def _fit_seconds(reg, name, train, opts, *, channels_last: bool) -> tuple[float, dict]:
+    """Loop seconds of one ``fit`` with the encoder's memory format chosen (the class
+    default is what the toolkit runs; ``False`` is the old NCHW path)."""
+    import warnings
+
+    from tactbench.classifiers.nets import SequenceNet
+
+    saved = SequenceNet.channels_last
+    SequenceNet.channels_last = channels_last
+    try:
+        clf = reg.build("classifier", name, **opts)
+        steps = {"cpu": 0.0}
+
+        def progress(done, total, **info):  # CPU time of the steps 2 .. total alone
+            if "val_accuracy" in info:
+                return
+            if done == 1:
+                steps["start"] = time.process_time()
+            if done == total:  # not BatchNorm recalibration, which follows the loop
+                steps["cpu"] = time.process_time() - steps["start"]
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # cnn-lstm: no ImageNet weights here
+            rep = clf.fit(train, None, seed=0, progress=progress)
+    finally:
+        SequenceNet.channels_last = saved
+    # the first step is left out of the CPU time (it starts the clock): scale to all
+    per_step = steps["cpu"] / max(rep["steps"] - 1, 1)
+    return rep["train_seconds"], per_step * rep["steps"], rep
+
+
+def step_flops(clf, train, batch: int, *, shared: bool = False) -> float:
+    """FLOPs of one training step (forward + backward) per window, counted by
+    ``torch.utils.flop_counter.FlopCounterMode`` (matrix products and convolutions)."""
+    import torch
+    import torch.nn.functional as F
+    from torch.utils.flop_counter import FlopCounterMode
+
+    from tactbench.classifiers.base import FrameBank
+
+    torch.manual_seed(0)
+    net = clf._build_net(tuple(train.frame_shape), 5, pretrained=False)
+    with torch.no_grad():
+        bank = FrameBank(train, net.prepare)
+    if shared:  # a batch as shared_features draws it: whole runs of windows
+        from tactbench.classifiers.base import window_runs
+        from tactbench.classifiers.training import epoch_order
+
+        idx = epoch_order(np.random.default_rng(0), len(train), 0, window_runs(train))[:batch]
+        x, y = bank.shared_batch(idx)
+    else:
+        x, y = bank.batch(np.random.default_rng(0).permutation(len(train))[:batch])
+    net.train()
+    counter = FlopCounterMode(display=False)
+    with counter:
+        F.cross_entropy(net(x), y).backward()
+    return counter.get_total_flops() / batch
+
+
+def gemm_rate(m: int, k: int, n: int, *, seconds: float = 1.0) -> tuple[float, float]:
+    """FLOPs this CPU sustains on a dense float32 ``(m, k) @ (k, n)``: per wall second
+    (best run) and per CPU second of this process (all runs; steadier when other jobs
+    share the cores)."""
+    import torch
+
+    a, b = torch.randn(m, k), torch.randn(k, n)
+    out = torch.empty(m, n)
+    torch.mm(a, b, out=out)
+    best, runs = float("inf"), 0
+    cpu0, end = time.process_time(), time.perf_counter() + seconds
+    while time.perf_counter() < end or runs < 3:
+        t0 = time.perf_counter()
+        torch.mm(a, b, out=out)
+        best = min(best, time.perf_counter() - t0)
+        runs += 1
+    flops = 2.0 * m * k * n
+    return flops / best, flops * runs / max(time.process_time() - cpu0, 1e-9)
+
+
+def measure_speed(cases, *, repeats: int, threads: int) -> dict:
+    """Windows per second of each model's fit loop, old path against new, interleaved
+    (before, after, after+shared, before, …; the fastest of each counts: other jobs
+    only ever slow a run down), with FLOPs per window and the achieved fraction of the
+    dense-GEMM rate measured here."""
+    from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
+
+    reg = load_registry()
+    # The reference rates: a square GEMM (the CPU's best case) and GEMMs shaped like the
+    # convolutions' im2col products (skinny: many pixels × few channels).
+    measured = {"square 1024": gemm_rate(1024, 1024, 1024, seconds=2.0),
+                "conv-like 81920×144×32": gemm_rate(81920, 144, 32, seconds=2.0),
+                "conv-like 5120×288×64": gemm_rate(5120, 288, 64, seconds=2.0)}
+    rates = {k: v[0] for k, v in measured.items()}
+    cpu_rates = {k: v[1] for k, v in measured.items()}
+    sustainable, sustainable_cpu = rates["square 1024"], cpu_rates["square 1024"]
+    print("dense GEMM: " + ", ".join(f"{k} {v / 1e9:.1f} GFLOP/s "
+                                     f"({cpu_rates[k] / 1e9:.1f} per CPU-s)"
+                                     for k, v in rates.items()), flush=True)
+    rows = []
+    for name, train, n_steps in cases:
+        opts = profile_options("quick", name)
+        opts.update(epochs=1, windows_per_epoch=n_steps * opts.get("batch_size", 64),
+                    schedule="constant")
+        times: dict[str, list[float]] = {v: [] for v in VARIANTS}
+        cpu: dict[str, list[float]] = {v: [] for v in VARIANTS}
+        for _ in range(repeats):
+            for variant, how in VARIANTS.items():
+                secs, cpu_s, rep = _fit_seconds(reg, name, train,
+                                                dict(opts, **how["options"]),
+                                                channels_last=how["channels_last"])
+                times[variant].append(secs)
+                cpu[variant].append(cpu_s)
+        clf = reg.build("classifier", name, **opts)
+        windows = n_steps * clf.batch_size
+        flops = step_flops(clf, train, clf.batch_size)
+        flops_shared = step_flops(clf, train, clf.batch_size, shared=True)
+        row = {"classifier": name, "frame_shape": list(train.frame_shape),
+               "input_size": getattr(clf, "input_size", None), "batch_size": clf.batch_size,
+               "steps": n_steps, "repeats": repeats, "threads": threads,
+               "flops_per_window": flops, "flops_per_window_shared": flops_shared,
+               "seconds": times, "cpu_seconds": cpu}
+        for variant in VARIANTS:
+            wps = windows / min(times[variant])
+            wpc = windows / min(cpu[variant])
+            f = flops_shared if "shared" in variant else flops
+            row[variant] = {"windows_per_s": wps, "windows_per_cpu_s": wpc,
+                            "gflop_per_s": wps * f / 1e9,
+                            "fraction_of_gemm": wps * f / sustainable,
+                            "fraction_of_gemm_per_cpu_s": wpc * f / sustainable_cpu}
+        for variant in ("after", "after+shared_features"):
+            key = "speedup_" + variant.replace("after+", "")
+            row[key] = row[variant]["windows_per_s"] / row["before"]["windows_per_s"]
+            row[key + "_cpu"] = (row[variant]["windows_per_cpu_s"]
+                                 / row["before"]["windows_per_cpu_s"])
+        rows.append(row)
+        print(f"{name:15s} {str(train.frame_shape):13s} {flops / 1e6:8.1f} MFLOP/window "
+              f"(shared {flops_shared / 1e6:.1f})  " + "  ".join(
+                  f"{v} {row[v]['windows_per_s']:6.0f} win/s "
+                  f"{row[v]['windows_per_cpu_s']:6.0f} win/CPU-s "
+                  f"({100 * row[v]['fraction_of_gemm_per_cpu_s']:.0f} % of GEMM)"
+                  for v in VARIANTS)
+              + f"  after/before {row['speedup_after']:.2f}× wall, "
+                f"{row['speedup_after_cpu']:.2f}× CPU", flush=True)
+    return {"gemm_flops_per_s": rates, "gemm_flops_per_cpu_s": cpu_rates, "rows": rows}
+
+
+def measure_compile(train, *, steps: int, repeats: int) -> dict:
+    """``torch.compile`` (inductor) of ``small-cnn-lstm``'s network against eager, on the
+    same prepared batch: compile seconds, and step time after it (best of interleaved)."""
+    import torch
+    import torch.nn.functional as F
+
+    from tactbench.classifiers.base import FrameBank
+    from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
+
+    clf = load_registry().build("classifier", "small-cnn-lstm",
+                                **profile_options("quick", "small-cnn-lstm"))
+    torch.manual_seed(0)
+    net = clf._build_net(tuple(train.frame_shape), 5, pretrained=False)
+    with torch.no_grad():
+        bank = FrameBank(train, net.prepare)
+    x, y = bank.batch(np.arange(clf.batch_size))
+
+    def stepper(module):
+        opt = torch.optim.Adam(net.parameters(), lr=1e-4)
+
+        def step():
+            opt.zero_grad(set_to_none=True)
+            F.cross_entropy(module(x), y).backward()
+            opt.step()
+        return step
+
+    net.train()
+    eager = stepper(net)
+    t0 = time.perf_counter()
+    compiled = stepper(torch.compile(net))
+    compiled()
+    compile_s = time.perf_counter() - t0
+    best = {"eager": float("inf"), "compiled": float("inf")}
+    for _ in range(repeats):
+        for label, step in (("eager", eager), ("compiled", compiled)):
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                step()
+            best[label] = min(best[label], (time.perf_counter() - t0) / steps)
+    out = {"compile_seconds": compile_s, "eager_step_s": best["eager"],
+           "compiled_step_s": best["compiled"],
+           "speedup": best["eager"] / best["compiled"],
+           "break_even_steps": (compile_s / max(best["eager"] - best["compiled"], 1e-9)
+                                if best["compiled"] < best["eager"] else None)}
+    print(f"torch.compile small-cnn-lstm: compile {compile_s:.1f} s, step eager "
+          f"{1e3 * best['eager']:.0f} ms, compiled {1e3 * best['compiled']:.0f} ms "
+          f"({out['speedup']:.2f}×)", flush=True)
+    return out
+
+
+def measure_threads(train, *, steps: int, repeats: int) -> dict:
+    """A grid of cells on 2 cores: one cell with 2 threads at a time, or two cells with
+    1 thread each at once. Windows per second of one step loop at 1 and 2 threads
+    (best of interleaved); two 1-thread cells give at most twice the 1-thread rate."""
+    import torch
+    import torch.nn.functional as F
+
+    from tactbench.classifiers.base import FrameBank
+    from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
+
+    clf = load_registry().build("classifier", "small-cnn-lstm",
+                                **profile_options("quick", "small-cnn-lstm"))
+    torch.manual_seed(0)
+    net = clf._build_net(tuple(train.frame_shape), 5, pretrained=False)
+    with torch.no_grad():
+        bank = FrameBank(train, net.prepare)
+    x, y = bank.batch(np.arange(clf.batch_size))
+    opt = torch.optim.Adam(net.parameters(), lr=1e-4)
+    net.train()
+    old = torch.get_num_threads()
+    best = {1: float("inf"), 2: float("inf")}
+    try:
+        for _ in range(repeats):
+            for n in (1, 2):
+                torch.set_num_threads(n)
+                t0 = time.perf_counter()
+                for _ in range(steps):
+                    opt.zero_grad(set_to_none=True)
+                    F.cross_entropy(net(x), y).backward()
+                    opt.step()
+                best[n] = min(best[n], (time.perf_counter() - t0) / steps)
+    finally:
+        torch.set_num_threads(old)
+    one, two = clf.batch_size / best[1], clf.batch_size / best[2]
+    out = {"windows_per_s_1_thread": one, "windows_per_s_2_threads": two,
+           "two_thread_scaling": two / one,
+           "grid_2_workers_x_1_thread_upper_bound": 2 * one}
+    print(f"threads small-cnn-lstm: 1 thread {one:.0f} win/s, 2 threads {two:.0f} win/s "
+          f"(×{two / one:.2f}); 2 workers × 1 thread ≤ {2 * one:.0f} win/s", flush=True)
+    return out
+
+
+def paper_step(checkpoint: bool) -> dict:
+    """One ``paper``-profile ``cnn-lstm`` training step on the CPU (224 px, batch 16 of
+    5 frames, SGD) in this process: its peak resident memory (``ru_maxrss``), with or
+    without gradient checkpointing of the backbone. Run in a fresh process per case."""
+    import resource
+
+    import torch
+    import torch.nn.functional as F
+
+    from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
+
+    opts = profile_options("paper", "cnn-lstm")
+    clf = load_registry().build("classifier", "cnn-lstm", **opts)
+    torch.manual_seed(0)
+    net = clf._build_net((3, 224, 224), 5, pretrained=False)
+    if not checkpoint:
+        net.checkpoint_segments = 0
+    x = torch.rand(clf.batch_size, 5, 3, 224, 224)
+    y = torch.arange(clf.batch_size) % 5
+    opt = torch.optim.SGD(net.parameters(), lr=clf.lr)
+    net.train()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    t0 = time.perf_counter()
+    opt.zero_grad(set_to_none=True)
+    F.cross_entropy(net(x), y).backward()
+    opt.step()
+    step_s = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return {"checkpoint": checkpoint, "checkpoint_segments": net.checkpoint_segments,
+            "peak_rss_mb": peak, "rss_before_step_mb": before, "step_seconds": step_s,
+            "batch": [clf.batch_size, 5, 3, 224, 224]}
+
+
+def measure_paper_step() -> list[dict]:
+    """:func:`paper_step` without and with checkpointing, each in its own process."""
+    import subprocess
+
+    rows = []
+    for flag in ("off", "on"):
+        out = subprocess.run([sys.executable, __file__, "--paper-step", flag],
+                             check=True, capture_output=True, text=True).stdout
+        row = json.loads(out.strip().splitlines()[-1])
+        rows.append(row)
+        print(f"paper-step cnn-lstm 224 px, checkpointing {flag}: peak RSS "
+              f"{row['peak_rss_mb']:.0f} MB, step {row['step_seconds']:.1f} s", flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=2)
@@ -279,13 +591,21 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=2, help="overhead test repeats (fastest counts)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--channels", type=int, nargs="+", default=[1, 3])
-    ap.add_argument("--skip", nargs="*", default=[], choices=["overhead", "quick", "paper-epoch"])
+    ap.add_argument("--skip", nargs="*", default=[],
+                    choices=["overhead", "speed", "compile", "threads", "quick", "paper-step",
+                             "paper-epoch"])
     ap.add_argument("--out", type=Path, default=Path("docs/benchmarks/training.json"))
+    ap.add_argument("--paper-step", choices=["off", "on"],
+                    help="(internal) one paper-profile cnn-lstm step in this process; "
+                         "prints its peak RSS as JSON")
     args = ap.parse_args(argv)
 
     import torch
 
     torch.set_num_threads(args.threads)
+    if args.paper_step:
+        print(json.dumps(paper_step(args.paper_step == "on")))
+        return 0
     from tactbench.data.windows import training_windows
 
     result: dict = {"command": "python " + " ".join(sys.argv), "threads": args.threads,
@@ -293,7 +613,8 @@ def main(argv=None) -> int:
                     "date": time.strftime("%Y-%m-%d"),
                     "note": "2-core CPU VM shared with other jobs: timings vary by ±30 %"}
     small = None
-    if "overhead" not in args.skip or "paper-epoch" not in args.skip:
+    if any(part not in args.skip for part in ("overhead", "speed", "threads", "compile",
+                                              "paper-epoch")):
         seqs, labels = synthetic_sequences(300, channels=3, seed=2)
         small = training_windows(seqs, labels, 5)
     if "overhead" not in args.skip:
@@ -302,8 +623,28 @@ def main(argv=None) -> int:
                  ("cnn-lstm", small, max(1, args.steps // 5))]
         result["overhead"] = measure_overhead(cases, repeats=args.repeats)
         result["logreg"] = measure_logreg(small)
+    def save() -> None:  # after every part: a part cut short keeps those before it
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+
+    if "speed" not in args.skip:
+        vectors = taxel_windows(small)
+        cases = [("small-cnn-lstm", small, args.steps), ("taxel-lstm", vectors, args.steps),
+                 ("cnn-lstm", small, max(1, args.steps // 5))]
+        result["speed"] = measure_speed(cases, repeats=args.repeats, threads=args.threads)
+        save()
+    if "threads" not in args.skip:
+        result["threads_per_cell"] = measure_threads(small, steps=10, repeats=args.repeats)
+        save()
+    if "compile" not in args.skip:
+        result["compile"] = measure_compile(small, steps=10, repeats=args.repeats)
+        save()
     if "quick" not in args.skip:
         result["quick"] = measure_quick(args.sequences, args.seeds, args.channels)
+        save()
+    if "paper-step" not in args.skip:
+        result["paper_step"] = measure_paper_step()
+        save()
     if "paper-epoch" not in args.skip:
         result["paper_epoch"] = measure_paper_epoch(small)
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -255,6 +255,47 @@ class FrameBank:
                               device=self.index.device)
         return self.frames[self.index[sel]], self.labels[sel]
 
+    def shared_batch(self, idx: np.ndarray):
+        """Windows ``idx`` as :class:`~tactbench.classifiers.nets.SharedWindows` (each
+        distinct frame once, in bank order) and their labels."""
+        import torch
+
+        from tactbench.classifiers.nets import SharedWindows
+
+        sel = torch.as_tensor(np.ascontiguousarray(idx), dtype=torch.int64,
+                              device=self.index.device)
+        distinct, inverse = torch.unique(self.index[sel], return_inverse=True)
+        return SharedWindows(self.frames[distinct], inverse), self.labels[sel]
+
+
+def window_runs(windows: Windows) -> np.ndarray:
+    """A run number per window for ``shared_features``: windows of one sequence whose
+    starts lie in the same ``[kL, kL + L)`` share a run (they overlap in up to
+    ``L - 1`` frames; a run's windows span at most ``2L - 1`` frames)."""
+    keys = np.stack([windows.seq_index, windows.starts // max(1, windows.length)], axis=1)
+    return np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+
+
+def share_frames(windows: Windows, idx: np.ndarray, x):
+    """A read batch ``x`` ``(B, L, *frame)`` of windows ``idx`` as
+    :class:`~tactbench.classifiers.nets.SharedWindows`: the same distinct frames in the
+    same order as :meth:`FrameBank.shared_batch` (by sequence, then position; the
+    blank padding frame last)."""
+    import torch
+
+    from tactbench.classifiers.nets import SharedWindows
+
+    idx = np.asarray(idx)
+    lengths = np.array([s.shape[0] for s in windows.sequences], dtype=np.int64)
+    stride = int(lengths.max()) + 1
+    pos = windows.starts[idx][:, None] + np.arange(windows.length, dtype=np.int64)[None, :]
+    seq = windows.seq_index[idx][:, None]
+    keys = np.where(pos < lengths[seq], seq * stride + pos, len(lengths) * stride)
+    _, first, inverse = np.unique(keys.reshape(-1), return_index=True, return_inverse=True)
+    flat = x.reshape(x.shape[0] * x.shape[1], *x.shape[2:])
+    return SharedWindows(flat[torch.from_numpy(first)],
+                         torch.from_numpy(inverse.reshape(keys.shape).astype(np.int64)))
+
 
 def bank_budget_bytes() -> int:
     """The frame-bank budget in bytes: ``$TACTBENCH_BANK_MIB`` (MiB) when set, else
@@ -421,6 +462,13 @@ class TorchSequenceClassifier(SequenceClassifier):
     #: training short (EfficientNet's 0.01 over ~100 steps leaves the running statistics
     #: near their initial values, and every test window lands in one class).
     bn_recalibration_batches: int = 0
+    #: 1: batches are drawn as runs of up to L consecutive windows of one sequence
+    #: (windows starting at kL .. kL+L-1), and each distinct frame of a batch goes
+    #: through the frame encoder once (the LSTM still sees every window): ~2.6× less
+    #: encoder work at L = 5. It changes the sampling, so it is part of a cell's
+    #: identity; 0 (default): windows drawn independently, every frame of every window
+    #: encoded. See docs/classifiers.md for what it does to accuracy.
+    shared_features: int = 0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -444,6 +492,8 @@ class TorchSequenceClassifier(SequenceClassifier):
         check_positive_int(self.eval_batch_size, "eval_batch_size")
         check_positive_int(self.bn_recalibration_batches, "bn_recalibration_batches (0: off)",
                            minimum=0)
+        if self.shared_features not in (0, 1):  # True/False are 1/0
+            raise InputError(f"shared_features must be 0 or 1, got {self.shared_features!r}")
         self.net = None
         self._device = None
         self._precision = None
@@ -506,7 +556,8 @@ class TorchSequenceClassifier(SequenceClassifier):
                            windows_per_epoch=self.windows_per_epoch, optimizer=self.optimizer,
                            lr=self.lr, momentum=self.momentum, weight_decay=self.weight_decay,
                            schedule=self.schedule, device=dev, precision=precision,
-                           progress=progress, evaluate=evaluate)
+                           progress=progress, evaluate=evaluate,
+                           groups=window_runs(train) if self.shared_features else None)
             except TrainingInterrupted as exc:
                 self.fit_report = self._finish_report(exc.report)
                 raise
@@ -597,7 +648,7 @@ class TorchSequenceClassifier(SequenceClassifier):
                 bank.to(dev)
 
             def get_batch(idx):
-                x, y = bank.batch(idx)
+                x, y = bank.shared_batch(idx) if self.shared_features else bank.batch(idx)
                 return x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
             return get_batch, None
         report.batches = "per batch"
@@ -605,8 +656,12 @@ class TorchSequenceClassifier(SequenceClassifier):
         workers = loader_workers(dev)
         report.loader_workers = workers
 
+        share = self.shared_features
+
         def get_read(idx):
             x, y = reader[idx]
+            if share:
+                x = share_frames(train, idx, x)
             return x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
 
         if workers == 0:
@@ -620,7 +675,9 @@ class TorchSequenceClassifier(SequenceClassifier):
             loader = DataLoader(reader, batch_size=None, sampler=indices, num_workers=workers,
                                 pin_memory=dev.type == "cuda",
                                 generator=torch.Generator().manual_seed(0))
-            for x, y in loader:
+            for idx, (x, y) in zip(indices, loader):
+                if share:
+                    x = share_frames(train, idx, x)
                 yield x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
         return get_read, load_batches
 

@@ -13,6 +13,12 @@ from typing import Any
 from tactbench.classifiers.base import TorchSequenceClassifier, n_params
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
 
+#: From this input size (px) up, ``cnn-lstm`` trains with gradient checkpointing of its
+#: backbone (every stage's inner activations recomputed in the backward pass): at 224 px
+#: one step of batch 16 × 5 frames peaks at 7.3 GB resident without it, 3.0 GB
+#: with it (docs/classifiers.md). The same updates either way, to float rounding.
+CHECKPOINT_FROM_PX = 112
+
 
 @dataclass(eq=False, repr=False, kw_only=True)
 class ImageSequenceClassifier(TorchSequenceClassifier):
@@ -96,6 +102,8 @@ class CnnLstm(ImageSequenceClassifier):
         self.weights_report: dict[str, Any] | None = None
 
     def _build_net(self, frame_shape, n_classes, *, pretrained):
+        from tactbench.classifiers.nets import segments_of
+
         channels = frame_shape[0]
         if self.backbone.startswith("timm:"):
             encoder = self._timm_backbone(self.backbone[5:], channels, pretrained)
@@ -113,7 +121,10 @@ class CnnLstm(ImageSequenceClassifier):
                     self.weights_report = {"source": None, "loaded": 0}
         else:  # __post_init__ refused any other name
             raise AssertionError(f"unchecked backbone {self.backbone!r}")
-        return self._wrap(encoder, frame_shape, n_classes)
+        net = self._wrap(encoder, frame_shape, n_classes)
+        if self.input_size >= CHECKPOINT_FROM_PX:
+            net.checkpoint_segments = len(segments_of(encoder))
+        return net
 
     def _timm_backbone(self, model_name: str, channels: int, pretrained: bool):
         import importlib.util

@@ -112,9 +112,120 @@ class SequenceNet(nn.Module):
             return resize_frames(frames, self.input_size)
         return frames
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        b, length = x.shape[:2]
-        frames = self.normalize(self.prepare(x.reshape(b * length, *x.shape[2:])))
-        feats = self.encoder(frames).reshape(b, length, -1)
+    #: Image frames go through the encoder in channels-last memory format: the same
+    #: arithmetic as NCHW up to float rounding, 1.1–1.6× less CPU time (docs/classifiers.md).
+    #: An instance attribute set to False restores the NCHW path (benchmarks/training.py).
+    channels_last: bool = True
+    #: Gradient checkpointing of the encoder (see :func:`checkpointed`): the encoder's
+    #: inner activations are recomputed in the backward pass instead of held. Set by the
+    #: classifier; the same forward, gradients and BatchNorm statistics as without.
+    checkpoint_segments: int = 0
+
+    def encode(self, frames: torch.Tensor) -> torch.Tensor:
+        """Per-frame features ``(N, F)`` of frames ``(N, *frame_shape)`` at any size."""
+        frames = self.normalize(self.prepare(frames))
+        if frames.ndim == 4 and self.channels_last:
+            frames = frames.contiguous(memory_format=torch.channels_last)
+        if self.checkpoint_segments > 0 and self.training and torch.is_grad_enabled():
+            return checkpointed(self.encoder, frames, self.checkpoint_segments)
+        return self.encoder(frames)
+
+    def forward(self, x: "torch.Tensor | SharedWindows") -> torch.Tensor:
+        if isinstance(x, SharedWindows):  # each distinct frame encoded once
+            feats = self.encode(x.frames)[x.index]
+        else:
+            b, length = x.shape[:2]
+            feats = self.encode(x.reshape(b * length, *x.shape[2:])).reshape(b, length, -1)
         out, _ = self.lstm(feats)
         return self.head(out[:, -1])
+
+
+class SharedWindows:
+    """A batch of windows as its distinct frames ``(U, *frame)`` and, per window, the
+    positions of its frames among them, ``index`` ``(B, L)`` int64: overlapping windows
+    of one sequence share frames, and :class:`SequenceNet` encodes each frame once."""
+
+    def __init__(self, frames: torch.Tensor, index: torch.Tensor) -> None:
+        self.frames = frames
+        self.index = index
+
+    def __len__(self) -> int:
+        return int(self.index.shape[0])
+
+    def to(self, device, non_blocking: bool = False) -> "SharedWindows":
+        return SharedWindows(self.frames.to(device, non_blocking=non_blocking),
+                             self.index.to(device, non_blocking=non_blocking))
+
+
+def segments_of(encoder: nn.Module) -> list[nn.Module]:
+    """The encoder as a list of modules applied in turn: EfficientNet's stem, blocks and
+    head (pooled at the end), SmallCNN's conv blocks, a Sequential's children; else the
+    encoder whole."""
+    from tactbench.classifiers.efficientnet import EfficientNetB0
+
+    if isinstance(encoder, EfficientNetB0):
+        return [encoder.stem, *encoder.blocks, encoder.head, _MeanPool()]
+    if isinstance(encoder, SmallCNN):  # whole conv blocks (ReLU works in place)
+        body = list(encoder.body)
+        return [nn.Sequential(*body[i:i + 4]) for i in range(0, len(body), 4)] + [_MeanPool()]
+    if isinstance(encoder, nn.Sequential):
+        return list(encoder)
+    return [encoder]
+
+
+class _MeanPool(nn.Module):
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x.mean((2, 3))
+
+
+class _KeepBatchNormStats:
+    """Context of a checkpoint's recomputation: BatchNorm buffers (running statistics,
+    batch count) of ``module`` are restored on exit, so recomputing a forward in the
+    backward pass does not update them a second time."""
+
+    def __init__(self, module: nn.Module) -> None:
+        self.module = module
+        self.saved: list[tuple[torch.Tensor, torch.Tensor]] = []
+
+    def __enter__(self):
+        self.saved = [(buf, buf.detach().clone())
+                      for m in self.module.modules() if isinstance(m, nn.modules.batchnorm._BatchNorm)
+                      for buf in m.buffers()]
+        return self
+
+    def __exit__(self, *exc) -> None:
+        with torch.no_grad():
+            for buf, value in self.saved:
+                buf.copy_(value)
+        self.saved = []
+
+
+def checkpointed(encoder: nn.Module, x: torch.Tensor, segments: int) -> torch.Tensor:
+    """``encoder(x)`` with gradient checkpointing over ``segments`` runs of its layers
+    (:func:`segments_of`): only each run's input is held for the backward pass, and a
+    run's inner activations are recomputed there (the whole batch at once, so BatchNorm
+    sees the same batch). Random draws (stochastic depth) are replayed
+    (``preserve_rng_state``) and BatchNorm's running statistics are updated once, as
+    without checkpointing: the same outputs, gradients and buffers, to float rounding."""
+    from contextlib import nullcontext
+
+    from torch.utils.checkpoint import checkpoint
+
+    layers = segments_of(encoder)
+    n = max(1, min(int(segments), len(layers)))
+    bounds = [round(i * len(layers) / n) for i in range(n + 1)]
+
+    def run(lo: int, hi: int):
+        def fn(y: torch.Tensor) -> torch.Tensor:
+            for layer in layers[lo:hi]:
+                y = layer(y)
+            return y
+        return fn
+
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        if hi <= lo:
+            continue
+        mods = nn.ModuleList([m for m in layers[lo:hi]])
+        x = checkpoint(run(lo, hi), x, use_reentrant=False, preserve_rng_state=True,
+                       context_fn=lambda mods=mods: (nullcontext(), _KeepBatchNormStats(mods)))
+    return x

@@ -157,15 +157,31 @@ class TrainingInterrupted(KeyboardInterrupt):
 ProgressFn = Callable[..., Any]
 
 
-def epoch_order(rng: np.random.Generator, n: int, per_epoch: int) -> np.ndarray:
+def epoch_order(rng: np.random.Generator, n: int, per_epoch: int,
+                groups: np.ndarray | None = None) -> np.ndarray:
     """Window indices for one epoch: a permutation of ``n``, cut to (or repeated up to)
-    ``per_epoch`` when ``per_epoch > 0``."""
+    ``per_epoch`` when ``per_epoch > 0``. With ``groups`` (a group number per window),
+    the groups are permuted and each group's windows follow one another (in index
+    order), so a batch holds whole runs of windows."""
     if n <= 0:
         raise InputError("no training windows")
+    if groups is None:
+        def permutation() -> np.ndarray:
+            return rng.permutation(n)
+    else:
+        groups = np.asarray(groups)
+        if groups.shape != (n,):
+            raise ValueError(f"groups has shape {groups.shape}, expected ({n},)")  # a bug
+        by_group = np.argsort(groups, kind="stable")
+        bounds = np.flatnonzero(np.diff(groups[by_group])) + 1
+        members = np.split(by_group, bounds)
+
+        def permutation() -> np.ndarray:
+            return np.concatenate([members[g] for g in rng.permutation(len(members))])
     if per_epoch <= 0 or per_epoch == n:
-        return rng.permutation(n)
+        return permutation()
     reps = -(-per_epoch // n)
-    return np.concatenate([rng.permutation(n) for _ in range(reps)])[:per_epoch]
+    return np.concatenate([permutation() for _ in range(reps)])[:per_epoch]
 
 
 def make_optimizer(name: str, params, *, lr: float, momentum: float, weight_decay: float):
@@ -201,6 +217,7 @@ def train_loop(
     evaluate: Callable[[], float] | None = None,
     load_batches: Callable[[list[np.ndarray]], Iterable[tuple["torch.Tensor", "torch.Tensor"]]]
     | None = None,
+    groups: np.ndarray | None = None,
 ) -> FitReport:
     """Train ``model`` with cross-entropy and fill ``report``.
 
@@ -211,7 +228,9 @@ def train_loop(
     ``progress(done, total, **info)`` is called after every step (``info``: ``epoch``,
     ``epochs``, ``loss``) and after each epoch's evaluation (``val_accuracy``).
     ``evaluate()`` (optional) returns the validation accuracy after each epoch. Random
-    order comes from ``report.seed``; the caller seeds torch.
+    order comes from ``report.seed``; the caller seeds torch. ``groups`` (a group
+    number per window, optional): batches are drawn as whole groups
+    (:func:`epoch_order`).
     """
     import torch
     import torch.nn.functional as F
@@ -236,7 +255,7 @@ def train_loop(
     try:
         for epoch in range(epochs):
             model.train()
-            order = epoch_order(rng, n_windows, windows_per_epoch)
+            order = epoch_order(rng, n_windows, windows_per_epoch, groups)
             loss_sum, count = 0.0, 0
             indices = [order[s * batch_size:(s + 1) * batch_size]
                        for s in range(steps_per_epoch)]
