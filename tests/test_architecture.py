@@ -73,10 +73,11 @@ LAZY = {"torch", "torchvision", "kornia", "cv2", "can", "matplotlib", "dask", "d
 STILL_TO_CONVERT = {
     "tactbench/apidoc.py": 4,
     "tactbench/can/record.py": 1,
-    "tactbench/classifiers/base.py": 1,
+    "tactbench/classifiers/base.py": 3,
     "tactbench/classifiers/classical.py": 1,
     "tactbench/classifiers/io.py": 8,
-    "tactbench/classifiers/models.py": 6,
+    "tactbench/classifiers/models.py": 7,
+    "tactbench/classifiers/nets.py": 2,
     "tactbench/classifiers/sklearn.py": 1,
     "tactbench/classifiers/testing.py": 4,
     "tactbench/cli.py": 3,
