@@ -44,7 +44,7 @@ def test_check_number_returns_only_finite_numbers_within_bounds(value, minimum, 
     ["can", "simulate", "synthetic-forearm", "--gap", "-0.5"],
     ["live", "--model", __file__, "--max-sweeps", "-1"],
     ["live", "--model", __file__, "--threads", "nan"],
-    ["live", "--model", __file__, "--length", "0"],
+    ["live", "--model", __file__, "-L", "0"],
 ])
 def test_cli_numbers_are_refused_before_any_work(args, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
