@@ -127,3 +127,15 @@ def test_a_scene_files_paths_are_taken_from_its_folder_and_expand_the_home(tmp_p
     fields = load_scene_file(scene)
     assert fields["dataset"] == "synthetic-forearm:users=2"
     assert fields["out"] == os.path.join(os.path.expanduser("~"), "x")
+
+
+def test_a_class_with_one_recording_is_refused_by_its_name(tmp_path):
+    """Degenerate input: a class with one recording can be trained on or tested on, never
+    both, so a score over it is no finding. Refused at planning, naming the class."""
+    root = _folder(tmp_path / "d")
+    (root / "lonely").mkdir()
+    np.save(root / "lonely" / "u0_r.npy", np.random.default_rng(1).random((5, 3, 3),
+                                                                           dtype=np.float32))
+    with pytest.raises(InputError, match="class 'lonely' has 1 recording; a benchmark "
+                                         "needs ≥ 2 per class"):
+        check_informative(read_folder(root))

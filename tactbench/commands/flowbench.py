@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from tactbench.budget import check_budget
 from tactbench.cli import get_registry, json_text
 from tactbench.encoders.evaluation import flowbench as fb
 from tactbench.encoders.parallel import default_workers
@@ -49,6 +50,8 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     specs = specs or fb.DEFAULT_ENCODERS
     encoders = [(spec, registry.build("encoder", spec)) for spec in specs]
     shapes = [_parse_size(s) for s in sizes] or [fb.DEFAULT_SHAPE, fb.FULL_SHAPE]
+    check_budget(fb.memory_estimate(shapes), "flowbench at "
+                 + ", ".join(fb.resolution_label(s) for s in shapes))  # before any scene
     with Progress() as bars:
         results = fb.run_flowbench(encoders, shapes, repeats=repeats,
                                    progress=bars.callback("flowbench"))

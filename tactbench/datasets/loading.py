@@ -128,8 +128,9 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
 
 def check_informative(dataset: Dataset) -> None:
     """Refuse a dataset that holds nothing to classify, before any work: every reading
-    missing (NaN), or every reading the same value. A classifier would report chance
-    accuracy as if it were a finding."""
+    missing (NaN), every reading the same value, or a class with fewer than 2
+    recordings (named by its name). A classifier would report chance accuracy, or a
+    class never tested, as if it were a finding."""
     import numpy as np
 
     lo, hi, seen = np.inf, -np.inf, 0
@@ -145,6 +146,15 @@ def check_informative(dataset: Dataset) -> None:
     if lo == hi:
         raise InputError(f"dataset '{dataset.name}': every reading is {lo:g}; there is "
                          f"nothing to classify")
+    counts = np.bincount(np.asarray(dataset.labels, dtype=np.int64),
+                         minlength=len(dataset.classes))
+    thin = [(dataset.classes[i], int(n)) for i, n in enumerate(counts) if n < 2]
+    if thin:  # it could be trained on or tested on, never both: no finding either way
+        name, n = thin[0]
+        more = f" (and {len(thin) - 1} more such classes)" if len(thin) > 1 else ""
+        raise InputError(f"dataset '{dataset.name}': class '{name}' has {n} recording"
+                         f"{'' if n == 1 else 's'}{more}; a benchmark needs ≥ 2 per class "
+                         f"to train and test on it")
 
 
 def check_loaded(dataset: Any, spec: str) -> Dataset:

@@ -144,3 +144,16 @@ def test_command_refuses_encoders_without_flow_and_bad_sizes():
     assert result.exit_code != 0 and "flow" in result.output
     result = runner.invoke(cli, ["flowbench", "--size", "big"])
     assert result.exit_code != 0 and "HxW" in result.output
+
+
+def test_a_size_beyond_the_memory_budget_is_refused_before_any_scene(monkeypatch):
+    """flowbench --size 4000x4000 under a 128 MiB budget: one line, exit 2, nothing made
+    (it once peaked at 6.8 GB; the estimate, 15 GiB, is on the safe side)."""
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "128")
+    monkeypatch.setattr(fb, "tactile_scene", lambda *a, **k: pytest.fail("a scene was made"))
+    result = CliRunner().invoke(cli, ["flowbench", "--size", "4000x4000", "--encoder", "dis"])
+    assert result.exit_code == 2
+    assert "flowbench at 4000x4000 would need about" in result.output
+    # the estimate grows with the images and stays under the default budget at the defaults
+    assert fb.memory_estimate([(4000, 4000)]) > 100 * fb.memory_estimate([fb.DEFAULT_SHAPE])
+    assert fb.memory_estimate([fb.DEFAULT_SHAPE, fb.FULL_SHAPE]) < 512 * 2 ** 20

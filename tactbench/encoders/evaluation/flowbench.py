@@ -270,6 +270,25 @@ def timing_sequence(shape: tuple[int, int], frames: int = 16) -> np.ndarray:
     return np.concatenate([scene.prev, scene.curr[-1:]])
 
 
+def memory_estimate(shapes: Sequence[tuple[int, int]]) -> int:
+    """Bytes :func:`run_flowbench` holds at ``shapes``, estimated before any scene is made:
+    every shape's scenes (float32 frame pairs and their float64 true flow) and timing
+    sequence are built up front; the largest shape's encoding of the timing sequence
+    (4 float32 channels) and an encoder's working copies (pyramids, gradients: taken as 8
+    images of the size) come on top."""
+    total, largest = 0, 0
+    for h, w in shapes:
+        full = h * w > 128 * 128
+        speeds = 3 if full else len(SPEEDS)
+        pairs = 1 if full else 2
+        moving = sum(m != "pressure" for m in MOTIONS)
+        n_scenes = len(SIZES) * (moving * speeds + len(MOTIONS) - moving) + 1
+        total += n_scenes * pairs * h * w * (2 * 4 + 2 * 8)  # prev, curr; u, v
+        total += 16 * h * w * 4  # the timing sequence
+        largest = max(largest, h * w)
+    return int(total + largest * (16 * 4 * 4 + 8 * 8))
+
+
 # ----------------------------------------------------------------------------- errors
 
 
