@@ -31,15 +31,21 @@ _TEMP = re.compile(r"^\.(?P<target>.+)\.(?P<kind>tmp|bad)-(?:(?P<pid>\d+)"
                    r"(?:-(?P<host>[0-9a-f]{8}))?(?:-[0-9a-z]+)?|[0-9a-z_]+)$")
 
 
+def cache_root() -> Path:
+    """``$TACTBENCH_CACHE``, else ``$XDG_CACHE_HOME/tactbench`` or ``~/.cache/tactbench``
+    (not created)."""
+    root = os.environ.get(CACHE_ENV)
+    if root:
+        return Path(root)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
+
+
 def cache_dir(*parts: str) -> Path:
     """``$TACTBENCH_CACHE`` or ``~/.cache/tactbench`` (``$XDG_CACHE_HOME`` respected), joined
     with ``parts``; created on first use."""
     root = os.environ.get(CACHE_ENV)
-    if root:
-        base = Path(root)
-    else:
-        xdg = os.environ.get("XDG_CACHE_HOME")
-        base = (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
+    base = cache_root()
     path = base.joinpath(*parts)
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -234,12 +240,7 @@ def _same_or_inside(path: Path, other: Path) -> bool:
 
 def _in_cache(path: Path) -> Path | None:
     """The cache folder when ``path`` is it or lies inside it (without creating it)."""
-    root = os.environ.get(CACHE_ENV)
-    if root:
-        base = Path(root)
-    else:
-        xdg = os.environ.get("XDG_CACHE_HOME")
-        base = (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
+    base = cache_root()
     return base if _same_or_inside(path, base) else None
 
 
