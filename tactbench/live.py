@@ -32,6 +32,7 @@ A sensor whose taxels come in another order is re-indexed to the model's
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -40,7 +41,12 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from tactbench.classifiers.io import load_model
 from tactbench.contracts import CLASSIFIER, FRAME, SENSOR
+from tactbench.data.imaging import Imager
+from tactbench.data.layout import TaxelLayout
+from tactbench.data.layout_io import layout_from_dict, load_layout
+from tactbench.encoders.base import check_sequence
 from tactbench.encoders.flow import flow_to_channels, is_flow_encoder
 from tactbench.errors import (
     InputError,
@@ -48,6 +54,7 @@ from tactbench.errors import (
     check_positive_float,
     check_positive_int,
 )
+from tactbench.plugins import load_registry
 
 
 # ------------------------------------------------------------------ encoding
@@ -59,8 +66,6 @@ def encode_next(encoder: Any, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
     ``[prev, curr]`` and keeps frame 1.
     """
     if is_flow_encoder(encoder):
-        from tactbench.encoders.base import check_sequence
-
         pair = check_sequence(np.stack([prev, curr]))
         flow = encoder.flow(pair[:1], pair[1:])
         return flow_to_channels(pair[1:], flow, max_flow=encoder.max_flow,
@@ -132,11 +137,7 @@ class LiveModel:
         Keyword arguments override what the metadata says (``layout`` is a
         :class:`~tactbench.data.layout.TaxelLayout` or a layout file).
         """
-        from tactbench.classifiers.io import load_model
-
         if registry is None:
-            from tactbench.plugins import load_registry
-
             registry = load_registry()
         clf, meta = load_model(path, registry=registry)
         return cls.from_parts(clf, meta, layout=layout, encoder=encoder, L=L,
@@ -204,7 +205,6 @@ class LiveModel:
         if lay is None:
             raise TactbenchError(f"{where}: an image classifier needs the taxel layout; "
                                  f"the metadata has none: give --layout")
-        from tactbench.data.imaging import Imager
 
         imaging = _dict_field(meta, "imaging", where)
         px = check_positive_float(pixel_mm if pixel_mm is not None
@@ -219,8 +219,6 @@ class LiveModel:
         if not isinstance(model.encoder_spec, str):
             raise TactbenchError(f"{where}: metadata 'encoder' must be an encoder spec")
         if registry is None:
-            from tactbench.plugins import load_registry
-
             registry = load_registry()
         model.encoder = registry.build("encoder", model.encoder_spec)
         shape = CLASSIFIER.get(clf, "frame_shape")
@@ -241,8 +239,6 @@ def _dict_field(meta: dict[str, Any], key: str, where: str) -> dict[str, Any]:
 
 
 def _finite(value: Any, what: str) -> float:
-    import math
-
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
             or not math.isfinite(float(value)):
         raise TactbenchError(f"{what} must be a finite number, got {value!r:.40}")
@@ -271,8 +267,6 @@ def _layout(obj: Any, where: str) -> Any:
     """A layout given as an object, a layout file, or the model metadata's dict."""
     if obj is None:
         return None
-    from tactbench.data.layout import TaxelLayout
-    from tactbench.data.layout_io import layout_from_dict, load_layout
 
     if isinstance(obj, TaxelLayout):
         return obj

@@ -75,7 +75,7 @@ def test_hook_register_sensors():
 def test_hook_register_datasets():
     def register_datasets(register):
         # a second name for the built-in simulator's source class
-        register("tiny", "tactbench.datasets.synthetic:SyntheticForearm",
+        register("tiny", "tactbench.datasets.synthetic_forearm:SyntheticForearm",
                  summary="a dataset factory")
 
     reg = registry_with(("p", namespace(register_datasets=register_datasets)))

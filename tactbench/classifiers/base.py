@@ -26,6 +26,7 @@ from typing import Any, Callable, ClassVar, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from tactbench.classifiers.io import save_model
 from tactbench.classifiers.training import (
     FitReport,
     ProgressFn,
@@ -175,8 +176,6 @@ class SequenceClassifier:
 
     def save(self, path, metadata: dict[str, Any] | None = None):
         """Write weights and metadata to ``path`` (safetensors; see :mod:`.io`)."""
-        from tactbench.classifiers.io import save_model
-
         return save_model(self, path, metadata or {})
 
     def preflight(self, device: str) -> None:

@@ -33,7 +33,7 @@ from tactbench.classifiers.base import (
     read_windows,
     streamed_mean_std,
 )
-from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted
+from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted, select_device
 from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_positive_float, check_positive_int
 
@@ -131,8 +131,6 @@ class PooledLogReg(SequenceClassifier):
         deterministic). ``progress(done, max_iter, loss=...)`` per L-BFGS evaluation."""
         import torch
         import torch.nn.functional as F
-
-        from tactbench.classifiers.training import select_device
 
         self._check_windows(train, "train")
         select_device(device)  # validate; the solve is small and runs on the CPU

@@ -48,6 +48,7 @@ from typing import Any, ClassVar, Iterator
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.classifiers.base import SequenceClassifier, _frames_per_chunk
 from tactbench.classifiers.training import FitReport, ProgressFn
 from tactbench.data.windows import Windows
@@ -190,8 +191,6 @@ class SklearnClassifier(SequenceClassifier):
 
     def _window_features(self, x: Windows | np.ndarray) -> np.ndarray:
         """``(B, L × F)`` float32: each sequence's frames reduced to features once."""
-        from tactbench.budget import check_budget
-
         if not isinstance(x, Windows):
             b, length = x.shape[:2]
             feats = frame_features(x.reshape(b * length, *x.shape[2:]), self.grid)

@@ -9,6 +9,7 @@ import click
 
 from tactbench.cli import Number, get_registry, json_text
 from tactbench.contracts import SENSOR
+from tactbench.errors import InputError
 from tactbench.live import LiveClassifier, LiveModel, run_summary
 from tactbench.specs import parse_spec
 
@@ -40,8 +41,6 @@ def _renamed(old: str, new: str):
     """A hidden option ``old`` that refuses itself, naming ``new`` (no silent aliases)."""
     def refuse(ctx: click.Context, param: click.Parameter, value: Any) -> None:
         if value is not None:
-            from tactbench.errors import InputError
-
             raise InputError(f"{old} is now {new}")
 
     return click.option(old, hidden=True, expose_value=False, callback=refuse,

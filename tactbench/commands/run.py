@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any, Callable
 
 import click
 
-from tactbench.cli import json_text
-
-from tactbench.cli import get_registry
-from tactbench.profiles import PRECISIONS, PROFILE_NAMES
+from tactbench.cli import get_registry, json_text
+from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
 from tactbench.runner import Scene, load_scene_file, run
 from tactbench.runner.scene import parse_lengths, parse_seeds
 from tactbench.runner.summaries import failed_cells, summarise
@@ -56,10 +55,6 @@ def scene_default(name: str, none: str | Callable[[], str] | None = None) -> str
     """The Scene field ``name``'s default as help shows it (lists joined by ", "); for a
     default of ``None``, ``none`` (text, or a function giving it); a flag's ``False`` is
     not shown (None)."""
-    from dataclasses import MISSING, fields
-
-    from tactbench.runner.scene import Scene
-
     (f,) = [f for f in fields(Scene) if f.name == name]
     value = f.default_factory() if f.default is MISSING else f.default  # type: ignore[misc]
     if value is None:
@@ -77,8 +72,6 @@ def scene_default(name: str, none: str | Callable[[], str] | None = None) -> str
 def _by_profile(attribute: str) -> Callable[[], str]:
     """``"the profile's: quick 5, paper 1"``: a profile setting, read from the profiles."""
     def text() -> str:
-        from tactbench.profiles import PROFILE_NAMES, get_profile
-
         values = {n: getattr(get_profile(n), attribute) for n in PROFILE_NAMES}
         return "the profile's: " + ", ".join(
             f"{n} {v:g}" if isinstance(v, float) else f"{n} {v}" for n, v in values.items())

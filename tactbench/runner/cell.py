@@ -25,6 +25,7 @@ from tactbench.contracts import CLASSIFIER
 from tactbench.data.splits import dataset_groups, describe_splits, make_splits
 from tactbench.data.windows import dataset_onsets, test_windows_for, training_windows_for
 from tactbench.errors import TactbenchError
+from tactbench.plugins import Registry
 from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
@@ -183,8 +184,6 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     """
     import numpy as np
     import torch
-
-    from tactbench.plugins import Registry
 
     memory = memory if memory is not None else MemoryTracker()
     torch.set_num_threads(job.threads)
