@@ -78,7 +78,7 @@ def preview_strip(dataset: Any, index: int, *, encoder: Any = None, pixel_mm: fl
 
     h, w = image_shape(dataset.layout, pixel_mm)
     t = int(raw.shape[0])
-    c = len(tuple(getattr(encoder, "channels", ()))) if encoder is not None else 0
+    c = len(tuple(ENCODER.get(encoder, "channels"))) if encoder is not None else 0
     # the images, their encoding, and the RGB strip of the frames shown
     check_budget(4 * t * h * w * (1 + c) + 12 * min(t, max_frames) * h * w * max(c, 1),
                  f"previewing sample {index} ({t} frames of {h}×{w} px at {pixel_mm:g} mm)")
