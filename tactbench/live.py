@@ -110,7 +110,7 @@ class LiveModel:
 
     clf: Any
     classes: list[str]
-    length: int
+    L: int
     taxel_ids: np.ndarray
     offset: Any = 0.0
     scale: float = 65535.0
@@ -168,7 +168,7 @@ class LiveModel:
             raise TactbenchError(f"{where}: the metadata lists {len(classes)} classes, but "
                                  f"the classifier has {outputs} outputs")
         L = (L if L is not None else
-             (meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
+             (meta.get("L") or CLASSIFIER.get(clf, "L") or 0))
         if L == 0:
             raise TactbenchError(f"{where}: window length L unknown; give -L")
         L = check_positive_int(L, f"{where}: window length L")
@@ -194,7 +194,7 @@ class LiveModel:
         if isinstance(offset, np.ndarray) and offset.shape != ids.shape:
             raise TactbenchError(f"{where}: normalisation offset has {offset.size} values for "
                                  f"{ids.size} taxels")
-        model = cls(clf=clf, classes=classes, length=L, taxel_ids=ids, offset=offset,
+        model = cls(clf=clf, classes=classes, L=L, taxel_ids=ids, offset=offset,
                     scale=scale, info=dict(meta))
         if frame_rank == 1:
             shape = CLASSIFIER.get(clf, "frame_shape")
@@ -291,7 +291,7 @@ class _FeatureWindow:
         self.features = CLASSIFIER.get(clf, "frame_features")
         self.window_proba = CLASSIFIER.get(clf, "window_proba")
         self.feats: deque[Any] = deque(maxlen=length)
-        self.length = length
+        self.L = length
 
     @staticmethod
     def supported(clf: Any) -> bool:
@@ -307,14 +307,14 @@ class _FeatureWindow:
     def proba(self, padded_blank: Any = None) -> np.ndarray:
         """Probabilities for the window (padded with blank-frame features to L)."""
         feats = list(self.feats)
-        if len(feats) < self.length:
-            feats += [padded_blank] * (self.length - len(feats))
+        if len(feats) < self.L:
+            feats += [padded_blank] * (self.L - len(feats))
         return np.asarray(self.window_proba(feats))
 
     def check(self, frame_shape: tuple[int, ...], seed: int = 0) -> bool:
         """Whether this path matches ``predict_proba`` on a random window (then use it)."""
         rng = np.random.default_rng(seed)
-        window = rng.random((self.length, *frame_shape), dtype=np.float32)
+        window = rng.random((self.L, *frame_shape), dtype=np.float32)
         try:
             for f in window:
                 self.push(f)
@@ -374,13 +374,13 @@ class LiveClassifier:
         self.model = model
         self.warmup = warmup
         self.encoder = IncrementalEncoder(model.encoder) if model.uses_images else None
-        self.window: deque[np.ndarray] = deque(maxlen=model.length)
+        self.window: deque[np.ndarray] = deque(maxlen=model.L)
         self.frames = 0
         self._features: _FeatureWindow | None = None
         self._blank: Any = None
         if cache_features and _FeatureWindow.supported(model.clf):
             shape = CLASSIFIER.get(model.clf, "frame_shape")
-            fw = _FeatureWindow(model.clf, model.length)
+            fw = _FeatureWindow(model.clf, model.L)
             if shape is not None and fw.check(tuple(shape)):
                 self._features = fw
                 self._blank = fw.features(np.zeros(shape, np.float32))
@@ -431,7 +431,7 @@ class LiveClassifier:
         if self._features is not None:
             self._features.push(frame)
         self.frames += 1
-        L = self.model.length
+        L = self.model.L
         if len(self.window) < L and self.warmup == "wait":
             return None
         if self._features is not None:

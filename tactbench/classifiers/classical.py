@@ -104,7 +104,7 @@ class PooledLogReg(SequenceClassifier):
 
         n = len(x)
         frame_shape = x.frame_shape if isinstance(x, Windows) else tuple(x.shape[2:])
-        length = x.length if isinstance(x, Windows) else x.shape[1]
+        length = x.L if isinstance(x, Windows) else x.shape[1]
         prepare = lambda t: frame_features(t, self.grid)  # noqa: E731
         n_feat = int(prepare(torch.zeros((1, *frame_shape))).shape[1])
         budget = bank_budget_bytes()
@@ -188,7 +188,7 @@ class PooledLogReg(SequenceClassifier):
                          loss=float(loss.detach()))
             return loss
 
-        self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+        self.n_classes, self.frame_shape, self.L = k, tuple(train.frame_shape), train.L
         self.feat_mean, self.feat_std = mean, std
         try:
             opt.step(closure)
@@ -243,7 +243,7 @@ class PooledLogReg(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("L")
+        clf.L = config.get("L")
         clf.fit_report = config.get("fit_report")
         need = {"weight", "bias", "feat_mean", "feat_std"}
         if set(tensors) != need:

@@ -130,7 +130,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     if not quiet:
         load = SENSOR.get(sensor, "bus_load")
         where = f" ({load().describe()})" if load is not None else ""
-        click.echo(f"live: {len(model.classes)} classes, L = {model.length}, encoder "
+        click.echo(f"live: {len(model.classes)} classes, L = {model.L}, encoder "
                    f"{model.encoder_spec if model.uses_images else '(taxel vectors)'}; "
                    f"sensor {sensor_spec}{where}", err=True)
     rows: list[dict[str, Any]] = []
@@ -152,7 +152,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     summary = run_summary(live, latencies, sensor)
     if as_json:
         click.echo(json_text({"model": model_path, "classes": model.classes,
-                               "L": model.length, "encoder": model.encoder_spec,
+                               "L": model.L, "encoder": model.encoder_spec,
                                "predictions": rows, "summary": summary}, indent=2))
     elif not jsonl and latencies:
         lat = summary["latency_ms"]

@@ -69,14 +69,14 @@ class Cell:
 
     encoder: str  # canonical spec, options sorted
     classifier: str  # canonical spec including the profile's options
-    length: int  # window length L, frames
+    L: int  # the window length, frames
     seed: int
     key: str
     init_seed: int | None = None  # the initialisation's seed when varied apart from the split's
 
     def label(self) -> str:
         """A short human name: ``raw × small-cnn-lstm L=5 seed=0``."""
-        return (f"{self.encoder} × {self.classifier.split(':')[0]} L={self.length} "
+        return (f"{self.encoder} × {self.classifier.split(':')[0]} L={self.L} "
                 f"seed={self.seed}")
 
 
@@ -456,6 +456,6 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                     identities[key] = identity
     if scene.contrasts:
         check_contrasts(scene.contrasts, [{"encoder": c.encoder, "classifier": c.classifier,
-                                           "L": c.length} for c in cells])
+                                           "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 kinds, cells, identities, registry)

@@ -319,7 +319,7 @@ def test_save_and_load_round_trip(fitted, name, tmp_path):
     loaded, got = load_model(path)
     assert got == meta
     assert type(loaded) is type(clf) and loaded.options() == clf.options()
-    assert loaded.n_classes == 3 and loaded.length == 3 and loaded.frame_shape == clf.frame_shape
+    assert loaded.n_classes == 3 and loaded.L == 3 and loaded.frame_shape == clf.frame_shape
     assert np.array_equal(loaded.predict_proba(test), clf.predict_proba(test))
     assert read_header(path)["classifier"] == name
     assert loaded.fit_report == json.loads(json.dumps(clf.fit_report))

@@ -207,6 +207,6 @@ def test_windows_grouping_needs_no_sorted_windows():
     win = training_windows(seqs, labels, 2)
     perm = np.random.default_rng(0).permutation(len(win))
     shuffled = Windows(win.sequences, win.seq_index[perm], win.starts[perm],
-                       win.labels[perm], win.length)
+                       win.labels[perm], win.L)
     a, b = window_runs(win), window_runs(shuffled)
     assert np.array_equal(a[perm], b)
