@@ -355,7 +355,7 @@ def test_the_names_plugin_authors_import_keep_their_place():
     import tactbench
     import tactbench.testing as face
     from tactbench import plugins, registry, specs
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
     from tactbench.encoders.evaluation.conformance import check_encoder, conformance_cases
 
     assert tactbench.hookimpl.project_name == plugins.ENTRY_POINT_GROUP == "tactbench"

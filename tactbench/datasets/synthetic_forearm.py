@@ -97,8 +97,9 @@ class SyntheticForearm:
 
     Options: ``users`` (38), ``positions`` (2: front, side), ``repetitions``
     (5), ``seed`` (0), ``n_taxels`` (1558), ``version`` (1: the first simulator, the
-    default; 2: the person model, see docs/simulator.md for why it is not the default yet), ``cache`` (True: keep generated sets under
-    ``cache_dir("datasets")``). ``load()`` returns the
+    default; 2: the person model, see docs/simulator.md for why it is not the default
+    yet), ``cache`` (True: keep generated sets under ``cache_dir("datasets")``).
+    ``load()`` returns the
     :class:`~tactbench.data.recording.Dataset`.
     """
 

@@ -441,7 +441,7 @@ def test_real_cyskin_recordings_without_a_layout(shared_data, spec):
 
 @pytest.mark.parametrize("name", list(TINY))
 def test_builtins_pass_the_conformance_checks(name):
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
 
     check_classifier(TINY[name])
 
@@ -457,7 +457,7 @@ class Unseeded(SmallCnnLstm):
 
 
 def test_the_conformance_checks_catch_a_broken_classifier():
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
     from tactbench.registry import Component, Registry
 
     registry = Registry([Component("classifier", "unseeded", f"{__name__}:Unseeded",

@@ -17,7 +17,7 @@ from tactbench.classifiers.base import FrameBank, share_frames, window_runs
 from tactbench.classifiers.efficientnet import EfficientNetB0
 from tactbench.classifiers.nets import SequenceNet, SharedWindows, SmallCNN, checkpointed
 from tactbench.classifiers.training import epoch_order
-from tactbench.classifiers.testing import tiny_windows
+from tactbench.classifiers.conformance import tiny_windows
 from tactbench.data.windows import Windows, training_windows
 from tactbench.errors import InputError
 from tactbench.plugins import load_registry

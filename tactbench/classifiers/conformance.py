@@ -2,7 +2,7 @@
 
 ::
 
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
     check_classifier("my-classifier:epochs=1")   # raises AssertionError listing failures
 
 Pass a spec with cheap options: the checks fit the classifier three times on a
