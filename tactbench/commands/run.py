@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
-from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any, Callable
 
@@ -55,8 +55,8 @@ def scene_default(name: str, none: str | Callable[[], str] | None = None) -> str
     """The Scene field ``name``'s default as help shows it (lists joined by ", "); for a
     default of ``None``, ``none`` (text, or a function giving it); a flag's ``False`` is
     not shown (None)."""
-    (f,) = [f for f in fields(Scene) if f.name == name]
-    value = f.default_factory() if f.default is MISSING else f.default  # type: ignore[misc]
+    (f,) = [f for f in dataclasses.fields(Scene) if f.name == name]
+    value = f.default_factory() if f.default is dataclasses.MISSING else f.default  # type: ignore[misc]
     if value is None:
         if none is None:
             raise TypeError(f"scene field {name!r} defaults to None: its option must say "

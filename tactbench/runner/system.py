@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import re
-import resource
 import signal
 import subprocess
 import sys
@@ -17,6 +16,10 @@ from typing import Iterator
 import tactbench
 from tactbench.errors import InputError
 
+try:
+    import resource
+except ImportError:  # Windows
+    resource = None
 
 
 def now() -> str:
@@ -31,12 +34,11 @@ def host() -> str:
 
 def peak_rss_mb() -> float:
     """Peak resident memory of this process so far, in MiB (NaN on Windows)."""
-    try:
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        # Linux reports KiB, macOS bytes
-        return rss / 1024.0 if sys.platform != "darwin" else rss / 2 ** 20
-    except ImportError:  # Windows
+    if resource is None:  # Windows
         return float("nan")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # Linux reports KiB, macOS bytes
+    return rss / 1024.0 if sys.platform != "darwin" else rss / 2 ** 20
 
 
 def _status_mb(field_name: str) -> float | None:
