@@ -58,7 +58,8 @@ def main() -> None:
     parser.add_argument("--json", dest="json_out")
     args = parser.parse_args()
 
-    from tactbench.datasets.synthetic import CIRCUMFERENCE_MM, TOP_X, generate
+    from tactbench.datasets.synthetic import CIRCUMFERENCE_MM, TOP_X
+    from tactbench.datasets.synthetic_forearm import generate
 
     start = time.perf_counter()
     cpu0 = time.process_time()

@@ -208,7 +208,7 @@ def taxel_windows(windows):
 
     seqs = [np.ascontiguousarray(s[:, 0, ::5, ::5].reshape(s.shape[0], -1))
             for s in windows.sequences]
-    return Windows(seqs, windows.seq_index, windows.starts, windows.labels, windows.length)
+    return Windows(seqs, windows.seq_index, windows.starts, windows.labels, windows.L)
 
 
 def measure_logreg(train) -> dict:

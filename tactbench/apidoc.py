@@ -26,7 +26,10 @@ import re
 import sys
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Iterator
+from typing import Any, ForwardRef, Iterator
+
+from tactbench.contracts import Contract
+from tactbench.paths import atomic_write_text
 
 #: The public modules documented, in this order, with what each is for a plugin author.
 MODULES: tuple[tuple[str, str], ...] = (
@@ -135,8 +138,6 @@ class _Shown:
 
 
 def _annotation(value: Any) -> Any:
-    from typing import ForwardRef
-
     if value is inspect.Parameter.empty:
         return value
     if isinstance(value, ForwardRef):
@@ -193,8 +194,6 @@ def _comments(module: ModuleType) -> dict[str, str]:
 def public_names(module: ModuleType) -> list[tuple[str, Any, str]]:
     """``(name, object, comment)`` of what ``module`` offers, in its order (see the
     module docstring)."""
-    from tactbench.contracts import Contract
-
     exported = module.__dict__.get("__all__")
     comments = _comments(module)
     if exported is not None:
@@ -261,8 +260,6 @@ def _value(obj: Any) -> str:
 
 
 def _item(module: str, name: str, obj: Any, comment: str) -> list[str]:
-    from tactbench.contracts import Contract
-
     parts = [f"### `{name}`", ""]
     if isinstance(obj, Contract):
         if comment:
@@ -324,8 +321,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     text = render()
     if argv == ["--write"]:
-        from tactbench.paths import atomic_write_text
-
         atomic_write_text(reference_path(), text)
         print(f"wrote {reference_path()}", file=sys.stderr)
         return 0

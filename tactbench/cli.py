@@ -9,6 +9,8 @@ components that use them.
 from __future__ import annotations
 
 import importlib
+import json
+import math
 import os
 import sys
 import traceback
@@ -17,7 +19,7 @@ from typing import Any
 import click
 
 from tactbench import __version__
-from tactbench.errors import PluginError, TactbenchError
+from tactbench.errors import InputError, PluginError, TactbenchError, check_number
 from tactbench.machine import pin_cpu_kernels
 from tactbench.plugins import collect_registry, make_plugin_manager
 
@@ -126,9 +128,6 @@ EXIT_CODES_TEXT = ("Exit status: 0 everything done; 1 a run's cells failed (list
 def json_text(doc: Any, **dumps: Any) -> str:
     """``doc`` as standard JSON for ``--json`` output: a NaN or infinite number (no JSON
     value) becomes ``null``, so any JSON reader can parse what tactbench prints."""
-    import json
-    import math
-
     def clean(value: Any) -> Any:
         if isinstance(value, float) and not math.isfinite(value):
             return None
@@ -156,8 +155,6 @@ class Number(click.ParamType):
         self.name = "integer" if integer else "number"
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None):
-        from tactbench.errors import InputError, check_number
-
         if isinstance(value, str):
             text = value.strip()
             try:

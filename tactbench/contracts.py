@@ -177,7 +177,7 @@ ENCODER = Contract("encoder", (
 ))
 
 #: Classifiers: ``fit`` on windows ``(B, L, C, H, W)`` or ``(B, L, N)``, then ``predict``.
-#: ``frame_shape``, ``length`` and ``n_classes`` are state a fitted (or loaded) classifier
+#: ``frame_shape``, ``L`` and ``n_classes`` are state a fitted (or loaded) classifier
 #: knows.
 CLASSIFIER = Contract("classifier", (
     Member("fit", True, "fit(train, val, *, seed, device, progress) → JSON-ready report"),
@@ -192,7 +192,7 @@ CLASSIFIER = Contract("classifier", (
            check=_profiles),
     Member("frame_shape", False, "the frame shape it was fitted on, (C, H, W) or (N,); "
            "None before fit", default=None),
-    Member("length", False, "the window length L it was fitted on; None before fit",
+    Member("L", False, "the window length L it was fitted on; None before fit",
            default=None),
     Member("classes", False, "the number of classes K it was built for: each cell of a run "
            "builds its classifier with the option classes=K (None: learnt from the labels "

@@ -32,6 +32,7 @@ A sensor whose taxels come in another order is re-indexed to the model's
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -40,7 +41,12 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from tactbench.classifiers.io import load_model
 from tactbench.contracts import CLASSIFIER, FRAME, SENSOR
+from tactbench.data.imaging import Imager
+from tactbench.data.layout import TaxelLayout
+from tactbench.data.layout_io import layout_from_dict, load_layout
+from tactbench.encoders.base import check_sequence
 from tactbench.encoders.flow import flow_to_channels, is_flow_encoder
 from tactbench.errors import (
     InputError,
@@ -48,6 +54,7 @@ from tactbench.errors import (
     check_positive_float,
     check_positive_int,
 )
+from tactbench.plugins import load_registry
 
 
 # ------------------------------------------------------------------ encoding
@@ -59,8 +66,6 @@ def encode_next(encoder: Any, prev: np.ndarray, curr: np.ndarray) -> np.ndarray:
     ``[prev, curr]`` and keeps frame 1.
     """
     if is_flow_encoder(encoder):
-        from tactbench.encoders.base import check_sequence
-
         pair = check_sequence(np.stack([prev, curr]))
         flow = encoder.flow(pair[:1], pair[1:])
         return flow_to_channels(pair[1:], flow, max_flow=encoder.max_flow,
@@ -105,7 +110,7 @@ class LiveModel:
 
     clf: Any
     classes: list[str]
-    length: int
+    L: int
     taxel_ids: np.ndarray
     offset: Any = 0.0
     scale: float = 65535.0
@@ -132,11 +137,7 @@ class LiveModel:
         Keyword arguments override what the metadata says (``layout`` is a
         :class:`~tactbench.data.layout.TaxelLayout` or a layout file).
         """
-        from tactbench.classifiers.io import load_model
-
         if registry is None:
-            from tactbench.plugins import load_registry
-
             registry = load_registry()
         clf, meta = load_model(path, registry=registry)
         return cls.from_parts(clf, meta, layout=layout, encoder=encoder, L=L,
@@ -167,7 +168,7 @@ class LiveModel:
             raise TactbenchError(f"{where}: the metadata lists {len(classes)} classes, but "
                                  f"the classifier has {outputs} outputs")
         L = (L if L is not None else
-             (meta.get("L") or CLASSIFIER.get(clf, "length") or 0))
+             (meta.get("L") or CLASSIFIER.get(clf, "L") or 0))
         if L == 0:
             raise TactbenchError(f"{where}: window length L unknown; give -L")
         L = check_positive_int(L, f"{where}: window length L")
@@ -193,7 +194,7 @@ class LiveModel:
         if isinstance(offset, np.ndarray) and offset.shape != ids.shape:
             raise TactbenchError(f"{where}: normalisation offset has {offset.size} values for "
                                  f"{ids.size} taxels")
-        model = cls(clf=clf, classes=classes, length=L, taxel_ids=ids, offset=offset,
+        model = cls(clf=clf, classes=classes, L=L, taxel_ids=ids, offset=offset,
                     scale=scale, info=dict(meta))
         if frame_rank == 1:
             shape = CLASSIFIER.get(clf, "frame_shape")
@@ -204,7 +205,6 @@ class LiveModel:
         if lay is None:
             raise TactbenchError(f"{where}: an image classifier needs the taxel layout; "
                                  f"the metadata has none: give --layout")
-        from tactbench.data.imaging import Imager
 
         imaging = _dict_field(meta, "imaging", where)
         px = check_positive_float(pixel_mm if pixel_mm is not None
@@ -219,8 +219,6 @@ class LiveModel:
         if not isinstance(model.encoder_spec, str):
             raise TactbenchError(f"{where}: metadata 'encoder' must be an encoder spec")
         if registry is None:
-            from tactbench.plugins import load_registry
-
             registry = load_registry()
         model.encoder = registry.build("encoder", model.encoder_spec)
         shape = CLASSIFIER.get(clf, "frame_shape")
@@ -241,8 +239,6 @@ def _dict_field(meta: dict[str, Any], key: str, where: str) -> dict[str, Any]:
 
 
 def _finite(value: Any, what: str) -> float:
-    import math
-
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
             or not math.isfinite(float(value)):
         raise TactbenchError(f"{what} must be a finite number, got {value!r:.40}")
@@ -271,8 +267,6 @@ def _layout(obj: Any, where: str) -> Any:
     """A layout given as an object, a layout file, or the model metadata's dict."""
     if obj is None:
         return None
-    from tactbench.data.layout import TaxelLayout
-    from tactbench.data.layout_io import layout_from_dict, load_layout
 
     if isinstance(obj, TaxelLayout):
         return obj
@@ -297,7 +291,7 @@ class _FeatureWindow:
         self.features = CLASSIFIER.get(clf, "frame_features")
         self.window_proba = CLASSIFIER.get(clf, "window_proba")
         self.feats: deque[Any] = deque(maxlen=length)
-        self.length = length
+        self.L = length
 
     @staticmethod
     def supported(clf: Any) -> bool:
@@ -313,14 +307,14 @@ class _FeatureWindow:
     def proba(self, padded_blank: Any = None) -> np.ndarray:
         """Probabilities for the window (padded with blank-frame features to L)."""
         feats = list(self.feats)
-        if len(feats) < self.length:
-            feats += [padded_blank] * (self.length - len(feats))
+        if len(feats) < self.L:
+            feats += [padded_blank] * (self.L - len(feats))
         return np.asarray(self.window_proba(feats))
 
     def check(self, frame_shape: tuple[int, ...], seed: int = 0) -> bool:
         """Whether this path matches ``predict_proba`` on a random window (then use it)."""
         rng = np.random.default_rng(seed)
-        window = rng.random((self.length, *frame_shape), dtype=np.float32)
+        window = rng.random((self.L, *frame_shape), dtype=np.float32)
         try:
             for f in window:
                 self.push(f)
@@ -380,13 +374,13 @@ class LiveClassifier:
         self.model = model
         self.warmup = warmup
         self.encoder = IncrementalEncoder(model.encoder) if model.uses_images else None
-        self.window: deque[np.ndarray] = deque(maxlen=model.length)
+        self.window: deque[np.ndarray] = deque(maxlen=model.L)
         self.frames = 0
         self._features: _FeatureWindow | None = None
         self._blank: Any = None
         if cache_features and _FeatureWindow.supported(model.clf):
             shape = CLASSIFIER.get(model.clf, "frame_shape")
-            fw = _FeatureWindow(model.clf, model.length)
+            fw = _FeatureWindow(model.clf, model.L)
             if shape is not None and fw.check(tuple(shape)):
                 self._features = fw
                 self._blank = fw.features(np.zeros(shape, np.float32))
@@ -437,7 +431,7 @@ class LiveClassifier:
         if self._features is not None:
             self._features.push(frame)
         self.frames += 1
-        L = self.model.length
+        L = self.model.L
         if len(self.window) < L and self.warmup == "wait":
             return None
         if self._features is not None:

@@ -7,6 +7,7 @@ command runs, and before anything imports torch.
 from __future__ import annotations
 
 import os
+import platform
 import sys
 
 from tactbench.errors import InputError, check_choice
@@ -29,8 +30,6 @@ KERNEL_VARIABLES = ("ATEN_CPU_CAPABILITY", "ONEDNN_MAX_CPU_ISA", "MKL_CBWR")
 
 def cpu_model() -> str:
     """The processor's model name (``/proc/cpuinfo``; ``platform`` elsewhere)."""
-    import platform
-
     try:
         with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
             for line in fh:

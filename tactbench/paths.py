@@ -16,11 +16,14 @@ import os
 import re
 import shutil
 import socket
+import tempfile
 import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
+
+from tactbench.errors import InputError, storage_error
 
 CACHE_ENV = "TACTBENCH_CACHE"
 
@@ -50,8 +53,6 @@ def cache_dir(*parts: str) -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # a file, read-only, no permission: known before any work
-        from tactbench.errors import InputError
-
         where = f"${CACHE_ENV}={root}" if root else f"the cache folder {base}"
         raise InputError(f"{where} cannot be used: {path} cannot be made "
                          f"({exc.strerror or exc}); set {CACHE_ENV} to a writable "
@@ -176,8 +177,6 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     except BaseException as exc:
         tmp.unlink(missing_ok=True)
         if isinstance(exc, OSError):
-            from tactbench.errors import storage_error
-
             full = storage_error(exc, path)
             if full is not None:
                 raise full from None
@@ -211,8 +210,6 @@ def atomic_folder(folder: str | Path) -> Iterator[Path]:
             if exc.errno not in _TAKEN or not folder.is_dir():  # not a lost race
                 raise
     except OSError as exc:  # a full disk while the folder was written: one line
-        from tactbench.errors import storage_error
-
         full = storage_error(exc, folder)
         if full is not None:
             raise full from None
@@ -247,8 +244,6 @@ def _in_cache(path: Path) -> Path | None:
 def check_not_in_cache(path: str | Path, option: str = "--out") -> None:
     """Refuse an output that is the cache folder or inside it: ``tactbench cache clear``
     removes what is there, and ``cache ls`` would call it damaged."""
-    from tactbench.errors import InputError
-
     cache = _in_cache(Path(path))
     if cache is not None:
         raise InputError(f"{option} {path} is inside the cache folder {cache} "
@@ -257,10 +252,6 @@ def check_not_in_cache(path: str | Path, option: str = "--out") -> None:
 
 
 def _writable_parent(path: Path, option: str) -> None:
-    import tempfile
-
-    from tactbench.errors import InputError
-
     folder = path.absolute().parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
@@ -285,8 +276,6 @@ def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
     command, which it may replace. Also refused: a folder at ``path``, a parent that is
     a file or cannot be written, a path in the cache folder. Returns ``path``.
     """
-    from tactbench.errors import InputError
-
     path = Path(path)
     try:
         for src in inputs:
@@ -318,8 +307,6 @@ def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
                         ours=None) -> Path:
     """:func:`check_output_file` for a folder: it may not exist yet, or be empty, or be
     ``ours(path)``; a folder holding anything else is refused, naming what it holds."""
-    from tactbench.errors import InputError
-
     path = Path(path)
     try:
         for src in inputs:

@@ -30,7 +30,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from tactbench.contracts import CLASSIFIER
 from tactbench.errors import InputError
+from tactbench.plugins import load_registry
 
 #: How cached encodings may be stored (see :mod:`tactbench.encoders.encoding`): ``float32``
 #: exactly as encoded, ``float16``, or ``uint8`` (each channel mapped linearly from its
@@ -112,11 +114,8 @@ def profile_options(profile: str = DEFAULT_PROFILE, classifier: str = "small-cnn
     table = get_profile(profile).classifiers
     if classifier in table:
         return dict(table[classifier])
-    from tactbench.contracts import CLASSIFIER
 
     if registry is None:
-        from tactbench.plugins import load_registry
-
         registry = load_registry()
     declared = CLASSIFIER.get(registry.get("classifier", classifier).load(), "profiles")
     return dict((declared or {}).get(profile, {}))

@@ -66,44 +66,10 @@ FACES = {"cli", "clidoc", "testing", "fuzzing", "__main__"}
 LAZY = {"torch", "torchvision", "kornia", "cv2", "can", "matplotlib", "dask", "distributed",
         "scipy", "sklearn", "skimage", "safetensors", "timm", "threadpoolctl", "rich",
         "pytest", "hypothesis", "numpy", "tomli", "psutil"}
-#: Function-level imports of anything else (tactbench's own modules above all) not yet
-#: moved to module level, per file: the files other helpers were editing when the rule
-#: came (issue 20). This list only shrinks: a count may fall (then lower it here), a file
-#: may not join it.
-STILL_TO_CONVERT = {
-    "tactbench/apidoc.py": 4,
-    "tactbench/can/record.py": 1,
-    "tactbench/classifiers/base.py": 3,
-    "tactbench/classifiers/classical.py": 1,
-    "tactbench/classifiers/io.py": 8,
-    "tactbench/classifiers/models.py": 7,
-    "tactbench/classifiers/nets.py": 2,
-    "tactbench/classifiers/sklearn.py": 1,
-    "tactbench/classifiers/testing.py": 4,
-    "tactbench/cli.py": 3,
-    "tactbench/commands/inspect.py": 1,
-    "tactbench/commands/live.py": 1,
-    "tactbench/commands/run.py": 3,
-    "tactbench/data/preview.py": 2,
-    "tactbench/datasets/folder.py": 2,
-    "tactbench/datasets/loading.py": 1,
-    "tactbench/datasets/synthetic.py": 3,
-    "tactbench/encoders/flow.py": 2,
-    "tactbench/encoders/parallel.py": 4,
-    "tactbench/live.py": 8,
-    "tactbench/machine.py": 1,
-    "tactbench/paths.py": 8,
-    "tactbench/profiles.py": 2,
-    "tactbench/runner/cell.py": 1,
-    "tactbench/runner/entries.py": 10,
-    "tactbench/runner/executors.py": 3,
-    "tactbench/runner/planning.py": 7,
-    "tactbench/runner/results.py": 6,
-    "tactbench/runner/scene.py": 7,
-    "tactbench/runner/summaries.py": 10,
-    "tactbench/runner/system.py": 6,
-    "tactbench/sensors/cyskin_can.py": 1,
-}
+#: tactbench's own modules that import torch at module level (the networks): importing one
+#: is importing torch, so they too are imported inside the functions that use them, and
+#: the classifiers that do not train a network never load torch.
+HEAVY_MODULES = {"tactbench.classifiers.nets", "tactbench.classifiers.efficientnet"}
 #: Import cycles among tactbench's modules still to break (helper runner-house's); only
 #: shrinks.
 KNOWN_CYCLES: list[list[str]] = []
@@ -234,38 +200,48 @@ def test_no_import_cycles_among_tactbench_modules():
 
 
 def function_level_imports(path: Path) -> list[tuple[str, int]]:
-    """``(top-level module, line)`` of each import inside a function of ``path``."""
+    """``(module, line)`` of each import inside a function of ``path`` (a name imported
+    from a tactbench package counts as its submodule when it is one)."""
     found = []
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
             for inner in ast.walk(node):
                 if isinstance(inner, ast.Import):
-                    found.append((inner.names[0].name.split(".")[0], inner.lineno))
+                    found.append((inner.names[0].name, inner.lineno))
                 elif isinstance(inner, ast.ImportFrom):
-                    found.append(((inner.module or "").split(".")[0], inner.lineno))
+                    module = inner.module or ""
+                    subs = [f"{module}.{a.name}" for a in inner.names]
+                    found.append((subs[0] if subs[0] in MODULES else module, inner.lineno))
     return sorted(set(found), key=lambda item: item[1])
 
 
 def test_the_function_level_import_finder_sees_nested_functions(tmp_path):
     (tmp_path / "m.py").write_text("import os\ndef f():\n    import torch\n"
                                    "    def g():\n        from tactbench import errors\n")
-    assert function_level_imports(tmp_path / "m.py") == [("torch", 3), ("tactbench", 5)]
+    assert function_level_imports(tmp_path / "m.py") == [("torch", 3), ("tactbench.errors", 5)]
 
 
 def test_tactbench_modules_are_imported_at_module_level():
-    """Imports inside functions are for heavy third-party libraries only (:data:`LAZY`);
-    tactbench's own modules and the standard library are imported at the top, where the
-    dependency shows."""
-    counts: dict[str, int] = {}
-    for path in MODULES.values():
-        n = sum(top not in LAZY for top, _ in function_level_imports(path))
-        if n:
-            counts[path.relative_to(REPO).as_posix()] = n
-    new = {f: n for f, n in counts.items() if n > STILL_TO_CONVERT.get(f, 0)}
-    assert not new, f"imports inside functions of what is not a heavy library: {new}"
-    done = {f: counts.get(f, 0) for f, n in STILL_TO_CONVERT.items() if counts.get(f, 0) < n}
-    assert not done, (f"fewer function-level imports than STILL_TO_CONVERT says; lower its "
-                      f"counts to these (drop a file at 0): {done}")
+    """Imports inside functions are for heavy third-party libraries only (:data:`LAZY`, and
+    tactbench's torch modules, :data:`HEAVY_MODULES`); tactbench's own modules and the
+    standard library are imported at the top, where the dependency shows."""
+    wrong = [f"{path.relative_to(REPO).as_posix()}:{line} imports {module}"
+             for path in MODULES.values()
+             for module, line in function_level_imports(path)
+             if module.split(".")[0] not in LAZY and module not in HEAVY_MODULES]
+    assert not wrong, "imports inside functions of what is not a heavy library: " + \
+        "; ".join(wrong)
+
+
+def test_the_heavy_modules_are_heavy():
+    """A module is on :data:`HEAVY_MODULES` only while it imports torch at module level."""
+    for module in sorted(HEAVY_MODULES):
+        tree = ast.parse(MODULES[module].read_text())
+        tops = {alias.name.split(".")[0] for node in tree.body if isinstance(node, ast.Import)
+                for alias in node.names}
+        tops |= {(node.module or "").split(".")[0] for node in tree.body
+                 if isinstance(node, ast.ImportFrom)}
+        assert "torch" in tops, f"{module} no longer imports torch: take it off HEAVY_MODULES"
 
 
 def test_the_runner_and_live_know_components_only_through_the_registry():

@@ -142,7 +142,7 @@ def test_a_documented_protocol_encoder_builds_runs_and_gets_the_defaults(registr
 
 
 def test_a_documented_protocol_classifier_builds_fits_and_predicts(registry):
-    from tactbench.classifiers.testing import tiny_windows
+    from tactbench.classifiers.conformance import tiny_windows
 
     clf = registry.build("classifier", "minimal")
     assert CLASSIFIER.get(clf, "frame_rank") == 3

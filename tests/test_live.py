@@ -100,7 +100,7 @@ def trained(tmp_path_factory):
 def test_live_predictions_equal_offline_predictions(trained):
     dataset, encoded, path = trained
     model = LiveModel.from_file(path, registry=REGISTRY)
-    assert model.classes == ["right", "left"] and model.length == 3
+    assert model.classes == ["right", "left"] and model.L == 3
     live = LiveClassifier(model)
     sample = dataset.samples[5]
     preds = [live.push(v, t) for t, v in zip(sample.recording.timestamps,

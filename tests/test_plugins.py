@@ -75,7 +75,7 @@ def test_hook_register_sensors():
 def test_hook_register_datasets():
     def register_datasets(register):
         # a second name for the built-in simulator's source class
-        register("tiny", "tactbench.datasets.synthetic:SyntheticForearm",
+        register("tiny", "tactbench.datasets.synthetic_forearm:SyntheticForearm",
                  summary="a dataset factory")
 
     reg = registry_with(("p", namespace(register_datasets=register_datasets)))
@@ -355,7 +355,7 @@ def test_the_names_plugin_authors_import_keep_their_place():
     import tactbench
     import tactbench.testing as face
     from tactbench import plugins, registry, specs
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
     from tactbench.encoders.evaluation.conformance import check_encoder, conformance_cases
 
     assert tactbench.hookimpl.project_name == plugins.ENTRY_POINT_GROUP == "tactbench"

@@ -16,6 +16,7 @@ from typing import Any, Callable
 from tactbench.can.busload import frame_bits
 from tactbench.can.logs import open_writer
 from tactbench.can.meta import marker_messages, taxel_map_messages
+from tactbench.errors import check_number
 
 #: Seconds between two calls of the ``progress`` callback (a bus carries thousands of
 #: messages per second; drawing each would cost more than receiving it).
@@ -74,8 +75,6 @@ def record(bus: Any, out: str | Path, *, duration: float | None = None,
         ``progress(messages, max_messages, seconds=...)``, at most every
         :data:`PROGRESS_EVERY_S` seconds and once at the end.
     """
-    from tactbench.errors import check_number
-
     for value, name in ((duration, "duration"), (idle_timeout, "idle_timeout")):
         if value is not None:  # NaN never compares: a NaN limit would never stop
             check_number(value, name, minimum=0, exclusive_minimum=True)

@@ -26,6 +26,7 @@ from typing import Any, Callable, ClassVar, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from tactbench.classifiers.io import save_model
 from tactbench.classifiers.training import (
     FitReport,
     ProgressFn,
@@ -83,7 +84,7 @@ class SequenceClassifier:
             check_positive_int(self.classes, "classes", minimum=2)
         self.n_classes: int | None = None
         self.frame_shape: tuple[int, ...] | None = None
-        self.length: int | None = None
+        self.L: int | None = None
         self.fit_report: dict[str, Any] | None = None
 
     def __repr__(self) -> str:
@@ -175,8 +176,6 @@ class SequenceClassifier:
 
     def save(self, path, metadata: dict[str, Any] | None = None):
         """Write weights and metadata to ``path`` (safetensors; see :mod:`.io`)."""
-        from tactbench.classifiers.io import save_model
-
         return save_model(self, path, metadata or {})
 
     def preflight(self, device: str) -> None:
@@ -200,7 +199,7 @@ class SequenceClassifier:
 
     def _base_config(self) -> dict[str, Any]:
         return {"options": self.options(), "n_classes": self.n_classes,
-                "frame_shape": list(self.frame_shape or ()), "L": self.length,
+                "frame_shape": list(self.frame_shape or ()), "L": self.L,
                 "fit_report": self.fit_report}
 
 
@@ -228,7 +227,7 @@ class FrameBank:
                 chunk = torch.from_numpy(np.ascontiguousarray(seq[a:b], dtype=np.float32))
                 bank[offsets[i] + a:offsets[i] + b] = prepare(chunk)
         blank = len(bank) - 1
-        steps = np.arange(windows.length, dtype=np.int64)
+        steps = np.arange(windows.L, dtype=np.int64)
         pos = windows.starts[:, None] + steps[None, :]
         index = offsets[windows.seq_index][:, None] + pos
         index[pos >= lengths[windows.seq_index][:, None]] = blank
@@ -272,7 +271,7 @@ def window_runs(windows: Windows) -> np.ndarray:
     """A run number per window for ``shared_features``: windows of one sequence whose
     starts lie in the same ``[kL, kL + L)`` share a run (they overlap in up to
     ``L - 1`` frames; a run's windows span at most ``2L - 1`` frames)."""
-    keys = np.stack([windows.seq_index, windows.starts // max(1, windows.length)], axis=1)
+    keys = np.stack([windows.seq_index, windows.starts // max(1, windows.L)], axis=1)
     return np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
@@ -288,7 +287,7 @@ def share_frames(windows: Windows, idx: np.ndarray, x):
     idx = np.asarray(idx)
     lengths = np.array([s.shape[0] for s in windows.sequences], dtype=np.int64)
     stride = int(lengths.max()) + 1
-    pos = windows.starts[idx][:, None] + np.arange(windows.length, dtype=np.int64)[None, :]
+    pos = windows.starts[idx][:, None] + np.arange(windows.L, dtype=np.int64)[None, :]
     seq = windows.seq_index[idx][:, None]
     keys = np.where(pos < lengths[seq], seq * stride + pos, len(lengths) * stride)
     _, first, inverse = np.unique(keys.reshape(-1), return_index=True, return_inverse=True)
@@ -333,7 +332,7 @@ def read_windows(windows: Windows | np.ndarray, index: np.ndarray | slice,
     import torch
 
     idx = np.arange(len(windows))[index] if isinstance(index, slice) else np.asarray(index)
-    length = windows.length if isinstance(windows, Windows) else windows.shape[1]
+    length = windows.L if isinstance(windows, Windows) else windows.shape[1]
     frame_shape = windows.frame_shape if isinstance(windows, Windows) else windows.shape[2:]
     step = _frames_per_chunk(frame_shape, length)
     out = None
@@ -547,7 +546,7 @@ class TorchSequenceClassifier(SequenceClassifier):
             net.to(dev)
             self.net = net
             self.n_classes, self.frame_shape = k, tuple(train.frame_shape)
-            self.length = train.length
+            self.L = train.L
             self._device, self._precision = dev, precision
             try:
                 train_loop(net, get_batch, load_batches=load_batches,
@@ -733,7 +732,7 @@ class TorchSequenceClassifier(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("L")
+        clf.L = config.get("L")
         clf.fit_report = config.get("fit_report")
         net = clf._build_net(clf.frame_shape, clf.n_classes, pretrained=False)
         expected = net.state_dict()

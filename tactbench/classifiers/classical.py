@@ -33,7 +33,7 @@ from tactbench.classifiers.base import (
     read_windows,
     streamed_mean_std,
 )
-from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted
+from tactbench.classifiers.training import FitReport, ProgressFn, TrainingInterrupted, select_device
 from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_positive_float, check_positive_int
 
@@ -104,7 +104,7 @@ class PooledLogReg(SequenceClassifier):
 
         n = len(x)
         frame_shape = x.frame_shape if isinstance(x, Windows) else tuple(x.shape[2:])
-        length = x.length if isinstance(x, Windows) else x.shape[1]
+        length = x.L if isinstance(x, Windows) else x.shape[1]
         prepare = lambda t: frame_features(t, self.grid)  # noqa: E731
         n_feat = int(prepare(torch.zeros((1, *frame_shape))).shape[1])
         budget = bank_budget_bytes()
@@ -131,8 +131,6 @@ class PooledLogReg(SequenceClassifier):
         deterministic). ``progress(done, max_iter, loss=...)`` per L-BFGS evaluation."""
         import torch
         import torch.nn.functional as F
-
-        from tactbench.classifiers.training import select_device
 
         self._check_windows(train, "train")
         select_device(device)  # validate; the solve is small and runs on the CPU
@@ -190,7 +188,7 @@ class PooledLogReg(SequenceClassifier):
                          loss=float(loss.detach()))
             return loss
 
-        self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+        self.n_classes, self.frame_shape, self.L = k, tuple(train.frame_shape), train.L
         self.feat_mean, self.feat_std = mean, std
         try:
             opt.step(closure)
@@ -245,7 +243,7 @@ class PooledLogReg(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("L")
+        clf.L = config.get("L")
         clf.fit_report = config.get("fit_report")
         need = {"weight", "bias", "feat_mean", "feat_std"}
         if set(tensors) != need:

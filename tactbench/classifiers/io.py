@@ -46,15 +46,21 @@ keeps loading unchanged on disk, and saving it again writes format 3.
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import re
 import warnings
+from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
 from tactbench import __version__
+from tactbench.data.layout_io import layout_to_dict
 from tactbench.errors import CorruptArtefactError, InputError, TactbenchError
+from tactbench.integrity import ALGORITHM, hash_chunks
+from tactbench.paths import atomic_write_bytes
+from tactbench.plugins import load_registry
 
 FORMAT = "tactbench-model"
 FORMAT_VERSION = 3
@@ -94,8 +100,6 @@ def _tensor_chunks(tensors: dict[str, Any]) -> Iterator[bytes | memoryview]:
 def payload_digest(record: dict[str, Any], tensors: dict[str, Any]) -> str:
     """SHA-256 of a model's header ``record`` (canonical JSON, without ``checksum``) and
     its ``tensors`` (see the module docstring)."""
-    from tactbench.integrity import hash_chunks
-
     head = {k: v for k, v in record.items() if k != "checksum"}
     text = json.dumps(head, sort_keys=True, separators=(",", ":"))
 
@@ -117,9 +121,6 @@ def save_model(clf, path: str | os.PathLike, metadata: dict[str, Any] | None = N
     """
     import torch
     from safetensors.torch import save
-
-    from tactbench.integrity import ALGORITHM
-    from tactbench.paths import atomic_write_bytes
 
     config, tensors = clf.export()
     meta = dict(metadata or {})
@@ -170,8 +171,6 @@ def live_metadata(dataset: Any, *, encoder: str, L: int, pixel_mm: float,
         "dataset": dataset.name,
     }
     if dataset.layout is not None:
-        from tactbench.data.layout_io import layout_to_dict
-
         meta["layout"] = layout_to_dict(dataset.layout)
     return meta
 
@@ -252,7 +251,6 @@ def _check_header(h: dict[str, Any], p: Path) -> None:
         check = h.get("checksum")
         if not isinstance(check, dict) or not isinstance(check.get("digest"), str):
             raise ModelFileError(p, "header has no checksum ('checksum.digest')")
-        from tactbench.integrity import ALGORITHM
 
         if not re.fullmatch(r"[0-9a-f]{64}", check["digest"]):
             raise ModelFileError(p, "header 'checksum.digest' is not a SHA-256 hex digest")
@@ -318,8 +316,6 @@ def load_model(path: str | os.PathLike, *, registry=None,
     header = read_header(p)
     name = header["classifier"]
     if registry is None:
-        from tactbench.plugins import load_registry
-
         registry = load_registry()
     try:
         cls = registry.get("classifier", name).load()
@@ -368,8 +364,6 @@ def migrate_header(header: dict[str, Any], cls: Any = None) -> dict[str, Any]:
     after the file's checksum was verified against the header as written."""
     if header["version"] >= FORMAT_VERSION:
         return header
-    import copy
-    from dataclasses import fields, is_dataclass
 
     out = copy.deepcopy(header)
     for part in ("config", "metadata"):

@@ -6,6 +6,7 @@ defaults are the ``quick`` profile's (see :mod:`tactbench.classifiers.training`)
 
 from __future__ import annotations
 
+import importlib.util
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -127,8 +128,6 @@ class CnnLstm(ImageSequenceClassifier):
         return net
 
     def _timm_backbone(self, model_name: str, channels: int, pretrained: bool):
-        import importlib.util
-
         if importlib.util.find_spec("timm") is None:
             raise InputError(f"backbone 'timm:{model_name}' needs timm, which is not "
                              f"installed; use backbone=efficientnet-b0")

@@ -8,11 +8,14 @@ them and accepts frames at any size.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from typing import Sequence
 
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from tactbench.classifiers.efficientnet import EfficientNetB0
 
 #: ImageNet channel statistics (RGB), for ``normalisation="imagenet"``.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -161,8 +164,6 @@ def segments_of(encoder: nn.Module) -> list[nn.Module]:
     """The encoder as a list of modules applied in turn: EfficientNet's stem, blocks and
     head (pooled at the end), SmallCNN's conv blocks, a Sequential's children; else the
     encoder whole."""
-    from tactbench.classifiers.efficientnet import EfficientNetB0
-
     if isinstance(encoder, EfficientNetB0):
         return [encoder.stem, *encoder.blocks, encoder.head, _MeanPool()]
     if isinstance(encoder, SmallCNN):  # whole conv blocks (ReLU works in place)
@@ -207,8 +208,6 @@ def checkpointed(encoder: nn.Module, x: torch.Tensor, segments: int) -> torch.Te
     sees the same batch). Random draws (stochastic depth) are replayed
     (``preserve_rng_state``) and BatchNorm's running statistics are updated once, as
     without checkpointing: the same outputs, gradients and buffers, to float rounding."""
-    from contextlib import nullcontext
-
     from torch.utils.checkpoint import checkpoint
 
     layers = segments_of(encoder)

@@ -48,6 +48,7 @@ from typing import Any, ClassVar, Iterator
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.classifiers.base import SequenceClassifier, _frames_per_chunk
 from tactbench.classifiers.training import FitReport, ProgressFn
 from tactbench.data.windows import Windows
@@ -190,15 +191,13 @@ class SklearnClassifier(SequenceClassifier):
 
     def _window_features(self, x: Windows | np.ndarray) -> np.ndarray:
         """``(B, L × F)`` float32: each sequence's frames reduced to features once."""
-        from tactbench.budget import check_budget
-
         if not isinstance(x, Windows):
             b, length = x.shape[:2]
             feats = frame_features(x.reshape(b * length, *x.shape[2:]), self.grid)
             return feats.reshape(b, -1).astype(np.float32)
         n_feat = self._n_features(x.frame_shape)
         total = sum(int(s.shape[0]) for s in x.sequences)
-        check_budget((total + len(x) * x.length) * n_feat * 4,
+        check_budget((total + len(x) * x.L) * n_feat * 4,
                      f"{self.estimator_name} features of {len(x)} windows")
         bank = np.zeros((total + 1, n_feat), dtype=np.float32)  # last row: blank frame
         lengths = np.array([int(s.shape[0]) for s in x.sequences], dtype=np.int64)
@@ -208,7 +207,7 @@ class SklearnClassifier(SequenceClassifier):
             for a in range(0, int(lengths[i]), step):
                 b = min(int(lengths[i]), a + step)
                 bank[offsets[i] + a:offsets[i] + b] = frame_features(seq[a:b], self.grid)
-        pos = x.starts[:, None] + np.arange(x.length)[None, :]
+        pos = x.starts[:, None] + np.arange(x.L)[None, :]
         index = offsets[x.seq_index][:, None] + pos
         index[pos >= lengths[x.seq_index][:, None]] = total
         return bank[index].reshape(len(x), -1)
@@ -244,7 +243,7 @@ class SklearnClassifier(SequenceClassifier):
             progress(0, 1, epoch=1, epochs=1)
         feats = self._window_features(train)
         labels = np.asarray(train.labels, dtype=np.int64)
-        self.n_classes, self.frame_shape, self.length = k, tuple(train.frame_shape), train.length
+        self.n_classes, self.frame_shape, self.L = k, tuple(train.frame_shape), train.L
         self._fit_estimator(feats, labels, seed)
         self._train, self._seed = (feats, labels), int(seed)
         proba = self._proba_of(feats)
@@ -289,10 +288,10 @@ class SklearnClassifier(SequenceClassifier):
         if tuple(shape) != tuple(self.frame_shape):
             raise InputError(f"sklearn:{self.estimator_name} needs frames of the trained "
                              f"shape {self.frame_shape}, got {tuple(shape)}")
-        length = x.length if isinstance(x, Windows) else x.shape[1]
-        if length != self.length:
+        length = x.L if isinstance(x, Windows) else x.shape[1]
+        if length != self.L:
             raise InputError(f"sklearn:{self.estimator_name} was fitted on windows of "
-                             f"L = {self.length} frames, got L = {length}")
+                             f"L = {self.L} frames, got L = {length}")
         if len(x) == 0:
             return np.zeros((0, self.n_classes), dtype=np.float32)
         return self._proba_of(self._window_features(x))
@@ -325,19 +324,19 @@ class SklearnClassifier(SequenceClassifier):
         clf = cls(**config["options"])
         clf.n_classes = int(config["n_classes"])
         clf.frame_shape = tuple(int(s) for s in config["frame_shape"])
-        clf.length = config.get("L")
+        clf.L = config.get("L")
         clf.fit_report = config.get("fit_report")
         feats = tensors["features"].numpy()
         labels = tensors["labels"].numpy().astype(np.int64)
         rows = tensors["check_rows"].numpy().astype(np.int64)
         saved = tensors["check_proba"].numpy()
-        width = clf._n_features(clf.frame_shape) * int(clf.length or 0)
+        width = clf._n_features(clf.frame_shape) * int(clf.L or 0)
         if feats.ndim != 2 or feats.shape != (len(labels), width) or labels.ndim != 1 \
                 or (len(rows) and (rows.min() < 0 or rows.max() >= len(labels))) \
                 or saved.shape != (len(rows), clf.n_classes):
             raise InputError(f"stored features {tuple(feats.shape)}, labels "
                              f"{tuple(labels.shape)} and checks {tuple(saved.shape)} do not "
-                             f"fit {clf.n_classes} classes and windows of {clf.length} "
+                             f"fit {clf.n_classes} classes and windows of {clf.L} "
                              f"frames {clf.frame_shape}")
         clf._fit_estimator(feats, labels, int(config["seed"]))
         clf._train, clf._seed = (feats, labels), int(config["seed"])

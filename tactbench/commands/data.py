@@ -11,7 +11,7 @@ from tactbench.cli import Number, get_registry, json_text
 from tactbench.data.dataset import Dataset
 from tactbench.data.preview import preview_strip, write_png, written_by_tactbench
 from tactbench.datasets.loading import check_loaded, load_dataset, takes_progress
-from tactbench.datasets.synthetic import generate
+from tactbench.datasets.synthetic_forearm import generate
 from tactbench.errors import InputError, MissingFileError
 from tactbench.specs import parse_spec
 from tactbench.paths import check_output_file, check_output_folder

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import click
 
-from tactbench.cli import json_text
-
-from tactbench.cli import get_registry
+from tactbench.cli import get_registry, json_text
+from tactbench.contracts import CLASSIFIER
 
 
 def _component_dict(comp) -> dict:
@@ -32,7 +31,6 @@ def _classifier_input(comp) -> str:
     classifier cannot be loaded here (a missing requirement)."""
     if comp.missing_requirements():
         return "-"
-    from tactbench.contracts import CLASSIFIER
 
     try:
         rank = CLASSIFIER.get(comp.load(), "frame_rank")  # the contract's default where unset

@@ -9,6 +9,7 @@ import click
 
 from tactbench.cli import Number, get_registry, json_text
 from tactbench.contracts import SENSOR
+from tactbench.errors import InputError
 from tactbench.live import LiveClassifier, LiveModel, run_summary
 from tactbench.specs import parse_spec
 
@@ -40,8 +41,6 @@ def _renamed(old: str, new: str):
     """A hidden option ``old`` that refuses itself, naming ``new`` (no silent aliases)."""
     def refuse(ctx: click.Context, param: click.Parameter, value: Any) -> None:
         if value is not None:
-            from tactbench.errors import InputError
-
             raise InputError(f"{old} is now {new}")
 
     return click.option(old, hidden=True, expose_value=False, callback=refuse,
@@ -131,7 +130,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     if not quiet:
         load = SENSOR.get(sensor, "bus_load")
         where = f" ({load().describe()})" if load is not None else ""
-        click.echo(f"live: {len(model.classes)} classes, L = {model.length}, encoder "
+        click.echo(f"live: {len(model.classes)} classes, L = {model.L}, encoder "
                    f"{model.encoder_spec if model.uses_images else '(taxel vectors)'}; "
                    f"sensor {sensor_spec}{where}", err=True)
     rows: list[dict[str, Any]] = []
@@ -153,7 +152,7 @@ def _live(ctx, model_path, sensor_spec, source, interface, channel, bitrate, for
     summary = run_summary(live, latencies, sensor)
     if as_json:
         click.echo(json_text({"model": model_path, "classes": model.classes,
-                               "L": model.length, "encoder": model.encoder_spec,
+                               "L": model.L, "encoder": model.encoder_spec,
                                "predictions": rows, "summary": summary}, indent=2))
     elif not jsonl and latencies:
         lat = summary["latency_ms"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -9,10 +10,8 @@ from typing import Any, Callable
 
 import click
 
-from tactbench.cli import json_text
-
-from tactbench.cli import get_registry
-from tactbench.profiles import PRECISIONS, PROFILE_NAMES
+from tactbench.cli import get_registry, json_text
+from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
 from tactbench.runner import Scene, load_scene_file, run
 from tactbench.runner.scene import parse_lengths, parse_seeds
 from tactbench.runner.summaries import failed_cells, summarise
@@ -56,12 +55,8 @@ def scene_default(name: str, none: str | Callable[[], str] | None = None) -> str
     """The Scene field ``name``'s default as help shows it (lists joined by ", "); for a
     default of ``None``, ``none`` (text, or a function giving it); a flag's ``False`` is
     not shown (None)."""
-    from dataclasses import MISSING, fields
-
-    from tactbench.runner.scene import Scene
-
-    (f,) = [f for f in fields(Scene) if f.name == name]
-    value = f.default_factory() if f.default is MISSING else f.default  # type: ignore[misc]
+    (f,) = [f for f in dataclasses.fields(Scene) if f.name == name]
+    value = f.default_factory() if f.default is dataclasses.MISSING else f.default  # type: ignore[misc]
     if value is None:
         if none is None:
             raise TypeError(f"scene field {name!r} defaults to None: its option must say "
@@ -77,8 +72,6 @@ def scene_default(name: str, none: str | Callable[[], str] | None = None) -> str
 def _by_profile(attribute: str) -> Callable[[], str]:
     """``"the profile's: quick 5, paper 1"``: a profile setting, read from the profiles."""
     def text() -> str:
-        from tactbench.profiles import PROFILE_NAMES, get_profile
-
         values = {n: getattr(get_profile(n), attribute) for n in PROFILE_NAMES}
         return "the profile's: " + ", ".join(
             f"{n} {v:g}" if isinstance(v, float) else f"{n} {v}" for n, v in values.items())

@@ -23,7 +23,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.contracts import ENCODER
+from tactbench.data.imaging import image_shape
 from tactbench.errors import InputError, check_positive_int, check_shape
 from tactbench.paths import atomic_write_bytes
 
@@ -73,8 +75,6 @@ def preview_strip(dataset: Any, index: int, *, encoder: Any = None, pixel_mm: fl
                              f"taxel values")
         vectors = np.nan_to_num(dataset.normalise(raw), nan=0.0)
         return Preview(taxel_bands(vectors), int(vectors.shape[0]), None, int(raw.shape[1]))
-    from tactbench.data.imaging import image_shape
-    from tactbench.budget import check_budget
 
     h, w = image_shape(dataset.layout, pixel_mm)
     t = int(raw.shape[0])

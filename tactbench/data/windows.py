@@ -43,7 +43,7 @@ from tactbench.errors import InputError, check_choice, check_positive_int
 
 @dataclass(frozen=True)
 class Windows:
-    """Windows of ``length`` frames over ``sequences``.
+    """Windows of ``L`` frames over ``sequences``.
 
     ``sequences[i]`` is float32 ``(T_i, *frame_shape)`` (``(T, C, H, W)`` for
     images, ``(T, N)`` for taxel vectors), an array or a stored sequence (only
@@ -55,10 +55,10 @@ class Windows:
     seq_index: np.ndarray  # (B,) int64
     starts: np.ndarray  # (B,) int64
     labels: np.ndarray  # (B,) int64
-    length: int
+    L: int
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "length", check_positive_int(self.length, "window length L"))
+        object.__setattr__(self, "L", check_positive_int(self.L, "window length L"))
         if not (len(self.seq_index) == len(self.starts) == len(self.labels)):
             # built by training_windows / test_windows: a mismatch is a bug, not an input
             raise ValueError("seq_index, starts and labels must have the same length")
@@ -77,14 +77,14 @@ class Windows:
         """Windows ``index`` as float32 ``(B, L, *frame_shape)``, zero-padded past the end."""
         idx = np.arange(len(self))[index] if isinstance(index, slice) else np.asarray(index)
         frame = int(np.prod(self.frame_shape, dtype=np.int64)) if self.frame_shape else 1
-        check_budget(4 * len(idx) * self.length * frame,
-                     f"a batch of {len(idx)} windows of L={self.length} frames "
+        check_budget(4 * len(idx) * self.L * frame,
+                     f"a batch of {len(idx)} windows of L={self.L} frames "
                      f"{self.frame_shape}")
-        out = np.zeros((len(idx), self.length, *self.frame_shape), dtype=np.float32)
+        out = np.zeros((len(idx), self.L, *self.frame_shape), dtype=np.float32)
         for row, j in enumerate(idx):
             seq = self.sequences[self.seq_index[j]]
             start = int(self.starts[j])
-            chunk = seq[start:start + self.length]
+            chunk = seq[start:start + self.L]
             out[row, :len(chunk)] = chunk
         return out
 

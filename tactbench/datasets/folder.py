@@ -553,8 +553,6 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
 def _check_total_budget(root: Path, paths: list[Path]) -> None:
     """The memory budget counts the whole folder, not a file at a time: every recording
     is held while the dataset is built (its values and their float32 copy)."""
-    from tactbench.budget import check_budget
-
     need = sum(_estimated_bytes(p) for p in paths)
     check_budget(need, f"reading the {len(paths)} recordings under {root}")
 
@@ -563,8 +561,6 @@ def _estimated_bytes(path: Path) -> int:
     """Memory a recording takes once read: its numbers (from the npy headers; ~4 bytes a
     CSV field) and their float32 copy. 0 where the file cannot tell (its reader then
     reports the problem)."""
-    from tactbench.integrity import read_npy_header
-
     suffix = path.suffix.lower()
     try:
         if suffix == ".csv":

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import inspect
+import logging
 from pathlib import Path
 from typing import Any, Callable
 
@@ -112,8 +113,6 @@ def load_dataset(spec_or_path: str | Path, registry: Any = None, *,
     if name not in registry.names("dataset") and path.exists():
         return load_path(path, progress=progress)  # a bare word naming a local folder
     if path.exists():
-        import logging
-
         logging.getLogger("tactbench.datasets").warning(
             "tactbench: warning: %r names the registered dataset %r; the %s %s here is "
             "not read (write ./%s to read it)", text, name,

@@ -7,11 +7,11 @@ sensor at 10 Hz. Default: 38 users × 5 gestures × 2 positions × 5 repetitions
 = 1900 samples. The model and its parameters are documented in
 ``docs/simulator.md``; the numbers live in the constants below.
 
-Two versions (option ``version``): 1, this module's users and gestures, recordings of
-5–27 frames starting near first contact (kept so past results stay reproducible:
-``synthetic-forearm:version=1``); 2 (the default), the person model of
-:mod:`tactbench.datasets.people` — people with their own style, recordings with a
-lead-in before contact and a tail after release — on the same skin, contacts and sensor.
+This module is version 1 of the simulator: its users and gestures, recordings of 5–27
+frames starting near first contact (kept so past results stay reproducible:
+``synthetic-forearm:version=1``); the skin, contacts and sensor it defines are shared
+with version 2, the person model of :mod:`tactbench.datasets.people`. The dataset of
+either version is :mod:`tactbench.datasets.synthetic_forearm`.
 
 Fairness (what the study's claim needs): Grasp, Twist and Pull share the same
 hand-posture model, so their contact shapes overlap frame by frame; they differ
@@ -21,39 +21,21 @@ strength, placement from per-user habits.
 
 Everything is deterministic: each user's and each sample's random numbers come
 from a SHA-256 of ``(seed, user, ...)``, so a user's samples do not depend on
-how many users are generated. Generated sets are cached on disk under
-``tactbench.paths.cache_dir("datasets")``, keyed by the options and
-:data:`GENERATOR_VERSION`.
+how many users are generated.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import math
-import shutil
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, Callable
 
 import numpy as np
 
-from tactbench.data.dataset import Dataset
 from tactbench.data.layout import SLOTS_PER_ID, TaxelLayout
-from tactbench.data.recording import Recording, Sample
+from tactbench.data.recording import Recording
 from tactbench.datasets.forearm import cyskin_forearm
-from tactbench.errors import InputError, check_choice, check_positive_int
-
-#: Bump when the generated data changes: it keys the cache (with the options).
-GENERATOR_VERSION = 2
-#: The simulator's versions (option ``version``) and the default (1 until version 2 shows
-#: the cost of leaving people out on the full set; docs/simulator.md).
-VERSIONS = (1, 2)
-DEFAULT_VERSION = 1
-#: Normalisation per version. Version 2's recordings are mostly without contact (lead-in,
-#: tail, the rest of the arm), so a taxel's median reading is its rest value; version 1's
-#: start at contact, and its 5th percentile is.
-NORMALISATION = {1: "baseline:low=5,high=99.99", 2: "baseline:low=50,high=99.99"}
+from tactbench.errors import check_choice
 
 CLASSES = ("Grasp", "2hGrasp", "Twist", "Push", "Pull")
 POSITIONS = ("front", "side")
@@ -473,109 +455,3 @@ def simulate_sample(device: Device, user: User, gesture: str, position: str,
                                  device.layout.positions)
     counts = read_sensor(device, pressure, stamps, r, session_offset)
     return Recording(counts, np.round(stamps, 6), device.layout.ids)
-
-
-# ------------------------------------------------------------- the dataset
-
-
-def check_options(**options: Any) -> dict[str, int]:
-    """The generator's options (``users``, ``positions``, ``repetitions``, ``seed``,
-    ``n_taxels``, ``version``) checked and as ints; errors name the option."""
-    minimum = {"users": 1, "positions": 1, "repetitions": 1, "seed": 0, "n_taxels": 1,
-               "version": 1}
-    out = {name: check_positive_int(value, f"synthetic-forearm option {name}",
-                                    minimum=minimum[name])
-           for name, value in options.items()}
-    if out.get("positions", 1) > len(POSITIONS):
-        raise InputError(f"synthetic-forearm option positions must be in 1..{len(POSITIONS)} "
-                         f"({', '.join(POSITIONS)}), got {out['positions']}")
-    if out.get("version", DEFAULT_VERSION) not in VERSIONS:
-        raise InputError(f"synthetic-forearm option version must be one of "
-                         f"{', '.join(map(str, VERSIONS))}, got {out['version']}")
-    return out
-
-
-def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: int = 0,
-             n_taxels: int = 1558, version: int = DEFAULT_VERSION,
-             progress: Callable[[int, int], None] | None = None) -> Dataset:
-    """Generate the dataset (no cache); see :class:`SyntheticForearm`."""
-    opts = check_options(users=users, positions=positions, repetitions=repetitions, seed=seed,
-                         n_taxels=n_taxels, version=version)
-    users, positions, repetitions = opts["users"], opts["positions"], opts["repetitions"]
-    version = opts["version"]
-    device = make_device(seed, n_taxels)
-    samples = []
-    total = users * len(CLASSES) * positions * repetitions
-    if version == 1:
-        make, simulate = make_user, simulate_sample
-    else:
-        from tactbench.datasets import people
-
-        make, simulate = people.make_person, people.simulate_sample
-    for u in range(users):
-        user = make(seed, u)
-        for label, gesture in enumerate(CLASSES):
-            for position in POSITIONS[:positions]:
-                for rep in range(1, repetitions + 1):
-                    rec = simulate(device, user, gesture, position, rep, seed)
-                    samples.append(Sample(rec, label, user.name, position, rep,
-                                          f"synthetic-forearm:seed={seed}/{user.name}/"
-                                          f"{gesture}/{position}/{rep}"))
-                    if progress is not None:
-                        progress(len(samples), total)
-    return Dataset("synthetic-forearm", samples, CLASSES, device.layout,
-                   normalisation=NORMALISATION[version],
-                   description=f"tactbench gesture simulator v{version}: "
-                               f"{users} users x {len(CLASSES)} gestures x {positions} "
-                               f"positions x {repetitions} repetitions, seed {seed}")
-
-
-class SyntheticForearm:
-    """Registered dataset ``synthetic-forearm``.
-
-    Options: ``users`` (38), ``positions`` (2: front, side), ``repetitions``
-    (5), ``seed`` (0), ``n_taxels`` (1558), ``version`` (1: the first simulator, the
-    default; 2: the person model, see docs/simulator.md for why it is not the default yet), ``cache`` (True: keep generated sets under
-    ``cache_dir("datasets")``). ``load()`` returns the
-    :class:`~tactbench.data.recording.Dataset`.
-    """
-
-    def __init__(self, users: int = 38, positions: int = 2, repetitions: int = 5,
-                 seed: int = 0, n_taxels: int = 1558, version: int = DEFAULT_VERSION,
-                 cache: bool = True) -> None:
-        self.options = check_options(users=users, positions=positions,
-                                     repetitions=repetitions, seed=seed, n_taxels=n_taxels,
-                                     version=version)
-        self.cache = bool(cache)
-
-    def cache_key(self) -> str:
-        text = json.dumps({"generator": GENERATOR_VERSION, **self.options}, sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-    def cache_path(self) -> Path:
-        from tactbench.paths import cache_dir
-
-        return cache_dir("datasets") / f"synthetic-forearm-{self.cache_key()}"
-
-    def load(self, progress: Callable[[int, int], None] | None = None) -> Dataset:
-        """The dataset: from the cache when there, else generated (and cached).
-
-        ``progress(done, total)`` is called per sample generated (not when the cache
-        answers).
-        """
-        if self.cache:
-            folder = self.cache_path()
-            if (folder / "manifest.json").is_file():
-                try:
-                    return Dataset.load(folder)
-                except (InputError, OSError):  # a bug elsewhere must not pass for a bad cache
-                    shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
-            elif folder.exists():  # a leftover without a manifest
-                shutil.rmtree(folder, ignore_errors=True)
-        ds = generate(**self.options, progress=progress)
-        if self.cache:
-            from tactbench.paths import atomic_folder
-
-            with atomic_folder(folder) as tmp:  # another process may win the race: fine
-                ds.save(tmp)
-        return ds

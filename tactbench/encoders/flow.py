@@ -45,6 +45,7 @@ silently repaired: the stability suite (``tactbench stability``) looks for it.
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any, ClassVar
 
@@ -52,7 +53,7 @@ import numpy as np
 
 from tactbench.contracts import ENCODER
 from tactbench.encoders.base import Encoder
-from tactbench.errors import InputError, check_positive_float, check_positive_int
+from tactbench.errors import InputError, check_at_most, check_positive_float, check_positive_int
 
 #: Default magnitude normalisation: pixels per frame mapped to magnitude 1.
 DEFAULT_MAX_FLOW = 8.0
@@ -204,10 +205,6 @@ class FlowEncoder(Encoder):
         working size, after ``downscale``, with any padding the method adds), naming
         both. Values up to the option's default are always accepted: the methods handle
         images smaller than their default windows."""
-        import inspect
-
-        from tactbench.errors import check_at_most
-
         hs, ws = self._grid_size((h, w))
         side = max(hs, ws, self.min_size) + 2 * int(getattr(self, "margin", 0) or 0)
         defaults = inspect.signature(type(self).__init__).parameters

@@ -23,9 +23,12 @@ dataset; the workers never wait at a chunk's end.
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
+import sys
 import time
 from collections import deque
+from concurrent import futures
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
@@ -50,8 +53,6 @@ def single_threaded_libraries() -> Iterator[None]:
 
     Only libraries already imported are touched (this must not import torch).
     """
-    import sys
-
     restore: list[Callable[[], None]] = []
     cv2 = sys.modules.get("cv2")
     if cv2 is not None:
@@ -104,11 +105,8 @@ def _checked_args(mode: str, workers: int | None) -> int:
 
 def _pool(workers: int, mode: str) -> tuple[Any, Any]:
     """``(executor, limits)``: a pool of ``workers`` and the context to run it in."""
-    from concurrent import futures
-
     if mode == "threads":
         return futures.ThreadPoolExecutor(max_workers=workers), single_threaded_libraries()
-    import multiprocessing
 
     # forkserver, not fork: a forked child of a process whose OpenMP/torch
     # threads are running can deadlock.
@@ -150,8 +148,6 @@ def encode_all(encoder: Any, sequences: Sequence[np.ndarray], *, workers: int | 
             if progress:
                 progress(i + 1, total)
         return out
-
-    from concurrent import futures
 
     results: list[np.ndarray | None] = [None] * total
     executor, limits = _pool(workers, mode)

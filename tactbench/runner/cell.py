@@ -25,6 +25,7 @@ from tactbench.contracts import CLASSIFIER
 from tactbench.data.splits import dataset_groups, describe_splits, make_splits
 from tactbench.data.windows import dataset_onsets, test_windows_for, training_windows_for
 from tactbench.errors import TactbenchError
+from tactbench.plugins import Registry
 from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
@@ -94,7 +95,7 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
 
 def model_metadata(p: Plan, cell: Cell) -> dict[str, Any]:
     """What `tactbench live` needs to use a cell's model: classes, layout, imaging, encoder."""
-    return live_metadata(p.dataset, encoder=cell.encoder, L=cell.length,
+    return live_metadata(p.dataset, encoder=cell.encoder, L=cell.L,
                          pixel_mm=p.scene.resolved_pixel_mm(), method=p.scene.imaging)
 
 
@@ -110,7 +111,7 @@ def model_problem(path: str | Path, p: Plan, cell: Cell) -> str | None:
         config = read_header(path).get("config", {})
     except TactbenchError as exc:  # ModelFileError is a CorruptArtefactError: a problem
         return getattr(exc, "problem", None) or str(exc)
-    want = {"cell": cell.key, "encoder": cell.encoder, "L": cell.length,
+    want = {"cell": cell.key, "encoder": cell.encoder, "L": cell.L,
             "classes": list(p.dataset.classes)}
     for field, value in want.items():
         if meta.get(field) != value:
@@ -184,8 +185,6 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     import numpy as np
     import torch
 
-    from tactbench.plugins import Registry
-
     memory = memory if memory is not None else MemoryTracker()
     torch.set_num_threads(job.threads)
     cell = job.cell
@@ -209,7 +208,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         if fold == 0:
             rss0 = memory.peak_mb
         # one split keeps the seed it always had; the folds of a k-fold split differ
-        seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.length,
+        seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.L,
                            *(() if len(splits) == 1 else (f"fold {fold}",)),
                            *(() if cell.init_seed is None else (f"init {cell.init_seed}",)))
         with memory.track("fit"):
@@ -274,7 +273,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
 def _windows(job: CellJob, sequences: Sequence[Any], labels: "np.ndarray",
              split: Any) -> tuple[Any, Any]:
     """The training and test windows of one split, as the scene's test window says."""
-    mode, onsets, length = job.scene.test_window, job.data.onsets, job.cell.length
+    mode, onsets, length = job.scene.test_window, job.data.onsets, job.cell.L
 
     def onsets_of(indices: Any) -> list[int] | None:
         return None if onsets is None else [onsets[i] for i in indices]

@@ -26,14 +26,18 @@ process's resident memory at one sequence.
 
 from __future__ import annotations
 
+import io
 import json
+import math
 import os
 import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
+from tactbench import __version__
 from tactbench.encoders.encoding import Storage
 from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.integrity import ALGORITHM, hash_bytes, hash_file, new_hasher, read_npy_header
 from tactbench.runner.planning import digest
 from tactbench.runner.system import now
 
@@ -56,8 +60,6 @@ def _canonical(obj: Any) -> bytes:
 
 def seal(meta: dict[str, Any]) -> dict[str, Any]:
     """``meta`` with ``meta_checksum``: the checksum of everything else in it."""
-    from tactbench.integrity import hash_bytes
-
     body = {k: v for k, v in meta.items() if k != "meta_checksum"}
     return {**body, "meta_checksum": hash_bytes(_canonical(body))}
 
@@ -73,11 +75,7 @@ class EntryWriter:
 
     def __init__(self, folder: Path, lengths: Sequence[int], frame_shape: Sequence[int],
                  storage: Storage, key: str | None = None) -> None:
-        import io
-
         import numpy as np
-
-        from tactbench.integrity import new_hasher
 
         self.lengths = [int(n) for n in lengths]
         self.frame_shape = tuple(int(n) for n in frame_shape)
@@ -118,12 +116,7 @@ class EntryWriter:
 
     def close(self) -> None:
         """Finish the files; raises when a sequence is missing."""
-        import io
-
         import numpy as np
-
-        from tactbench import __version__
-        from tactbench.integrity import ALGORITHM, hash_bytes
 
         self._fh.close()
         if self._done != len(self.lengths):
@@ -239,8 +232,6 @@ def verify_entry(folder: str | Path, *, full: bool = True,
     for its cost). Returns ``(meta, offsets)``; raises :class:`CorruptArtefactError`
     (the entry and the problem, in one line).
     """
-    from tactbench.integrity import hash_bytes, hash_file
-
     folder = Path(folder)
     before = signature(folder)
     if not folder.is_dir():
@@ -327,10 +318,6 @@ def _npy_header(path: Path, data: bytes | None = None,
     """``(shape, fortran_order, dtype, data offset)`` of a ``.npy`` file (or of its bytes,
     ``data``), from its header alone; a header numpy cannot parse, or longer than
     :data:`tactbench.integrity.NPY_HEADER_MAX`, raises :class:`CorruptArtefactError`."""
-    import io
-
-    from tactbench.integrity import read_npy_header
-
     with (open(path, "rb") if data is None else io.BytesIO(data)) as fh:
         try:
             shape, fortran, dtype = read_npy_header(fh)
@@ -442,8 +429,6 @@ class StoredSequence:
 
     @property
     def size(self) -> int:
-        import math
-
         return math.prod(self.shape)
 
     def __len__(self) -> int:

@@ -9,10 +9,12 @@ dropped, finished ones were already handed to ``finish``.
 
 from __future__ import annotations
 
+from concurrent.futures import ProcessPoolExecutor, as_completed
+import multiprocessing
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.runner.cell import CellJob, failed_row, run_cell
-from tactbench.runner.system import BEFORE, MemoryTracker
+from tactbench.runner.system import BEFORE, MemoryTracker, ignore_interrupts, stop_workers
 
 if TYPE_CHECKING:
     from tactbench.runner.scene import Scene
@@ -61,11 +63,6 @@ def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
 
 def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
     """``workers`` cells at once in local processes (spawned: torch and fork do not mix)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    from tactbench.runner.system import ignore_interrupts, stop_workers
-
     pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts,
                                mp_context=multiprocessing.get_context("spawn"))
     try:

@@ -18,6 +18,7 @@ import json
 import math
 import os
 import re
+import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -34,9 +35,12 @@ from tactbench.errors import (
     check_positive_float,
     check_positive_int,
 )
+from tactbench.paths import check_not_in_cache
+from tactbench.plugins import load_registry
 from tactbench.profiles import PRECISIONS, get_profile, profile_options
 from tactbench.budget import check_budget
-from tactbench.specs import parse_spec
+from tactbench.runner.summaries import check_contrasts, parse_contrast
+from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 from tactbench.runner.system import check_scheduler
 from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
@@ -65,14 +69,14 @@ class Cell:
 
     encoder: str  # canonical spec, options sorted
     classifier: str  # canonical spec including the profile's options
-    length: int  # window length L, frames
+    L: int  # the window length, frames
     seed: int
     key: str
     init_seed: int | None = None  # the initialisation's seed when varied apart from the split's
 
     def label(self) -> str:
         """A short human name: ``raw × small-cnn-lstm L=5 seed=0``."""
-        return (f"{self.encoder} × {self.classifier.split(':')[0]} L={self.length} "
+        return (f"{self.encoder} × {self.classifier.split(':')[0]} L={self.L} "
                 f"seed={self.seed}")
 
 
@@ -93,8 +97,6 @@ class Plan:
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
-        from tactbench.specs import parse_spec
-
         return self.registry.get("classifier", parse_spec(spec)[0])
 
 
@@ -130,8 +132,6 @@ def input_kind(frame_rank: int | None, has_layout: bool) -> str:
 
 
 def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dict]:
-    from tactbench.specs import format_spec, parse_spec
-
     name, options = parse_spec(spec)
     merged = {**(extra or {}), **options}
     return format_spec(name, merged), merged
@@ -148,8 +148,6 @@ def _is_ours(name: str) -> bool:
 
 
 def _probe_writable(folder: Path, out: Path) -> None:
-    import tempfile
-
     try:
         fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
     except OSError as exc:
@@ -172,7 +170,6 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
     refused, never overwritten.
     """
     out = Path(out)
-    from tactbench.paths import check_not_in_cache
 
     check_not_in_cache(out)  # 'cache clear' would delete the results
     try:
@@ -260,8 +257,6 @@ INPUT_KINDS = ("images", "vectors")
 
 def _check_statistics(scene: Scene) -> None:
     """The margin, contrasts' syntax and input kind of a scene (see docs/statistics.md)."""
-    from tactbench.runner.summaries import parse_contrast
-
     if scene.margin is not None:
         check_positive_float(scene.margin, "--margin (points)")
     for text in scene.contrasts or ():
@@ -419,8 +414,6 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
     computed or written.
     """
-    from tactbench.plugins import load_registry
-
     registry = registry or load_registry()
     check_scene(scene)
     # Names and options first (cheap), so a typo fails before a dataset is loaded.
@@ -462,9 +455,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                                       None if init is None else int(init)))
                     identities[key] = identity
     if scene.contrasts:
-        from tactbench.runner.summaries import check_contrasts
-
         check_contrasts(scene.contrasts, [{"encoder": c.encoder, "classifier": c.classifier,
-                                           "L": c.length} for c in cells])
+                                           "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 kinds, cells, identities, registry)

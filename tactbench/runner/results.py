@@ -24,11 +24,20 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
+import sys
 from pathlib import Path
 from typing import Any, Iterable
 
-from tactbench.errors import CorruptArtefactError
-from tactbench.paths import Temporary, atomic_write_text, remove_orphans
+from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.integrity import hash_bytes
+from tactbench.paths import (
+    Temporary,
+    atomic_write_text,
+    parse_temporary,
+    remove_orphans,
+    temp_name,
+)
 
 log = logging.getLogger("tactbench.runner.results")
 
@@ -59,8 +68,6 @@ def failed_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def row_checksum(row: dict[str, Any]) -> str:
     """The checksum of a row: SHA-256 of everything but ``checksum``, as sorted JSON."""
-    from tactbench.integrity import hash_bytes
-
     body = {k: v for k, v in row.items() if k != "checksum"}
     return hash_bytes(json.dumps(body, sort_keys=True, separators=(",", ":")).encode())
 
@@ -232,11 +239,6 @@ class ResultStore:
         whose report this run would replace. Two runs at once must plan the same grid;
         of two different ones, the later is refused, naming the first.
         """
-        import os
-
-        from tactbench.errors import InputError
-        from tactbench.paths import parse_temporary, temp_name
-
         keys = sorted(set(keys))
         planned = set(keys)
         out = self.out
@@ -251,8 +253,7 @@ class ResultStore:
                              f"includes them")
         self.cells.mkdir(parents=True, exist_ok=True)
         mine = self.cells / temp_name("run")
-        from tactbench.paths import atomic_write_text as write
-        write(mine, json.dumps({"keys": keys, "command": _command()}))
+        atomic_write_text(mine, json.dumps({"keys": keys, "command": _command()}))
         for claim in sorted(self.cells.glob(".run.tmp-*"), key=_claim_order):
             info = parse_temporary(claim)
             if claim == mine or info is None or info.pid == os.getpid() \
@@ -281,8 +282,6 @@ def _claim_order(path: Path) -> tuple[int, str]:
 
 
 def _command() -> str:
-    import sys
-
     return " ".join(["tactbench", *sys.argv[1:]])
 
 

@@ -15,6 +15,9 @@ the file and the field.
 
 from __future__ import annotations
 
+import difflib
+import json
+import math
 import numbers
 import os
 import re
@@ -22,7 +25,14 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Iterable
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError, MissingFileError
+from tactbench.profiles import get_profile
 
 #: Where cells run: this machine (serially or in ``workers`` processes) or a dask cluster.
 EXECUTORS = ("local", "dask")
@@ -64,7 +74,6 @@ class Scene:
         """The tactile-image pixel size in mm: the scene's, else its profile's."""
         if self.pixel_mm is not None:
             return float(self.pixel_mm)
-        from tactbench.profiles import get_profile
 
         return get_profile(self.profile).pixel_mm
 
@@ -72,7 +81,6 @@ class Scene:
         """How cached encodings are stored: the scene's precision, else its profile's."""
         if self.precision is not None:
             return str(self.precision)
-        from tactbench.profiles import get_profile
 
         return get_profile(self.profile).precision
 
@@ -229,8 +237,6 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
             raise InputError(f"{label} must be at most {MAX_WORKERS}, got {_show(value)}")
         return value
     if kind == "number":
-        import math
-
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise InputError(f"{label} must be a number, got {type(value).__name__} "
                              f"{_show(value)}")
@@ -273,12 +279,6 @@ def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 def load_scene_file(path: str | Path) -> dict[str, Any]:
     """Read a scene file (TOML, or JSON when it ends in ``.json``) into a dict of
     :class:`Scene` fields: names, types and ranges checked (:func:`check_fields`)."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
-    import json
-
     path = Path(path)
     is_json = path.suffix.lower() == ".json"
     try:
@@ -316,8 +316,6 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
             raise InputError(f"{path}: field '{key}' is now '{RENAMED[key]}'")
         name = _ALIASES.get(key, key)
         if name not in known:
-            import difflib
-
             close = difflib.get_close_matches(name, sorted(known), n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
             raise InputError(f"{path}: unknown field {_show(key)}{hint}")
@@ -332,8 +330,6 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
 def _relative_to(values: dict[str, Any], folder: Path) -> dict[str, Any]:
     """A scene file's paths (``out``, a ``dataset`` path) with ``~`` expanded and,
     when relative, taken from the scene file's folder, not the working folder."""
-    from tactbench.datasets.loading import is_path_spec
-
     for name in ("out", "dataset"):
         text = values.get(name)
         if isinstance(text, str) and (name == "out" or is_path_spec(text)):

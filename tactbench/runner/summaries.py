@@ -12,7 +12,22 @@ import math
 import statistics
 from typing import Any, Iterable, Sequence
 
+from tactbench.data.splits import user_folds
+from tactbench.errors import InputError
 from tactbench.runner.results import failed_rows, ok_rows
+from tactbench.runner.statistics import (
+    TARGET_HALF_WIDTH,
+    corrected_t,
+    holm,
+    mcnemar_p,
+    pairs_differing_in_one_factor,
+    runs_needed,
+    seed_summary,
+    sign_flip_p,
+    tost_p,
+    variance_components,
+    verdict,
+)
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
 #: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).
@@ -101,8 +116,6 @@ def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = N
 
 def _seed_interval(accuracies: Sequence[float]) -> list[float] | None:
     """95 % t-interval of the mean accuracy over seeds (None for one seed)."""
-    from tactbench.runner.statistics import seed_summary
-
     vals = [float(a) for a in accuracies if a is not None and not math.isnan(a)]
     if len(vals) < 2:
         return None
@@ -135,8 +148,6 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
     the contrast is made once for each of their combinations in the run. The difference
     is B − A. Raises :class:`InputError` naming the mistake.
     """
-    from tactbench.errors import InputError
-
     example = "e.g. encoder=raw,L=6..encoder=farneback,L=3"
     if not isinstance(text, str) or text.count("..") != 1:
         raise InputError(f"contrast {text!r} must be two cells joined by '..' ({example})")
@@ -198,8 +209,6 @@ def contrast_pairs(contrast: str, cells: Sequence[dict[str, Any]]) -> list[tuple
 
 def check_contrasts(contrasts: Sequence[str], cells: Sequence[dict[str, Any]]) -> None:
     """Refuse a contrast that names no pair of ``cells`` (before any work)."""
-    from tactbench.errors import InputError
-
     for text in contrasts:
         if not contrast_pairs(text, cells):
             raise InputError(f"contrast {text!r} names no two cells of this run (cells "
@@ -223,11 +232,7 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     (points) adds the equivalence test; ``users`` (the user of each dataset sample, by
     index) adds per-user gains. See :func:`paired_runs` for each entry's fields.
     """
-    from tactbench.runner.statistics import holm, pairs_differing_in_one_factor, verdict
-
     if margin is not None and not (isinstance(margin, (int, float)) and margin > 0):
-        from tactbench.errors import InputError
-
         raise InputError(f"margin must be a number of points > 0, got {margin!r}")
     groups = _cell_groups(rows)
     blocks: dict[tuple, list[tuple]] = {}
@@ -349,15 +354,6 @@ def paired_runs(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[st
     """
     import numpy as np
 
-    from tactbench.runner.statistics import (
-        TARGET_HALF_WIDTH,
-        corrected_t,
-        mcnemar_p,
-        runs_needed,
-        sign_flip_p,
-        tost_p,
-    )
-
     shared = sorted(set(runs_a) & set(runs_b), key=lambda k: (k[0], -1 if k[1] is None else k[1]))
     per_seed: dict[tuple, Any] = {}
     for key in shared:
@@ -435,9 +431,6 @@ def _fold_differences(per_seed, splits, runs, users, folds: int):
     None when the folds cannot be made again here."""
     import numpy as np
 
-    from tactbench.data.splits import user_folds
-    from tactbench.errors import InputError
-
     users = [str(u) for u in users]
     out = []
     for seed, keys in splits.items():
@@ -473,8 +466,6 @@ def _per_class_gains(per_seed, splits, classes, ratio, confidence) -> dict[str, 
     """Class → gain B − A on that class's test sequences, per run, with the run-level
     interval (None where fewer than 2 runs test the class)."""
     import numpy as np
-
-    from tactbench.runner.statistics import corrected_t
 
     out = {}
     for c, name in enumerate(classes):
@@ -549,8 +540,6 @@ def variance_decomposition(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any
     (:func:`tactbench.runner.statistics.variance_components`; test sampling as
     p(1 − p)/n_test), as standard deviations in points."""
     import numpy as np
-
-    from tactbench.runner.statistics import variance_components
 
     out = []
     for key, runs in _cell_groups(rows).items():

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import re
+import signal
+import subprocess
 import sys
 import time
 from contextlib import contextmanager
@@ -10,6 +13,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
+import tactbench
+from tactbench.errors import InputError
+
+try:
+    import resource
+except ImportError:  # Windows
+    resource = None
 
 
 def now() -> str:
@@ -24,14 +34,11 @@ def host() -> str:
 
 def peak_rss_mb() -> float:
     """Peak resident memory of this process so far, in MiB (NaN on Windows)."""
-    try:
-        import resource
-
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        # Linux reports KiB, macOS bytes
-        return rss / 1024.0 if sys.platform != "darwin" else rss / 2 ** 20
-    except ImportError:  # Windows
+    if resource is None:  # Windows
         return float("nan")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # Linux reports KiB, macOS bytes
+    return rss / 1024.0 if sys.platform != "darwin" else rss / 2 ** 20
 
 
 def _status_mb(field_name: str) -> float | None:
@@ -132,8 +139,6 @@ def versions() -> dict[str, str]:
     """Versions of tactbench, Python, numpy, and of torch, cv2, kornia when imported."""
     import numpy
 
-    import tactbench
-
     out = {"tactbench": tactbench.__version__, "python": sys.version.split()[0],
            "numpy": numpy.__version__}
     # Only what this process has imported: importing them here would cost seconds.
@@ -146,8 +151,6 @@ def versions() -> dict[str, str]:
 
 def git_revision() -> str | None:
     """The checkout's commit (with ``+dirty``), when tactbench runs from one."""
-    import subprocess
-
     root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():
         return None
@@ -166,8 +169,6 @@ def ignore_interrupts() -> None:
     """In a worker process: leave Ctrl-C (SIGINT, sent to the whole process group) to the
     parent, which stops the workers itself (:func:`stop_workers`); a worker would
     otherwise print its own traceback of the interrupt."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
@@ -206,10 +207,6 @@ def check_scheduler(address: str) -> str:
     """A dask scheduler address as dask takes it (``tcp://host:port``, ``host:port``,
     ``tls://...``), checked before any work: dask's own error comes after the encoding,
     as a traceback."""
-    import re
-
-    from tactbench.errors import InputError
-
     text = str(address).strip()
     if not re.fullmatch(r"(?:(?:tcp|tls|ws|wss|ucx|inproc)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}/?",
                         text):

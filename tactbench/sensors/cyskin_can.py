@@ -21,7 +21,7 @@ from tactbench.can.busload import BusLoad, bus_load
 from tactbench.can.codec import MAX_TAXELS, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, is_meta
 from tactbench.data.layout_io import load_layout
-from tactbench.errors import InputError
+from tactbench.errors import InputError, check_number
 
 
 def parse_taxel_ids(spec: Any) -> np.ndarray:
@@ -131,7 +131,6 @@ class CySkinCAN:
         self.taxel_ids = self.taxel_map.taxel_ids
         self.assembler = SweepAssembler(self.taxel_map, missing=missing, window=window)
         self.bitrate, self.data_bitrate, self.rate_hz = bitrate, data_bitrate, rate_hz
-        from tactbench.errors import check_number
 
         self.flush_after = check_number(flush_after, "flush_after", minimum=0)
         # NaN never compares: a NaN timeout would never end

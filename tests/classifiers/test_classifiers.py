@@ -319,7 +319,7 @@ def test_save_and_load_round_trip(fitted, name, tmp_path):
     loaded, got = load_model(path)
     assert got == meta
     assert type(loaded) is type(clf) and loaded.options() == clf.options()
-    assert loaded.n_classes == 3 and loaded.length == 3 and loaded.frame_shape == clf.frame_shape
+    assert loaded.n_classes == 3 and loaded.L == 3 and loaded.frame_shape == clf.frame_shape
     assert np.array_equal(loaded.predict_proba(test), clf.predict_proba(test))
     assert read_header(path)["classifier"] == name
     assert loaded.fit_report == json.loads(json.dumps(clf.fit_report))
@@ -441,7 +441,7 @@ def test_real_cyskin_recordings_without_a_layout(shared_data, spec):
 
 @pytest.mark.parametrize("name", list(TINY))
 def test_builtins_pass_the_conformance_checks(name):
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
 
     check_classifier(TINY[name])
 
@@ -457,7 +457,7 @@ class Unseeded(SmallCnnLstm):
 
 
 def test_the_conformance_checks_catch_a_broken_classifier():
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
     from tactbench.registry import Component, Registry
 
     registry = Registry([Component("classifier", "unseeded", f"{__name__}:Unseeded",

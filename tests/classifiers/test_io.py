@@ -263,7 +263,7 @@ def test_a_format_2_file_is_verified_as_written_then_read_as_format_3(tmp_path,
     assert h["version"] == 2 and h["config"]["length"] == 2 and "L" not in h["config"]
     back, meta = load_model(old, registry=REGISTRY)
     assert meta == {"L": 2, "classes": ["a", "b"]}
-    assert back.length == 2 and back.normalisation == "data"
+    assert back.L == 2 and back.normalisation == "data"
     x = np.stack([s[:2] for s in seqs])
     np.testing.assert_allclose(back.predict_proba(x), clf.predict_proba(x), atol=1e-6)
     assert read_header(save_model(back, tmp_path / "new.safetensors", meta))["version"] == 3

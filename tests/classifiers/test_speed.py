@@ -17,7 +17,7 @@ from tactbench.classifiers.base import FrameBank, share_frames, window_runs
 from tactbench.classifiers.efficientnet import EfficientNetB0
 from tactbench.classifiers.nets import SequenceNet, SharedWindows, SmallCNN, checkpointed
 from tactbench.classifiers.training import epoch_order
-from tactbench.classifiers.testing import tiny_windows
+from tactbench.classifiers.conformance import tiny_windows
 from tactbench.data.windows import Windows, training_windows
 from tactbench.errors import InputError
 from tactbench.plugins import load_registry
@@ -207,6 +207,6 @@ def test_windows_grouping_needs_no_sorted_windows():
     win = training_windows(seqs, labels, 2)
     perm = np.random.default_rng(0).permutation(len(win))
     shuffled = Windows(win.sequences, win.seq_index[perm], win.starts[perm],
-                       win.labels[perm], win.length)
+                       win.labels[perm], win.L)
     a, b = window_runs(win), window_runs(shuffled)
     assert np.array_equal(a[perm], b)

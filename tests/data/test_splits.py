@@ -173,7 +173,7 @@ def test_group_folds_leave_each_value_out_once():
 
 def test_dataset_groups_lists_the_metadata_a_dataset_has():
     from tactbench.data.splits import dataset_groups
-    from tactbench.datasets.synthetic import generate
+    from tactbench.datasets.synthetic_forearm import generate
 
     ds = generate(users=2, repetitions=2, positions=2)
     g = dataset_groups(ds)
@@ -189,7 +189,7 @@ def test_dataset_groups_lists_the_metadata_a_dataset_has():
 
 def test_train_on_front_test_on_side_is_one_run(tmp_path):
     """The runner takes a group split end to end: every test recording is from the side."""
-    from tactbench.datasets.synthetic import generate
+    from tactbench.datasets.synthetic_forearm import generate
     from tactbench.runner import EncodingCache, Scene, run
 
     scene = Scene(dataset="synthetic-forearm:users=2,repetitions=1", encoders=["raw"],

@@ -298,7 +298,7 @@ def test_registered_reader_path_detection_and_import_round_trip(tmp_path):
 
 def test_import_of_any_readable_source_and_its_errors(tmp_path):
     from tactbench.datasets.cost import read_cost_csv, write_cost_csv
-    from tactbench.datasets.synthetic import generate
+    from tactbench.datasets.synthetic_forearm import generate
 
     src = generate(users=2, positions=1, repetitions=1, seed=1)
     src.save(tmp_path / "syn")

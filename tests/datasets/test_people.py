@@ -18,7 +18,7 @@ import pytest
 from tactbench.data.splits import make_splits
 from tactbench.data.windows import dataset_onsets, window_starts
 from tactbench.datasets import people
-from tactbench.datasets.synthetic import generate
+from tactbench.datasets.synthetic_forearm import generate
 
 REPO = Path(__file__).resolve().parents[2]
 L = 5

@@ -6,16 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactbench.datasets import people, synthetic
+from tactbench.datasets import people, synthetic, synthetic_forearm
 from tactbench.datasets.synthetic import (
     CLASSES,
-    SyntheticForearm,
     _rng,
-    generate,
     make_device,
     make_user,
     simulate_pressure,
 )
+from tactbench.datasets.synthetic_forearm import SyntheticForearm, generate
 from tactbench.plugins import load_registry
 
 
@@ -112,7 +111,8 @@ def test_registered_and_cached(tmp_path, monkeypatch):
     assert SyntheticForearm(users=1, repetitions=1).load().content_hash() == ds.content_hash()
     # the key follows the options and the generator version
     assert SyntheticForearm(users=2).cache_key() != SyntheticForearm(users=1).cache_key()
-    monkeypatch.setattr(synthetic, "GENERATOR_VERSION", synthetic.GENERATOR_VERSION + 1)
+    monkeypatch.setattr(synthetic_forearm, "GENERATOR_VERSION",
+                        synthetic_forearm.GENERATOR_VERSION + 1)
     assert SyntheticForearm(users=1, repetitions=1).cache_path() != folder
 
 

@@ -2,7 +2,7 @@
 
 ::
 
-    from tactbench.classifiers.testing import check_classifier
+    from tactbench.classifiers.conformance import check_classifier
     check_classifier("my-classifier:epochs=1")   # raises AssertionError listing failures
 
 Pass a spec with cheap options: the checks fit the classifier three times on a
@@ -29,11 +29,14 @@ from typing import Any
 
 import numpy as np
 
+from tactbench.classifiers.io import load_model
+from tactbench.contracts import CLASSIFIER
+from tactbench.data.windows import test_windows, training_windows
+from tactbench.plugins import load_registry
+
 
 def tiny_windows(frame_rank: int | None, *, n: int = 18, length: int = 3, seed: int = 0):
     """Training and test :class:`~tactbench.data.windows.Windows` of an easy 3-class task."""
-    from tactbench.data.windows import test_windows, training_windows
-
     rng = np.random.default_rng(seed)
     seqs, labels = [], []
     for i in range(n):
@@ -52,10 +55,6 @@ def tiny_windows(frame_rank: int | None, *, n: int = 18, length: int = 3, seed: 
 
 def check_classifier(spec: str, *, registry: Any = None) -> None:
     """Run every check on the classifier ``spec``; ``AssertionError`` lists the failures."""
-    from tactbench.classifiers.io import load_model
-    from tactbench.contracts import CLASSIFIER
-    from tactbench.plugins import load_registry
-
     registry = registry or load_registry()
     build = lambda: registry.build("classifier", spec)  # noqa: E731
     clf = build()
