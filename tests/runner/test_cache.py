@@ -297,13 +297,12 @@ def test_the_identity_recorded_in_an_entry_must_hash_to_its_key(tmp_path):
 
 def test_the_full_checksum_is_read_once_per_process_per_version_of_the_file(tmp_path,
                                                                            monkeypatch):
-    import tactbench.integrity as integrity
-
     cache = EncodingCache(tmp_path)
     cache.write("k", [np.ones((4, 3), np.float32)], {})
     calls = []
-    real = integrity.hash_file
-    monkeypatch.setattr(integrity, "hash_file", lambda *a, **k: calls.append(a) or real(*a, **k))
+    real = entries_module.hash_file  # the entries' own name for it (imported at the top)
+    monkeypatch.setattr(entries_module, "hash_file",
+                        lambda *a, **k: calls.append(a) or real(*a, **k))
     cache.verify("k")
     assert calls == []  # the writer hashed the bytes as it wrote them: no second read
     entries_module._VERIFIED.clear()  # as in another process
