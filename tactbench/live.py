@@ -41,6 +41,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from tactbench.budget import check_budget
 from tactbench.classifiers.io import load_model
 from tactbench.contracts import CLASSIFIER, FRAME, SENSOR
 from tactbench.data.imaging import Imager
@@ -201,6 +202,7 @@ class LiveModel:
             if shape is not None and tuple(shape) != (ids.size,):
                 raise TactbenchError(f"{where}: the classifier expects taxel vectors "
                                      f"{tuple(shape)}, the metadata names {ids.size} taxels")
+            _check_window_budget(L, ids.size, where)
             return model
         if lay is None:
             raise TactbenchError(f"{where}: an image classifier needs the taxel layout; "
@@ -227,7 +229,15 @@ class LiveModel:
             raise TactbenchError(f"{where}: the classifier expects frames {tuple(shape)}, "
                                  f"but encoder '{model.encoder_spec}' on this layout at "
                                  f"{px:g} mm gives {expected}")
+        _check_window_budget(L, math.prod(expected), where)
         return model
+
+
+def _check_window_budget(L: int, frame_values: int, where: str) -> None:
+    """Refuse, before the sensor opens, a window whose frames do not fit the memory
+    budget: the window of ``L`` frames and the batch it is copied into, float32."""
+    check_budget(2 * 4 * L * frame_values,
+                 f"{where}: a live window of L = {L} frames of {frame_values} values")
 
 
 def _dict_field(meta: dict[str, Any], key: str, where: str) -> dict[str, Any]:

@@ -539,3 +539,16 @@ def test_frame_features_are_cached_only_for_a_classifier_whose_contract_offers_t
 
     assert _FeatureWindow.supported(SmallCnnLstm())
     assert not _FeatureWindow.supported(PooledLogReg())  # predict_proba on each window
+
+
+def test_an_absurd_window_length_is_refused_by_the_memory_budget(trained, monkeypatch):
+    """``live -L 100000`` on a model of images: the window and its batch are estimated
+    and refused before the sensor opens, instead of allocating them sweep by sweep."""
+    from tactbench.errors import BudgetError
+
+    _, _, path = trained
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "64")
+    model = LiveModel.from_file(path, registry=REGISTRY)
+    with pytest.raises(BudgetError, match="live window of L = 100000 frames"):
+        LiveModel.from_parts(model.clf, model.info, L=100_000, registry=REGISTRY)
+    assert LiveModel.from_parts(model.clf, model.info, L=5, registry=REGISTRY).L == 5
