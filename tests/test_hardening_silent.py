@@ -139,3 +139,14 @@ def test_a_class_with_one_recording_is_refused_by_its_name(tmp_path):
     with pytest.raises(InputError, match="class 'lonely' has 1 recording; a benchmark "
                                          "needs ≥ 2 per class"):
         check_informative(read_folder(root))
+
+
+def test_a_one_line_csv_ending_in_a_comma_is_refused_not_guessed(tmp_path):
+    """'12,' alone: a trailing comma, or a missing second reading? (found by the fuzz
+    suite: it was read as one column)."""
+    path = tmp_path / "r.csv"
+    path.write_text("12,\n")
+    with pytest.raises(InputError, match=r"r.csv, line 1: its one row ends in ','"):
+        read_array_file(path)
+    path.write_text("12,\n13,\n")  # every line of several: a trailing comma
+    assert read_array_file(path)[0].tolist() == [[12.0], [13.0]]

@@ -210,8 +210,13 @@ def _read_csv(path: Path, timestamp_column: str | int | None
             raise InputError(f"{path}, line {line_of.get(id(line), '?')}: not a CSV row "
                              f"({exc})") from None
 
-    # a delimiter ending every line is no column
+    # a delimiter ending every line is no column; on a file of one line it could as well
+    # be a missing last reading, so it is refused rather than guessed
     trailing = all(line.rstrip().endswith(delimiter) for _, line in lines)
+    if trailing and len(lines) == 1:
+        raise InputError(f"{path}, line {lines[0][0]}: its one row ends in {delimiter!r}: a "
+                         f"missing last reading or a trailing delimiter? Give the reading, "
+                         f"or remove the {delimiter!r}")
 
     def row_of(line: str) -> list[str]:
         row = fields(line)
