@@ -296,12 +296,12 @@ class _FeatureWindow:
     on the whole window.
     """
 
-    def __init__(self, clf: Any, length: int) -> None:
+    def __init__(self, clf: Any, L: int) -> None:
         self.clf = clf
         self.features = CLASSIFIER.get(clf, "frame_features")
         self.window_proba = CLASSIFIER.get(clf, "window_proba")
-        self.feats: deque[Any] = deque(maxlen=length)
-        self.L = length
+        self.feats: deque[Any] = deque(maxlen=L)
+        self.L = L
 
     @staticmethod
     def supported(clf: Any) -> bool:

@@ -35,7 +35,7 @@ from tactbench.data.windows import test_windows, training_windows
 from tactbench.plugins import load_registry
 
 
-def tiny_windows(frame_rank: int | None, *, n: int = 18, length: int = 3, seed: int = 0):
+def tiny_windows(frame_rank: int | None, *, n: int = 18, L: int = 3, seed: int = 0):
     """Training and test :class:`~tactbench.data.windows.Windows` of an easy 3-class task."""
     rng = np.random.default_rng(seed)
     seqs, labels = [], []
@@ -50,7 +50,7 @@ def tiny_windows(frame_rank: int | None, *, n: int = 18, length: int = 3, seed: 
             seq[:, :, 4 * k:4 * k + 4, 2:10] += 0.8
         seqs.append(seq.clip(0, 1))
         labels.append(k)
-    return training_windows(seqs, labels, length), test_windows(seqs, labels, length)
+    return training_windows(seqs, labels, L), test_windows(seqs, labels, L)
 
 
 def check_classifier(spec: str, *, registry: Any = None) -> None:

@@ -104,26 +104,26 @@ def _check(sequences: Sequence[np.ndarray], labels: Sequence[int]) -> np.ndarray
 
 
 def training_windows(sequences: Sequence[np.ndarray], labels: Sequence[int],
-                     length: int) -> Windows:
-    """Every ``length``-frame window of every sequence (one padded window if shorter)."""
+                     L: int) -> Windows:
+    """Every ``L``-frame window of every sequence (one padded window if shorter)."""
     labels_arr = _check(sequences, labels)
     seq_index, starts = [], []
     for i, seq in enumerate(sequences):
-        n = max(1, seq.shape[0] - length + 1)
+        n = max(1, seq.shape[0] - L + 1)
         seq_index.append(np.full(n, i, dtype=np.int64))
         starts.append(np.arange(n, dtype=np.int64))
     si = np.concatenate(seq_index) if seq_index else np.zeros(0, np.int64)
     st = np.concatenate(starts) if starts else np.zeros(0, np.int64)
-    return Windows(list(sequences), si, st, labels_arr[si], length)
+    return Windows(list(sequences), si, st, labels_arr[si], L)
 
 
 def test_windows(sequences: Sequence[np.ndarray], labels: Sequence[int],
-                 length: int) -> Windows:
-    """The first ``length`` frames of each sequence, padded with blank frames."""
+                 L: int) -> Windows:
+    """The first ``L`` frames of each sequence, padded with blank frames."""
     labels_arr = _check(sequences, labels)
     n = len(sequences)
     return Windows(list(sequences), np.arange(n, dtype=np.int64), np.zeros(n, np.int64),
-                   labels_arr, length)
+                   labels_arr, L)
 
 
 test_windows.__test__ = False  # not a pytest test, despite the name
@@ -153,30 +153,30 @@ def onset_frame(pressure: np.ndarray, fraction: float = ONSET_FRACTION) -> int:
     return int(np.argmax(total >= fraction * peak))
 
 
-def window_starts(n_frames: Sequence[int], length: int, onsets: Sequence[int]) -> np.ndarray:
+def window_starts(n_frames: Sequence[int], L: int, onsets: Sequence[int]) -> np.ndarray:
     """Start of each sequence's onset window: its onset, moved back so that the window
-    ends at the last frame when fewer than ``length`` frames follow (never before 0)."""
+    ends at the last frame when fewer than ``L`` frames follow (never before 0)."""
     n = np.asarray(n_frames, dtype=np.int64)
     on = np.asarray(onsets, dtype=np.int64)
-    return np.maximum(0, np.minimum(on, n - int(length))).astype(np.int64)
+    return np.maximum(0, np.minimum(on, n - int(L))).astype(np.int64)
 
 
 def test_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequence[int],
-                     length: int, onsets: Sequence[int] | None = None) -> Windows:
+                     L: int, onsets: Sequence[int] | None = None) -> Windows:
     """The test windows of ``mode`` (:data:`TEST_WINDOWS`): one per sequence for
     ``first`` and ``onset`` (which needs ``onsets``), every window for ``vote``
     (``seq_index`` says whose; the caller averages their probabilities)."""
     check_choice(mode, "test window", TEST_WINDOWS)
     if mode == "first":
-        return test_windows(sequences, labels, length)
+        return test_windows(sequences, labels, L)
     if mode == "vote":
-        return training_windows(sequences, labels, length)
+        return training_windows(sequences, labels, L)
     labels_arr = _check(sequences, labels)
     if onsets is None or len(onsets) != len(sequences):
         raise ValueError("onset test windows need one onset per sequence")  # a bug
-    starts = window_starts([s.shape[0] for s in sequences], length, onsets)
+    starts = window_starts([s.shape[0] for s in sequences], L, onsets)
     return Windows(list(sequences), np.arange(len(sequences), dtype=np.int64), starts,
-                   labels_arr, length)
+                   labels_arr, L)
 
 
 test_windows_for.__test__ = False
@@ -189,15 +189,15 @@ def dataset_onsets(dataset) -> tuple[int, ...]:
 
 
 def training_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequence[int],
-                         length: int, onsets: Sequence[int] | None = None) -> Windows:
+                         L: int, onsets: Sequence[int] | None = None) -> Windows:
     """The training windows of ``mode``: every window, or for ``onset`` every window
     starting at or after the sequence's onset window."""
-    windows = training_windows(sequences, labels, length)
+    windows = training_windows(sequences, labels, L)
     if mode != "onset":
         return windows
     if onsets is None or len(onsets) != len(sequences):
         raise ValueError("onset training windows need one onset per sequence")  # a bug
-    first = window_starts([s.shape[0] for s in sequences], length, onsets)
+    first = window_starts([s.shape[0] for s in sequences], L, onsets)
     keep = windows.starts >= first[windows.seq_index]
     return Windows(windows.sequences, windows.seq_index[keep], windows.starts[keep],
-                   windows.labels[keep], length)
+                   windows.labels[keep], L)

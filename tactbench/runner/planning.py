@@ -376,7 +376,7 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
 
 
 def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
-                  encoder_version: str, classifier: str, length: int,
+                  encoder_version: str, classifier: str, L: int,
                   seed: int, init_seed: int | None = None, *,
                   either_input: bool = False) -> dict[str, Any]:
     """Everything that decides a cell's result; its :func:`digest` is the cell's key.
@@ -398,7 +398,7 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
         **storage_identity(scene.resolved_precision()),
         "classifier": classifier,
         "profile": scene.profile,
-        "L": int(length),
+        "L": int(L),
         "seed": int(seed),
         **({} if init_seed is None else {"init_seed": int(init_seed)}),
         **({"input": kind} if scene.input and either_input else {}),

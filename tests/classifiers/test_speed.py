@@ -177,7 +177,7 @@ def test_shared_features_is_a_named_option_off_by_default(monkeypatch):
     assert reg.build("classifier", "small-cnn-lstm").shared_features == 0
     with pytest.raises(InputError, match="shared_features"):
         reg.build("classifier", "small-cnn-lstm:shared_features=2")
-    train, test = tiny_windows(3, n=24, length=3)
+    train, test = tiny_windows(3, n=24, L=3)
     spec = "small-cnn-lstm:epochs=2,input_size=8,width=4,windows_per_epoch=40,batch_size=8"
     results = {}
     for budget in ("", "0"):  # frame bank, and read per batch
@@ -194,7 +194,7 @@ def test_shared_features_is_a_named_option_off_by_default(monkeypatch):
 
 
 def test_shared_features_work_for_taxel_vectors():
-    train, test = tiny_windows(1, n=24, length=3)
+    train, test = tiny_windows(1, n=24, L=3)
     clf = load_registry().build("classifier", "taxel-lstm:epochs=1,windows_per_epoch=32,"
                                 "batch_size=8,shared_features=1")
     report = clf.fit(train, seed=0)
