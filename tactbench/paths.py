@@ -267,6 +267,20 @@ def _writable_parent(path: Path, option: str) -> None:
     os.unlink(probe)
 
 
+@contextmanager
+def _usable_path(path: Path, option: str):
+    """Turn what the file system says of ``path`` into one line naming ``option``: a NUL
+    in the name (a ``ValueError``), or an ``OSError``; an ``InputError`` passes as is."""
+    try:
+        yield
+    except InputError:
+        raise
+    except ValueError as exc:
+        raise InputError(f"{option} {path!r} is not a usable path: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"{option} {path} cannot be used: {exc.strerror or exc}") from None
+
+
 def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
                       ours=None) -> Path:
     """Refuse, before any work, an output file that would lose something (the rule above).
@@ -277,7 +291,7 @@ def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
     a file or cannot be written, a path in the cache folder. Returns ``path``.
     """
     path = Path(path)
-    try:
+    with _usable_path(path, option):
         for src in inputs:
             if _same_or_inside(path, Path(src)):
                 raise InputError(f"{option} {path} is the input {src}; tactbench never "
@@ -294,12 +308,6 @@ def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
                 raise InputError(f"{option} {path} exists and tactbench did not write it; "
                                  f"give a new name, or remove it first (nothing was written)")
         _writable_parent(path, option)
-    except ValueError as exc:  # a NUL in the name (InputError is a ValueError too)
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"{option} {path!r} is not a usable path: {exc}") from None
-    except OSError as exc:
-        raise InputError(f"{option} {path} cannot be used: {exc.strerror or exc}") from None
     return path
 
 
@@ -308,7 +316,7 @@ def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
     """:func:`check_output_file` for a folder: it may not exist yet, or be empty, or be
     ``ours(path)``; a folder holding anything else is refused, naming what it holds."""
     path = Path(path)
-    try:
+    with _usable_path(path, option):
         for src in inputs:
             if _same_or_inside(path, Path(src)) or _same_or_inside(Path(src), path):
                 raise InputError(f"{option} {path} overlaps the input {src}; tactbench "
@@ -328,10 +336,4 @@ def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
             _writable_parent(path / ".probe", option)
         else:
             _writable_parent(path, option)
-    except ValueError as exc:
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"{option} {path!r} is not a usable path: {exc}") from None
-    except OSError as exc:
-        raise InputError(f"{option} {path} cannot be used: {exc.strerror or exc}") from None
     return path

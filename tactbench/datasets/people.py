@@ -220,7 +220,6 @@ def grip_hand(person: Person, rep: _Rep, x0: float, y0: float, d: float,
     """A hand wrapped around the arm (as :func:`~tactbench.datasets.synthetic.wrap_hand`),
     its parts those the person usually lands, each landing otherwise with a probability
     that grows with sloppiness; ``fingertips``: only the finger and thumb tips."""
-    r = rep.r
     k = person.hand_mm / 180.0
     spread = 19.0 * k * person.spread * (-1 if mirror else 1)
     lengths = np.array([0.93, 1.0, 0.96, 0.78])
