@@ -90,6 +90,21 @@ class TaxelMLP(nn.Module):
         return self.body(x)
 
 
+def as_channels_last(x: torch.Tensor) -> torch.Tensor:
+    """``(N, C, H, W)`` in channels-last memory format, so that the convolutions that
+    follow run (and keep) channels-last.
+
+    With ``C == 1`` both layouts hold the same bytes and ``contiguous(memory_format=...)``
+    returns the tensor unchanged, with NCHW strides, so torch chooses NCHW kernels for
+    the whole network (raw pressure images trained 1.6× slower than 3-channel flow
+    images). A one-channel tensor gets the channels-last strides as a view: no copy, the
+    same values."""
+    n, c, h, w = x.shape
+    if c == 1 and x.is_contiguous():
+        return x.as_strided(x.shape, (h * w, 1, w, 1))
+    return x.contiguous(memory_format=torch.channels_last)
+
+
 class SequenceNet(nn.Module):
     """Frame encoder on every frame → LSTM → last step → dropout → FC → ReLU → logits.
 
@@ -116,8 +131,10 @@ class SequenceNet(nn.Module):
         return frames
 
     #: Image frames go through the encoder in channels-last memory format: the same
-    #: arithmetic as NCHW up to float rounding, 1.1–1.6× less CPU time (docs/classifiers.md).
+    #: arithmetic as NCHW up to float rounding, 1.1–2× less CPU time (docs/classifiers.md).
     #: An instance attribute set to False restores the NCHW path (benchmarks/training.py).
+    #: A one-channel frame is NCHW and channels-last at once, and torch then keeps NCHW
+    #: for every layer after it: :func:`as_channels_last` marks it explicitly.
     channels_last: bool = True
     #: Gradient checkpointing of the encoder (see :func:`checkpointed`): the encoder's
     #: inner activations are recomputed in the backward pass instead of held. Set by the
@@ -128,7 +145,7 @@ class SequenceNet(nn.Module):
         """Per-frame features ``(N, F)`` of frames ``(N, *frame_shape)`` at any size."""
         frames = self.normalize(self.prepare(frames))
         if frames.ndim == 4 and self.channels_last:
-            frames = frames.contiguous(memory_format=torch.channels_last)
+            frames = as_channels_last(frames)
         if self.checkpoint_segments > 0 and self.training and torch.is_grad_enabled():
             return checkpointed(self.encoder, frames, self.checkpoint_segments)
         return self.encoder(frames)

@@ -46,19 +46,38 @@ def _step(net, x, y, seed=5):
 # ----------------------------------------------------------------------- channels last
 
 
-def test_channels_last_is_the_nchw_arithmetic_to_float_rounding():
+@pytest.mark.parametrize("channels", [1, 2])
+def test_channels_last_is_the_nchw_arithmetic_to_float_rounding(channels):
     torch.manual_seed(0)
-    net = SequenceNet(SmallCNN(2, 8, 3), frame_shape=(2, 20, 20), n_classes=3, hidden=8,
-                      fc=16, dropout=0.0, input_size=16)
+    net = SequenceNet(SmallCNN(channels, 8, 3), frame_shape=(channels, 20, 20), n_classes=3,
+                      hidden=8, fc=16, dropout=0.0, input_size=16)
     assert net.channels_last  # the default path
     nchw = copy.deepcopy(net)
     nchw.channels_last = False
-    x, y = torch.rand(6, 4, 2, 20, 20), torch.tensor([0, 1, 2, 0, 1, 2])
+    x, y = torch.rand(6, 4, channels, 20, 20), torch.tensor([0, 1, 2, 0, 1, 2])
     loss_a, state_a = _step(net, x, y)
     loss_b, state_b = _step(nchw, x, y)
     assert loss_a == pytest.approx(loss_b, rel=1e-5)
     for k in state_a:
         torch.testing.assert_close(state_a[k], state_b[k], rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_frames_reach_the_encoder_channels_last_one_channel_included(channels):
+    """One channel is NCHW and channels-last at once; unmarked, torch keeps NCHW for the
+    whole network. The frames must reach the first convolution with channels-last
+    strides, and its output must be channels-last."""
+    net = SequenceNet(SmallCNN(channels, 8, 2), frame_shape=(channels, 20, 20), n_classes=3,
+                      hidden=8, fc=16, dropout=0.0, input_size=16)
+    seen = {}
+    first = net.encoder.body[0]
+    first.register_forward_hook(lambda m, inp, out: seen.update(inp=inp[0], out=out))
+    net.eval()
+    with torch.no_grad():
+        net(torch.rand(2, 3, channels, 20, 20))
+    assert seen["inp"].stride()[1] == 1  # channel stride of channels-last
+    assert seen["out"].is_contiguous(memory_format=torch.channels_last)
+    assert not seen["out"].is_contiguous()  # 8 channels: the layouts differ
 
 
 # ----------------------------------------------------------------------- checkpointing
