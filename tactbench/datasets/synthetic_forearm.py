@@ -61,35 +61,80 @@ def check_options(**options: Any) -> dict[str, int]:
 
 def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: int = 0,
              n_taxels: int = 1558, version: int = DEFAULT_VERSION,
-             progress: Callable[[int, int], None] | None = None) -> Dataset:
-    """Generate the dataset (no cache); see :class:`SyntheticForearm`."""
+             progress: Callable[[int, int], None] | None = None,
+             workers: int | None = None) -> Dataset:
+    """Generate the dataset (no cache); see :class:`SyntheticForearm`.
+
+    Each user's recordings depend only on the seed and the user (not on the other users),
+    so users are generated in ``workers`` processes at once (default: the usable cores,
+    one process for a set of fewer than :data:`PARALLEL_MIN_USERS` users): the same
+    samples, in the same order, as one process makes.
+    """
     opts = check_options(users=users, positions=positions, repetitions=repetitions, seed=seed,
                          n_taxels=n_taxels, version=version)
     users, positions, repetitions = opts["users"], opts["positions"], opts["repetitions"]
     version = opts["version"]
     device = make_device(seed, n_taxels)
-    samples = []
-    total = users * len(CLASSES) * positions * repetitions
-    if version == 1:
-        make, simulate = make_user, simulate_sample
+    per_user = len(CLASSES) * positions * repetitions
+    total = users * per_user
+    if workers is None:
+        from tactbench.encoders.parallel import default_workers
+
+        workers = default_workers() if users >= PARALLEL_MIN_USERS else 1
+    check_positive_int(workers, "workers")
+    jobs = [(seed, n_taxels, version, u, positions, repetitions) for u in range(users)]
+    samples: list[Sample] = []
+    if workers == 1 or users == 1:
+        for job in jobs:
+            samples += _user_samples(*job, device=device)
+            if progress is not None:
+                progress(len(samples), total)
     else:
-        make, simulate = people.make_person, people.simulate_sample
-    for u in range(users):
-        user = make(seed, u)
-        for label, gesture in enumerate(CLASSES):
-            for position in POSITIONS[:positions]:
-                for rep in range(1, repetitions + 1):
-                    rec = simulate(device, user, gesture, position, rep, seed)
-                    samples.append(Sample(rec, label, user.name, position, rep,
-                                          f"synthetic-forearm:seed={seed}/{user.name}/"
-                                          f"{gesture}/{position}/{rep}"))
-                    if progress is not None:
-                        progress(len(samples), total)
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        # forkserver, not fork: the caller may hold torch/OpenMP threads (see
+        # tactbench.encoders.parallel); results come back in user order.
+        ctx = multiprocessing.get_context("forkserver")
+        with ProcessPoolExecutor(max_workers=min(workers, users), mp_context=ctx) as pool:
+            for part in pool.map(_user_samples_job, jobs):
+                samples += part
+                if progress is not None:
+                    progress(len(samples), total)
     return Dataset("synthetic-forearm", samples, CLASSES, device.layout,
                    normalisation=NORMALISATION[version],
                    description=f"tactbench gesture simulator v{version}: "
                                f"{users} users x {len(CLASSES)} gestures x {positions} "
                                f"positions x {repetitions} repetitions, seed {seed}")
+
+
+#: Fewer users than this are generated in one process (starting processes costs more).
+PARALLEL_MIN_USERS = 8
+
+
+def _user_samples(seed: int, n_taxels: int, version: int, u: int, positions: int,
+                  repetitions: int, *, device=None) -> list[Sample]:
+    """User ``u``'s samples, in the dataset's order (gesture, position, repetition)."""
+    if device is None:
+        device = make_device(seed, n_taxels)
+    if version == 1:
+        make, simulate = make_user, simulate_sample
+    else:
+        make, simulate = people.make_person, people.simulate_sample
+    user = make(seed, u)
+    out = []
+    for label, gesture in enumerate(CLASSES):
+        for position in POSITIONS[:positions]:
+            for rep in range(1, repetitions + 1):
+                rec = simulate(device, user, gesture, position, rep, seed)
+                out.append(Sample(rec, label, user.name, position, rep,
+                                  f"synthetic-forearm:seed={seed}/{user.name}/"
+                                  f"{gesture}/{position}/{rep}"))
+    return out
+
+
+def _user_samples_job(job: tuple) -> list[Sample]:
+    return _user_samples(*job)
 
 
 class SyntheticForearm:

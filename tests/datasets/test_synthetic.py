@@ -88,6 +88,17 @@ def test_deterministic_and_seeded(small):
 
 
 @pytest.mark.parametrize("version", [1, 2])
+def test_users_made_in_parallel_processes_give_the_same_dataset(version):
+    one = generate(users=3, repetitions=1, positions=1, version=version, workers=1)
+    calls = []
+    two = generate(users=3, repetitions=1, positions=1, version=version, workers=2,
+                   progress=lambda done, total: calls.append((done, total)))
+    assert two.content_hash() == one.content_hash()
+    assert [s.source for s in two] == [s.source for s in one]  # the same order
+    assert calls == [(5, 15), (10, 15), (15, 15)]  # one call per user, in order
+
+
+@pytest.mark.parametrize("version", [1, 2])
 def test_a_users_samples_do_not_depend_on_how_many_users(version):
     two = generate(users=2, repetitions=1, version=version)
     three = generate(users=3, repetitions=1, version=version)
