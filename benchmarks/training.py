@@ -13,9 +13,9 @@ size the runner's quick profile images at ~5 mm/px):
    windows of L = 5 (C = 1 and C = 3), seconds and test accuracy; the runner's
    goal is six of these (raw vs farneback × 3 seeds) plus data and encoding in
    ≤ 10 minutes on 2 cores.
-3. ``speed``: windows per second of each model's fit loop (``small-cnn-lstm``,
-   ``taxel-lstm``, ``cnn-lstm`` at quick sizes), the old path ("before": NCHW
-   encoding) against today's ("after": channels-last) and with
+3. ``speed``: windows per second of each model's fit loop (``small-cnn-lstm`` on 1- and
+   3-channel frames, ``taxel-lstm``, ``cnn-lstm`` at quick sizes), the old path
+   ("before": NCHW encoding) against channels-last ("after") and channels-last with
    ``shared_features=1``, interleaved in one process; FLOPs per window (forward +
    backward, ``FlopCounterMode``) against the dense-GEMM rate measured here.
 4. ``threads``: one step loop at 1 and 2 threads (2 threads per cell, or two
@@ -629,7 +629,10 @@ def main(argv=None) -> int:
 
     if "speed" not in args.skip:
         vectors = taxel_windows(small)
-        cases = [("small-cnn-lstm", small, args.steps), ("taxel-lstm", vectors, args.steps),
+        # one channel (raw pressure) and three (pressure + flow): the main job's two inputs
+        seqs1, labels1 = synthetic_sequences(300, channels=1, seed=2)
+        cases = [("small-cnn-lstm", training_windows(seqs1, labels1, 5), args.steps),
+                 ("small-cnn-lstm", small, args.steps), ("taxel-lstm", vectors, args.steps),
                  ("cnn-lstm", small, max(1, args.steps // 5))]
         result["speed"] = measure_speed(cases, repeats=args.repeats, threads=args.threads)
         save()
