@@ -267,11 +267,13 @@ class FrameBank:
         return SharedWindows(self.frames[distinct], inverse), self.labels[sel]
 
 
-def window_runs(windows: Windows) -> np.ndarray:
+def window_runs(windows: Windows, run: int | None = None) -> np.ndarray:
     """A run number per window for ``shared_features``: windows of one sequence whose
-    starts lie in the same ``[kL, kL + L)`` share a run (they overlap in up to
-    ``L - 1`` frames; a run's windows span at most ``2L - 1`` frames)."""
-    keys = np.stack([windows.seq_index, windows.starts // max(1, windows.L)], axis=1)
+    starts lie in the same ``[k·run, k·run + run)`` share a run (``run`` defaults to
+    ``L``: then a run's windows overlap in up to ``L - 1`` frames and span at most
+    ``2L - 1``)."""
+    run = max(1, int(windows.L if run is None else run))
+    keys = np.stack([windows.seq_index, windows.starts // run], axis=1)
     return np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
@@ -461,12 +463,14 @@ class TorchSequenceClassifier(SequenceClassifier):
     #: training short (EfficientNet's 0.01 over ~100 steps leaves the running statistics
     #: near their initial values, and every test window lands in one class).
     bn_recalibration_batches: int = 0
-    #: 1: batches are drawn as runs of up to L consecutive windows of one sequence
-    #: (windows starting at kL .. kL+L-1), and each distinct frame of a batch goes
-    #: through the frame encoder once (the LSTM still sees every window): ~2.6× less
-    #: encoder work at L = 5. It changes the sampling, so it is part of a cell's
-    #: identity; 0 (default): windows drawn independently, every frame of every window
-    #: encoded. See docs/classifiers.md for what it does to accuracy.
+    #: Windows drawn in runs that share frames, each distinct frame of a batch encoded
+    #: once (the LSTM still sees every window). ``K ≥ 2``: runs of up to K consecutive
+    #: windows of one sequence (starts in ``[jK, jK + K)``: K windows over ``K + L - 1``
+    #: frames instead of ``K·L``); ``1``: runs of up to L windows; 0 (default): windows
+    #: drawn independently, every frame of every window encoded. At L = 1 windows share
+    #: no frame and nothing changes. It changes the sampling (a batch holds fewer, longer
+    #: stretches of sequences), so it is part of a cell's identity. See
+    #: docs/classifiers.md for what it does to accuracy.
     shared_features: int = 0
 
     def __post_init__(self) -> None:
@@ -491,8 +495,9 @@ class TorchSequenceClassifier(SequenceClassifier):
         check_positive_int(self.eval_batch_size, "eval_batch_size")
         check_positive_int(self.bn_recalibration_batches, "bn_recalibration_batches (0: off)",
                            minimum=0)
-        if self.shared_features not in (0, 1):  # True/False are 1/0
-            raise InputError(f"shared_features must be 0 or 1, got {self.shared_features!r}")
+        check_positive_int(self.shared_features,
+                           "shared_features (0: off, 1: runs of L windows, K: runs of K)",
+                           minimum=0, maximum=MAX_BATCH)
         self.net = None
         self._device = None
         self._precision = None
@@ -556,7 +561,7 @@ class TorchSequenceClassifier(SequenceClassifier):
                            lr=self.lr, momentum=self.momentum, weight_decay=self.weight_decay,
                            schedule=self.schedule, device=dev, precision=precision,
                            progress=progress, evaluate=evaluate,
-                           groups=window_runs(train) if self.shared_features else None)
+                           groups=self._runs(train))
             except TrainingInterrupted as exc:
                 self.fit_report = self._finish_report(exc.report)
                 raise
@@ -568,6 +573,16 @@ class TorchSequenceClassifier(SequenceClassifier):
                 self._recalibrate_batchnorm(net, get_batch, len(train), seed)
         self.fit_report = self._finish_report(report)
         return dict(self.fit_report)
+
+    def _sharing(self, L: int) -> bool:
+        """Whether training shares frames between windows (only overlapping ones can)."""
+        return bool(self.shared_features) and L >= 2
+
+    def _runs(self, train: Windows) -> np.ndarray | None:
+        """The run number per training window that ``shared_features`` draws by, or None."""
+        if not self._sharing(train.L):
+            return None
+        return window_runs(train, None if self.shared_features == 1 else self.shared_features)
 
     def _recalibrate_batchnorm(self, net, get_batch, n_windows: int, seed: int) -> None:
         """BatchNorm statistics from the final weights, on seeded training batches
@@ -636,6 +651,7 @@ class TorchSequenceClassifier(SequenceClassifier):
         """
         import torch
 
+        share = self._sharing(train.L)
         probe = net.prepare(torch.zeros((1, *train.frame_shape)))
         bank_bytes = FrameBank.nbytes(train, tuple(probe.shape[1:]))
         report.bank_mb = bank_bytes / 2 ** 20
@@ -647,15 +663,13 @@ class TorchSequenceClassifier(SequenceClassifier):
                 bank.to(dev)
 
             def get_batch(idx):
-                x, y = bank.shared_batch(idx) if self.shared_features else bank.batch(idx)
+                x, y = bank.shared_batch(idx) if share else bank.batch(idx)
                 return x.to(dev, non_blocking=True), y.to(dev, non_blocking=True)
             return get_batch, None
         report.batches = "per batch"
         reader = WindowBatches(train, net.prepare)
         workers = loader_workers(dev)
         report.loader_workers = workers
-
-        share = self.shared_features
 
         def get_read(idx):
             x, y = reader[idx]

@@ -138,16 +138,21 @@ def test_checkpointed_encoder_matches_for_a_plain_cnn():
 # ----------------------------------------------------------------------- shared features
 
 
-def test_window_runs_group_overlapping_windows_of_one_sequence():
+@pytest.mark.parametrize("run", [None, 2, 5])
+def test_window_runs_group_overlapping_windows_of_one_sequence(run):
     seqs, labels = _seqs()
     win = training_windows(seqs, labels, 3)
-    runs = window_runs(win)
+    runs = window_runs(win, run)
+    k = 3 if run is None else run  # runs of L by default
     assert runs.shape == (len(win),)
+    sizes = []
     for r in np.unique(runs):
         members = np.flatnonzero(runs == r)
         assert len(set(win.seq_index[members])) == 1
-        assert len(members) <= 3
-        assert win.starts[members].max() - win.starts[members].min() <= 2
+        assert len(members) <= k
+        assert win.starts[members].max() - win.starts[members].min() <= k - 1
+        sizes.append(len(members))
+    assert max(sizes) == k  # the sequences are long enough for full runs
 
 
 def test_grouped_epoch_order_keeps_runs_together_and_covers_every_window():
@@ -194,8 +199,9 @@ def test_shared_batch_encodes_each_distinct_frame_once_with_the_same_result():
 def test_shared_features_is_a_named_option_off_by_default(monkeypatch):
     reg = load_registry()
     assert reg.build("classifier", "small-cnn-lstm").shared_features == 0
-    with pytest.raises(InputError, match="shared_features"):
-        reg.build("classifier", "small-cnn-lstm:shared_features=2")
+    for bad in ("-1", "two"):
+        with pytest.raises(InputError, match="shared_features"):
+            reg.build("classifier", f"small-cnn-lstm:shared_features={bad}")
     train, test = tiny_windows(3, n=24, L=3)
     spec = "small-cnn-lstm:epochs=2,input_size=8,width=4,windows_per_epoch=40,batch_size=8"
     results = {}
@@ -210,6 +216,19 @@ def test_shared_features_is_a_named_option_off_by_default(monkeypatch):
     plain = reg.build("classifier", spec)
     plain.fit(train, seed=0)
     assert not np.allclose(plain.predict_proba(test), results[""])  # other batches
+
+
+def test_shared_features_change_nothing_at_L_1():
+    """Windows of one frame share no frame: the same batches, the same model."""
+    train, test = tiny_windows(3, n=24, L=1)
+    spec = "small-cnn-lstm:epochs=1,input_size=8,width=4,windows_per_epoch=40,batch_size=8"
+    reg = load_registry()
+    out = []
+    for extra in ("", ",shared_features=2"):
+        clf = reg.build("classifier", spec + extra)
+        clf.fit(train, seed=0)
+        out.append(clf.predict_proba(test))
+    np.testing.assert_array_equal(out[0], out[1])
 
 
 def test_shared_features_work_for_taxel_vectors():
