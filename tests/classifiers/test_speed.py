@@ -80,6 +80,28 @@ def test_frames_reach_the_encoder_channels_last_one_channel_included(channels):
     assert not seen["out"].is_contiguous()  # 8 channels: the layouts differ
 
 
+def test_pooling_before_relu_is_the_same_network_bit_for_bit():
+    """SmallCNN pools before its ReLU (cheaper); conv → BN → ReLU → pool, the textbook
+    order it had, gives the same loss and the same weights after a step, exactly."""
+    torch.manual_seed(0)
+    net = SequenceNet(SmallCNN(3, 8, 3), frame_shape=(3, 20, 20), n_classes=3, hidden=8,
+                      fc=16, dropout=0.0, input_size=15)  # odd sizes: ceil-mode pooling
+    assert [type(m).__name__ for m in net.encoder.body[:4]] == [
+        "Conv2d", "BatchNorm2d", "MaxPool2d", "ReLU"]
+    textbook = copy.deepcopy(net)
+    mods = list(textbook.encoder.body)
+    for i in range(0, len(mods), 4):
+        mods[i + 2], mods[i + 3] = mods[i + 3], mods[i + 2]
+    textbook.encoder.body = torch.nn.Sequential(*mods)
+    x, y = torch.randn(6, 4, 3, 20, 20), torch.tensor([0, 1, 2, 0, 1, 2])
+    loss_a, state_a = _step(net, x, y)
+    loss_b, state_b = _step(textbook, x, y)
+    assert loss_a == loss_b
+    assert state_a.keys() == state_b.keys()  # saved weights load either way
+    for k in state_a:
+        assert torch.equal(state_a[k], state_b[k]), k
+
+
 # ----------------------------------------------------------------------- checkpointing
 
 
