@@ -68,7 +68,8 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
     Each user's recordings depend only on the seed and the user (not on the other users),
     so users are generated in ``workers`` processes at once (default: the usable cores,
     one process for a set of fewer than :data:`PARALLEL_MIN_USERS` users): the same
-    samples, in the same order, as one process makes.
+    samples, in the same order, as one process makes. ``progress(done, total)`` is
+    called per sample in one process, per user with several.
     """
     opts = check_options(users=users, positions=positions, repetitions=repetitions, seed=seed,
                          n_taxels=n_taxels, version=version)
@@ -85,10 +86,13 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
     jobs = [(seed, n_taxels, version, u, positions, repetitions) for u in range(users)]
     samples: list[Sample] = []
     if workers == 1 or users == 1:
-        for job in jobs:
-            samples += _user_samples(*job, device=device)
+        def made(sample: Sample) -> None:  # progress per sample
+            samples.append(sample)
             if progress is not None:
                 progress(len(samples), total)
+
+        for job in jobs:
+            _user_samples(*job, device=device, made=made)
     else:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
@@ -113,8 +117,10 @@ PARALLEL_MIN_USERS = 8
 
 
 def _user_samples(seed: int, n_taxels: int, version: int, u: int, positions: int,
-                  repetitions: int, *, device=None) -> list[Sample]:
-    """User ``u``'s samples, in the dataset's order (gesture, position, repetition)."""
+                  repetitions: int, *, device=None,
+                  made: Callable[[Sample], None] | None = None) -> list[Sample]:
+    """User ``u``'s samples, in the dataset's order (gesture, position, repetition);
+    ``made(sample)`` hears of each as it is made."""
     if device is None:
         device = make_device(seed, n_taxels)
     if version == 1:
@@ -130,6 +136,8 @@ def _user_samples(seed: int, n_taxels: int, version: int, u: int, positions: int
                 out.append(Sample(rec, label, user.name, position, rep,
                                   f"synthetic-forearm:seed={seed}/{user.name}/"
                                   f"{gesture}/{position}/{rep}"))
+                if made is not None:
+                    made(out[-1])
     return out
 
 
