@@ -284,23 +284,27 @@ def measure_paper_epoch(train) -> dict | None:
 # --------------------------------------------------------------------------- speed (issue 21)
 
 #: What each variant of ``measure_speed`` changes against the old path ("before":
-#: NCHW encoding, every frame of every window encoded).
+#: NCHW encoding, SmallCNN's ReLU before its pool, every frame of every window encoded).
 VARIANTS = {
-    "before": {"channels_last": False, "options": {}},
-    "after": {"channels_last": True, "options": {}},
-    "after+shared_features": {"channels_last": True, "options": {"shared_features": 1}},
+    "before": {"channels_last": False, "pool_before_relu": False, "options": {}},
+    "after": {"channels_last": True, "pool_before_relu": True, "options": {}},
+    "after+shared_features": {"channels_last": True, "pool_before_relu": True,
+                              "options": {"shared_features": 1}},
 }
 
 
-def _fit_seconds(reg, name, train, opts, *, channels_last: bool) -> tuple[float, dict]:
-    """Loop seconds of one ``fit`` with the encoder's memory format chosen (the class
-    default is what the toolkit runs; ``False`` is the old NCHW path)."""
+def _fit_seconds(reg, name, train, opts, *, channels_last: bool,
+                 pool_before_relu: bool = True) -> tuple[float, dict]:
+    """Loop seconds of one ``fit`` with the encoder's memory format and SmallCNN's block
+    order chosen (the class defaults are what the toolkit runs; ``False`` is the old
+    path)."""
     import warnings
 
-    from tactbench.classifiers.nets import SequenceNet
+    from tactbench.classifiers.nets import SequenceNet, SmallCNN
 
-    saved = SequenceNet.channels_last
+    saved = SequenceNet.channels_last, SmallCNN.pool_before_relu
     SequenceNet.channels_last = channels_last
+    SmallCNN.pool_before_relu = pool_before_relu
     try:
         clf = reg.build("classifier", name, **opts)
         steps = {"cpu": 0.0}
@@ -317,15 +321,23 @@ def _fit_seconds(reg, name, train, opts, *, channels_last: bool) -> tuple[float,
             warnings.simplefilter("ignore")  # cnn-lstm: no ImageNet weights here
             rep = clf.fit(train, None, seed=0, progress=progress)
     finally:
-        SequenceNet.channels_last = saved
+        SequenceNet.channels_last, SmallCNN.pool_before_relu = saved
     # the first step is left out of the CPU time (it starts the clock): scale to all
     per_step = steps["cpu"] / max(rep["steps"] - 1, 1)
     return rep["train_seconds"], per_step * rep["steps"], rep
 
 
 def step_flops(clf, train, batch: int, *, shared: bool = False) -> float:
-    """FLOPs of one training step (forward + backward) per window, counted by
-    ``torch.utils.flop_counter.FlopCounterMode`` (matrix products and convolutions)."""
+    """FLOPs of one training step (forward + backward) per window: 3 × the forward's,
+    counted by ``torch.utils.flop_counter.FlopCounterMode`` (matrix products and
+    convolutions; a backward pass costs two forwards: the gradients of the input and of
+    the weights).
+
+    The forward count only: torch 2.13's counter overcounts the backward of grouped
+    convolutions (a depthwise 3 × 3 over 64 channels: 22× too many), which would inflate
+    EfficientNet-B0's count ~13×; for networks without grouped convolutions (SmallCNN)
+    its full count and 3 × forward agree within a few per cent (the first layer needs no
+    input gradient)."""
     import torch
     import torch.nn.functional as F
     from torch.utils.flop_counter import FlopCounterMode
@@ -347,8 +359,9 @@ def step_flops(clf, train, batch: int, *, shared: bool = False) -> float:
     net.train()
     counter = FlopCounterMode(display=False)
     with counter:
-        F.cross_entropy(net(x), y).backward()
-    return counter.get_total_flops() / batch
+        loss = F.cross_entropy(net(x), y)
+    loss.backward()  # not counted (see above)
+    return 3 * counter.get_total_flops() / batch
 
 
 def gemm_rate(m: int, k: int, n: int, *, seconds: float = 1.0) -> tuple[float, float]:
@@ -402,7 +415,8 @@ def measure_speed(cases, *, repeats: int, threads: int) -> dict:
             for variant, how in VARIANTS.items():
                 secs, cpu_s, rep = _fit_seconds(reg, name, train,
                                                 dict(opts, **how["options"]),
-                                                channels_last=how["channels_last"])
+                                                channels_last=how["channels_last"],
+                                                pool_before_relu=how["pool_before_relu"])
                 times[variant].append(secs)
                 cpu[variant].append(cpu_s)
         clf = reg.build("classifier", name, **opts)

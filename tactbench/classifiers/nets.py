@@ -66,14 +66,19 @@ class SmallCNN(nn.Module):
     saved weights load as before.
     """
 
+    #: False builds the textbook order (ReLU before the pool): the code before, for
+    #: benchmarks/training.py's "before" rows.
+    pool_before_relu: bool = True
+
     def __init__(self, in_channels: int, width: int = 16, layers: int = 4) -> None:
         super().__init__()
         mods: list[nn.Module] = []
         cin = in_channels
         for i in range(layers):
             cout = width * 2 ** ((i + 1) // 2)
+            pool, relu = nn.MaxPool2d(2, ceil_mode=True), nn.ReLU(inplace=True)
             mods += [nn.Conv2d(cin, cout, 3, padding=1, bias=False), nn.BatchNorm2d(cout),
-                     nn.MaxPool2d(2, ceil_mode=True), nn.ReLU(inplace=True)]
+                     *((pool, relu) if self.pool_before_relu else (relu, pool))]
             cin = cout
         self.body = nn.Sequential(*mods)
         self.out_features = cin

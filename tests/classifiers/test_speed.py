@@ -93,6 +93,12 @@ def test_pooling_before_relu_is_the_same_network_bit_for_bit():
     for i in range(0, len(mods), 4):
         mods[i + 2], mods[i + 3] = mods[i + 3], mods[i + 2]
     textbook.encoder.body = torch.nn.Sequential(*mods)
+    SmallCNN.pool_before_relu = False  # the benchmark's "before" builds the same order
+    try:
+        assert [type(m).__name__ for m in SmallCNN(3, 8, 3).body[:4]] == [
+            "Conv2d", "BatchNorm2d", "ReLU", "MaxPool2d"]
+    finally:
+        SmallCNN.pool_before_relu = True
     x, y = torch.randn(6, 4, 3, 20, 20), torch.tensor([0, 1, 2, 0, 1, 2])
     loss_a, state_a = _step(net, x, y)
     loss_b, state_b = _step(textbook, x, y)
