@@ -28,6 +28,14 @@ KERNEL_LEVELS = {  # level → (ATEN_CPU_CAPABILITY, ONEDNN_MAX_CPU_ISA, MKL_CBW
 KERNEL_VARIABLES = ("ATEN_CPU_CAPABILITY", "ONEDNN_MAX_CPU_ISA", "MKL_CBWR")
 
 
+def usable_cores() -> int:
+    """The cores this process may use (its CPU affinity where the OS tells it)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def cpu_model() -> str:
     """The processor's model name (``/proc/cpuinfo``; ``platform`` elsewhere)."""
     try:

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 import shutil
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, Callable
 
@@ -28,6 +30,7 @@ from tactbench.datasets.synthetic import (
     simulate_sample,
 )
 from tactbench.errors import InputError, check_positive_int
+from tactbench.machine import usable_cores
 from tactbench.paths import atomic_folder, cache_dir
 
 #: Bump when the generated data changes: it keys the cache (with the options).
@@ -79,9 +82,7 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
     per_user = len(CLASSES) * positions * repetitions
     total = users * per_user
     if workers is None:
-        from tactbench.encoders.parallel import default_workers
-
-        workers = default_workers() if users >= PARALLEL_MIN_USERS else 1
+        workers = usable_cores() if users >= PARALLEL_MIN_USERS else 1
     check_positive_int(workers, "workers")
     jobs = [(seed, n_taxels, version, u, positions, repetitions) for u in range(users)]
     samples: list[Sample] = []
@@ -94,9 +95,6 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
         for job in jobs:
             _user_samples(*job, device=device, made=made)
     else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         # forkserver, not fork: the caller may hold torch/OpenMP threads (see
         # tactbench.encoders.parallel); results come back in user order.
         ctx = multiprocessing.get_context("forkserver")

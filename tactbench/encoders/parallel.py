@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
-import os
 import sys
 import time
 from collections import deque
@@ -35,16 +34,14 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from tactbench.errors import InputError
+from tactbench.machine import usable_cores
 
 MODES = ("threads", "processes", "serial")
 
 
 def default_workers() -> int:
-    """The cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
+    """The cores this process may use (:func:`tactbench.machine.usable_cores`)."""
+    return usable_cores()
 
 
 @contextlib.contextmanager
