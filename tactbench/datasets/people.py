@@ -56,6 +56,12 @@ TAIL_S = (0.5, 0.45, 0.1, 2.0)  # median tail after release: same
 HABIT_ROUND_MM = 15.0  # where round the arm a person habitually puts the hand (sd)
 FINGERTIP_GRIP = 0.4  # a person grasps, twists or pulls with the fingertips only (each)
 
+# ---- a person's own way of doing each gesture (drawn once per person and gesture):
+# where on the arm around their spot, how hard, how fast; see docs/simulator.md
+GESTURE_PLACE_MM = (12.0, 25.0)  # sd round / along the arm
+GESTURE_FORCE_SIGMA = 0.25  # lognormal force factor on top of the person's strength
+GESTURE_TEMPO_SIGMA = 0.15  # lognormal tempo factor on top of the person's tempo
+
 # ---- a session (one person at one position) shifts the style a little
 SESSION_PLACE_MM = 5.0  # sd of the placement shift
 SESSION_FORCE_SIGMA = 0.08  # lognormal force factor
@@ -78,6 +84,27 @@ def _lognormal_clipped(r: np.random.Generator, spec: tuple[float, float, float, 
                        ) -> float:
     median, sigma, lo, hi = spec
     return float(np.clip(r.lognormal(math.log(median), sigma), lo, hi))
+
+
+@dataclass(frozen=True)
+class Habit:
+    """A person's own way of doing one gesture: placement shift (mm), force and tempo
+    factors on top of their general style."""
+
+    dx: float  # round the arm
+    dy: float  # along the arm
+    force: float
+    tempo: float
+
+
+def make_habit(seed: int, index: int, gesture: str) -> Habit:
+    """Person ``index``'s habit for ``gesture`` (its own random stream, so the person's
+    other draws are those of a model without habits)."""
+    r = _rng("person-gesture", seed, index, gesture)
+    return Habit(float(r.normal(0.0, GESTURE_PLACE_MM[0])),
+                 float(r.normal(0.0, GESTURE_PLACE_MM[1])),
+                 float(r.lognormal(0.0, GESTURE_FORCE_SIGMA)),
+                 float(r.lognormal(0.0, GESTURE_TEMPO_SIGMA)))
 
 
 @dataclass(frozen=True)
@@ -117,6 +144,10 @@ class Person:
     push_ease: float
     two_hand_mm: float  # separation of the hands in 2hGrasp
     two_hand_delay: float  # s
+    habits: tuple[Habit, ...] = ()  # per gesture, in the order of CLASSES
+
+    def habit(self, gesture: str) -> Habit:
+        return self.habits[v1.CLASSES.index(gesture)]
 
 
 def make_person(seed: int, index: int) -> Person:
@@ -162,6 +193,7 @@ def make_person(seed: int, index: int) -> Person:
         push_ease=float(r.uniform(0.0, 0.35)),
         two_hand_mm=float(r.uniform(85.0, 110.0)),
         two_hand_delay=float(r.uniform(0.0, 0.35)),
+        habits=tuple(make_habit(seed, index, g) for g in v1.CLASSES),
     )
 
 
@@ -292,16 +324,17 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
     contact), the hand pressing for ``contact_s`` s (before its release): ``(T, N)``."""
     check_choice(gesture, "gesture", v1.CLASSES)
     rep = _Rep(r, person)
+    habit = person.habit(gesture)
     p = _Patches(len(t))
     k = person.hand_mm / 180.0
-    tempo = session.tempo * rep.factor(REP_TIME_SIGMA)
+    tempo = habit.tempo * session.tempo * rep.factor(REP_TIME_SIGMA)
     side = position == "side"
-    x0 = TOP_X + person.x_habit + (person.x_side if side else 0.0) + session.dx \
+    x0 = TOP_X + person.x_habit + habit.dx + (person.x_side if side else 0.0) + session.dx \
         + rep.shift(REP_PLACE_MM[0])
-    y0 = float(np.clip(person.y_pref + session.dy + rep.shift(REP_PLACE_MM[1]), 60,
-                       LENGTH_MM - 60))
+    y0 = float(np.clip(person.y_pref + habit.dy + session.dy + rep.shift(REP_PLACE_MM[1]),
+                       60, LENGTH_MM - 60))
     d = 1.0 if person.right_handed else -1.0
-    force = person.strength * session.force * rep.factor(REP_FORCE_SIGMA)
+    force = person.strength * habit.force * session.force * rep.factor(REP_FORCE_SIGMA)
     tau = person.tau * tempo
     overshoot = float(np.clip(person.overshoot + rep.shift(0.04), 0.0, 0.4))
     x0 -= d * 40 * k
@@ -355,8 +388,9 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
             lead[:, :, 2] = 0.4 * rate_n[None, :] + 0.2 * phi[None, :]
             _grip(p, hand, t, force * 0.88, tau, overshoot, rep, dy=dy, gain=gain, lead=lead)
     else:
-        _push(p, person, rep, t, TOP_X + person.x_habit + (person.x_side if side else 0.0)
-              + session.dx + rep.shift(REP_PLACE_MM[0]), y0, force, tempo, contact_s)
+        _push(p, person, rep, t, TOP_X + person.x_habit + habit.dx
+              + (person.x_side if side else 0.0) + session.dx + rep.shift(REP_PLACE_MM[0]),
+              y0, force, tempo, contact_s)
     return p.pressure(xy)
 
 
@@ -414,7 +448,8 @@ def simulate_sample(device: v1.Device, person: Person, gesture: str, position: s
     session = make_session(seed, person, position)
     rep = _Rep(r, person)
     contact = float(np.clip(r.lognormal(math.log(v1.LENGTH_MEDIAN_S), v1.LENGTH_SIGMA)
-                            * person.tempo * session.tempo, *v1.LENGTH_RANGE_S))
+                            * person.tempo * person.habit(gesture).tempo * session.tempo,
+                            *v1.LENGTH_RANGE_S))
     lead = float(np.clip(person.lead_in * rep.factor(REP_LEAD_SIGMA), 0.0, 3.0))
     tail = float(np.clip(person.tail * rep.factor(REP_LEAD_SIGMA), 0.0, 3.0))
     rel_tau = person.release_tau * rep.factor(REP_TIME_SIGMA)
