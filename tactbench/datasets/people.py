@@ -95,16 +95,20 @@ class Habit:
     dy: float  # along the arm
     force: float
     tempo: float
+    parts: tuple[bool, bool, bool, bool, bool]  # palm, little, middle, proximal, thumb
 
 
-def make_habit(seed: int, index: int, gesture: str) -> Habit:
+def make_habit(seed: int, index: int, gesture: str,
+               part_p: tuple[float, float, float, float, float]) -> Habit:
     """Person ``index``'s habit for ``gesture`` (its own random stream, so the person's
-    other draws are those of a model without habits)."""
+    other draws are those of a model without habits); which parts of the hand land in
+    this gesture, each with the person's probability ``part_p``."""
     r = _rng("person-gesture", seed, index, gesture)
     return Habit(float(r.normal(0.0, GESTURE_PLACE_MM[0])),
                  float(r.normal(0.0, GESTURE_PLACE_MM[1])),
                  float(r.lognormal(0.0, GESTURE_FORCE_SIGMA)),
-                 float(r.lognormal(0.0, GESTURE_TEMPO_SIGMA)))
+                 float(r.lognormal(0.0, GESTURE_TEMPO_SIGMA)),
+                 tuple(bool(b) for b in r.random(5) < np.asarray(part_p)))
 
 
 @dataclass(frozen=True)
@@ -119,7 +123,7 @@ class Person:
     sloppiness: float
     spread: float  # factor on finger spacing
     finger_weights: np.ndarray  # (4,) index..little
-    grip_parts: tuple[bool, bool, bool, bool, bool]  # palm, little, middle, proximal, thumb
+    part_p: tuple[float, float, float, float, float]  # how often each part lands (habits)
     fingertips: tuple[bool, bool, bool]  # Grasp, Twist, Pull with the fingertips only
     y_pref: float  # along the arm, mm
     x_habit: float  # round the arm from the top, mm
@@ -156,9 +160,9 @@ def make_person(seed: int, index: int) -> Person:
     right = bool(r.random() < RIGHT_HANDED)
     mean, sd, lo, hi = HAND_LENGTH_MM
     tempo = float(r.lognormal(0.0, TEMPO_SIGMA))
-    parts = (r.random() < r.uniform(0.1, 0.7), r.random() < r.uniform(0.6, 1.0),
-             r.random() < r.uniform(0.15, 0.85), r.random() < r.uniform(0.05, 0.6),
-             r.random() < r.uniform(0.5, 1.0))
+    part_p = tuple(float(r.uniform(lo, hi))  # palm, little, middle, proximal, thumb
+                   for lo, hi in ((0.1, 0.7), (0.6, 1.0), (0.15, 0.85), (0.05, 0.6),
+                                  (0.5, 1.0)))
     return Person(
         name=f"u{index:02d}",
         hand_mm=float(np.clip(r.normal(mean, sd), lo, hi)),
@@ -168,7 +172,7 @@ def make_person(seed: int, index: int) -> Person:
         sloppiness=float(r.lognormal(0.0, SLOPPINESS_SIGMA)),
         spread=float(r.lognormal(0.0, SPREAD_SIGMA)),
         finger_weights=np.array([1.0, 1.0, 0.85, 0.65]) * r.lognormal(0.0, 0.2, 4),
-        grip_parts=tuple(bool(p) for p in parts),
+        part_p=part_p,
         fingertips=tuple(bool(f) for f in r.random(3) < FINGERTIP_GRIP),
         y_pref=float(r.uniform(0.3, 0.7) * LENGTH_MM),
         x_habit=float(r.normal(0.0, HABIT_ROUND_MM)),
@@ -193,7 +197,7 @@ def make_person(seed: int, index: int) -> Person:
         push_ease=float(r.uniform(0.0, 0.35)),
         two_hand_mm=float(r.uniform(85.0, 110.0)),
         two_hand_delay=float(r.uniform(0.0, 0.35)),
-        habits=tuple(make_habit(seed, index, g) for g in v1.CLASSES),
+        habits=tuple(make_habit(seed, index, g, part_p) for g in v1.CLASSES),
     )
 
 
@@ -247,16 +251,17 @@ class _Patches(Patches):
         return out
 
 
-def grip_hand(person: Person, rep: _Rep, x0: float, y0: float, d: float,
-              mirror: bool = False, fingertips: bool = False) -> Hand:
+def grip_hand(person: Person, parts: tuple[bool, ...], rep: _Rep, x0: float, y0: float,
+              d: float, mirror: bool = False, fingertips: bool = False) -> Hand:
     """A hand wrapped around the arm (as :func:`~tactbench.datasets.synthetic.wrap_hand`),
-    its parts those the person usually lands, each landing otherwise with a probability
-    that grows with sloppiness; ``fingertips``: only the finger and thumb tips."""
+    its ``parts`` those the person usually lands in this gesture, each landing otherwise
+    with a probability that grows with sloppiness; ``fingertips``: only the finger and
+    thumb tips."""
     k = person.hand_mm / 180.0
     spread = 19.0 * k * person.spread * (-1 if mirror else 1)
     lengths = np.array([0.93, 1.0, 0.96, 0.78])
     palm, little, middle, proximal, thumb = (p != rep.flip(REP_PART_FLIP)
-                                             for p in person.grip_parts)
+                                             for p in parts)
     if fingertips:
         palm = middle = proximal = False
     xs, ys, sxs, sys_, amps, kinds = [], [], [], [], [], []
@@ -343,19 +348,20 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
         tips_only = person.fingertips[("Grasp", "Twist", "Pull").index(gesture)] \
             != rep.flip(REP_VARIANT_FLIP)
     if gesture == "Grasp":
-        _grip(p, grip_hand(person, rep, x0, y0, d, fingertips=tips_only), t, force, tau,
+        _grip(p, grip_hand(person, habit.parts, rep, x0, y0, d, fingertips=tips_only), t, force, tau,
               overshoot, rep)
     elif gesture == "2hGrasp":
         sep = person.two_hand_mm * k * rep.factor(0.05)
         delay = max(0.0, person.two_hand_delay + rep.shift(0.05))
         share = np.array([rep.factor(0.1), rep.factor(0.1)]) * 0.65
-        h1 = grip_hand(person, rep, x0, y0 - sep / 2, d)
-        h2 = grip_hand(person, rep, x0 + rep.shift(5.0), y0 + sep / 2, -d, mirror=True)
+        h1 = grip_hand(person, habit.parts, rep, x0, y0 - sep / 2, d)
+        h2 = grip_hand(person, habit.parts, rep, x0 + rep.shift(5.0), y0 + sep / 2, -d,
+                       mirror=True)
         _grip(p, h1, t, force * share[0], tau, overshoot, rep)
         _grip(p, h2, t - delay, force * share[1], tau * rep.factor(0.1), overshoot, rep)
     elif gesture in ("Twist", "Pull"):
         twist = gesture == "Twist"
-        hand = grip_hand(person, rep, x0, y0, d, fingertips=tips_only)
+        hand = grip_hand(person, habit.parts, rep, x0, y0, d, fingertips=tips_only)
         n = len(hand.x)
         start = person.stroke_start * tempo
         duration = min(person.stroke_duration * tempo, max(0.3, 0.8 * contact_s - start))
