@@ -6,8 +6,12 @@ Every simulated person has a *style* (:class:`Person`), drawn once from
 parts of the hand land, how far their fingers spread, how fast force builds and how it is
 released, which variant of each gesture they use (a fingertip or a whole-hand pull, a
 flat-hand or a fingertip push, one twist stroke or two), and how consistent they are from
-one repetition to the next (``sloppiness`` scales every per-repetition variation). A
-session (the person at one position) shifts the style a little. Each recording has a
+one repetition to the next (``sloppiness`` scales every per-repetition variation). On top
+of that style, each person has their own way of doing each gesture (:class:`Habit`, from
+``sha256(seed, "person-gesture", index, gesture)``): where on the arm round their spot,
+how hard, how fast, and which parts of the hand land, the same in all their repetitions of
+that gesture and different from other people's. A session (the person at one position)
+shifts the style a little. Each recording has a
 lead-in without contact and a tail after release whose lengths are per-person habits.
 
 The distributions and their sources are listed in ``docs/simulator.md`` ("People,
@@ -348,8 +352,8 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
         tips_only = person.fingertips[("Grasp", "Twist", "Pull").index(gesture)] \
             != rep.flip(REP_VARIANT_FLIP)
     if gesture == "Grasp":
-        _grip(p, grip_hand(person, habit.parts, rep, x0, y0, d, fingertips=tips_only), t, force, tau,
-              overshoot, rep)
+        _grip(p, grip_hand(person, habit.parts, rep, x0, y0, d, fingertips=tips_only), t,
+              force, tau, overshoot, rep)
     elif gesture == "2hGrasp":
         sep = person.two_hand_mm * k * rep.factor(0.05)
         delay = max(0.0, person.two_hand_delay + rep.shift(0.05))
