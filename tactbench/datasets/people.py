@@ -6,8 +6,12 @@ Every simulated person has a *style* (:class:`Person`), drawn once from
 parts of the hand land, how far their fingers spread, how fast force builds and how it is
 released, which variant of each gesture they use (a fingertip or a whole-hand pull, a
 flat-hand or a fingertip push, one twist stroke or two), and how consistent they are from
-one repetition to the next (``sloppiness`` scales every per-repetition variation). A
-session (the person at one position) shifts the style a little. Each recording has a
+one repetition to the next (``sloppiness`` scales every per-repetition variation). On top
+of that style, each person has their own way of doing each gesture (:class:`Habit`, from
+``sha256(seed, "person-gesture", index, gesture)``): where on the arm round their spot,
+how hard, how fast, and which parts of the hand land, the same in all their repetitions of
+that gesture and different from other people's. A session (the person at one position)
+shifts the style a little. Each recording has a
 lead-in without contact and a tail after release whose lengths are per-person habits.
 
 The distributions and their sources are listed in ``docs/simulator.md`` ("People,
@@ -56,6 +60,12 @@ TAIL_S = (0.5, 0.45, 0.1, 2.0)  # median tail after release: same
 HABIT_ROUND_MM = 15.0  # where round the arm a person habitually puts the hand (sd)
 FINGERTIP_GRIP = 0.4  # a person grasps, twists or pulls with the fingertips only (each)
 
+# ---- a person's own way of doing each gesture (drawn once per person and gesture):
+# where on the arm around their spot, how hard, how fast; see docs/simulator.md
+GESTURE_PLACE_MM = (12.0, 25.0)  # sd round / along the arm
+GESTURE_FORCE_SIGMA = 0.25  # lognormal force factor on top of the person's strength
+GESTURE_TEMPO_SIGMA = 0.15  # lognormal tempo factor on top of the person's tempo
+
 # ---- a session (one person at one position) shifts the style a little
 SESSION_PLACE_MM = 5.0  # sd of the placement shift
 SESSION_FORCE_SIGMA = 0.08  # lognormal force factor
@@ -81,6 +91,31 @@ def _lognormal_clipped(r: np.random.Generator, spec: tuple[float, float, float, 
 
 
 @dataclass(frozen=True)
+class Habit:
+    """A person's own way of doing one gesture: placement shift (mm), force and tempo
+    factors on top of their general style."""
+
+    dx: float  # round the arm
+    dy: float  # along the arm
+    force: float
+    tempo: float
+    parts: tuple[bool, bool, bool, bool, bool]  # palm, little, middle, proximal, thumb
+
+
+def make_habit(seed: int, index: int, gesture: str,
+               part_p: tuple[float, float, float, float, float]) -> Habit:
+    """Person ``index``'s habit for ``gesture`` (its own random stream, so the person's
+    other draws are those of a model without habits); which parts of the hand land in
+    this gesture, each with the person's probability ``part_p``."""
+    r = _rng("person-gesture", seed, index, gesture)
+    return Habit(float(r.normal(0.0, GESTURE_PLACE_MM[0])),
+                 float(r.normal(0.0, GESTURE_PLACE_MM[1])),
+                 float(r.lognormal(0.0, GESTURE_FORCE_SIGMA)),
+                 float(r.lognormal(0.0, GESTURE_TEMPO_SIGMA)),
+                 tuple(bool(b) for b in r.random(5) < np.asarray(part_p)))
+
+
+@dataclass(frozen=True)
 class Person:
     """One simulated person's style (see the module docstring)."""
 
@@ -92,7 +127,7 @@ class Person:
     sloppiness: float
     spread: float  # factor on finger spacing
     finger_weights: np.ndarray  # (4,) index..little
-    grip_parts: tuple[bool, bool, bool, bool, bool]  # palm, little, middle, proximal, thumb
+    part_p: tuple[float, float, float, float, float]  # how often each part lands (habits)
     fingertips: tuple[bool, bool, bool]  # Grasp, Twist, Pull with the fingertips only
     y_pref: float  # along the arm, mm
     x_habit: float  # round the arm from the top, mm
@@ -117,6 +152,10 @@ class Person:
     push_ease: float
     two_hand_mm: float  # separation of the hands in 2hGrasp
     two_hand_delay: float  # s
+    habits: tuple[Habit, ...] = ()  # per gesture, in the order of CLASSES
+
+    def habit(self, gesture: str) -> Habit:
+        return self.habits[v1.CLASSES.index(gesture)]
 
 
 def make_person(seed: int, index: int) -> Person:
@@ -125,9 +164,9 @@ def make_person(seed: int, index: int) -> Person:
     right = bool(r.random() < RIGHT_HANDED)
     mean, sd, lo, hi = HAND_LENGTH_MM
     tempo = float(r.lognormal(0.0, TEMPO_SIGMA))
-    parts = (r.random() < r.uniform(0.1, 0.7), r.random() < r.uniform(0.6, 1.0),
-             r.random() < r.uniform(0.15, 0.85), r.random() < r.uniform(0.05, 0.6),
-             r.random() < r.uniform(0.5, 1.0))
+    part_p = tuple(float(r.uniform(lo, hi))  # palm, little, middle, proximal, thumb
+                   for lo, hi in ((0.1, 0.7), (0.6, 1.0), (0.15, 0.85), (0.05, 0.6),
+                                  (0.5, 1.0)))
     return Person(
         name=f"u{index:02d}",
         hand_mm=float(np.clip(r.normal(mean, sd), lo, hi)),
@@ -137,7 +176,7 @@ def make_person(seed: int, index: int) -> Person:
         sloppiness=float(r.lognormal(0.0, SLOPPINESS_SIGMA)),
         spread=float(r.lognormal(0.0, SPREAD_SIGMA)),
         finger_weights=np.array([1.0, 1.0, 0.85, 0.65]) * r.lognormal(0.0, 0.2, 4),
-        grip_parts=tuple(bool(p) for p in parts),
+        part_p=part_p,
         fingertips=tuple(bool(f) for f in r.random(3) < FINGERTIP_GRIP),
         y_pref=float(r.uniform(0.3, 0.7) * LENGTH_MM),
         x_habit=float(r.normal(0.0, HABIT_ROUND_MM)),
@@ -162,6 +201,7 @@ def make_person(seed: int, index: int) -> Person:
         push_ease=float(r.uniform(0.0, 0.35)),
         two_hand_mm=float(r.uniform(85.0, 110.0)),
         two_hand_delay=float(r.uniform(0.0, 0.35)),
+        habits=tuple(make_habit(seed, index, g, part_p) for g in v1.CLASSES),
     )
 
 
@@ -215,16 +255,17 @@ class _Patches(Patches):
         return out
 
 
-def grip_hand(person: Person, rep: _Rep, x0: float, y0: float, d: float,
-              mirror: bool = False, fingertips: bool = False) -> Hand:
+def grip_hand(person: Person, parts: tuple[bool, ...], rep: _Rep, x0: float, y0: float,
+              d: float, mirror: bool = False, fingertips: bool = False) -> Hand:
     """A hand wrapped around the arm (as :func:`~tactbench.datasets.synthetic.wrap_hand`),
-    its parts those the person usually lands, each landing otherwise with a probability
-    that grows with sloppiness; ``fingertips``: only the finger and thumb tips."""
+    its ``parts`` those the person usually lands in this gesture, each landing otherwise
+    with a probability that grows with sloppiness; ``fingertips``: only the finger and
+    thumb tips."""
     k = person.hand_mm / 180.0
     spread = 19.0 * k * person.spread * (-1 if mirror else 1)
     lengths = np.array([0.93, 1.0, 0.96, 0.78])
     palm, little, middle, proximal, thumb = (p != rep.flip(REP_PART_FLIP)
-                                             for p in person.grip_parts)
+                                             for p in parts)
     if fingertips:
         palm = middle = proximal = False
     xs, ys, sxs, sys_, amps, kinds = [], [], [], [], [], []
@@ -292,16 +333,17 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
     contact), the hand pressing for ``contact_s`` s (before its release): ``(T, N)``."""
     check_choice(gesture, "gesture", v1.CLASSES)
     rep = _Rep(r, person)
+    habit = person.habit(gesture)
     p = _Patches(len(t))
     k = person.hand_mm / 180.0
-    tempo = session.tempo * rep.factor(REP_TIME_SIGMA)
+    tempo = habit.tempo * session.tempo * rep.factor(REP_TIME_SIGMA)
     side = position == "side"
-    x0 = TOP_X + person.x_habit + (person.x_side if side else 0.0) + session.dx \
+    x0 = TOP_X + person.x_habit + habit.dx + (person.x_side if side else 0.0) + session.dx \
         + rep.shift(REP_PLACE_MM[0])
-    y0 = float(np.clip(person.y_pref + session.dy + rep.shift(REP_PLACE_MM[1]), 60,
-                       LENGTH_MM - 60))
+    y0 = float(np.clip(person.y_pref + habit.dy + session.dy + rep.shift(REP_PLACE_MM[1]),
+                       60, LENGTH_MM - 60))
     d = 1.0 if person.right_handed else -1.0
-    force = person.strength * session.force * rep.factor(REP_FORCE_SIGMA)
+    force = person.strength * habit.force * session.force * rep.factor(REP_FORCE_SIGMA)
     tau = person.tau * tempo
     overshoot = float(np.clip(person.overshoot + rep.shift(0.04), 0.0, 0.4))
     x0 -= d * 40 * k
@@ -310,19 +352,20 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
         tips_only = person.fingertips[("Grasp", "Twist", "Pull").index(gesture)] \
             != rep.flip(REP_VARIANT_FLIP)
     if gesture == "Grasp":
-        _grip(p, grip_hand(person, rep, x0, y0, d, fingertips=tips_only), t, force, tau,
-              overshoot, rep)
+        _grip(p, grip_hand(person, habit.parts, rep, x0, y0, d, fingertips=tips_only), t,
+              force, tau, overshoot, rep)
     elif gesture == "2hGrasp":
         sep = person.two_hand_mm * k * rep.factor(0.05)
         delay = max(0.0, person.two_hand_delay + rep.shift(0.05))
         share = np.array([rep.factor(0.1), rep.factor(0.1)]) * 0.65
-        h1 = grip_hand(person, rep, x0, y0 - sep / 2, d)
-        h2 = grip_hand(person, rep, x0 + rep.shift(5.0), y0 + sep / 2, -d, mirror=True)
+        h1 = grip_hand(person, habit.parts, rep, x0, y0 - sep / 2, d)
+        h2 = grip_hand(person, habit.parts, rep, x0 + rep.shift(5.0), y0 + sep / 2, -d,
+                       mirror=True)
         _grip(p, h1, t, force * share[0], tau, overshoot, rep)
         _grip(p, h2, t - delay, force * share[1], tau * rep.factor(0.1), overshoot, rep)
     elif gesture in ("Twist", "Pull"):
         twist = gesture == "Twist"
-        hand = grip_hand(person, rep, x0, y0, d, fingertips=tips_only)
+        hand = grip_hand(person, habit.parts, rep, x0, y0, d, fingertips=tips_only)
         n = len(hand.x)
         start = person.stroke_start * tempo
         duration = min(person.stroke_duration * tempo, max(0.3, 0.8 * contact_s - start))
@@ -355,8 +398,9 @@ def simulate_pressure(gesture: str, person: Person, session: Session, position: 
             lead[:, :, 2] = 0.4 * rate_n[None, :] + 0.2 * phi[None, :]
             _grip(p, hand, t, force * 0.88, tau, overshoot, rep, dy=dy, gain=gain, lead=lead)
     else:
-        _push(p, person, rep, t, TOP_X + person.x_habit + (person.x_side if side else 0.0)
-              + session.dx + rep.shift(REP_PLACE_MM[0]), y0, force, tempo, contact_s)
+        _push(p, person, rep, t, TOP_X + person.x_habit + habit.dx
+              + (person.x_side if side else 0.0) + session.dx + rep.shift(REP_PLACE_MM[0]),
+              y0, force, tempo, contact_s)
     return p.pressure(xy)
 
 
@@ -414,7 +458,8 @@ def simulate_sample(device: v1.Device, person: Person, gesture: str, position: s
     session = make_session(seed, person, position)
     rep = _Rep(r, person)
     contact = float(np.clip(r.lognormal(math.log(v1.LENGTH_MEDIAN_S), v1.LENGTH_SIGMA)
-                            * person.tempo * session.tempo, *v1.LENGTH_RANGE_S))
+                            * person.tempo * person.habit(gesture).tempo * session.tempo,
+                            *v1.LENGTH_RANGE_S))
     lead = float(np.clip(person.lead_in * rep.factor(REP_LEAD_SIGMA), 0.0, 3.0))
     tail = float(np.clip(person.tail * rep.factor(REP_LEAD_SIGMA), 0.0, 3.0))
     rel_tau = person.release_tau * rep.factor(REP_TIME_SIGMA)

@@ -34,7 +34,7 @@ from tactbench.machine import usable_cores
 from tactbench.paths import atomic_folder, cache_dir
 
 #: Bump when the generated data changes: it keys the cache (with the options).
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 #: The simulator's versions (option ``version``) and the default (1 until version 2 shows
 #: the cost of leaving people out on the full set; docs/simulator.md).
 VERSIONS = (1, 2)

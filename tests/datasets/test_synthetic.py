@@ -26,7 +26,7 @@ V1_HASHES = {
 }
 #: Version 2 at 2 users: a change to the person model changes it; then say so in
 #: docs/simulator.md (its default set's hash and what changed) and bump GENERATOR_VERSION.
-V2_HASH = "a43f90653fcb0e8835b0f769ed5d9df7d06693db74b6addb807c6e357d4144e0"
+V2_HASH = "68553deca442f973a05d8e013df6ea4874780ff7347779a1392114904488b10b"
 
 
 @pytest.fixture(scope="module")
@@ -196,15 +196,17 @@ def test_twist_rolls_round_the_axis_and_pull_shifts_along_it(device, version):
 
 @pytest.mark.parametrize("version", VERSION)
 def test_twist_keeps_changing_fingertip_pressure(device, version):
+    # the median ratio over many people is about 2.0 on both versions (2.07 and 2.02 over
+    # 60 people), so 20 people and a margin below it: a test of the dynamics, not of a draw
     def late_change(g):
         out = []
-        for i in range(10):
+        for i in range(20):
             p = _pressure(g, device, i, version=version)
             out.append(np.abs(np.diff(p[(T > 0.5) & (T < 1.5)], axis=0)).sum(1).mean()
                        / p[T > 0.5].sum(1).mean())
         return np.median(out)
 
-    assert late_change("Twist") > 2 * late_change("Grasp")
+    assert late_change("Twist") > 1.5 * late_change("Grasp")
 
 
 @pytest.mark.parametrize("version", VERSION)
