@@ -1,7 +1,7 @@
 """The runner's goals, measured: the study's comparison on the quick profile, twice.
 
     python benchmarks/runner.py [--out docs/results/study-quick] [--workers-too]
-                                [--extra ARGS...]
+                                [--repeats N] [--extra ARGS...]
 
 1. From an empty cache: `tactbench run` with its defaults — the study's comparison
    (raw vs farneback, small-cnn-lstm, L = 5, seeds 0 1 2, paper split, quick profile,
@@ -10,7 +10,8 @@
 2. The identical command again. Goal: ≤ 5 % of the first (nothing is recomputed).
 3. With ``--workers-too``: the same grid into two fresh output folders on the now warm
    encoding cache, one cell at a time with 2 torch threads (the default) and two cells at
-   once with 1 thread each (``--workers 2``): which serves a grid better on this machine.
+   once with 1 thread each (``--workers 2``): which serves a grid better on this machine
+   (``--repeats N``: N interleaved pairs, so that the machine's drift hits both alike).
 
 The run's reports (report.md, results.csv/json, plots) land in --out; the timings go to
 OUT/timing.json. Extra arguments are passed to `tactbench run` (e.g. `-L 1-6`).
@@ -47,6 +48,8 @@ def main() -> None:
     parser.add_argument("--out", default="docs/results/study-quick")
     parser.add_argument("--workers-too", action="store_true",
                         help="also time the cells alone: 1 worker x 2 threads and 2 x 1")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="with --workers-too: interleaved repeats of the two")
     parser.add_argument("extra", nargs="*", help="more arguments for tactbench run")
     args = parser.parse_args()
 
@@ -59,15 +62,17 @@ def main() -> None:
     # The simulator's own cache is part of the first run's cost, as on a fresh install.
     first_s, first_out = timed(argv, env)
     second_s, _ = timed(argv, env)
-    grid = {}
+    grid: dict[str, list[float]] = {}
     if args.workers_too:  # encodings cached now: what is left is the cells
-        for label, flags in (("1 worker x 2 threads", ["--workers", "1", "--threads", "2"]),
-                             ("2 workers x 1 thread", ["--workers", "2", "--threads", "1"])):
-            scratch = Path(tempfile.mkdtemp(prefix="tactbench-bench-grid-"))
-            grid[label], _ = timed([sys.executable, "-m", "tactbench", "run", "--out",
+        for _ in range(args.repeats):  # interleaved: the VM's drift hits both alike
+            for label, flags in (("1 worker x 2 threads", ["--workers", "1", "--threads", "2"]),
+                                 ("2 workers x 1 thread", ["--workers", "2", "--threads", "1"])):
+                scratch = Path(tempfile.mkdtemp(prefix="tactbench-bench-grid-"))
+                seconds, _ = timed([sys.executable, "-m", "tactbench", "run", "--out",
                                     str(scratch / "out"), *flags, *args.extra], env)
-            shutil.rmtree(scratch, ignore_errors=True)
-            print(f"{label}: {grid[label]:.1f} s (encodings cached)", flush=True)
+                grid.setdefault(label, []).append(seconds)
+                shutil.rmtree(scratch, ignore_errors=True)
+                print(f"{label}: {seconds:.1f} s (encodings cached)", flush=True)
     shutil.rmtree(cache, ignore_errors=True)
 
     doc = {
