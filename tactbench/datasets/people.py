@@ -33,12 +33,10 @@ from tactbench.datasets.synthetic import (
     LENGTH_MM,
     PRESSURE_REF_KPA,
     RATE_HZ,
-    SLIP_MM,
     TOP_X,
     Hand,
     Patches,
     _ar_noise,
-    _rise,
     _rng,
     _smoothstep,
     _strokes,
@@ -303,27 +301,9 @@ def _grip(p: Patches, hand: Hand, t: np.ndarray, force: float, tau: float, overs
           rep: _Rep, *, dx=None, dy=None, gain=None, lead=None) -> None:
     """Version 1's grip (:func:`tactbench.datasets.synthetic._grip`) with the person's
     overshoot and the repetition's finger timing."""
-    r = rep.r
-    n = len(hand.x)
-    onset = np.array([rep.shift(0.02) for _ in range(n)])
-    tremor = 1.0 + 0.03 * _ar_noise(r, (n, len(t)))
-    dt = np.diff(t, prepend=t[0] - 1 / RATE_HZ).clip(1e-3)
-    slip = np.cumsum(r.normal(0.0, 1.0, (2, n, len(t))) * SLIP_MM * np.sqrt(dt), axis=2)
-    for j in range(n):
-        tj = t - onset[j]
-        env = _rise(tj, tau)
-        env = env * (1.0 + overshoot * np.exp(-np.maximum(tj, 0) / (1.5 * tau))) * tremor[j]
-        amp = force * PRESSURE_REF_KPA * hand.amp[j] * env
-        if gain is not None:
-            amp = amp * gain[j]
-        grow = 0.75 + 0.25 * np.cbrt(np.clip(env, 0, None))
-        cx = hand.x[j] + slip[0, j] + (0 if dx is None else dx[j])
-        cy = hand.y[j] + slip[1, j] + (0 if dy is None else dy[j])
-        sx, sy = hand.sx[j] * grow, hand.sy[j] * grow
-        p.add(cx, cy, sx, sy, amp, hand.angle[j])
-        if lead is not None:
-            ox, oy, w = lead[j, :, 0], lead[j, :, 1], lead[j, :, 2]
-            p.add(cx + ox, cy + oy, 0.6 * sx, 0.6 * sy, amp * w, hand.angle[j])
+    onset = np.array([rep.shift(0.02) for _ in range(len(hand.x))])
+    v1.press_hand(p, hand, t, force, tau, overshoot, onset, rep.r, dx=dx, dy=dy, gain=gain,
+                  lead=lead)
 
 
 def simulate_pressure(gesture: str, person: Person, session: Session, position: str,

@@ -252,6 +252,18 @@ def _grip(p: Patches, hand: Hand, t: np.ndarray, force: float, tau: float,
     n = len(hand.x)
     onset = r.normal(0.0, 0.03, n)  # the fingers land at slightly different times
     overshoot = r.uniform(0.0, 0.25)
+    press_hand(p, hand, t, force, tau, overshoot, onset, r, dx=dx, dy=dy, gain=gain,
+               lead=lead)
+
+
+def press_hand(p: Patches, hand: Hand, t: np.ndarray, force: float, tau: float,
+               overshoot: float, onset: np.ndarray, r: np.random.Generator, *, dx=None,
+               dy=None, gain=None, lead=None) -> None:
+    """The contacts of :func:`_grip` once each finger's ``onset`` (s) and the grip's
+    ``overshoot`` are chosen: force builds up with ``tau`` and settles, with tremor and
+    slip drawn from ``r``; the person model of version 2 chooses onset and overshoot its
+    own way and presses the same."""
+    n = len(hand.x)
     tremor = 1.0 + 0.03 * _ar_noise(r, (n, len(t)))
     dt = np.diff(t, prepend=t[0] - 1 / RATE_HZ).clip(1e-3)
     slip = np.cumsum(r.normal(0.0, 1.0, (2, n, len(t))) * SLIP_MM * np.sqrt(dt), axis=2)
