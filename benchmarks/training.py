@@ -453,11 +453,10 @@ def measure_speed(cases, *, repeats: int, threads: int) -> dict:
     return {"gemm_flops_per_s": rates, "gemm_flops_per_cpu_s": cpu_rates, "rows": rows}
 
 
-def measure_compile(train, *, steps: int, repeats: int) -> dict:
-    """``torch.compile`` (inductor) of ``small-cnn-lstm``'s network against eager, on the
-    same prepared batch: compile seconds, and step time after it (best of interleaved)."""
+def _quick_batch(train):
+    """``small-cnn-lstm`` at the quick profile, a fresh seeded network for ``train``'s
+    frames and its first training batch (frames prepared): ``(clf, net, x, y)``."""
     import torch
-    import torch.nn.functional as F
 
     from tactbench.classifiers.base import FrameBank
     from tactbench.plugins import load_registry
@@ -470,6 +469,16 @@ def measure_compile(train, *, steps: int, repeats: int) -> dict:
     with torch.no_grad():
         bank = FrameBank(train, net.prepare)
     x, y = bank.batch(np.arange(clf.batch_size))
+    return clf, net, x, y
+
+
+def measure_compile(train, *, steps: int, repeats: int) -> dict:
+    """``torch.compile`` (inductor) of ``small-cnn-lstm``'s network against eager, on the
+    same prepared batch: compile seconds, and step time after it (best of interleaved)."""
+    import torch
+    import torch.nn.functional as F
+
+    clf, net, x, y = _quick_batch(train)
 
     def stepper(module):
         opt = torch.optim.Adam(net.parameters(), lr=1e-4)
@@ -511,17 +520,7 @@ def measure_threads(train, *, steps: int, repeats: int) -> dict:
     import torch
     import torch.nn.functional as F
 
-    from tactbench.classifiers.base import FrameBank
-    from tactbench.plugins import load_registry
-    from tactbench.profiles import profile_options
-
-    clf = load_registry().build("classifier", "small-cnn-lstm",
-                                **profile_options("quick", "small-cnn-lstm"))
-    torch.manual_seed(0)
-    net = clf._build_net(tuple(train.frame_shape), 5, pretrained=False)
-    with torch.no_grad():
-        bank = FrameBank(train, net.prepare)
-    x, y = bank.batch(np.arange(clf.batch_size))
+    clf, net, x, y = _quick_batch(train)
     opt = torch.optim.Adam(net.parameters(), lr=1e-4)
     net.train()
     old = torch.get_num_threads()
