@@ -2,19 +2,23 @@
 
     python benchmarks/people.py [--dataset synthetic-forearm] [--encoders raw farneback]
         [--classifier logreg] [-L 5] [--seeds 0-4] [--test-window onset]
-        [--json docs/people.json] [--md docs/people.md]
+        [--json docs/people.json] [--md docs/people.md] [--work DIR]
 
-1. **Leaving people out costs accuracy.** The same grid (encoders × classifier, L, seeds)
-   runs with the random split (``paper``: 30 test samples per class) and the users split
-   (a fifth of the people left out); per seed, the difference users − random is one paired
-   run-level observation. The interval is Nadeau and Bengio's corrected resampled t
-   (Machine Learning 52, 2003): variance ``(1/J + n_test/n_train) · S²`` over the ``J``
-   seeds, t with ``J − 1`` degrees of freedom (``scipy.stats.t``), with ``n_test/n_train``
-   the larger of the two splits' (the users split's), so the interval is the wider one.
-   Computed here, not by tactbench's run statistics.
-2. **Accuracy differs between people beyond binomial noise.** One run with
-   ``users:folds=5`` at the first seed (every person tested once, by a model that never
-   saw them); per
+1. **Leaving people out costs accuracy.** Two K-fold designs test every recording once
+   per seed: ``users:folds=5`` (each fold's people are unseen in training) and
+   ``group:repetition:folds=5`` (each fold holds out one repetition of every person,
+   gesture and position: the test people are seen, with their other repetitions, as in a
+   random split). Per seed and users fold, the difference users − seen is taken on the
+   *same* test recordings (that fold's people; under the seen design they were predicted
+   by the repetition folds' models), so which people happen to be tested cancels out of
+   it. The ``K · r`` fold differences of ``r`` seeds go into Bouckaert and Frank's
+   corrected repeated K-fold t (PAKDD 2004): variance ``(1/(K r) + 1/(K − 1)) · S²``, t
+   with ``K r − 1`` degrees of freedom (``scipy.stats.t``). An earlier design compared the
+   ``paper`` split (150 random test recordings) with ``users`` (a fifth of the people);
+   its two test sets differ, and the correction's floor ``n_test/n_train · S²`` on those
+   noisy differences kept gaps of 5–10 points unresolved however many seeds ran.
+2. **Accuracy differs between people beyond binomial noise.** The ``users:folds=5`` run
+   at the first seed (every person tested once, by a model that never saw them); per
    person, ``k`` of ``n`` test recordings right. The between-person variance of accuracy
    is the method-of-moments variance component ``Var(p̂_i) − mean(p̂_i (1 − p̂_i)/(n_i − 1))``
    (what the spread of per-person accuracy adds to what binomial noise alone would give),
@@ -76,6 +80,29 @@ def corrected_t_interval(differences: Sequence[float], test_train_ratio: float,
             "test_train_ratio": float(test_train_ratio), "confidence": confidence}
 
 
+def corrected_kfold_interval(differences: Sequence[float], folds: int,
+                             confidence: float = CONFIDENCE) -> dict:
+    """Bouckaert–Frank corrected repeated K-fold t over ``K · r`` fold differences: the
+    corrected resampled t with ``n_test/n_train = 1/(K − 1)``."""
+    out = corrected_t_interval(differences, 1.0 / (folds - 1), confidence)
+    out["folds"] = int(folds)
+    return out
+
+
+def paired_fold_differences(users_pred: dict, seen_pred: dict, folds: list) -> list[float]:
+    """Per users fold: accuracy under the users design − under the seen design, both on
+    that fold's test recordings. ``*_pred`` are a cell's ``test_predictions``."""
+    def correct(pred: dict) -> dict[int, bool]:
+        return {int(i): bool(t == p) for i, t, p in
+                zip(pred["indices"], pred["labels"], pred["predictions"])}
+
+    u, s = correct(users_pred), correct(seen_pred)
+    if set(u) != set(s):
+        raise SystemExit("the two K-fold designs did not test the same recordings")
+    return [float(np.mean([u[int(i)] for i in f.test]) - np.mean([s[int(i)] for i in f.test]))
+            for f in folds]
+
+
 def _variance_component(k: np.ndarray, n: np.ndarray) -> float:
     p = k / n
     return float(p.var(ddof=1) - np.mean(p * (1 - p) / np.maximum(n - 1, 1)))
@@ -126,12 +153,14 @@ def _seeds(text: str) -> list[int]:
 
 
 def run_grid(dataset: str, encoders: list[str], classifier: str, length: int,
-             seeds: list[int], split: str, test_window: str, work: Path) -> list[dict]:
+             seeds: list[int], split: str, test_window: str, work: Path,
+             workers: int = 1) -> list[dict]:
     from tactbench.runner import EncodingCache, Scene, run
 
     scene = Scene(dataset=dataset, encoders=encoders, classifiers=[classifier],
                   L=[length], seeds=seeds, split=split, test_window=test_window,
-                  threads=1, out=str(work / split.replace(":", "-").replace("=", "")))
+                  threads=1, workers=workers,
+                  out=str(work / split.replace(":", "-").replace("=", "")))
     result = run(scene, progress=False, cache=EncodingCache(work / "cache"))
     bad = [r for r in result.rows if r["status"] != "ok"]
     if bad:
@@ -146,35 +175,45 @@ def command(dataset: str, encoders: list[str], classifier: str, length: int, see
             f"--seed {seeds} --split {split} --test-window {test_window} --threads 1")
 
 
+#: The two K-fold designs of the gap: people unseen, people seen (one repetition out).
+FOLDS = 5
+UNSEEN, SEEN = f"users:folds={FOLDS}", f"group:repetition:folds={FOLDS}"
+
+
 def measure(args: argparse.Namespace, work: Path) -> dict:
+    from tactbench.data.splits import user_folds
     from tactbench.datasets.loading import load_dataset
 
     seeds = _seeds(args.seeds)
     t0 = time.perf_counter()
     ds = load_dataset(args.dataset)
     users = np.asarray(ds.users)
-    splits = ("paper", "users") + (() if args.gap_only else ("users:folds=5",))
+    labels = np.asarray(ds.labels)
     rows = {split: run_grid(args.dataset, args.encoders, args.classifier, args.length,
-                            seeds if split != "users:folds=5" else seeds[:1],
-                            split, args.test_window, work)
-            for split in splits}
+                            seeds, split, args.test_window, work, args.workers)
+            for split in (UNSEEN, SEEN)}
     out = {"gap": {}, "people": {}, "accuracy": {}}
     for enc in args.encoders:
-        acc = {split: {r["seed"]: r["accuracy"] for r in rows[split] if r["encoder"] == enc}
-               for split in ("paper", "users")}
-        diffs = [acc["users"][s] - acc["paper"][s] for s in seeds]
-        ratio = max(r["n_test"] / r["n_train"] for split in ("paper", "users")
-                    for r in rows[split] if r["encoder"] == enc)
-        gap = corrected_t_interval(diffs, ratio)
-        gap["per_seed"] = diffs
+        cell = {split: {r["seed"]: r for r in rows[split] if r["encoder"] == enc}
+                for split in (UNSEEN, SEEN)}
+        diffs, per_seed = [], []
+        for s in seeds:
+            split_seed = int(cell[UNSEEN][s].get("split_seed", s))
+            folds = user_folds(users, labels, seed=split_seed, folds=FOLDS)
+            d = paired_fold_differences(cell[UNSEEN][s]["test_predictions"],
+                                        cell[SEEN][s]["test_predictions"], folds)
+            diffs += d
+            per_seed.append(cell[UNSEEN][s]["accuracy"] - cell[SEEN][s]["accuracy"])
+        gap = corrected_kfold_interval(diffs, FOLDS)
+        gap["per_fold"] = diffs
+        gap["per_seed"] = per_seed  # every recording, users − seen
+        gap["folds_lower"] = int(sum(d < 0 for d in diffs))
+        gap["folds_higher"] = int(sum(d > 0 for d in diffs))
         out["gap"][enc] = gap
-        out["accuracy"][enc] = {split: float(np.mean(list(acc[split].values())))
-                                for split in acc}
-        if args.gap_only:
-            continue
-        [fold_row] = [r for r in rows["users:folds=5"] if r["encoder"] == enc
-                      and r["seed"] == seeds[0]]
-        pred = fold_row["test_predictions"]
+        out["accuracy"][enc] = {split: float(np.mean([r["accuracy"]
+                                                      for r in cell[split].values()]))
+                                for split in cell}
+        pred = cell[UNSEEN][seeds[0]]["test_predictions"]
         idx = np.asarray(pred["indices"])
         correct = np.asarray(pred["labels"]) == np.asarray(pred["predictions"])
         out["people"][enc] = between_person_variance(correct, users[idx], seed=seeds[0])
@@ -195,33 +234,32 @@ def markdown(args: argparse.Namespace, res: dict, meta: dict) -> str:
         "",
         "```bash",
         *(command(args.dataset, args.encoders, args.classifier, args.length, args.seeds, s,
-                  args.test_window) for s in ("paper", "users")),
-        *([] if args.gap_only else [command(args.dataset, args.encoders, args.classifier,
-                                            args.length, str(_seeds(args.seeds)[0]),
-                                            "users:folds=5", args.test_window)]),
+                  args.test_window) for s in (UNSEEN, SEEN)),
         "```",
         "",
-        "## Leaving people out (users − random split, paired by seed)",
+        "## Leaving people out (people unseen − seen, paired on the same recordings)",
         "",
-        "Nadeau–Bengio corrected resampled t over seeds, computed by this script "
-        "(`scipy.stats.t`); n_test/n_train is the users split's.",
+        f"`{UNSEEN}` leaves each fold's people out of training; `{SEEN}` leaves one "
+        "repetition of every person out, so the test people are seen (as in a random "
+        "split). Both test every recording once per seed. Per seed and users fold, the "
+        "difference is taken on that fold's recordings under both designs; the interval is "
+        "Bouckaert–Frank's corrected repeated K-fold t over the K · seeds fold differences "
+        "(n_test/n_train = 1/(K − 1)), computed by this script (`scipy.stats.t`).",
         "",
-        "| encoder | random split | users split | users − random (points) | "
-        f"{int(100 * CONFIDENCE)} % interval | p |",
-        "|---|---|---|---|---|---|",
+        "| encoder | people seen | people unseen | unseen − seen (points) | "
+        f"{int(100 * CONFIDENCE)} % interval | p | folds lower / higher | "
+        "per seed (all recordings) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for enc, g in res["gap"].items():
         a = res["accuracy"][enc]
-        lines.append(f"| {enc} | {100 * a['paper']:.1f} % | {100 * a['users']:.1f} % | "
+        lines.append(f"| {enc} | {100 * a[SEEN]:.1f} % | {100 * a[UNSEEN]:.1f} % | "
                      f"{pct(g['mean'])} | [{pct(g['low'])}, {pct(g['high'])}] | "
-                     f"{g['p']:.2g} |")
-    if args.gap_only:
-        lines += ["", "Regenerate with the command above; numbers in "
-                  f"[{Path(args.json).name}]({Path(args.json).name}).", ""]
-        return "\n".join(lines)
+                     f"{g['p']:.2g} | {g['folds_lower']} / {g['folds_higher']} | "
+                     + ", ".join(pct(d) for d in g["per_seed"]) + " |")
     lines += [
         "",
-        "## Accuracy per person (users:folds=5, first seed)",
+        f"## Accuracy per person ({UNSEEN}, first seed)",
         "",
         "Variance component between people (method of moments, beyond binomial noise) with "
         "a percentile bootstrap interval over people; χ² test of homogeneity.",
@@ -251,8 +289,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--test-window", default="onset", choices=["first", "onset", "vote"])
     ap.add_argument("--json", default=str(REPO / "docs" / "people.json"))
     ap.add_argument("--md", default=str(REPO / "docs" / "people.md"))
-    ap.add_argument("--gap-only", action="store_true",
-                    help="measure the users − random gap only (no users:folds=5 run)")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="cells in parallel, one torch thread each (the runner's --workers)")
     ap.add_argument("--work", help="folder for the runs (default: a temporary one)")
     args = ap.parse_args(argv)
     given, shown = list(argv if argv is not None else sys.argv[1:]), []
@@ -277,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
     atomic_write_text(Path(args.json), json.dumps(doc, indent=1) + "\n")
     atomic_write_text(Path(args.md), markdown(args, res, meta))
     for enc, g in res["gap"].items():
-        print(f"{enc}: users − random {100 * g['mean']:+.1f} points "
+        print(f"{enc}: people unseen − seen {100 * g['mean']:+.1f} points "
               f"[{100 * g['low']:+.1f}, {100 * g['high']:+.1f}]")
         v = res["people"].get(enc)
         if v:
