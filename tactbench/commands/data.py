@@ -103,8 +103,9 @@ def info_cmd(path: str, as_json: bool) -> None:
               help="Repetitions of each gesture per position.")
 @click.option("--positions", default=2, show_default=True, type=click.IntRange(1, 2),
               help="Positions (1: front only, 2: front and side).")
-@click.option("--version", "version", default=1, show_default=True, type=click.IntRange(1, 2),
-              help="Simulator version: 1 the first (the default), 2 the person model.")
+@click.option("--version", "version", default=2, show_default=True, type=click.IntRange(1, 2),
+              help="Simulator version: 2 the person model (the default), 1 the first "
+                   "(recordings from contact on, kept so past results reproduce).")
 def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int,
               version: int) -> None:
     """Generate the synthetic-forearm gesture dataset into a new or empty folder."""

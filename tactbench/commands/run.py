@@ -103,10 +103,10 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
                    "over any metadata (position, repetition): group:position:test=side "
                    "trains on the front, tests on the side.")
 @scene_option("--test-window", field="test_window",
-              type=click.Choice(["first", "onset", "vote"]),
-              help="Which frames a test sequence is classified on: first (its first L "
-                   "frames, the study's), onset (L frames from contact onset) or vote "
-                   "(every window, probabilities averaged).")
+              type=click.Choice(["vote", "onset", "first"]),
+              help="Which frames a test sequence is classified on: vote (every window, "
+                   "probabilities averaged), onset (L frames from contact onset) or first "
+                   "(its first L frames, the study's protocol).")
 @scene_option("--profile", field="profile", type=click.Choice(PROFILE_NAMES),
               help="quick: CPU-sized; paper: the study's settings (a GPU job).")
 @scene_option("--pixel-mm", field="pixel_mm", type=float, none=_by_profile("pixel_mm"),

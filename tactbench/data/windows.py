@@ -1,6 +1,6 @@
 """Windows of L frames: how sequences become training and test examples.
 
-The study's protocol (test window ``first``, the default):
+The study's protocol (test window ``first``):
 
 - training: every window of ``L`` consecutive frames of every training
   sequence (a sequence shorter than ``L`` gives one window, padded);
@@ -8,7 +8,8 @@ The study's protocol (test window ``first``, the default):
 - padding: blank (all-zero) frames appended after the sequence's end.
 
 Testing on the first frames assumes that recordings start at contact. Where they start
-before it, two other test windows (:data:`TEST_WINDOWS`) are offered:
+before it, as the built-in simulator's (version 2) and many real sets' do, two other test
+windows (:data:`TEST_WINDOWS`) are offered, and ``vote`` is the runner's default:
 
 - ``onset``: the ``L`` frames from the contact onset, :func:`onset_frame`: the first
   frame whose total pressure (the sum of the normalised taxel values) reaches
@@ -17,7 +18,11 @@ before it, two other test windows (:data:`TEST_WINDOWS`) are offered:
   fewer than ``L`` frames follow the onset. Training then uses the windows starting at
   or after each training sequence's own onset window, so that it sees what tests see;
 - ``vote``: every window of the test sequence is classified and the class
-  probabilities are averaged (training unchanged).
+  probabilities are averaged (training unchanged). It is the default because it is the
+  one window that held up on every set measured (docs/reports/which-window.md): far
+  above ``first`` where recordings start before contact, and not told apart from it
+  where they start at contact; ``onset`` loses to ``first`` on a real set whose contact
+  begins before its recordings do.
 
 A :class:`Windows` holds the sequences once and the window positions, so the
 many overlapping training windows share memory; :meth:`Windows.batch`

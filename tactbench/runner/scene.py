@@ -48,7 +48,7 @@ class Scene:
     L: list[int] = field(default_factory=lambda: [5])  # window lengths, frames
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     split: str = "paper"  # paper, users, users:folds=K or group:KEY[:folds=K]
-    test_window: str = "first"  # first (the study's), onset or vote: see data/windows.py
+    test_window: str = "vote"  # vote, onset or first (the study's): see data/windows.py
     test_per_class: int = 30
     profile: str = "quick"
     pixel_mm: float | None = None  # None: the profile's
