@@ -183,15 +183,17 @@ def test_seed_ranges_k_fold_users_and_test_windows_from_the_command_line(tmp_pat
     rows = json.loads((tmp_path / "a" / "results.json").read_text())["rows"]
     assert {(r["split"], r["folds"], r["test_window"]) for r in rows} == \
         {("users:folds=2", 2, "onset")}
-    first = go("b", "--seed", "0")
-    same = go("c", "--seed", "0", "--test-window", "first")
-    vote = go("d", "--seed", "0", "--test-window", "vote")
-    keys = [json.loads((tmp_path / o / "results.json").read_text())["rows"][0]["key"]
+    default = go("b", "--seed", "0")
+    vote = go("c", "--seed", "0", "--test-window", "vote")
+    first = go("d", "--seed", "0", "--test-window", "first")
+    keys = [json.loads((tmp_path / o / "results.json").read_text())["rows"][0]
             for o in ("b", "c", "d")]
-    # the study's window keeps the key a cell had before test windows existed
-    assert keys[0] == keys[1] != keys[2]
-    assert first["summary"][0]["accuracy_mean"] == same["summary"][0]["accuracy_mean"]
-    assert vote["meta"]["computed"] == 1
+    # vote is the default; the study's window keeps the key a cell had before test windows
+    # existed (no test_window in its identity), so it differs from vote's
+    assert [r["test_window"] for r in keys] == ["vote", "vote", "first"]
+    assert keys[0]["key"] == keys[1]["key"] != keys[2]["key"]
+    assert default["summary"][0]["accuracy_mean"] == vote["summary"][0]["accuracy_mean"]
+    assert first["meta"]["computed"] == 1
     bad = CliRunner().invoke(cli, ["run", "--split", "users:folds=1", "--out",
                                    str(tmp_path / "e")])
     assert bad.exit_code == 2 and "folds must be ≥ 2" in bad.output

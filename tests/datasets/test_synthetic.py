@@ -43,9 +43,9 @@ def test_version_1_is_the_same_data_as_before():
     assert named.content_hash() == V1_HASHES[(2, 1, 2, 0)]
     assert named.normalisation.spec == "baseline:high=99.99,low=5"
     assert all(5 <= s.recording.n_frames <= 27 for s in named)
-    # the default is version 1 (docs/simulator.md says why); version 2 is other data, with
-    # its own cache entry
-    assert generate(users=2, repetitions=1).content_hash() == V1_HASHES[(2, 1, 2, 0)]
+    # the default is version 2, the person model (docs/simulator.md says why); version 1 is
+    # other data, with its own cache entry
+    assert generate(users=2, repetitions=1).content_hash() == V2_HASH
     assert generate(users=2, repetitions=1, version=2).content_hash() == V2_HASH
     assert SyntheticForearm(users=2, repetitions=1, version=2).cache_key() != \
         SyntheticForearm(users=2, repetitions=1, version=1).cache_key()
