@@ -198,3 +198,15 @@ def test_a_run_with_unique_names_shows_short_names_as_before(tmp_path, classifie
         report, "| encoder | classifier | input |")} == {short}
     assert sorted(p.name for p in (tmp_path / "out").glob("confusion_*.png")) == [
         f"confusion_{e}_{short}_L{L}.png" for e in ("farneback", "raw") for L in (3, 5)]
+
+
+def test_a_cell_names_its_variant_in_progress_and_peak_steps():
+    from tactbench.runner.planning import Cell
+
+    labels = spec_labels([WIDE, NARROW, "sklearn:C=1,estimator=SVC"])
+    assert Cell("raw", NARROW, 5, 0, "k").label(labels) == \
+        "raw × small-cnn-lstm (width=8) L=5 seed=0"
+    # a classifier no other spec shares is named as ever, with labels or without
+    assert Cell("raw", "sklearn:C=1,estimator=SVC", 5, 0, "k").label(labels) == \
+        "raw × sklearn L=5 seed=0" == Cell("raw", "sklearn:C=1,estimator=SVC", 5, 0,
+                                           "k").label()
