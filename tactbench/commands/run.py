@@ -16,7 +16,7 @@ from tactbench.runner import Scene, load_scene_file, run
 from tactbench.runner.scene import parse_lengths, parse_seeds
 from tactbench.runner.summaries import failed_cells, summarise
 from tactbench.runner.tables import print_comparisons, print_table
-from tactbench.runner.writers import write_reports
+from tactbench.runner.writers import run_labels, write_reports
 
 
 class SceneOption(click.Option):
@@ -178,6 +178,7 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
                           contrasts=scene.contrasts or (), margin=scene.margin, users=users)
     summaries = summarise(result.rows, users=users)
     failed = failed_cells(result.rows)
+    labels = run_labels(result.rows)  # variants of one classifier told apart
     if as_json:
         comps = json.loads(paths["json"].read_text())["comparisons"]
         click.echo(json_text({"meta": meta, "summary": summaries, "comparisons": comps,
@@ -185,9 +186,10 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
                                "files": {k: str(v) for k, v in paths.items()}}, indent=2))
     else:
         print_table(summaries, title=f"{scene.dataset} · split {scene.split} · test window "
-                                     f"{scene.test_window} · profile {scene.profile}")
+                                     f"{scene.test_window} · profile {scene.profile}",
+                    labels=labels)
         print_comparisons(json.loads(paths["json"].read_text())["comparisons"],
-                          factors=("encoder", "classifier", "contrast"))
+                          factors=("encoder", "classifier", "contrast"), labels=labels)
         click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
                    f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
                    f"results.csv, results.json, plots)")

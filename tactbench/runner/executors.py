@@ -14,6 +14,7 @@ import multiprocessing
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.runner.cell import CellJob, failed_row, run_cell
+from tactbench.runner.summaries import spec_labels
 from tactbench.runner.system import BEFORE, MemoryTracker, ignore_interrupts, stop_workers
 
 if TYPE_CHECKING:
@@ -52,12 +53,14 @@ def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
     cell): a cell whose peak was set before it started names the step that set it.
     """
     memory = memory if memory is not None else MemoryTracker()
+    jobs = list(jobs)
+    labels = spec_labels(job.cell.classifier for job in jobs)  # variants told apart
     for job in jobs:
         earlier = memory.peak_step
-        row = run_cell(job, bars.callback(f"train {job.cell.label()}"))
+        row = run_cell(job, bars.callback(f"train {job.cell.label(labels)}"))
         if row.get("peak_step") == BEFORE and earlier != BEFORE:
             row["peak_step"] = f"{earlier} (earlier in this run)"
-        memory.step(f"cell {job.cell.label()}")
+        memory.step(f"cell {job.cell.label(labels)}")
         finish(row)
 
 

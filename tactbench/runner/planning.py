@@ -21,7 +21,7 @@ import re
 import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from tactbench.contracts import CLASSIFIER, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
@@ -39,7 +39,7 @@ from tactbench.paths import check_not_in_cache
 from tactbench.plugins import load_registry
 from tactbench.profiles import PRECISIONS, get_profile, profile_options
 from tactbench.budget import check_budget
-from tactbench.runner.summaries import check_contrasts, parse_contrast
+from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 from tactbench.runner.system import check_scheduler
@@ -74,10 +74,14 @@ class Cell:
     key: str
     init_seed: int | None = None  # the initialisation's seed when varied apart from the split's
 
-    def label(self) -> str:
-        """A short human name: ``raw × small-cnn-lstm L=5 seed=0``."""
-        return (f"{self.encoder} × {self.classifier.split(':')[0]} L={self.L} "
-                f"seed={self.seed}")
+    def label(self, labels: Mapping[str, str] | None = None) -> str:
+        """A short human name: ``raw × small-cnn-lstm L=5 seed=0``; the classifier by its
+        label in ``labels`` (:func:`tactbench.runner.summaries.spec_labels`) where that
+        tells it from another spec of the same name: ``raw × small-cnn-lstm (width=8)``."""
+        clf = (labels or {}).get(self.classifier, "")
+        if not clf or clf == short_name(self.classifier):  # unique: its name, as ever
+            clf = self.classifier.split(":")[0]
+        return f"{self.encoder} × {clf} L={self.L} seed={self.seed}"
 
 
 @dataclass

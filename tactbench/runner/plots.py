@@ -6,12 +6,13 @@ and :func:`caption` says what a figure shows, for report.md.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.summaries import short_name
+from tactbench.runner.summaries import spec_label, spec_labels
 
 #: The top-level figures :func:`write_plots` may write besides ``confusion_*.png``.
 FIGURES = ("accuracy_vs_L", "cost_vs_accuracy", "per_class_vs_L")
@@ -102,11 +103,24 @@ def check_reference(reference: Iterable[dict[str, Any]] | None) -> list[dict[str
     return out
 
 
-def _curve_keys(summaries: Sequence[dict[str, Any]]) -> dict[tuple, list[dict[str, Any]]]:
-    """(dataset, split, encoder, classifier) → that curve's summaries, sorted by L."""
+def _labels(summaries: Sequence[dict[str, Any]],
+            labels: Mapping[str, str] | None) -> Mapping[str, str]:
+    """``labels``, or else the labels among the classifiers of ``summaries``
+    (:func:`tactbench.runner.summaries.spec_labels`)."""
+    return spec_labels(s["classifier"] for s in summaries) if labels is None else labels
+
+
+def _curve_key(s: dict[str, Any], labels: Mapping[str, str]) -> tuple:
+    return s["dataset"], s["split"], s["encoder"], spec_label(s["classifier"], labels)
+
+
+def _curve_keys(summaries: Sequence[dict[str, Any]], labels: Mapping[str, str] | None = None
+                ) -> dict[tuple, list[dict[str, Any]]]:
+    """(dataset, split, encoder, classifier label) → that curve's summaries, by L."""
+    labels = _labels(summaries, labels)
     curves: dict[tuple, list[dict[str, Any]]] = {}
     for s in summaries:
-        key = (s["dataset"], s["split"], s["encoder"], short_name(s["classifier"]))
+        key = _curve_key(s, labels)
         curves.setdefault(key, []).append(s)
     for pts in curves.values():
         pts.sort(key=lambda s: s["L"])
@@ -146,19 +160,26 @@ def _band_only(points: Sequence[dict[str, Any]]) -> str:
     return band_note(points).split(", ", 1)[1].removeprefix("band: ")
 
 
-def l_curves_apply(summaries: Sequence[dict[str, Any]]) -> bool:
+def l_curves_apply(summaries: Sequence[dict[str, Any]],
+                   labels: Mapping[str, str] | None = None) -> bool:
     """Whether the L figures apply: some encoder × classifier has ≥ 2 values of L."""
-    return any(len({s["L"] for s in pts}) >= 2 for pts in _curve_keys(summaries).values())
+    return any(len({s["L"] for s in pts}) >= 2
+               for pts in _curve_keys(summaries, labels).values())
 
 
 def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
-                reference: Iterable[dict[str, Any]] | None = None) -> dict[str, Path]:
+                reference: Iterable[dict[str, Any]] | None = None,
+                labels: Mapping[str, str] | None = None) -> dict[str, Path]:
     """The figures of a run, as PNG in ``out``; returns name → path.
 
     - ``accuracy_vs_L`` (:func:`plot_accuracy_vs_l`) and ``per_class_vs_L``
       (:func:`plot_per_class_vs_l`): only when some line has ≥ 2 values of L;
     - ``cost_vs_accuracy`` (:func:`plot_cost_vs_accuracy`);
-    - ``confusion_<encoder>_<classifier>_L<L>`` (:func:`plot_confusion`) for each summary.
+    - ``confusion_<encoder>_<classifier>_L<L>`` (:func:`plot_confusion`) for each summary
+      (:func:`confusion_names`).
+
+    A classifier is named by its label in ``labels`` (by default among the classifiers of
+    ``summaries``; :func:`tactbench.runner.summaries.spec_labels`).
     """
     import matplotlib
 
@@ -167,22 +188,28 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
 
     out = Path(out)
     reference = check_reference(reference)
-    summaries = [s for s in summaries if not math.isnan(s["accuracy_mean"])]
+    labels = _labels(summaries, labels)
+    names = confusion_names(summaries, labels)  # as caption() names them
+    named = [(s, n) for s, n in zip(summaries, names) if not math.isnan(s["accuracy_mean"])]
+    summaries = [s for s, _ in named]
     if not summaries:
         return {}
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    colour = {key: colours[i % len(colours)] for i, key in enumerate(_curve_keys(summaries))}
+    colour = {key: colours[i % len(colours)]
+              for i, key in enumerate(_curve_keys(summaries, labels))}
     # (name, draw, dpi): each figure is drawn, saved and closed before the next
     todo: list[tuple[str, Any, int]] = []
-    if l_curves_apply(summaries):
+    if l_curves_apply(summaries, labels):
         todo.append(("accuracy_vs_L",
-                     lambda: plot_accuracy_vs_l(summaries, colour, reference), 120))
+                     lambda: plot_accuracy_vs_l(summaries, colour, reference, labels), 120))
     if any(not math.isnan(s["encode_ms_per_frame_mean"]) for s in summaries):
-        todo.append(("cost_vs_accuracy", lambda: plot_cost_vs_accuracy(summaries, colour), 120))
-    if l_curves_apply(summaries):
-        todo.append(("per_class_vs_L", lambda: plot_per_class_vs_l(summaries, colour), 110))
-    for s in summaries:
-        todo.append((confusion_name(s), lambda s=s: plot_confusion(s), 110))
+        todo.append(("cost_vs_accuracy",
+                     lambda: plot_cost_vs_accuracy(summaries, colour, labels), 120))
+    if l_curves_apply(summaries, labels):
+        todo.append(("per_class_vs_L",
+                     lambda: plot_per_class_vs_l(summaries, colour, labels), 110))
+    for s, name in named:
+        todo.append((name, lambda s=s: plot_confusion(s, labels), 110))
     figures: dict[str, Path] = {}
     for name, draw, dpi in todo:
         fig = draw()
@@ -194,13 +221,14 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
 
 
 def plot_accuracy_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple, str],
-                       reference: Sequence[dict[str, Any]] = ()):
+                       reference: Sequence[dict[str, Any]] = (),
+                       labels: Mapping[str, str] | None = None):
     """Accuracy against L, a line per encoder × classifier with a shaded band
     (:func:`accuracy_band`), and ``reference`` (:func:`check_reference`), the published
     points, as open markers "study (published)"."""
     import matplotlib.pyplot as plt
 
-    curves = _curve_keys(summaries)
+    curves = _curve_keys(summaries, labels)
     several = len({k[:2] for k in curves}) > 1
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for key, pts in curves.items():
@@ -236,11 +264,13 @@ def plot_accuracy_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple, 
     return fig
 
 
-def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tuple, str]):
+def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tuple, str],
+                          labels: Mapping[str, str] | None = None):
     """Accuracy against encode cost (log x), error bars from the band, the
     :func:`pareto_front` as a step line with its members ringed."""
     import matplotlib.pyplot as plt
 
+    labels = _labels(summaries, labels)
     drawn = [s for s in summaries if not math.isnan(s["encode_ms_per_frame_mean"])]
     fig, ax = plt.subplots(figsize=(7, 4.5))
     costs = [max(s["encode_ms_per_frame_mean"], MIN_PLOTTED_COST_MS) for s in drawn]
@@ -248,9 +278,9 @@ def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tupl
     for s, x, y in zip(drawn, costs, accs):
         band = accuracy_band(s)
         yerr = [[y - 100 * band[0]], [100 * band[1] - y]] if band else None
-        key = (s["dataset"], s["split"], s["encoder"], short_name(s["classifier"]))
-        ax.errorbar([x], [y], yerr=yerr, marker="o", capsize=3, color=colour[key])
-        ax.annotate(f"{s['encoder']} / {short_name(s['classifier'])} L={s['L']}",
+        ax.errorbar([x], [y], yerr=yerr, marker="o", capsize=3,
+                    color=colour[_curve_key(s, labels)])
+        ax.annotate(f"{s['encoder']} / {spec_label(s['classifier'], labels)} L={s['L']}",
                     (x, y), fontsize=7, xytext=(4, 4), textcoords="offset points")
     front = pareto_front([(s["encode_ms_per_frame_mean"], s["accuracy_mean"])
                           for s in drawn])
@@ -270,11 +300,12 @@ def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tupl
     return fig
 
 
-def plot_per_class_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple, str]):
+def plot_per_class_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple, str],
+                        labels: Mapping[str, str] | None = None):
     """One panel per class, a line per encoder × classifier (means over seeds)."""
     import matplotlib.pyplot as plt
 
-    curves = _curve_keys(summaries)
+    curves = _curve_keys(summaries, labels)
     several = len({k[:2] for k in curves}) > 1
     classes = list(dict.fromkeys(c for s in summaries for c in s["classes"]))
     ncols = min(3, len(classes))
@@ -305,13 +336,36 @@ def plot_per_class_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple,
     return fig
 
 
-def confusion_name(summary: dict[str, Any]) -> str:
-    """``confusion_<encoder>_<classifier>_L<L>``: the name of a summary's confusion figure."""
-    return (f"confusion_{_slug(summary['encoder'])}_{_slug(short_name(summary['classifier']))}"
-            f"_L{summary['L']}")
+def confusion_names(summaries: Sequence[dict[str, Any]],
+                    labels: Mapping[str, str] | None = None) -> list[str]:
+    """The name of each summary's confusion figure, ``confusion_<encoder>_<classifier>_L<L>``
+    (the classifier by its label, :func:`tactbench.runner.summaries.spec_labels`, slugged:
+    ``confusion_raw_small-cnn-lstm-width-8_L5``). Names that slugging still makes alike
+    get the first 8 hex digits of SHA-256 of the cell's encoder and classifier specs, so
+    no figure overwrites another."""
+    labels = _labels(summaries, labels)
+    names = [f"confusion_{_slug(s['encoder'])}_{_slug(_file_label(s['classifier'], labels))}"
+             f"_L{s['L']}" for s in summaries]
+    cells = {}  # name → the distinct cells given it
+    for name, s in zip(names, summaries):
+        cells.setdefault(name, set()).add((str(s["encoder"]), str(s["classifier"]), s["L"]))
+    return [name if len(cells[name]) == 1 else f"{name}_{_digest(s)}"
+            for name, s in zip(names, summaries)]
 
 
-def plot_confusion(summary: dict[str, Any]):
+def _digest(summary: dict[str, Any]) -> str:
+    text = f"{summary['encoder']}|{summary['classifier']}"
+    return hashlib.sha256(text.encode()).hexdigest()[:8]
+
+
+def _file_label(spec: str, labels: Mapping[str, str]) -> str:
+    """A classifier's label for a file name, before :func:`_slug`:
+    ``small-cnn-lstm (lr=0.1; width=8)`` → ``small-cnn-lstm lr=0.1 width=8`` (slugged:
+    ``small-cnn-lstm-lr-0-1-width-8``)."""
+    return spec_label(spec, labels).replace(" (", " ").replace("; ", " ").rstrip(")")
+
+
+def plot_confusion(summary: dict[str, Any], labels: Mapping[str, str] | None = None):
     """A summary's confusion matrix, rows normalised per seed and averaged."""
     import matplotlib.pyplot as plt
 
@@ -327,16 +381,18 @@ def plot_confusion(summary: dict[str, Any]):
     ax.set_yticks(range(len(classes)), classes, fontsize=8)
     ax.set_xlabel("predicted")
     ax.set_ylabel("true")
-    ax.set_title(f"{summary['encoder']} / {short_name(summary['classifier'])}, "
+    ax.set_title(f"{summary['encoder']} / {spec_label(summary['classifier'], labels)}, "
                  f"L={summary['L']}", fontsize=9)
     fig.tight_layout()
     return fig
 
 
 def caption(name: str, summaries: Sequence[dict[str, Any]],
-            reference: Sequence[dict[str, Any]]) -> str:
-    """What figure ``name`` shows, for report.md."""
-    curves = _curve_keys(summaries)
+            reference: Sequence[dict[str, Any]], labels: Mapping[str, str] | None = None
+            ) -> str:
+    """What figure ``name`` shows, for report.md (``labels`` as :func:`write_plots`'s)."""
+    labels = _labels(summaries, labels)
+    curves = _curve_keys(summaries, labels)
     several = len({k[:2] for k in curves}) > 1
     if name == "accuracy_vs_L":
         notes = {_curve_label(k, several): band_note(pts) for k, pts in curves.items()}
@@ -354,7 +410,8 @@ def caption(name: str, summaries: Sequence[dict[str, Any]],
         costs = [s["encode_ms_per_frame_mean"] for s in drawn]
         front = pareto_front(list(zip(costs, [s["accuracy_mean"] for s in drawn])))
         members = ", ".join(
-            f"{drawn[i]['encoder']} / {short_name(drawn[i]['classifier'])} L={drawn[i]['L']} "
+            f"{drawn[i]['encoder']} / {spec_label(drawn[i]['classifier'], labels)} "
+            f"L={drawn[i]['L']} "
             f"({costs[i]:.3g} ms, {100 * drawn[i]['accuracy_mean']:.1f} %)" for i in front)
         return ("Accuracy against encode cost (ms per frame on one core, log scale; a cost "
                 f"below {MIN_PLOTTED_COST_MS:g} ms is drawn at {MIN_PLOTTED_COST_MS:g}), "
@@ -364,8 +421,9 @@ def caption(name: str, summaries: Sequence[dict[str, Any]],
     if name == "per_class_vs_L":
         return ("Per-class accuracy against window length L, one panel per class, a line "
                 "per encoder × classifier; means over seeds, no bands.")
-    cell = next((f"{s['encoder']} / {short_name(s['classifier'])}, L={s['L']}"
-                 for s in summaries if name == confusion_name(s)), name)
+    cell = next((f"{s['encoder']} / {spec_label(s['classifier'], labels)}, L={s['L']}"
+                 for s, own in zip(summaries, confusion_names(summaries, labels))
+                 if name == own), name)
     return (f"Confusion matrix of {cell}: each true class's row normalised per seed, then "
             "averaged over seeds.")
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import math
 import statistics
-from typing import Any, Iterable, Sequence
+from collections import Counter
+from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.data.splits import user_folds
 from tactbench.errors import InputError
@@ -58,6 +59,51 @@ def short_name(spec: str) -> str:
         if key.strip() == "estimator" and value.strip():
             return f"{name}:{value.strip()}"
     return name
+
+
+def spec_labels(specs: Iterable[str]) -> dict[str, str]:
+    """Spec → the name the reports show for it, among ``specs`` (those of one run).
+
+    A spec whose :func:`short_name` no other spec shares is shown by it, as always. Specs
+    that share one are told apart by the options that differ among them, by key:
+    ``small-cnn-lstm (width=16)`` and ``small-cnn-lstm (width=8)``, several joined by
+    ``"; "`` (a label holds no comma: contrast labels join factors with commas); an option
+    one of them lacks shows as ``key=default``. Specs still shown alike (the same options
+    spelled in another order) are shown whole.
+    """
+    groups: dict[str, list[str]] = {}
+    for spec in dict.fromkeys(str(s) for s in specs):
+        groups.setdefault(short_name(spec), []).append(spec)
+    labels: dict[str, str] = {}
+    for short, members in groups.items():
+        if len(members) == 1:
+            labels[members[0]] = short
+            continue
+        options = {spec: _options_text(spec) for spec in members}
+        keys = sorted({k for o in options.values() for k in o})
+        differ = [k for k in keys if len({o.get(k) for o in options.values()}) > 1]
+        for spec in members:
+            shown = "; ".join(f"{k}={options[spec].get(k, 'default')}" for k in differ)
+            labels[spec] = f"{short} ({shown})"
+    count = Counter(labels.values())
+    return {spec: spec if count[label] > 1 else label for spec, label in labels.items()}
+
+
+def spec_label(spec: Any, labels: Mapping[str, str] | None = None) -> str:
+    """``spec``'s label in ``labels`` (:func:`spec_labels`); its short name where
+    ``labels`` does not name it."""
+    return (labels or {}).get(str(spec)) or short_name(str(spec))
+
+
+def _options_text(spec: str) -> dict[str, str]:
+    """A spec's options as written (``key`` → value text; a bare first value under
+    ``_``), for labels: no typing, so a value shows as the spec spells it."""
+    options = {}
+    for item in spec.partition(":")[2].split(","):
+        key, eq, value = item.partition("=")
+        if key.strip():
+            options[key.strip() if eq else "_"] = value.strip() if eq else key.strip()
+    return options
 
 
 def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = None
@@ -182,14 +228,15 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
     return a, b
 
 
-def _matches(cell: dict[str, Any], side: dict[str, str]) -> bool:
+def _matches(cell: dict[str, Any], side: dict[str, str], labels: Mapping[str, str]) -> bool:
     for factor, value in side.items():
         got = cell[factor]
         if factor == "L":
             if int(got) != int(value):
                 return False
         elif factor == "classifier":
-            if value not in (str(got), short_name(str(got)), str(got).split(":")[0]):
+            if value not in (str(got), short_name(str(got)), str(got).split(":")[0],
+                             spec_label(got, labels)):
                 return False
         elif str(got) != value:
             return False
@@ -199,11 +246,13 @@ def _matches(cell: dict[str, Any], side: dict[str, str]) -> bool:
 def contrast_pairs(contrast: str, cells: Sequence[dict[str, Any]]) -> list[tuple[int, int]]:
     """The pairs (index of A, index of B) of ``cells`` (dicts of :data:`FACTORS`) that
     ``contrast`` (:func:`parse_contrast`) names: A and B match their sides and agree on
-    every factor the contrast does not set."""
+    every factor the contrast does not set. A side names a classifier by its full spec,
+    its name, its short name or its label among the cells' (:func:`spec_labels`)."""
     a_side, b_side = parse_contrast(contrast)
     rest = [f for f in FACTORS if f not in a_side]
+    labels = spec_labels(c["classifier"] for c in cells)
     return [(i, j) for i, ci in enumerate(cells) for j, cj in enumerate(cells)
-            if i != j and _matches(ci, a_side) and _matches(cj, b_side)
+            if i != j and _matches(ci, a_side, labels) and _matches(cj, b_side, labels)
             and all(ci[f] == cj[f] for f in rest)]
 
 
@@ -241,13 +290,14 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     out: list[dict[str, Any]] = []
     for (dataset, split), keys in blocks.items():
         cells = [dict(zip(FACTORS, key[2:])) for key in keys]
+        labels = spec_labels(c["classifier"] for c in cells)
         todo = [(p.a, p.b, p.factor, p.value_a, p.value_b)
                 for p in pairs_differing_in_one_factor(cells)]
         for text in contrasts:
             a_side, b_side = parse_contrast(text)
             for i, j in contrast_pairs(text, cells):
-                todo.append((i, j, "contrast", _side_label(cells[i], a_side),
-                             _side_label(cells[j], b_side)))
+                todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
+                             _side_label(cells[j], b_side, labels)))
         for i, j, factor, value_a, value_b in todo:
             res = paired_runs(groups[keys[i]], groups[keys[j]], margin=margin, users=users,
                               confidence=confidence)
@@ -289,9 +339,11 @@ def _runs_for_floor(alpha: float) -> int:
     return j
 
 
-def _side_label(cell: dict[str, Any], side: dict[str, str]) -> str:
-    """``encoder=raw,L=6`` with the cell's own values (a classifier by its short name)."""
-    return ",".join(f"{f}={short_name(str(cell[f])) if f == 'classifier' else cell[f]}"
+def _side_label(cell: dict[str, Any], side: dict[str, str],
+                labels: Mapping[str, str] | None = None) -> str:
+    """``encoder=raw,L=6`` with the cell's own values (a classifier by its label in
+    ``labels``, :func:`spec_labels`)."""
+    return ",".join(f"{f}={spec_label(cell[f], labels) if f == 'classifier' else cell[f]}"
                     for f in side)
 
 
@@ -570,13 +622,16 @@ def peak_step(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def failed_cells(rows: Iterable[dict[str, Any]]) -> list[dict[str, str]]:
-    """One line per failed cell: ``encoder``, ``classifier`` (short), ``L``, ``seed``,
-    ``error`` (``Type: message``, first line) and ``key``."""
+    """One line per failed cell: ``encoder``, ``classifier`` (its label among the rows'
+    classifiers, :func:`spec_labels`), ``L``, ``seed``, ``error`` (``Type: message``,
+    first line) and ``key``."""
+    rows = list(rows)
+    labels = spec_labels(r["classifier"] for r in rows)
     out = []
     for r in failed_rows(rows):
         error = r.get("error", {})
         message = str(error.get("message", "")).strip().splitlines()
-        out.append({"encoder": r["encoder"], "classifier": short_name(r["classifier"]),
+        out.append({"encoder": r["encoder"], "classifier": labels[str(r["classifier"])],
                     "L": str(r["L"]), "seed": str(r["seed"]), "key": r["key"],
                     "error": f"{error.get('type', 'Error')}: {message[0] if message else ''}"})
     return out

@@ -16,7 +16,12 @@ from tactbench.paths import atomic_write_text
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import ok_rows, row_status
 from tactbench.runner.system import describe_machines
-from tactbench.runner.summaries import comparisons, summarise, variance_decomposition
+from tactbench.runner.summaries import (
+    comparisons,
+    spec_labels,
+    summarise,
+    variance_decomposition,
+)
 from tactbench.runner.tables import (
     comparisons_markdown,
     failed_cells_markdown,
@@ -89,7 +94,8 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
     atomic_write_text(paths["csv"], rows_csv(rows))
     figures: dict[str, Path] = {}
     if plots and doc["summary"]:
-        figures = write_plots(out, doc["summary"], reference=reference)
+        figures = write_plots(out, doc["summary"], reference=reference,
+                              labels=run_labels(rows, doc["summary"]))
         paths.update(figures)
     atomic_write_text(paths["markdown"], markdown_report(
         doc["summary"], rows, meta or {}, figures, doc["comparisons"], reference=reference,
@@ -132,11 +138,21 @@ def results_document(rows: Sequence[dict[str, Any]], *, meta: dict[str, Any] | N
     return doc
 
 
+def run_labels(rows: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any]] = ()
+               ) -> dict[str, str]:
+    """The name every report of a run shows for each of its classifiers: its short name,
+    with the options that tell it apart where the run has several specs of one
+    (:func:`tactbench.runner.summaries.spec_labels`, over every row, failed ones too)."""
+    return spec_labels([*(r["classifier"] for r in rows),
+                        *(s["classifier"] for s in summaries)])
+
+
 def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
                     variance=()) -> str:
     """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
     comparisons over runs (with per-class and per-user gains), the variance
     decomposition, published reference points, failed cells, figures with captions."""
+    labels = run_labels(rows, summaries)
     done = ok_rows(rows)
     failed = failed_cells_markdown(rows)
     first = done[0] if done else (rows[0] if rows else {})
@@ -164,27 +180,28 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
         "is the step that set it (load encoding, windows, fit, predict, save model, or "
         "\"before this cell\": earlier work in the same process, such as a serial run's "
         "encoding).",
-        "", markdown_table(summaries), "", "## Per-class accuracy (%, mean over seeds)", "",
-        per_class_markdown(summaries), "",
+        "", markdown_table(summaries, labels), "",
+        "## Per-class accuracy (%, mean over seeds)", "", per_class_markdown(summaries, labels),
+        "",
     ]
     if comps:
         lines += ["## Paired comparisons over runs", "", COMPARISONS_TEXT, "",
-                  comparisons_markdown(comps), ""]
+                  comparisons_markdown(comps, labels), ""]
         notes = [c for c in comps if c.get("note")]
         for note in dict.fromkeys(c["note"] for c in notes):
             lines.append(f"- {sum(c['note'] == note for c in notes)} comparison(s): {note}.")
         if notes:
             lines.append("")
-        gains = per_class_gains_markdown(comps)
+        gains = per_class_gains_markdown(comps, labels)
         if gains:
             lines += ["### Per-class gains (B − A, points, 95 % interval over runs)", "",
                       gains, ""]
-        people = per_user_gains_markdown(comps)
+        people = per_user_gains_markdown(comps, labels)
         if people:
             lines += ["### Per-user gains (B − A on each test user's recordings)", "",
                       "A user is helped when B's accuracy on their recordings, averaged "
                       "over the runs that test them, is above A's.", "", people, ""]
-    by_user = per_user_accuracy_markdown(summaries)
+    by_user = per_user_accuracy_markdown(summaries, labels)
     if by_user:
         lines += ["## Per-user accuracy (%, mean over the runs testing the user)", "",
                   by_user, ""]
@@ -193,12 +210,12 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
                   "Runs vary the split and the initialisation separately; each cell's "
                   "accuracy variance split into split, initialisation and test sampling "
                   "(p(1 − p)/n_test), as standard deviations in points.", "",
-                  variance_markdown(variance), ""]
+                  variance_markdown(variance, labels), ""]
     if reference:
         lines += ["## Published reference points", "",
                   "The study's published accuracies (as given to the report), each beside "
                   "our cells of the same encoder (or `encoder / classifier`) and L.", "",
-                  reference_markdown(reference, summaries), ""]
+                  reference_markdown(reference, summaries, labels), ""]
     if failed:
         lines += ["## Failed cells", "",
                   f"{n_failed} cell(s) raised; their rows (with the traceback's last frames) "
@@ -207,7 +224,7 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
     if figures:
         lines += ["## Figures", ""]
     for name, path in figures.items():
-        lines += [f"![{name}]({path.name})", "", f"*{caption(name, summaries, reference)}*",
-                  ""]
+        lines += [f"![{name}]({path.name})", "",
+                  f"*{caption(name, summaries, reference, labels)}*", ""]
     return "\n".join(lines)
 

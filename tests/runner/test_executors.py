@@ -69,7 +69,9 @@ def test_serial_cells_name_the_run_step_that_set_their_peak(monkeypatch):
 
     rows = iter([{"peak_step": BEFORE}, {"peak_step": "fit"}])
     monkeypatch.setattr(executors, "run_cell", lambda job, progress=None: next(rows))
-    job = SimpleNamespace(cell=SimpleNamespace(label=lambda: "raw × logreg L=5 seed=0"))
+    cell = SimpleNamespace(classifier="logreg",
+                           label=lambda labels=None: "raw × logreg L=5 seed=0")
+    job = SimpleNamespace(cell=cell)
     # the run so far: its encoding pass set a peak far above anything a cell reaches
     memory = MemoryTracker(steps=[(BEFORE, 10.0, 10.0), ("encode", 10.0, 1e9)])
     got = []
