@@ -343,10 +343,9 @@ def study(root: Path, m: dict) -> str:
     parts = [run_grid("study", split, [*base, "--split", split], root, reference=reference)
              for split in ("paper", "users")]
     paper, users = parts[0]["results"], parts[1]["results"]
-    # the same grids on the simulator's first version with the study's test window: what
-    # the person model changes (the cells of the report before version 2 was the default)
-    before = [run_grid("study", f"{split}-v1", [*base, "--split", split, *V1], root,
-                       reference=reference) for split in ("paper", "users")]
+    # the same grids on the simulator's first version with the study's test window, as
+    # this report stored them before version 2 became the default: read, not rerun
+    before = [_load(root, "study", f"{split}-v1") for split in ("paper", "users")]
     lines = header("The study, reproduced on the simulator", "study",
                    "the built-in simulator `synthetic-forearm` (version 2, the person "
                    "model: 1900 recordings that start before contact, 38 simulated people, "
@@ -398,7 +397,8 @@ def study(root: Path, m: dict) -> str:
                   "comparisons (every pair differing in one factor, and the contrast); "
                   "results.json has them all, with per-class gains and McNemar per seed.", ""]
         lines += figures(part, Path("study")) + [""]
-    lines += people_change(paper, users, before[0]["results"], before[1]["results"])
+    if None not in before:
+        lines += people_change(paper, users, *before, root)
     lines += ["## What it shows", ""]
     for label, results in (("paper", paper), ("users", users)):
         c5 = comp(results, "encoder", "raw", "farneback", L=5)
@@ -435,14 +435,18 @@ def study(root: Path, m: dict) -> str:
     return "\n".join(lines)
 
 
-#: The simulator's first version with the study's test window (the study report's grids
-#: before version 2, the person model, became the default).
-V1 = ["--dataset", "synthetic-forearm:version=1", "--test-window", "first"]
-
-
-def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict) -> list[str]:
+def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict,
+                  root: Path) -> list[str]:
     """The study report's section on what version 2's people (and its recordings that
-    start before contact, classified by ``vote``) change, at L = 5, from stored results."""
+    start before contact, classified by ``vote``) change, at L = 5, from stored results
+    (the version-1 parts are ``study/{paper,users}-v1``, kept from before the switch)."""
+    commands = []
+    for split in ("paper", "users"):
+        t = root / "study" / f"{split}-v1.timing.json"
+        if t.is_file():
+            info = json.loads(t.read_text())
+            commands.append(f"`{info['command']}` ({info.get('date', '?')}, "
+                            f"{info['wall_s'] / 60:.0f} min)")
     def acc(results, enc):
         s = find(results, encoder=enc, L=5)
         return None if s is None else s["accuracy_mean"]
@@ -455,7 +459,10 @@ def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict) -> l
              "recordings from contact on, the study's test window `first`), kept from this "
              "report before version 2 (people with their own style per gesture, recordings "
              "from before contact to after release, test window `vote`) became the default. "
-             "At L = 5, mean over seeds; the flow gain is paired over runs within each row.",
+             "At L = 5, mean over seeds; the flow gain is paired over runs within each row. "
+             "The version-1 runs (`study/paper-v1`, `study/users-v1`) are read as stored; "
+             "they were made by " + " and ".join(commands) + ", and the same commands with "
+             "`--dataset synthetic-forearm:version=1 --test-window first` remake them.",
              "", "| simulator | split | raw | farneback | flow gain (points, 95 % interval) |",
              "|---|---|---|---|---|"]
     rows = [("version 1", "paper", paper_v1), ("version 1", "users", users_v1),
