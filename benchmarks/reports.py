@@ -855,7 +855,7 @@ def findings(root: Path) -> list[str]:
                  and c["b_better_runs"] == c["runs"]]
         half = [comp(r, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
                 for r in (paper, users)]
-        text = ("[The study, reproduced](docs/reports/study.md) (simulator, "
+        text = ("[The study, reproduced](docs/reports/study.md) (simulator version 2, "
                 f"{paper['comparisons'][0]['runs']} runs, a CPU-sized CNN with a quarter of "
                 "the quick profile's training): at L = 5 Farnebäck flow against the pressure "
                 "image is " + " and ".join(parts) + "; leaving users out, every run favours "
