@@ -151,3 +151,34 @@ def test_people_are_drawn_from_the_documented_distributions():
     a = people.make_session(0, ps[0], "front")
     b = people.make_session(0, ps[0], "side")
     assert a != b and abs(a.force - 1) < 0.4 and abs(a.dx) < 25
+
+
+def test_leaving_people_out_costs_accuracy_on_the_same_recordings(reduced):
+    """benchmarks/people.py's design: every recording tested once by a model that never
+    saw its person (users:folds=5) and once by one that saw the person's other repetitions
+    (group:repetition:folds=5); the difference per users fold, on that fold's recordings."""
+    from tactbench.data.splits import dataset_groups
+
+    ds, x = reduced
+    y, users = ds.labels, np.asarray(ds.users)
+    bench = _bench()
+    diffs = []
+    for seed in range(2):
+        pred = {}
+        for design in (bench.UNSEEN, bench.SEEN):
+            p = np.full(len(y), -1)
+            for fold in make_splits(design, labels=y, users=users, seed=seed,
+                                    groups=dataset_groups(ds)):
+                p[fold.test] = _logreg(x, y, fold.train, fold.test)
+            assert (p >= 0).all()  # each design tests every recording once
+            pred[design] = {"indices": list(range(len(y))), "labels": y.tolist(),
+                            "predictions": p.tolist()}
+        folds = make_splits(bench.UNSEEN, labels=y, users=users, seed=seed)
+        diffs += bench.paired_fold_differences(pred[bench.UNSEEN], pred[bench.SEEN], folds)
+    gap = bench.corrected_kfold_interval(diffs, bench.FOLDS)
+    assert gap["runs"] == 10 and gap["test_train_ratio"] == pytest.approx(0.25)
+    assert gap["high"] < 0, gap  # people unseen: lower, the interval excludes 0
+    # the two designs must have tested the same recordings
+    short = {"indices": [0], "labels": [0], "predictions": [0]}
+    with pytest.raises(SystemExit, match="same recordings"):
+        bench.paired_fold_differences(pred[bench.UNSEEN], short, folds)
