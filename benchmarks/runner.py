@@ -4,8 +4,9 @@
                                 [--repeats N] [--extra ARGS...]
 
 1. From an empty cache: `tactbench run` with its defaults — the study's comparison
-   (raw vs farneback, small-cnn-lstm, L = 5, seeds 0 1 2, paper split, quick profile,
-   built-in synthetic-forearm dataset). Goal: ≤ 180 s on 2 CPU cores (issue 21; it was
+   (raw vs farneback, small-cnn-lstm, L = 5, seeds 0 1 2, paper split, test window
+   vote, quick profile, the built-in synthetic-forearm dataset: version 2 since
+   2026-11-24, whose recordings are about twice version 1's length). Goal: ≤ 180 s on 2 CPU cores (issue 21; it was
    ≤ 10 minutes before).
 2. The identical command again. Goal: ≤ 5 % of the first (nothing is recomputed).
 3. With ``--workers-too``: the same grid into two fresh output folders on the now warm
