@@ -78,3 +78,22 @@ def nolayout_dataset(tmp_path) -> Path:
     path = tmp_path / "nolayout"
     Dataset(name="nolayout", samples=samples, classes=("a", "b"), layout=None).save(path)
     return path
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures write_plots closes, by name (their label), to look at what was drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = {}
+    close = plt.close
+
+    def keep(fig=None):
+        figures[fig.get_label()] = fig
+        close(fig)
+
+    monkeypatch.setattr(plt, "close", keep)
+    return figures

@@ -121,25 +121,6 @@ def test_a_contrast_names_the_variant_of_each_side():
                         "raw"]
 
 
-@pytest.fixture
-def drawn(monkeypatch):
-    """The figures write_plots closes, by name (their label)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures = {}
-    close = plt.close
-
-    def keep(fig=None):
-        figures[fig.get_label()] = fig
-        close(fig)
-
-    monkeypatch.setattr(plt, "close", keep)
-    return figures
-
-
 def test_two_variants_get_their_own_confusion_figures_and_lines(tmp_path, drawn):
     rows = _variant_rows(lengths=(3, 5))
     paths = write_reports(tmp_path / "out", rows)

@@ -332,25 +332,6 @@ def _scored(encoder, seed, L, wrong_a, wrong_b, *, cost=1.0, classifier="logreg"
     return row
 
 
-@pytest.fixture
-def drawn(monkeypatch):
-    """The figures write_plots closes, by name (their label), to look at what was drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures = {}
-    close = plt.close
-
-    def keep(fig=None):
-        figures[fig.get_label()] = fig
-        close(fig)
-
-    monkeypatch.setattr(plt, "close", keep)
-    return figures
-
-
 def _grid(seeds=(0, 1, 2), lengths=(3, 5)):
     rows = []
     for seed in seeds:
