@@ -81,7 +81,10 @@ def test_record_writes_the_bus_with_label_markers(tmp_path, dataset):
     assert result.exit_code == 0, result.output
     doc = json.loads(result.stdout)
     assert doc["messages"] > 0 and doc["label"] == "Twist"
-    assert 0 < doc["bus_load_measured"] < 1
+    # a virtual bus played at 20x has no real capacity, so the load may pass 100 %;
+    # what must hold is that it counts every frame at its nominal length (67 + 8 per byte)
+    bits_per_message = doc["bus_load_measured"] * 1e6 * doc["seconds"] / doc["messages"]
+    assert 67 < bits_per_message <= 67 + 64
     log = read_log(out)
     assert log.taxel_source == "announced"
     [seg] = log.labelled
