@@ -219,9 +219,11 @@ def header(title: str, name: str, what: str, parts: list[dict], m: dict,
     walls = []
     for p in parts:
         t = p["timing"]
+        reused = (f"; {t['skipped']} reused from an earlier run of the same command, "
+                  "whose time is not counted here" if t.get("skipped") else "")
         walls.append(f"`{p['part']}` {t['wall_s'] / 60:.1f} min ({t['computed']} cells "
-                     f"computed on {t['date']}" + (f"; {t['note']}" if t.get("note") else "")
-                     + ")")
+                     f"computed on {t['date']}" + reused
+                     + (f"; {t['note']}" if t.get("note") else "") + ")")
     lines = [f"# {title}", "",
              f"**Regenerate**: `python benchmarks/reports.py {name}`. It runs:", "", "```"]
     lines += cmds + ["```", ""]
@@ -412,9 +414,7 @@ def study(root: Path, m: dict) -> str:
                      f"{len(resolved)} of {len(flow)} window lengths"
                      + (" (" + ", ".join(f"L = {c['L']}: {verdict_words(c, 'raw', 'farneback')}"
                                          for c in resolved) + ")" if resolved else "")
-                     + "; every run favours flow at L = "
-                     + (", ".join(str(c["L"]) for c in flow if c["b_better_runs"] == c["runs"])
-                        or "none") + ".")
+                     + "; " + _unanimous_L(flow) + ".")
         c36 = comp(results, "L", 3, 6, encoder="raw")
         lines.append(f"- {label} split, the study's \"pressure only plateaus from L = 3\": "
                      f"raw {say(c36, 'L=3', 'L=6')}")
@@ -488,6 +488,13 @@ def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict,
                      f"{_gain(g1)} on version 1, {_gain(g2)} on version 2.")
     lines.append("")
     return lines
+
+
+def _unanimous_L(flow: list[dict]) -> str:
+    """Where every run favours flow, in words."""
+    every = [str(c["L"]) for c in flow if c["b_better_runs"] == c["runs"]]
+    return ("every run favours flow at L = " + ", ".join(every) if every
+            else "at no L does every run favour flow")
 
 
 def _gain(c: dict | None) -> str:
@@ -851,15 +858,14 @@ def findings(root: Path) -> list[str]:
                          f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}] "
                          f"({c['b_better_runs']} of {c['runs']} runs higher; "
                          f"{verdict_words(c, 'raw', 'flow')})")
-        every = [c["L"] for c in users["comparisons"] if c["factor"] == "encoder"
-                 and c["b_better_runs"] == c["runs"]]
+        every_c = [c for c in users["comparisons"] if c["factor"] == "encoder"]
         half = [comp(r, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
                 for r in (paper, users)]
         text = ("[The study, reproduced](docs/reports/study.md) (simulator version 2, "
                 f"{paper['comparisons'][0]['runs']} runs, a CPU-sized CNN with a quarter of "
                 "the quick profile's training): at L = 5 Farnebäck flow against the pressure "
-                "image is " + " and ".join(parts) + "; leaving users out, every run favours "
-                "flow at L = " + (", ".join(map(str, sorted(every))) or "none") + ".")
+                "image is " + " and ".join(parts) + "; leaving users out, "
+                + _unanimous_L(sorted(every_c, key=lambda c: c["L"])) + ".")
         if all(half):
             text += (" The study's \"flow at half the L beats pressure\", paired over the "
                      "same runs: farneback at L = 3 minus raw at L = 6 is " + " and ".join(
@@ -985,7 +991,8 @@ def _verdict_count(results: list[dict]) -> str:
     comps = [c for r in results for c in r["comparisons"]]
     held = [c for c in comps if c["verdict"] in ("A better", "B better", "equivalent")]
     runs = sorted({c["runs"] for c in comps})
-    return (f"Of its {len(comps)} paired comparisons, {len(held)} reach a verdict with the "
+    return (f"Of its {len(comps)} paired comparisons, {len(held)} "
+            f"{'reaches' if len(held) == 1 else 'reach'} a verdict with the "
             f"run as the unit ({'/'.join(map(str, runs))} runs; "
             "[why](docs/statistics.md)).")
 
