@@ -24,7 +24,11 @@ size the runner's quick profile images at ~5 mm/px):
 5. ``paper-step``: the peak RSS of one ``paper``-profile ``cnn-lstm`` training step
    on the CPU (224 px, batch 16 × 5 frames) without and with gradient
    checkpointing, each in a fresh process.
-6. ``paper-epoch`` (only with CUDA): one epoch of the paper profile
+6. ``vote``: prediction on every window of 150 test sequences (the ``vote`` test window,
+   the runner's default) by a quick-profile ``small-cnn-lstm``, each distinct frame
+   encoded once (the default) against every frame of every window (the path before),
+   interleaved; seconds per test sequence and the largest difference in probability.
+7. ``paper-epoch`` (only with CUDA): one epoch of the paper profile
    (``cnn-lstm``, 224 px, SGD 1e-3, batch 16) on the GPU.
 
 Usage::
@@ -513,6 +517,47 @@ def measure_compile(train, *, steps: int, repeats: int) -> dict:
     return out
 
 
+def measure_vote(*, repeats: int, n_sequences: int = 150) -> dict:
+    """Prediction of every window of ``n_sequences`` test sequences (``vote``), shared
+    frames against the plain path, interleaved (best of ``repeats``)."""
+    import tactbench.classifiers.base as base
+    from tactbench.data.windows import training_windows
+    from tactbench.plugins import load_registry
+    from tactbench.profiles import profile_options
+
+    seqs, labels = synthetic_sequences(n_sequences + 50, channels=1, seed=3)
+    train = training_windows(seqs[:50], labels[:50], 5)
+    test = training_windows(seqs[50:], labels[50:], 5)
+    opts = {**profile_options("quick", "small-cnn-lstm"), "epochs": 1,
+            "windows_per_epoch": 256}
+    clf = load_registry().build("classifier", "small-cnn-lstm", **opts)
+    clf.fit(train, seed=0)  # the weights do not matter for speed; some training does
+    shared_path = base.shares_at_inference
+    plain_path = lambda windows, net: False  # noqa: E731 - the path before
+    best = {"shared": float("inf"), "plain": float("inf")}
+    proba = {}
+    try:
+        for _ in range(repeats):
+            for label, path in (("plain", plain_path), ("shared", shared_path)):
+                base.shares_at_inference = path
+                t0 = time.perf_counter()
+                proba[label] = clf.predict_proba(test)
+                best[label] = min(best[label], time.perf_counter() - t0)
+    finally:
+        base.shares_at_inference = shared_path
+    out = {"sequences": n_sequences, "windows": len(test), "L": 5,
+           "plain_s": best["plain"], "shared_s": best["shared"],
+           "plain_ms_per_sequence": 1e3 * best["plain"] / n_sequences,
+           "shared_ms_per_sequence": 1e3 * best["shared"] / n_sequences,
+           "speedup": best["plain"] / best["shared"],
+           "max_abs_probability_difference": float(np.abs(proba["plain"]
+                                                          - proba["shared"]).max())}
+    print(f"vote prediction, {len(test)} windows of {n_sequences} sequences: plain "
+          f"{best['plain']:.2f} s, shared frames {best['shared']:.2f} s "
+          f"({out['speedup']:.2f}×)", flush=True)
+    return out
+
+
 def measure_threads(train, *, steps: int, repeats: int) -> dict:
     """A grid of cells on 2 cores: one cell with 2 threads at a time, or two cells with
     1 thread each at once. Windows per second of one step loop at 1 and 2 threads
@@ -605,8 +650,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--channels", type=int, nargs="+", default=[1, 3])
     ap.add_argument("--skip", nargs="*", default=[],
-                    choices=["overhead", "speed", "compile", "threads", "quick", "paper-step",
-                             "paper-epoch"])
+                    choices=["overhead", "speed", "compile", "threads", "vote", "quick",
+                             "paper-step", "paper-epoch"])
     ap.add_argument("--out", type=Path, default=Path("docs/benchmarks/training.json"))
     ap.add_argument("--paper-step", choices=["off", "on"],
                     help="(internal) one paper-profile cnn-lstm step in this process; "
@@ -654,6 +699,9 @@ def main(argv=None) -> int:
         save()
     if "compile" not in args.skip:
         result["compile"] = measure_compile(small, steps=10, repeats=args.repeats)
+        save()
+    if "vote" not in args.skip:
+        result["vote"] = measure_vote(repeats=args.repeats)
         save()
     if "quick" not in args.skip:
         result["quick"] = measure_quick(args.sequences, args.seeds, args.channels)

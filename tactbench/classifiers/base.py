@@ -320,6 +320,18 @@ def _frames_per_chunk(frame_shape: Sequence[int], frames_per_item: int = 1) -> i
     return max(1, READ_CHUNK_BYTES // max(item, 1))
 
 
+def shares_at_inference(windows: Windows | np.ndarray, net: Any) -> bool:
+    """Whether prediction on ``windows`` encodes each distinct frame once: windows that
+    overlap (two of one sequence, ``L`` ≥ 2) on a :class:`~tactbench.classifiers.nets.
+    SequenceNet` (a plugin's own network need not accept
+    :class:`~tactbench.classifiers.nets.SharedWindows`). One window per sequence
+    (``first``, ``onset``) keeps the plain path."""
+    from tactbench.classifiers.nets import SequenceNet
+
+    return (isinstance(windows, Windows) and windows.L >= 2 and isinstance(net, SequenceNet)
+            and len(np.unique(windows.seq_index)) < len(windows))
+
+
 def read_windows(windows: Windows | np.ndarray, index: np.ndarray | slice,
                  prepare: Callable[[Any], Any] | None = None):
     """Windows ``index`` as one float32 tensor ``(B, L, *prepared frame)``.
@@ -697,12 +709,20 @@ class TorchSequenceClassifier(SequenceClassifier):
     # -- predict -----------------------------------------------------------------------
 
     def predict_proba(self, x: Windows | np.ndarray) -> np.ndarray:
-        """Class probabilities ``(B, K)`` float32, in batches, without gradients."""
+        """Class probabilities ``(B, K)`` float32, in batches, without gradients.
+
+        Overlapping windows of one sequence (every window of it, as the ``vote`` test
+        window classifies) send each distinct frame of a batch through the frame encoder
+        once (:func:`shares_at_inference`): in evaluation mode a frame's features do not
+        depend on the other frames of its batch, so this is the same arithmetic up to
+        float rounding, with up to ``L``× less CNN work.
+        """
         import torch
 
         x = self._check_input(x)
         net, dev = self.net, self._device
         precision = self._precision or precision_for(dev, self.amp)
+        share = shares_at_inference(x, net)
         was_training = net.training
         net.eval()
         out = []
@@ -711,7 +731,10 @@ class TorchSequenceClassifier(SequenceClassifier):
                 step = self._eval_step(x, net)
                 for lo in range(0, len(x), step):
                     # read and resized in sub-batches: the raw batch is never whole
-                    xb = read_windows(x, slice(lo, lo + step), net.prepare).to(dev)
+                    xb = read_windows(x, slice(lo, lo + step), net.prepare)
+                    if share:
+                        xb = share_frames(x, np.arange(lo, min(lo + step, len(x))), xb)
+                    xb = xb.to(dev)
                     with precision.autocast(dev):
                         logits = net(xb)
                     out.append(torch.softmax(logits.float(), dim=1).cpu().numpy())

@@ -18,7 +18,7 @@ from tactbench.classifiers.efficientnet import EfficientNetB0
 from tactbench.classifiers.nets import SequenceNet, SharedWindows, SmallCNN, checkpointed
 from tactbench.classifiers.training import epoch_order
 from tactbench.classifiers.conformance import tiny_windows
-from tactbench.data.windows import Windows, training_windows
+from tactbench.data.windows import Windows, test_windows, training_windows
 from tactbench.errors import InputError
 from tactbench.plugins import load_registry
 
@@ -276,3 +276,58 @@ def test_windows_grouping_needs_no_sorted_windows():
                        win.labels[perm], win.L)
     a, b = window_runs(win), window_runs(shuffled)
     assert np.array_equal(a[perm], b)
+
+
+# --------------------------------------------------------------- shared frames, predicting
+
+
+@pytest.mark.parametrize("spec", [
+    "small-cnn-lstm:epochs=1,input_size=8,width=4,windows_per_epoch=40,batch_size=8",
+    "taxel-lstm:epochs=1,windows_per_epoch=32,batch_size=8",
+])
+def test_voting_windows_encode_each_frame_once_with_the_same_probabilities(
+        monkeypatch, spec):
+    """Every window of a test sequence (the ``vote`` test window) overlaps its
+    neighbours: prediction encodes each distinct frame once, batch boundaries included,
+    and gives the plain path's probabilities."""
+    import tactbench.classifiers.base as base
+
+    train, _ = tiny_windows(1 if spec.startswith("taxel") else 3, n=24, L=3)
+    clf = load_registry().build("classifier", spec)
+    clf.fit(train, seed=0)
+    clf.eval_batch_size = 7  # windows of one sequence split across forward passes
+    vote = training_windows(train.sequences, train.labels[np.unique(train.seq_index,
+                                                                     return_index=True)[1]], 3)
+    assert base.shares_at_inference(vote, clf.net)
+    encoded = []
+    hook = clf.net.encoder.register_forward_hook(
+        lambda module, args, out: encoded.append(len(args[0])))
+    shared = clf.predict_proba(vote)
+    n_shared = sum(encoded)
+    encoded.clear()
+    monkeypatch.setattr(base, "shares_at_inference", lambda windows, net: False)
+    plain = clf.predict_proba(vote)
+    hook.remove()
+    np.testing.assert_allclose(shared, plain, rtol=1e-5, atol=1e-6)
+    assert sum(encoded) == 3 * len(vote)
+    # per forward pass, each distinct (sequence, frame) once, and one blank for padding
+    lengths = np.array([s.shape[0] for s in vote.sequences])
+    distinct = 0
+    for lo in range(0, len(vote), 7):
+        seq = vote.seq_index[lo:lo + 7, None]
+        pos = vote.starts[lo:lo + 7, None] + np.arange(3)
+        distinct += len({(int(a), int(b)) if b < lengths[a] else "blank"
+                         for a, b in zip(np.broadcast_to(seq, pos.shape).ravel(), pos.ravel())})
+    assert n_shared == distinct < sum(encoded)
+
+
+def test_one_window_per_sequence_keeps_the_plain_path():
+    from tactbench.classifiers.base import shares_at_inference
+
+    seqs, labels = _seqs()
+    net = SequenceNet(SmallCNN(2, 4, 2), frame_shape=(2, 9, 11), n_classes=3, hidden=6,
+                      fc=8, dropout=0.0, input_size=8)
+    assert not shares_at_inference(test_windows(seqs, labels, 4), net)  # `first`
+    assert not shares_at_inference(training_windows(seqs, labels, 1), net)  # L = 1
+    assert shares_at_inference(training_windows(seqs, labels, 4), net)
+    assert not shares_at_inference(training_windows(seqs, labels, 4), torch.nn.Identity())
