@@ -281,11 +281,14 @@ def _check_agreement(header: dict[str, Any], p: Path) -> None:
                                 f"window length {config['L']}")
     ids = meta.get("taxel_ids")
     shape = config["frame_shape"]
-    if ids is not None and len(shape) == 1 and (not isinstance(ids, list)
-                                                or len(ids) != shape[0]):
+    # An encoder of taxel vectors gives C values per taxel (frame-diff: the value and its
+    # change), so a network's vectors hold a whole multiple of the taxels.
+    if ids is not None and len(shape) == 1 and (not isinstance(ids, list) or not ids
+                                                or shape[0] % len(ids) != 0):
         raise ModelFileError(p, f"metadata 'taxel_ids' names "
                                 f"{len(ids) if isinstance(ids, list) else '?'} taxels, but "
-                                f"the network takes vectors of {shape[0]}")
+                                f"the network takes vectors of {shape[0]} values, not a "
+                                "whole number per taxel")
 
 
 def _check_finite(tensors: dict[str, Any], p: Path) -> None:

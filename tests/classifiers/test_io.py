@@ -290,7 +290,8 @@ def test_a_format_2_file_is_verified_as_written_then_read_as_format_3(tmp_path,
     (lambda h: h.update(classifier=7), "'classifier' must be a classifier name"),
     (lambda h: h["metadata"].update(L=9), "metadata 'L' 9 differs"),
     (lambda h: h["metadata"].update(taxel_ids=[1, 2]), "names 2 taxels, but the network "
-                                                       "takes vectors of 5"),
+                                                       "takes vectors of 5 values"),
+    (lambda h: h["metadata"].update(taxel_ids=[]), "names 0 taxels"),
 ])
 def test_header_fields_of_the_wrong_type_or_value_are_one_line(fitted, tmp_path, edit, message):
     clf, _ = fitted
@@ -315,3 +316,21 @@ def test_the_error_survives_pickling_to_another_process():
     err = pickle.loads(pickle.dumps(ModelFileError("m.safetensors", "checksum differs")))
     assert isinstance(err, CorruptArtefactError) and str(err) == "m.safetensors: checksum differs"
     assert (err.artefact, err.problem) == ("m.safetensors", "checksum differs")
+
+
+def test_vectors_of_several_values_per_taxel_read_back(tmp_path):
+    """An encoder of taxel vectors may give C values per taxel (frame-diff: 2N): the
+    model's metadata names the N taxels, and the file reads back (it was refused as
+    damaged, so a rerun with --save-models retrained it every time)."""
+    from tactbench.data.windows import training_windows
+
+    rng = np.random.default_rng(0)
+    seqs = [rng.random((4, 6), dtype=np.float32) + label for label in (0, 1) * 4]
+    clf = REGISTRY.build("classifier", "logreg", classes=2)
+    clf.fit(training_windows(seqs, np.array([0, 1] * 4), 2), None, seed=0, device="cpu",
+            progress=None)
+    path = save_model(clf, tmp_path / "m.safetensors", {"taxel_ids": [3, 7, 11]})
+    back, meta = load_model(path, registry=REGISTRY)
+    assert meta["taxel_ids"] == [3, 7, 11] and back.frame_shape == (6,)
+    bad = save_model(clf, tmp_path / "bad.safetensors", {"taxel_ids": [3, 7, 11, 12]})
+    _one_line_model_error(bad, "names 4 taxels, but the network takes vectors of 6 values")

@@ -110,6 +110,18 @@ def test_saved_models_work_with_live(tmp_path, tiny_scene, cache):
     assert again.computed == 1 and path.exists()
 
 
+def test_saved_models_of_multi_value_taxel_vectors_are_reused(tiny_scene, cache):
+    """frame-diff on taxel vectors gives 2 values per taxel: its saved model reads back,
+    so a rerun computes nothing (it was refused as damaged and retrained every time)."""
+    scene = tiny_scene(encoders=["frame-diff"], seeds=[0], save_models=True,
+                       input="vectors",
+                       classifiers=["taxel-lstm:epochs=1,windows_per_epoch=16,batch_size=8"])
+    first = run(scene, progress=False, cache=cache)
+    assert first.computed == 1 and first.failed == []
+    again = run(scene, progress=False, cache=cache)
+    assert (again.computed, again.skipped) == (0, 1)
+
+
 @pytest.mark.slow
 def test_a_killed_run_loses_only_the_cell_in_progress(tmp_path):
     out = tmp_path / "out"
