@@ -191,8 +191,10 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
 
     Each side names the factors (of :data:`FACTORS`) it sets, ``factor=value`` joined by
     commas; both sides name the same factors; the factors neither names are shared, so
-    the contrast is made once for each of their combinations in the run. The difference
-    is B − A. Raises :class:`InputError` naming the mistake.
+    the contrast is made once for each of their combinations in the run. An encoder or
+    classifier spec keeps its own commas (``encoder=farneback:levels=3,winsize=9,L=3``):
+    a comma starts a new factor only where a factor's name and ``=`` follow it. The
+    difference is B − A. Raises :class:`InputError` naming the mistake.
     """
     example = "e.g. encoder=raw,L=6..encoder=farneback,L=3"
     if not isinstance(text, str) or text.count("..") != 1:
@@ -200,7 +202,7 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
     sides = []
     for part in text.split(".."):
         side: dict[str, str] = {}
-        for item in part.split(","):
+        for item in _contrast_items(part):
             factor, eq, value = item.partition("=")
             factor, value = factor.strip(), value.strip()
             if not eq or not factor or not value:
@@ -226,6 +228,20 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
     if a == b:
         raise InputError(f"contrast {text!r} compares a cell with itself")
     return a, b
+
+
+def _contrast_items(side: str) -> list[str]:
+    """One side of a contrast split into its ``factor=value`` items: a comma-separated
+    piece that does not start with a factor's name and ``=`` continues the spec before
+    it (an option of an encoder or classifier spec, ``farneback:levels=3,winsize=9``)."""
+    items: list[str] = []
+    for piece in side.split(","):
+        starts_factor = piece.partition("=")[0].strip() in FACTORS
+        if items and not starts_factor and ":" in items[-1]:
+            items[-1] += "," + piece
+        else:
+            items.append(piece)
+    return items
 
 
 def _matches(cell: dict[str, Any], side: dict[str, str], labels: Mapping[str, str]) -> bool:

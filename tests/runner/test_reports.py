@@ -538,3 +538,19 @@ def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differe
     assert plain["df"] == 3 and plain["difference"] == pytest.approx(c["difference"])
     assert plain["method"] == "corrected repeated 5-fold t (Bouckaert–Frank)"
     assert c["permutation_p"] == plain["permutation_p"]  # the sign-flip is over seeds
+
+
+def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():
+    from tactbench.errors import InputError
+    from tactbench.runner.summaries import parse_contrast
+
+    a, b = parse_contrast("encoder=farneback:levels=3,winsize=9,L=3"
+                          "..encoder=dis:preset=fast,L=6")
+    assert a == {"encoder": "farneback:levels=3,winsize=9", "L": "3"}
+    assert b == {"encoder": "dis:preset=fast", "L": "6"}
+    a, b = parse_contrast("classifier=small-cnn-lstm:width=8,epochs=2"
+                          "..classifier=small-cnn-lstm")
+    assert a == {"classifier": "small-cnn-lstm:width=8,epochs=2"}
+    # a plain value takes no continuation: a stray item is still a mistake
+    with pytest.raises(InputError, match="unknown factor 'winsize'"):
+        parse_contrast("encoder=raw,winsize=9..encoder=dis,winsize=9")
