@@ -12,7 +12,8 @@ Nothing is computed twice:
   version, so each encoding is computed once across runs;
 - each finished cell is written at once, atomically, to ``OUT/cells/<key>.json``
   (:class:`ResultStore`); running the same scene again skips finished cells, and a
-  run killed mid-cell loses only that cell.
+  run killed mid-cell loses only that cell. An out folder without its ``cells/`` (git
+  ignores it) gets the rows its ``results.json`` keeps put back, verified.
 
 A cell that raises is stored as a *failed* row (error type, message, last traceback
 frames) and the rest of the grid goes on; the next run retries it.

@@ -19,7 +19,7 @@ from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.scene import Scene
-from tactbench.runner.results import ResultStore, failed_rows, ok_rows
+from tactbench.runner.results import REPORT_JSON, ResultStore, failed_rows, ok_rows
 from tactbench.runner.system import MemoryTracker, git_revision
 from tactbench.ui import Progress
 
@@ -81,7 +81,13 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
         store.clean()
-        claim = store.claim(c.key for c in p.cells)  # one grid per out folder
+        claim = store.claim((c.key for c in p.cells), p.identities)  # one grid per folder
+        if not scene.rerun:  # rows results.json keeps and cells/ lacks (git ignores it)
+            restored = store.restore(p.identities)
+            if restored:
+                log.warning("tactbench: %d cell row(s) put back into %s from %s "
+                            "(verified); not computed again", len(restored), store.cells,
+                            store.out / REPORT_JSON)
         models = Path(scene.out) / "models" if scene.save_models else None
         pending = [c for c in p.cells if scene.rerun
                    or not store.finished(c.key, p.identities[c.key])

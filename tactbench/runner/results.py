@@ -17,6 +17,12 @@ identity): a damaged row (truncated, edited, another cell's copied under this na
 reported in one warning line and treated as missing, so the run recomputes the cell.
 Rows written before checksums existed have none to verify and are checked for shape
 only.
+
+``OUT/results.json`` keeps every row of the report too, as stored (key and checksum
+included). ``OUT/cells`` is what git ignores and what a copy of a report folder often
+leaves behind, so a run puts back the rows of its planned cells that ``cells`` lacks and
+``results.json`` holds (:meth:`ResultStore.restore`), each verified as a cell file is
+(and required to have its checksum), instead of computing them again.
 """
 
 from __future__ import annotations
@@ -49,6 +55,15 @@ COST_FIELDS = ("encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "p
 
 #: A cell file larger than this is not a row tactbench wrote (rows are a few kB).
 ROW_MAX_BYTES = 16 << 20
+
+#: The report document of an out folder that keeps every row (written by
+#: :func:`tactbench.runner.writers.write_reports`, which imports this module).
+REPORT_JSON = "results.json"
+
+#: Identity fields that a cell's identity leaves out at their default (see
+#: :func:`tactbench.runner.planning.cell_identity`), with that default.
+IDENTITY_DEFAULTS = {"test_window": "first", "precision": "float32", "init_seed": None,
+                     "input": None}
 
 
 def row_status(row: dict[str, Any]) -> str:
@@ -219,6 +234,43 @@ class ResultStore:
         atomic_write_text(self.path(row["key"]), text)
         return row
 
+    def restore(self, identities: dict[str, dict[str, Any]]) -> list[str]:
+        """Put back the rows of planned cells that ``OUT/cells`` lacks and
+        ``OUT/results.json`` holds; returns their keys.
+
+        ``identities``: planned cell key → identity. A row is put back only when it is a
+        sound ``ok`` row of that cell (:func:`check_row` with the planned identity) and
+        has its checksum (results.json is a document people copy, merge and edit); any
+        other is named in one warning line and its cell is computed again.
+        """
+        missing = {k: v for k, v in identities.items()
+                   if not (self.path(k).exists() or self.path(k).is_symlink())}
+        report = self.out / REPORT_JSON
+        if not missing or not report.is_file():
+            return []
+        try:
+            doc = json.loads(report.read_bytes())
+        except (OSError, ValueError, RecursionError) as exc:
+            log.warning("tactbench: warning: %s cannot be read (%s); its rows are not "
+                        "reused", report, exc)
+            return []
+        rows = doc.get("rows") if isinstance(doc, dict) else None
+        restored: list[str] = []
+        for row in rows if isinstance(rows, list) else []:
+            key = row.get("key") if isinstance(row, dict) else None
+            if not isinstance(key, str) or key not in missing or row_status(row) != OK:
+                continue
+            problem = check_row(row, key, missing[key]) if "checksum" in row \
+                else "has no checksum to verify it"
+            if problem is not None:
+                log.warning("tactbench: warning: the row of cell %s in %s %s; the cell is "
+                            "computed again", key, report, problem)
+                continue
+            self.put(row)
+            restored.append(key)
+            del missing[key]
+        return restored
+
     def clean(self) -> list[Temporary]:
         """Remove temporary row files whose writing process is gone; returns them."""
         return remove_orphans(self.cells)
@@ -229,10 +281,14 @@ class ResultStore:
 
     # ------------------------------------------------------- runs sharing an out folder
 
-    def claim(self, keys: Iterable[str]) -> Path:
+    def claim(self, keys: Iterable[str],
+              identities: dict[str, dict[str, Any]] | None = None) -> Path:
         """Refuse a grid that would drop another grid's cells from the report of this out
         folder, then mark the folder as used by this run (delete the returned file when
-        the run ends; a claim whose process is gone is ignored, then cleaned).
+        the run ends; a claim whose process is gone is ignored, then cleaned). With
+        ``identities`` (planned key → identity) the refusal also says how a stored cell
+        differs from the nearest planned one (``its test_window is 'first', this run's
+        'vote'``): what keeps it from being reused.
 
         The rule: one out folder holds one grid, and a run may extend it (more seeds,
         L, encoders) but not leave out cells already there: those are another grid's,
@@ -246,7 +302,7 @@ class ResultStore:
                        if not p.name.startswith(".") and p.stem not in planned) \
             if self.cells.is_dir() else []
         if stray:
-            first = _describe(self.path(stray[0]))
+            first = _describe(self.path(stray[0]), identities)
             raise InputError(f"out folder {out} holds {len(stray)} cell(s) of another grid "
                              f"({first}) that this run does not plan, and its report "
                              f"would leave them out; give a new --out, or a grid that "
@@ -285,14 +341,44 @@ def _command() -> str:
     return " ".join(["tactbench", *sys.argv[1:]])
 
 
-def _describe(path: Path) -> str:
+def _describe(path: Path, identities: dict[str, dict[str, Any]] | None = None) -> str:
     """``encoder × classifier L=.. seed=.. from `command``` for a stored row, as far as
-    it reads."""
+    it reads; with the planned ``identities``, also how it differs from the nearest."""
     try:
         row = json.loads(path.read_bytes()[:ROW_MAX_BYTES])
         label = (f"{row['encoder']} × {str(row['classifier']).split(':')[0]} L={row['L']} "
                  f"seed={row['seed']}")
         command = (row.get("run") or {}).get("command")
-        return label + (f", from `{command}`" if command else "")
+        label += f", from `{command}`" if command else ""
     except Exception:  # noqa: BLE001 — only a description; the file is named instead
         return path.name
+    differences = min((identity_differences(row, i) for i in (identities or {}).values()),
+                      key=len, default=[])
+    if differences:
+        label += "; " + ", ".join(
+            f"its {field} is {_short(mine)}, this run's {_short(planned)}"
+            for field, mine, planned in differences[:3])
+        label += ", …" if len(differences) > 3 else ""
+    return label
+
+
+def identity_differences(row: dict[str, Any], identity: dict[str, Any],
+                         ) -> list[tuple[str, Any, Any]]:
+    """``(field, row's value, identity's value)`` for each identity field in which a
+    stored ``row`` differs from a planned cell ``identity`` (a field an identity leaves
+    out at its default, :data:`IDENTITY_DEFAULTS`, counts as that default on both
+    sides)."""
+    identity = json.loads(json.dumps(identity))  # tuples as lists, as a row reads back
+    fields = [*identity, *(f for f in IDENTITY_DEFAULTS if f not in identity)]
+    differences = []
+    for field in fields:
+        default = IDENTITY_DEFAULTS.get(field)
+        mine, planned = row.get(field, default), identity.get(field, default)
+        if mine != planned:
+            differences.append((field, mine, planned))
+    return differences
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:39] + "…"

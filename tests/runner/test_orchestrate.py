@@ -78,6 +78,30 @@ def test_a_failing_cell_does_not_end_the_grid_and_a_rerun_retries_only_it(
            [r["finished"] for r in first.ok]
 
 
+def test_a_report_folder_copied_without_its_cells_is_not_computed_again(
+        tmp_path, tiny_scene, cache, caplog):
+    # git ignores OUT/cells: a report folder from a clone, or moved with `git mv` and
+    # checked out elsewhere, has results.json (every row, with its checksum) and no cells
+    import shutil
+
+    from tactbench.runner.writers import write_reports
+
+    scene = tiny_scene(encoders=["raw"], classifiers=[FAST_CLF], seeds=[0, 1],
+                       out=str(tmp_path / "paper"))
+    first = run(scene, progress=False, cache=cache)
+    write_reports(scene.out, first.rows, plots=False)
+    moved = tmp_path / "paper-v1"
+    shutil.copytree(scene.out, moved, ignore=shutil.ignore_patterns("cells"))
+    again = run(replace(scene, out=str(moved)), progress=False, cache=cache)
+    assert (again.computed, again.skipped) == (0, 2)
+    assert again.rows == first.rows  # the rows as computed, put back into cells/
+    assert f"2 cell row(s) put back into {moved / 'cells'}" in caplog.text
+    # --rerun still recomputes every cell
+    shutil.rmtree(moved / "cells")
+    assert run(replace(scene, out=str(moved), rerun=True), progress=False,
+               cache=cache).computed == 2
+
+
 def test_an_extra_plugin_trains_its_cells(tiny_scene, cache, fake_registry):
     scene = tiny_scene(encoders=["raw"], classifiers=["added-logreg:max_iter=20"], seeds=[0])
     (row,) = run(scene, registry=fake_registry, progress=False, cache=cache).rows

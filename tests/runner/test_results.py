@@ -111,3 +111,66 @@ def test_temporary_row_files_of_dead_processes_are_removed(tmp_path):
     alive.write_text("{")
     assert [t.path for t in store.clean()] == [dead]
     assert sorted(p.name for p in store.cells.iterdir()) == [alive.name, "a.json"]
+
+
+def _report(tmp_path, rows):
+    """An out folder as git keeps it: results.json with ``rows``, no cells/ folder."""
+    import json
+
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    (tmp_path / "results.json").write_text(json.dumps({"meta": {}, "rows": rows}))
+
+
+def test_rows_kept_in_results_json_are_put_back_when_cells_lacks_them(tmp_path, caplog):
+    import json
+
+    made = ResultStore(tmp_path / "made")  # where the rows were computed
+    identity = {"dataset_hash": "h1", "seed": 0}
+    rows = [made.put({**RESULT, **identity, "key": k, "status": "ok", "accuracy": 0.5})
+            for k in ("a", "b", "c", "d", "e")]
+    rows[1] = {**rows[1], "accuracy": 0.9}  # edited: no longer matches its checksum
+    rows[2] = {k: v for k, v in rows[2].items() if k != "checksum"}  # nothing to verify
+    rows.append(made.put({**CELL, **identity, "key": "f", "status": "failed",
+                          "error": {"type": "RuntimeError"}}))
+    _report(tmp_path / "copy", rows)
+    store = ResultStore(tmp_path / "copy")
+    store.put({**RESULT, **identity, "key": "d", "status": "ok", "accuracy": 0.25})
+    planned = {k: identity for k in ("a", "b", "c", "d", "f", "g")}
+    planned["e"] = {"dataset_hash": "h2", "seed": 0}  # another dataset: not this cell
+
+    assert store.restore(planned) == ["a"]
+    assert store.finished("a", identity) and store.read("a")["accuracy"] == 0.5
+    assert json.loads(store.path("a").read_text()) == rows[0]  # the row as computed
+    assert store.read("d")["accuracy"] == 0.25  # a row cells/ holds is left as it is
+    for key in ("b", "c", "e", "f", "g"):  # computed again
+        assert not store.path(key).exists(), key
+    assert "cell b in" in caplog.text and "does not match its checksum" in caplog.text
+    assert "cell c in" in caplog.text and "has no checksum" in caplog.text
+    assert "records dataset_hash = 'h1'" in caplog.text
+    assert store.restore(planned) == []  # nothing left to put back
+
+
+def test_an_unreadable_results_json_is_not_reused_and_says_so(tmp_path, caplog):
+    (tmp_path / "results.json").write_text('{"rows": [')
+    store = ResultStore(tmp_path)
+    assert store.restore({"a": {}}) == [] and not store.path("a").exists()
+    assert "results.json cannot be read" in caplog.text
+    _report(tmp_path, "not a list")
+    assert store.restore({"a": {}}) == []
+
+
+def test_a_refused_grid_is_told_how_the_stored_cells_differ(tmp_path):
+    from tactbench.errors import InputError
+
+    store = ResultStore(tmp_path)
+    stored = {"dataset_hash": "h1", "L": 3, "seed": 0}  # made with test window "first"
+    store.put({**RESULT, **stored, "key": "old", "status": "ok", "accuracy": 0.5,
+               "test_window": "first"})
+    planned = {"new": {**stored, "test_window": "vote"},
+               "far": {**stored, "dataset_hash": "h2", "seed": 1, "test_window": "vote"}}
+    with pytest.raises(InputError, match=r"1 cell\(s\) of another grid \(raw × logreg L=3 "
+                                         r"seed=0; its test_window is 'first', this run's "
+                                         r"'vote'\)"):
+        store.claim(planned, planned)
+    with pytest.raises(InputError, match=r"its dataset_hash is 'h1', this run's 'h2'"):
+        store.claim(["x"], {"x": {**stored, "dataset_hash": "h2"}})
