@@ -245,20 +245,13 @@ class ResultStore:
         """
         missing = {k: v for k, v in identities.items()
                    if not (self.path(k).exists() or self.path(k).is_symlink())}
+        if not missing:
+            return []
         report = self.out / REPORT_JSON
-        if not missing or not report.is_file():
-            return []
-        try:
-            doc = json.loads(report.read_bytes())
-        except (OSError, ValueError, RecursionError) as exc:
-            log.warning("tactbench: warning: %s cannot be read (%s); its rows are not "
-                        "reused", report, exc)
-            return []
-        rows = doc.get("rows") if isinstance(doc, dict) else None
         restored: list[str] = []
-        for row in rows if isinstance(rows, list) else []:
-            key = row.get("key") if isinstance(row, dict) else None
-            if not isinstance(key, str) or key not in missing or row_status(row) != OK:
+        for row in self._report_rows(warn=True):
+            key = row["key"]
+            if key not in missing or row_status(row) != OK:
                 continue
             problem = check_row(row, key, missing[key]) if "checksum" in row \
                 else "has no checksum to verify it"
@@ -270,6 +263,23 @@ class ResultStore:
             restored.append(key)
             del missing[key]
         return restored
+
+    def _report_rows(self, *, warn: bool = False) -> list[dict[str, Any]]:
+        """The rows (dicts with a string ``key``) of ``OUT/results.json``, unverified;
+        none when it is absent or unreadable (``warn``: said in one warning line)."""
+        report = self.out / REPORT_JSON
+        if not report.is_file():
+            return []
+        try:
+            doc = json.loads(report.read_bytes())
+        except (OSError, ValueError, RecursionError) as exc:
+            if warn:
+                log.warning("tactbench: warning: %s cannot be read (%s); its rows are not "
+                            "reused", report, exc)
+            return []
+        rows = doc.get("rows") if isinstance(doc, dict) else None
+        return [row for row in (rows if isinstance(rows, list) else [])
+                if isinstance(row, dict) and isinstance(row.get("key"), str)]
 
     def clean(self) -> list[Temporary]:
         """Remove temporary row files whose writing process is gone; returns them."""
@@ -307,6 +317,14 @@ class ResultStore:
                              f"({first}) that this run does not plan, and its report "
                              f"would leave them out; give a new --out, or a grid that "
                              f"includes them")
+        # the rows only results.json keeps (git ignores cells/): the same rule
+        kept = [row for row in self._report_rows()
+                if row["key"] not in planned and not self.path(row["key"]).exists()]
+        if kept:
+            raise InputError(f"out folder {out}: its {REPORT_JSON} holds {len(kept)} row(s) "
+                             f"of another grid ({_describe(kept[0], identities)}) that this "
+                             f"run does not plan, and its report would replace them; give "
+                             f"a new --out, or a grid that includes them")
         self.cells.mkdir(parents=True, exist_ok=True)
         mine = self.cells / temp_name("run")
         atomic_write_text(mine, json.dumps({"keys": keys, "command": _command()}))
@@ -341,17 +359,20 @@ def _command() -> str:
     return " ".join(["tactbench", *sys.argv[1:]])
 
 
-def _describe(path: Path, identities: dict[str, dict[str, Any]] | None = None) -> str:
-    """``encoder × classifier L=.. seed=.. from `command``` for a stored row, as far as
-    it reads; with the planned ``identities``, also how it differs from the nearest."""
+def _describe(path: Path | dict[str, Any],
+              identities: dict[str, dict[str, Any]] | None = None) -> str:
+    """``encoder × classifier L=.. seed=.. from `command``` for a stored row (a cell file
+    or a row of results.json), as far as it reads; with the planned ``identities``, also
+    how it differs from the nearest."""
     try:
-        row = json.loads(path.read_bytes()[:ROW_MAX_BYTES])
+        row = path if isinstance(path, dict) else json.loads(
+            path.read_bytes()[:ROW_MAX_BYTES])
         label = (f"{row['encoder']} × {str(row['classifier']).split(':')[0]} L={row['L']} "
                  f"seed={row['seed']}")
         command = (row.get("run") or {}).get("command")
         label += f", from `{command}`" if command else ""
     except Exception:  # noqa: BLE001 — only a description; the file is named instead
-        return path.name
+        return path.get("key", "a row") if isinstance(path, dict) else path.name
     differences = min((identity_differences(row, i) for i in (identities or {}).values()),
                       key=len, default=[])
     if differences:

@@ -102,6 +102,27 @@ def test_a_report_folder_copied_without_its_cells_is_not_computed_again(
                cache=cache).computed == 2
 
 
+def test_another_grid_is_refused_where_only_results_json_keeps_the_rows(
+        tmp_path, tiny_scene, cache):
+    """A report folder without cells/ (as git leaves it) still holds a grid: a run of
+    another grid into it is refused before any work, and results.json is kept."""
+    import shutil
+
+    from tactbench.errors import InputError
+    from tactbench.runner.writers import write_reports
+
+    scene = tiny_scene(encoders=["raw"], classifiers=[FAST_CLF], seeds=[0])
+    write_reports(scene.out, run(scene, progress=False, cache=cache).rows, plots=False)
+    shutil.rmtree(Path(scene.out) / "cells")
+    report = (Path(scene.out) / "results.json").read_bytes()
+    with pytest.raises(InputError, match=r"results.json holds 1 row\(s\) of another grid "
+                                         r"\(raw × logreg L=3 seed=0"):
+        run(replace(scene, seeds=[1]), progress=False, cache=cache)
+    assert (Path(scene.out) / "results.json").read_bytes() == report
+    # a grid that includes the stored cell extends the folder, as with cells/
+    assert run(replace(scene, seeds=[0, 1]), progress=False, cache=cache).computed == 1
+
+
 def test_an_extra_plugin_trains_its_cells(tiny_scene, cache, fake_registry):
     scene = tiny_scene(encoders=["raw"], classifiers=["added-logreg:max_iter=20"], seeds=[0])
     (row,) = run(scene, registry=fake_registry, progress=False, cache=cache).rows
