@@ -496,8 +496,9 @@ def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict,
     return lines
 
 
-def _unanimous_L(flow: list[dict]) -> str:
-    """Where every run favours flow, in words."""
+def _unanimous_L(comparisons: list[dict]) -> str:
+    """Where every run favours flow (the encoder comparisons), in words."""
+    flow = sorted((c for c in comparisons if c["factor"] == "encoder"), key=lambda c: c["L"])
     every = [str(c["L"]) for c in flow if c["b_better_runs"] == c["runs"]]
     return ("every run favours flow at L = " + ", ".join(every) if every
             else "at no L does every run favour flow")
@@ -864,14 +865,13 @@ def findings(root: Path) -> list[str]:
                          f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}] "
                          f"({c['b_better_runs']} of {c['runs']} runs higher; "
                          f"{verdict_words(c, 'raw', 'flow')})")
-        every_c = [c for c in users["comparisons"] if c["factor"] == "encoder"]
         half = [comp(r, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
                 for r in (paper, users)]
         text = ("[The study, reproduced](docs/reports/study.md) (simulator version 2, "
                 f"{paper['comparisons'][0]['runs']} runs, a CPU-sized CNN with a quarter of "
                 "the quick profile's training): at L = 5 Farnebäck flow against the pressure "
                 "image is " + " and ".join(parts) + "; leaving users out, "
-                + _unanimous_L(sorted(every_c, key=lambda c: c["L"])) + ".")
+                + _unanimous_L(users["comparisons"]) + ".")
         if all(half):
             text += (" The study's \"flow at half the L beats pressure\", paired over the "
                      "same runs: farneback at L = 3 minus raw at L = 6 is " + " and ".join(

@@ -165,6 +165,8 @@ class ResultStore:
     def __init__(self, out: str | Path) -> None:
         self.out = Path(out)
         self.cells = self.out / "cells"
+        #: (mtime_ns, size) of results.json, its read error, its rows: see _report_rows
+        self._report_cache: tuple[tuple[int, int], Exception | None, list] | None = None
 
     def path(self, key: str) -> Path:
         """Where the row of cell ``key`` is (or will be) kept."""
@@ -266,20 +268,29 @@ class ResultStore:
 
     def _report_rows(self, *, warn: bool = False) -> list[dict[str, Any]]:
         """The rows (dicts with a string ``key``) of ``OUT/results.json``, unverified;
-        none when it is absent or unreadable (``warn``: said in one warning line)."""
+        none when it is absent or unreadable (``warn``: said in one warning line). A run
+        asks twice (:meth:`claim`, then :meth:`restore`); the file, a report's every row
+        with its predictions, is parsed once while it stays the same."""
         report = self.out / REPORT_JSON
-        if not report.is_file():
-            return []
         try:
-            doc = json.loads(report.read_bytes())
-        except (OSError, ValueError, RecursionError) as exc:
-            if warn:
-                log.warning("tactbench: warning: %s cannot be read (%s); its rows are not "
-                            "reused", report, exc)
+            st = report.stat()
+        except OSError:
             return []
-        rows = doc.get("rows") if isinstance(doc, dict) else None
-        return [row for row in (rows if isinstance(rows, list) else [])
-                if isinstance(row, dict) and isinstance(row.get("key"), str)]
+        stamp = (st.st_mtime_ns, st.st_size)
+        if self._report_cache is None or self._report_cache[0] != stamp:
+            try:
+                doc, error = json.loads(report.read_bytes()), None
+            except (OSError, ValueError, RecursionError) as exc:
+                doc, error = None, exc
+            rows = doc.get("rows") if isinstance(doc, dict) else None
+            self._report_cache = (stamp, error, [
+                row for row in (rows if isinstance(rows, list) else [])
+                if isinstance(row, dict) and isinstance(row.get("key"), str)])
+        _, error, rows = self._report_cache
+        if error is not None and warn:
+            log.warning("tactbench: warning: %s cannot be read (%s); its rows are not "
+                        "reused", report, error)
+        return rows
 
     def clean(self) -> list[Temporary]:
         """Remove temporary row files whose writing process is gone; returns them."""
