@@ -122,6 +122,10 @@ def _text(value: Any) -> str | None:
     return None
 
 
+def _optional_text(value: Any) -> str | None:
+    return None if value == "" else _text(value)
+
+
 def _count(value: Any) -> str | None:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         return f"must be a positive integer, got {value!r}"
@@ -248,7 +252,34 @@ DATASET = Contract("dataset", (
     Member("load", True, "load() → tactbench.data.recording.Dataset"),
 ))
 
-CONTRACTS: dict[str, Contract] = {c.kind: c for c in (ENCODER, CLASSIFIER, SENSOR, DATASET)}
+#: Splits: how a dataset's recordings become train/test pairs (docs/plugins.md).
+#: ``split`` returns one :class:`tactbench.data.splits.Split` per fold, numbered from 0,
+#: each with a group id for every test recording; the runner checks what it returns
+#: (:func:`tactbench.data.splits.check_splits`) before training on it.
+SPLIT = Contract("split", (
+    Member("split", True, "split(data: SplitData, *, seed) → [Split, ...], one per fold, "
+           "folds 0, 1, ...; the same for the same data and seed"),
+    Member("spec", False, "how cell identities and rows record this split ('users:folds=5'); "
+           "'' means its name with its options sorted", default="", check=_optional_text),
+))
+
+#: Test windows: which L-frame windows of a recording a classifier is trained and tested
+#: on, and how the predictions of one test recording's windows combine.
+TEST_WINDOW = Contract("test-window", (
+    Member("training", True, "training(sequences, labels, L, *, prepared) → Windows: the "
+           "training windows of these recordings (sequences[i]: (T_i, *frame))"),
+    Member("test", True, "test(sequences, labels, L, *, prepared) → Windows: the test "
+           "windows, seq_index naming each one's recording"),
+    Member("combine", True, "combine(classifier, windows, n) → (n,) int: the class of each "
+           "of the n test recordings from the predictions of its windows"),
+    Member("prepare", True, "prepare(dataset) → one picklable value per recording (its "
+           "contact onset, ...), computed once per run and given back, for the recordings "
+           "at hand, as prepared (None: nothing to prepare; prepared is then None)",
+           default=None),
+))
+
+CONTRACTS: dict[str, Contract] = {c.kind: c for c in (ENCODER, CLASSIFIER, SENSOR, DATASET,
+                                                      SPLIT, TEST_WINDOW)}
 
 
 def check(kind: str, obj: Any, *, name: str = "", plugin: str = "") -> Any:

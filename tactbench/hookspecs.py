@@ -4,7 +4,7 @@ A plugin is any module (or object) with functions marked ``@tactbench.hookimpl``
 whose names are hooks below. Installed plugins are found through the
 entry-point group ``tactbench``; built-in components use the same hooks.
 
-The four ``register_*`` hooks receive one argument, ``register``, a callable::
+The ``register_*`` hooks of components receive one argument, ``register``, a callable::
 
     register(name, target, *, summary, requires=())
 
@@ -49,6 +49,16 @@ def register_encoders(register):
 @hookspec
 def register_classifiers(register):
     """Register classifiers: ``fit`` on encoded windows, ``predict`` class indices."""
+
+
+@hookspec
+def register_splits(register):
+    """Register splits: ``split(data, *, seed)`` → train/test index sets, one per fold."""
+
+
+@hookspec
+def register_test_windows(register):
+    """Register test windows: a recording's windows, and how their predictions combine."""
 
 
 @hookspec

@@ -35,6 +35,7 @@ STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
 
 #: Modules whose hooks register the built-in components, in load order.
 BUILTIN_PLUGINS: tuple[str, ...] = (
+    "tactbench.data",  # splits and test windows
     "tactbench.encoders",
     "tactbench.datasets",
     "tactbench.sensors",

@@ -25,6 +25,8 @@ KIND_HOOKS: dict[str, str] = {
     "dataset": "register_datasets",
     "encoder": "register_encoders",
     "classifier": "register_classifiers",
+    "split": "register_splits",
+    "test-window": "register_test_windows",
 }
 KINDS: tuple[str, ...] = tuple(KIND_HOOKS)
 

@@ -101,12 +101,13 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
                    "leave a random fifth of the users out; users:folds=K: K-fold over "
                    "users, every user tested once; group:KEY[:folds=K|:test=A] the same "
                    "over any metadata (position, repetition): group:position:test=side "
-                   "trains on the front, tests on the side.")
+                   "trains on the front, tests on the side; kfold:folds=K: stratified "
+                   "K-fold over recordings, each tested once per seed; or a plugin's "
+                   "split (tactbench list).")
 @scene_option("--test-window", field="test_window",
-              type=click.Choice(["vote", "onset", "first"]),
               help="Which frames a test sequence is classified on: vote (every window, "
-                   "probabilities averaged), onset (L frames from contact onset) or first "
-                   "(its first L frames, the study's protocol).")
+                   "probabilities averaged), onset (L frames from contact onset), first "
+                   "(its first L frames, the study's protocol), or a plugin's.")
 @scene_option("--profile", field="profile", type=click.Choice(PROFILE_NAMES),
               help="quick: CPU-sized; paper: the study's settings (a GPU job).")
 @scene_option("--pixel-mm", field="pixel_mm", type=float, none=_by_profile("pixel_mm"),
@@ -159,14 +160,16 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     the failed cells.
     """
     fields = load_scene_file(scene_file) if scene_file else {}
+    labels = {}  # a refused value is named as it was given
     for param in ctx.command.params:  # command-line values override the file
         if isinstance(param, SceneOption):
             value = param.field_value(options[param.name])
             if value is not None:
                 fields[param.field] = value
+                labels[param.field] = max(param.opts, key=len)
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
-    scene = Scene(**fields)
+    scene = Scene.of(fields, labels=labels)
     registry = get_registry()
     result = run(scene, registry=registry, progress=sys.stderr.isatty() or not as_json)
     meta = {"command": " ".join(["tactbench", *sys.argv[1:]]),

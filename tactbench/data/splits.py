@@ -1,52 +1,128 @@
-"""Train/test splits: the study's per-class split, and leaving out whole groups.
+"""Train/test splits: what a split yields, the built-in designs' functions, the grammar.
 
-Each is a deterministic function of the labels (and the samples' groups) and a seed, so
-a split can be recorded by its spec and seed and recomputed anywhere. Specs:
+A *split* is a small strategy object, registered like any other component (hook
+``register_splits``; contract :data:`tactbench.contracts.SPLIT`): its
+``split(data, *, seed)`` returns the :class:`Split` of each fold, and each
+:class:`Split` names the fold and, for every test recording, the *group* it was left
+out with. Rows store both (``test_predictions["folds"]`` and ``["groups"]``), so no
+statistic has to draw a fold again. The built-in designs (classes in
+:mod:`tactbench.data.strategies`) are deterministic functions, here, of the recordings'
+labels and metadata (:class:`SplitData`) and a seed, so a split is recorded by its spec
+and seed and recomputed anywhere:
 
-- ``paper``: ``test_per_class`` random samples of each class are the test set (the study's);
+- ``paper``: ``test_per_class`` random recordings of each class are the test set (the
+  study's); a test recording's group is its own index;
 - ``users``: a random fifth of the users (at least one) is the test set;
 - ``users:folds=K``: the users are dealt at random into ``K`` folds and each fold is the
   test set once, training on the others (every user is tested exactly once), so a small
-  set of people still gives a figure over all of them. :func:`make_splits` returns the
-  ``K`` splits; a cell trains ``K`` models and pools their test predictions.
+  set of people still gives a figure over all of them; a cell trains ``K`` models and
+  pools their test predictions;
 - ``group:KEY`` (``group:KEY:folds=K``, ``group:KEY:test=A|B``): the same over any
   recording metadata a dataset has (:func:`dataset_groups`: ``user``, ``position``,
   ``repetition``): a random fifth of its values, ``K`` folds of them, or the named values
   as the test set (``group:position:test=side`` trains on the front, tests on the side).
-  ``group:user`` is ``users`` (same spec in a cell's identity, same split).
+  ``group:user`` is ``users`` (same spec in a cell's identity, same split);
+- ``kfold:folds=K``: repeated stratified K-fold over recordings: for each run seed the
+  recordings of each class are shuffled and dealt into ``K`` folds, each fold tested
+  once (every recording is tested once per run); a test recording's group is its own
+  index.
+
+The split spec grammar (:func:`parse_split`) is the component grammar ``name:key=value``
+with one more spelling: a leading value may be followed by ``:`` (``group:position:folds=3``).
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
-from typing import Any, Mapping, NamedTuple, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
+from tactbench.contracts import SPLIT
+from tactbench.errors import ContractError, InputError, check_positive_float, check_positive_int
+from tactbench.plugins import load_registry
 from tactbench.seeds import derive_seed
-from tactbench.specs import parse_spec
-
-SPLITS = ("paper", "users", "group")
+from tactbench.specs import format_spec, parse_spec
 
 #: Sample metadata a group split can leave out, in the order errors list them.
 GROUP_KEYS = ("user", "position", "repetition")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Split:
-    """Indices into a dataset's samples; ``train`` and ``test`` never overlap."""
+    """One train/test pair of a split: indices into a dataset's recordings.
 
-    name: str
-    seed: int
-    train: np.ndarray  # (n_train,) int64, sorted
-    test: np.ndarray  # (n_test,) int64, sorted
-    test_users: tuple[str, ...] = ()
+    ``train`` ``(n_train,)`` and ``test`` ``(n_test,)`` are sorted int64 indices that never
+    overlap; ``groups`` ``(n_test,)`` is the group id of each test recording, what it was
+    left out with (its user for ``users``, its ``KEY`` for ``group:KEY``, its own index for
+    ``paper`` and ``kfold``); ``fold`` is the fold this pair is (0 for a split of one
+    fold); ``left_out`` the values of the key left out (a row's ``test_users``).
+    """
 
-    def describe(self) -> dict:
-        return {"split": self.name, "split_seed": self.seed, "n_train": int(len(self.train)),
-                "n_test": int(len(self.test)), "test_users": list(self.test_users)}
+    train: np.ndarray
+    test: np.ndarray
+    groups: tuple[str, ...]
+    fold: int = 0
+    left_out: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("train", "test"):
+            idx = np.asarray(getattr(self, name))
+            if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
+                raise ContractError(f"a split's {name} indices must be integers (n,), got "
+                                    f"{idx.dtype} {idx.shape}")
+            object.__setattr__(self, name, np.sort(idx.astype(np.int64)))
+        object.__setattr__(self, "groups", tuple(str(g) for g in self.groups))
+        object.__setattr__(self, "left_out", tuple(str(v) for v in self.left_out))
+        if len(self.groups) != len(self.test):
+            raise ContractError(f"a split names {len(self.groups)} groups for "
+                                f"{len(self.test)} test recordings; one each")
+        if isinstance(self.fold, bool) or not isinstance(self.fold, (int, np.integer)) \
+                or self.fold < 0:
+            raise ContractError(f"a split's fold must be an integer ≥ 0, got {self.fold!r}")
+        object.__setattr__(self, "fold", int(self.fold))
+        if np.intersect1d(self.train, self.test).size or \
+                len(np.unique(self.test)) != len(self.test):
+            raise ContractError("a split's train and test sets overlap, or its test set "
+                                "names a recording twice")
+
+
+@dataclass(frozen=True, eq=False)
+class SplitData:
+    """What a split sees of a dataset: every recording's class and metadata.
+
+    ``labels`` ``(n,)`` int class indices; ``groups`` ``{key: value of every recording}``
+    (:func:`dataset_groups`, ``user`` always present, ``""`` where unknown);
+    ``test_per_class`` is the scene's, for the ``paper`` split.
+    """
+
+    labels: np.ndarray
+    groups: Mapping[str, Sequence[str]] = field(default_factory=dict)
+    test_per_class: int = 30
+
+    def __post_init__(self) -> None:
+        labels = np.asarray(self.labels, dtype=np.int64)
+        groups = {k: tuple(str(v) for v in vals) for k, vals in dict(self.groups).items()}
+        groups.setdefault("user", ("",) * len(labels))
+        for key, vals in groups.items():
+            if len(vals) != len(labels):  # made by the runner: a mismatch is a bug
+                raise ValueError(f"{len(vals)} values of {key!r} for {len(labels)} recordings")
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "groups", groups)
+
+    @classmethod
+    def of(cls, dataset: Any, *, test_per_class: int = 30) -> "SplitData":
+        """The split data of a :class:`~tactbench.data.dataset.Dataset`."""
+        return cls(np.asarray(dataset.labels), dataset_groups(dataset), test_per_class)
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+
+def recording_ids(indices: np.ndarray) -> tuple[str, ...]:
+    """Group ids of recordings that are their own group: their indices, as text."""
+    return tuple(str(int(i)) for i in indices)
 
 
 def paper_split(labels: Sequence[int], *, seed: int, test_per_class: int = 30) -> Split:
@@ -67,7 +143,7 @@ def paper_split(labels: Sequence[int], *, seed: int, test_per_class: int = 30) -
         test.append(rng.choice(idx, size=n, replace=False))
     test_idx = np.sort(np.concatenate(test)).astype(np.int64)
     train_idx = np.setdiff1d(np.arange(len(labels)), test_idx).astype(np.int64)
-    return Split("paper", seed, train_idx, test_idx)
+    return Split(train_idx, test_idx, recording_ids(test_idx))
 
 
 def dataset_groups(dataset: Any) -> dict[str, list[str]]:
@@ -80,7 +156,9 @@ def dataset_groups(dataset: Any) -> dict[str, list[str]]:
     return {k: v for k, v in out.items() if any(v)}
 
 
-def _group_values(groups: Mapping[str, Sequence[str]], key: str, spec: str) -> np.ndarray:
+def group_values(groups: Mapping[str, Sequence[str]], key: str, spec: str) -> np.ndarray:
+    """The value of ``key`` of every recording; refused, naming the keys there are, when
+    no recording has one (``spec`` names the split in the message)."""
     if key not in groups or not any(str(v) for v in groups[key]):
         have = [k for k in groups if any(str(v) for v in groups[k])]
         raise InputError(f"split {spec!r}: the recordings have no {key!r}; this dataset's "
@@ -135,8 +213,9 @@ def group_split(groups: Sequence[str], labels: Sequence[int], *, key: str, seed:
     if missing:
         raise InputError(f"leave-{_noun(key).replace(' ', '-')}-out split {label!r} left no "
                          f"training sample for classes {sorted(int(m) for m in missing)}")
-    return Split(label, seed, np.flatnonzero(~is_test).astype(np.int64),
-                 np.flatnonzero(is_test).astype(np.int64), tuple(test_values.tolist()))
+    test_idx = np.flatnonzero(is_test)
+    return Split(np.flatnonzero(~is_test), test_idx, tuple(values[test_idx].tolist()),
+                 left_out=tuple(test_values.tolist()))
 
 
 def users_split(users: Sequence[str], labels: Sequence[int], *, seed: int,
@@ -174,9 +253,9 @@ def group_folds(groups: Sequence[str], labels: Sequence[int], *, key: str, seed:
             raise InputError(f"{label}:folds={folds}: fold {k + 1} ({_noun(key)} "
                              f"{', '.join(fold_values[:5])}) leaves no training sample for "
                              f"class(es) {missing}; use fewer folds")
-        out.append(Split(f"{label}:folds={folds}", seed,
-                         np.flatnonzero(~is_test).astype(np.int64),
-                         np.flatnonzero(is_test).astype(np.int64), tuple(fold_values.tolist())))
+        test_idx = np.flatnonzero(is_test)
+        out.append(Split(np.flatnonzero(~is_test), test_idx, tuple(values[test_idx].tolist()),
+                         fold=k, left_out=tuple(fold_values.tolist())))
     return out
 
 
@@ -187,106 +266,119 @@ def user_folds(users: Sequence[str], labels: Sequence[int], *, seed: int, folds:
     return group_folds(users, labels, key="user", seed=seed, folds=folds)
 
 
-class SplitSpec(NamedTuple):
-    """A parsed split spec: ``(name, folds)`` first, as callers unpack it."""
+def kfold_folds(labels: Sequence[int], *, seed: int, folds: int) -> list[Split]:
+    """Stratified K-fold over recordings: each class's recordings are shuffled by ``seed``
+    and dealt in turn into ``folds`` folds (one class after another, so fold sizes differ
+    by at most one, as do a class's counts in two folds); fold ``k`` is the test set of
+    split ``k``. Every recording is tested exactly once; every class keeps training
+    recordings in every fold (each class needs ≥ 2). A test recording's group is its own
+    index. Repeated over run seeds, this is repeated stratified K-fold."""
+    folds = check_positive_int(folds, "kfold split folds", minimum=2)
+    labels = np.asarray(labels, dtype=np.int64)
+    if len(labels) < folds:
+        raise InputError(f"kfold:folds={folds} needs ≥ {folds} recordings; the dataset has "
+                         f"{len(labels)}")
+    classes, counts = np.unique(labels, return_counts=True)
+    if (counts < 2).any():
+        raise InputError(f"kfold:folds={folds}: class(es) "
+                         f"{sorted(int(c) for c in classes[counts < 2])} have one recording; "
+                         f"every fold must train on every class (each needs ≥ 2)")
+    rng = np.random.default_rng(derive_seed(seed, "split", "kfold", folds))
+    order = np.concatenate([rng.permutation(np.flatnonzero(labels == c)) for c in classes])
+    fold_of = np.empty(len(labels), dtype=np.int64)
+    fold_of[order] = np.arange(len(labels)) % folds
+    return [Split(np.flatnonzero(fold_of != k), test, recording_ids(test), fold=k)
+            for k in range(folds) for test in (np.flatnonzero(fold_of == k),)]
 
-    name: str  # paper, users, group
-    folds: int | None = None
-    key: str = ""  # the metadata a group split leaves out ("user" for users)
-    test: tuple[str, ...] | None = None  # the test values of group:KEY:test=A|B
+
+_LEADING_VALUE = re.compile(r"^([^=,:]+):(.*)$")
+SPLIT_EXAMPLES = ("'paper', 'users', 'users:folds=5', 'group:position', "
+                  "'group:KEY:folds=K' or 'kfold:folds=5'")
 
 
-_GROUP_RE = re.compile(r"^group:([A-Za-z_]\w*)(?:[:,](.*))?$")
-_SPLIT_HELP = "'paper', 'users', 'users:folds=5', 'group:position' or 'group:KEY:folds=K'"
-
-
-def parse_split(spec: str) -> SplitSpec:
-    """``"paper"`` → ``("paper", None)``; ``"users:folds=5"`` → ``("users", 5, "user")``;
-    ``"group:position:test=side"`` → ``("group", None, "position", ("side",))``.
-    ``group:user`` is parsed as ``users``."""
-
+def parse_split(spec: str) -> tuple[str, dict[str, Any]]:
+    """A split spec's name and options: ``"users:folds=5"`` → ``("users", {"folds": 5})``;
+    ``"group:position:test=side"`` → ``("group", {"_": "position", "test": "side"})``
+    (a leading value, :data:`~tactbench.specs.POSITIONAL`, goes to the split's
+    ``positional_option``; it may be followed by ``:`` or ``,``)."""
     if not isinstance(spec, str):
-        raise InputError(f"split must be text such as {_SPLIT_HELP}, got {spec!r}")
-    text = spec.strip()
-    if text == "group" or text.startswith("group:") or text.startswith("group,"):
-        m = _GROUP_RE.match(text)
-        if m is None:
-            raise InputError(f"split {spec!r}: a group split names the metadata to leave out, "
-                             f"as in 'group:position' or 'group:user:folds=5'")
-        name, key = "group", m.group(1)
-        options = parse_spec(f"group:{m.group(2)}")[1] if m.group(2) else {}
-    else:
-        name, options = parse_spec(text)
-        check_choice(name, "split", SPLITS)
-        key = "user" if name == "users" else ""
-    unknown = sorted(set(options) - {"folds", "test"})
-    if unknown or (options and name == "paper") or ("test" in options and name == "users"):
-        raise InputError(f"split {spec!r}: only 'users' and 'group:KEY' take options: "
-                         f"folds=K (users:folds=5), and for a group test=A|B "
-                         f"(group:position:test=side)")
-    folds = options.get("folds")
-    if folds is not None:
-        folds = check_positive_int(folds, f"split {spec!r}: folds", minimum=2)
-    test = options.get("test")
-    if test is not None:
-        if folds is not None:
-            raise InputError(f"split {spec!r}: give folds=K or test=A|B, not both")
-        test = tuple(sorted(dict.fromkeys(v.strip() for v in str(test).split("|")
-                                          if v.strip())))
-        if not test:
-            raise InputError(f"split {spec!r}: test= names the test group(s), as in "
-                             f"test=side or test=u01|u02")
-    if name == "group" and key == "user" and test is None:
-        name = "users"  # the familiar name: same identity, same split
-    return SplitSpec(name, folds, key, test)
+        raise InputError(f"split must be text such as {SPLIT_EXAMPLES}, got {spec!r}")
+    name, sep, rest = spec.strip().partition(":")
+    m = _LEADING_VALUE.match(rest)
+    if m is not None:
+        rest = f"{m.group(1)},{m.group(2)}"
+    return parse_spec(f"{name}{sep}{rest}")
 
 
-def canonical_split(spec: str) -> str:
+def build_split(spec: str, registry: Any) -> Any:
+    """The split strategy of ``spec``, built by ``registry`` (checked against its
+    contract there)."""
+    name, options = parse_split(spec)
+    return registry.build("split", name, **options)
+
+
+def split_spec(strategy: Any, spec: str) -> str:
+    """How a cell's identity and row record the split ``strategy`` built from ``spec``:
+    its ``spec`` attribute (the built-ins': ``users:folds=5``, ``group:position``), else
+    the name with its options sorted."""
+    own = SPLIT.get(strategy, "spec")
+    if own:
+        return own
+    name, options = parse_split(spec)
+    return format_spec(name, options)
+
+
+def canonical_split(spec: str, registry: Any = None) -> str:
     """The split spec as recorded in a cell's identity (``users:folds=5``,
     ``group:position:test=side``); ``group:user`` is recorded as ``users``."""
-    p = parse_split(spec)
-    head = p.name if p.name != "group" else f"group:{p.key}"
-    if p.folds is not None:
-        return f"{head}:folds={p.folds}"
-    if p.test is not None:
-        return f"{head}:test={'|'.join(p.test)}"
-    return head
+    return split_spec(build_split(spec, registry or load_registry()), spec)
+
+
+def check_splits(splits: Sequence[Split], n: int, name: str = "split") -> list[Split]:
+    """``splits`` if they are what a split must return for ``n`` recordings: at least
+    one :class:`Split`, folds numbered ``0, 1, ...`` in order, indices below ``n``, no
+    recording tested twice. Raises :class:`~tactbench.errors.ContractError` naming the
+    split: a plugin's mistake, refused before a model is trained on it."""
+    splits = list(splits)
+    problem = None
+    if not splits or not all(isinstance(s, Split) for s in splits):
+        problem = "must return a non-empty list of Split"
+    elif [s.fold for s in splits] != list(range(len(splits))):
+        problem = f"numbered its folds {[s.fold for s in splits]}, not 0, 1, ... in order"
+    elif any(len(s.train) == 0 or len(s.test) == 0 for s in splits):
+        problem = "returned a fold without training or test recordings"
+    elif max(int(max(s.train.max(), s.test.max())) for s in splits) >= n:
+        problem = f"names a recording beyond the dataset's {n}"
+    elif len(np.unique(np.concatenate([s.test for s in splits]))) != \
+            sum(len(s.test) for s in splits):
+        problem = "tests a recording in two folds"
+    if problem:
+        raise ContractError(f"{name} {problem}")
+    return splits
 
 
 def make_splits(spec: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
-                test_per_class: int = 30,
-                groups: Mapping[str, Sequence[str]] | None = None) -> list[Split]:
-    """Every split of ``spec``: one, or ``K`` folds for ``users:folds=K`` or
-    ``group:KEY:folds=K``. ``groups`` (:func:`dataset_groups`) gives each sample's
-    metadata for group splits; ``users`` serves as its ``user`` when it has none."""
-    p = parse_split(spec)
-    if p.name == "paper":
-        return [paper_split(labels, seed=seed, test_per_class=test_per_class)]
+                test_per_class: int = 30, groups: Mapping[str, Sequence[str]] | None = None,
+                registry: Any = None) -> list[Split]:
+    """Every split of ``spec`` (one, or ``K`` folds), as a run draws them: built by
+    ``registry`` (default: every installed plugin). ``groups`` (:func:`dataset_groups`)
+    gives each sample's metadata for group splits; ``users`` serves as its ``user`` when
+    it has none."""
     merged = dict(groups or {})
-    merged.setdefault("user", list(users))
-    values = _group_values(merged, p.key, spec) if p.name == "group" else \
-        np.asarray([str(u) for u in merged["user"]])
-    label = canonical_split(spec).split(":folds=")[0]
-    if p.folds is not None:
-        return group_folds(values, labels, key=p.key, seed=seed, folds=p.folds)
-    return [group_split(values, labels, key=p.key, seed=seed, test=p.test,
-                        name=None if p.test is None else label)]
+    merged.setdefault("user", [str(u) for u in users])
+    strategy = build_split(spec, registry or load_registry())
+    data = SplitData(np.asarray(labels), merged, test_per_class)
+    return check_splits(strategy.split(data, seed=seed), len(data), f"split {spec!r}")
 
 
-def describe_splits(splits: Sequence[Split]) -> dict:
-    """What a cell's row records of its split(s): one split's fields, or the folds'
-    together (``n_train`` the mean per fold, ``n_test`` the total, every test user)."""
-    if len(splits) == 1:
-        return splits[0].describe()
-    return {"split": splits[0].name, "split_seed": splits[0].seed, "folds": len(splits),
-            "n_train": int(round(float(np.mean([len(s.train) for s in splits])))),
-            "n_test": int(sum(len(s.test) for s in splits)),
-            "test_users": [u for s in splits for u in s.test_users]}
-
-
-def make_split(name: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
-               test_per_class: int = 30) -> Split:
-    """The split called ``name`` (``paper`` or ``users``) of these samples."""
-    if check_choice(name, "split", SPLITS[:2]) == "paper":
-        return paper_split(labels, seed=seed, test_per_class=test_per_class)
-    return users_split(users, labels, seed=seed)
+def describe_splits(spec: str, seed: int, splits: Sequence[Split]) -> dict:
+    """What a cell's row records of its split(s): the spec and seed, and one split's
+    sizes or the folds' together (``folds``, ``n_train`` the mean per fold, ``n_test`` the
+    total, every value left out)."""
+    out = {"split": spec, "split_seed": seed}
+    if len(splits) > 1:
+        out["folds"] = len(splits)
+    out.update({"n_train": int(round(float(np.mean([len(s.train) for s in splits])))),
+                "n_test": int(sum(len(s.test) for s in splits)),
+                "test_users": [u for s in splits for u in s.left_out]})
+    return out

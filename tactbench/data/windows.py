@@ -9,7 +9,9 @@ The study's protocol (test window ``first``):
 
 Testing on the first frames assumes that recordings start at contact. Where they start
 before it, as the built-in simulator's (version 2) and many real sets' do, two other test
-windows (:data:`TEST_WINDOWS`) are offered, and ``vote`` is the runner's default:
+windows are offered, and ``vote`` is the runner's default. A test window is a small
+strategy object registered through the hook ``register_test_windows`` (the built-ins:
+:mod:`tactbench.data.strategies`); this module holds the windows they are made of:
 
 - ``onset``: the ``L`` frames from the contact onset, :func:`onset_frame`: the first
   frame whose total pressure (the sum of the normalised taxel values) reaches
@@ -43,7 +45,7 @@ from typing import Sequence
 import numpy as np
 
 from tactbench.budget import check_budget
-from tactbench.errors import InputError, check_choice, check_positive_int
+from tactbench.errors import InputError, check_positive_int
 
 
 @dataclass(frozen=True)
@@ -133,8 +135,10 @@ def test_windows(sequences: Sequence[np.ndarray], labels: Sequence[int],
 
 test_windows.__test__ = False  # not a pytest test, despite the name
 
-#: Where a sequence's test window starts: see the module docstring.
-TEST_WINDOWS = ("first", "onset", "vote")
+#: The test window of rows and cell identities that name none: the study's, the only one
+#: before test windows existed. A cell identity leaves it out, so that keys made then stay
+#: valid; a run's default is :class:`tactbench.runner.scene.Scene`'s ``test_window``.
+UNNAMED_TEST_WINDOW = "first"
 #: Contact onset: the first frame whose total pressure reaches this fraction of the peak
 #: (both above the recording's quietest frame).
 ONSET_FRACTION = 0.1
@@ -166,43 +170,30 @@ def window_starts(n_frames: Sequence[int], L: int, onsets: Sequence[int]) -> np.
     return np.maximum(0, np.minimum(on, n - int(L))).astype(np.int64)
 
 
-def test_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequence[int],
-                     L: int, onsets: Sequence[int] | None = None) -> Windows:
-    """The test windows of ``mode`` (:data:`TEST_WINDOWS`): one per sequence for
-    ``first`` and ``onset`` (which needs ``onsets``), every window for ``vote``
-    (``seq_index`` says whose; the caller averages their probabilities)."""
-    check_choice(mode, "test window", TEST_WINDOWS)
-    if mode == "first":
-        return test_windows(sequences, labels, L)
-    if mode == "vote":
-        return training_windows(sequences, labels, L)
+def onset_test_windows(sequences: Sequence[np.ndarray], labels: Sequence[int], L: int,
+                       onsets: Sequence[int]) -> Windows:
+    """One window per sequence, from its onset window (:func:`window_starts`)."""
     labels_arr = _check(sequences, labels)
-    if onsets is None or len(onsets) != len(sequences):
+    if len(onsets) != len(sequences):
         raise ValueError("onset test windows need one onset per sequence")  # a bug
     starts = window_starts([s.shape[0] for s in sequences], L, onsets)
     return Windows(list(sequences), np.arange(len(sequences), dtype=np.int64), starts,
                    labels_arr, L)
 
 
-test_windows_for.__test__ = False
+def onset_training_windows(sequences: Sequence[np.ndarray], labels: Sequence[int], L: int,
+                           onsets: Sequence[int]) -> Windows:
+    """Every window starting at or after its sequence's onset window."""
+    windows = training_windows(sequences, labels, L)
+    if len(onsets) != len(sequences):
+        raise ValueError("onset training windows need one onset per sequence")  # a bug
+    first = window_starts([s.shape[0] for s in sequences], L, onsets)
+    keep = windows.starts >= first[windows.seq_index]
+    return Windows(windows.sequences, windows.seq_index[keep], windows.starts[keep],
+                   windows.labels[keep], L)
 
 
 def dataset_onsets(dataset) -> tuple[int, ...]:
     """:func:`onset_frame` of every sample of a :class:`~tactbench.data.dataset.Dataset`,
     on its normalised values (one recording at a time)."""
     return tuple(onset_frame(dataset.normalise(s.recording.values)) for s in dataset.samples)
-
-
-def training_windows_for(mode: str, sequences: Sequence[np.ndarray], labels: Sequence[int],
-                         L: int, onsets: Sequence[int] | None = None) -> Windows:
-    """The training windows of ``mode``: every window, or for ``onset`` every window
-    starting at or after the sequence's onset window."""
-    windows = training_windows(sequences, labels, L)
-    if mode != "onset":
-        return windows
-    if onsets is None or len(onsets) != len(sequences):
-        raise ValueError("onset training windows need one onset per sequence")  # a bug
-    first = window_starts([s.shape[0] for s in sequences], L, onsets)
-    keep = windows.starts >= first[windows.seq_index]
-    return Windows(windows.sequences, windows.seq_index[keep], windows.starts[keep],
-                   windows.labels[keep], L)

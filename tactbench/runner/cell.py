@@ -21,9 +21,17 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from tactbench.classifiers.io import live_metadata, load_model, read_header
-from tactbench.contracts import CLASSIFIER
-from tactbench.data.splits import dataset_groups, describe_splits, make_splits
-from tactbench.data.windows import dataset_onsets, test_windows_for, training_windows_for
+from tactbench.contracts import CLASSIFIER, TEST_WINDOW
+from tactbench.data.splits import (
+    Split,
+    SplitData,
+    build_split,
+    check_splits,
+    dataset_groups,
+    describe_splits,
+    parse_split,
+)
+from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import TactbenchError
 from tactbench.plugins import Registry
 from tactbench.runner.entries import load_encoding
@@ -33,6 +41,7 @@ from tactbench.runner.scene import Scene
 from tactbench.machine import machine
 from tactbench.runner.system import MemoryTracker, host, now, versions
 from tactbench.seeds import derive_seed
+from tactbench.specs import parse_spec
 
 if TYPE_CHECKING:
     import numpy as np
@@ -49,27 +58,39 @@ class DatasetFacts:
     labels: tuple[int, ...]  # class index of every sample
     users: tuple[str, ...]  # user of every sample
     classes: tuple[str, ...]
-    onsets: tuple[int, ...] | None = None  # contact onset frame of every sample (onset)
     groups: dict[str, tuple[str, ...]] | None = None  # metadata of group:KEY splits
+    prepared: tuple[Any, ...] | None = None  # the test window's value of every sample
 
     @classmethod
-    def of(cls, dataset: Any, *, onsets: bool = False) -> "DatasetFacts":
-        """The facts of ``dataset`` (its samples' onsets too, with ``onsets``)."""
+    def of(cls, dataset: Any, *, window: Any = None) -> "DatasetFacts":
+        """The facts of ``dataset``; with the test window ``window``, what its
+        ``prepare`` makes of every sample (a contact onset), made here once."""
+        prepare = None if window is None else TEST_WINDOW.get(window, "prepare")
         return cls(labels=tuple(int(x) for x in dataset.labels),
                    users=tuple(str(u) for u in dataset.users),
                    classes=tuple(dataset.classes),
-                   onsets=dataset_onsets(dataset) if onsets else None,
-                   groups={k: tuple(v) for k, v in dataset_groups(dataset).items()})
+                   groups={k: tuple(v) for k, v in dataset_groups(dataset).items()},
+                   prepared=None if prepare is None else tuple(prepare(dataset)))
+
+    def split_data(self, test_per_class: int) -> SplitData:
+        """What a split sees of these samples."""
+        import numpy as np
+
+        return SplitData(np.asarray(self.labels, dtype=np.int64),
+                         {"user": self.users, **(self.groups or {})}, test_per_class)
 
 
 @dataclass(frozen=True)
 class CellJob:
     """Everything a worker needs to run a cell, picklable and small: the cell, the scene
-    it belongs to, the dataset's facts and where its encoding is."""
+    it belongs to, the registered components it is built from (classifier, split, test
+    window), the dataset's facts and where its encoding is."""
 
     cell: Cell
     identity: dict[str, Any]
     classifier: Any  # tactbench.plugins.Component of the cell's classifier (picklable)
+    split: Any  # ... of the scene's split
+    test_window: Any  # ... of the scene's test window
     encoding_dir: str
     scene: Scene
     data: DatasetFacts
@@ -83,9 +104,12 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
     """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.cache.ensure_encodings`;
     with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
     scene = p.scene
-    data = DatasetFacts.of(p.dataset, onsets=scene.test_window == "onset")  # shared by all
+    data = DatasetFacts.of(p.dataset, window=p.test_window)  # shared by all
+    split = p.registry.get("split", parse_split(scene.split)[0])
+    window = p.registry.get("test-window", parse_spec(scene.test_window)[0])
     return [CellJob(cell=c, identity=p.identities[c.key],
                     classifier=p.classifier_component(c.classifier),
+                    split=split, test_window=window,
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
                     scene=scene, data=data, threads=scene.resolved_threads(),
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
@@ -182,85 +206,53 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     ``peak_step`` names the step that set ``peak_rss_mb`` (see
     :class:`~tactbench.runner.system.MemoryTracker`).
     """
-    import numpy as np
     import torch
 
     memory = memory if memory is not None else MemoryTracker()
     torch.set_num_threads(job.threads)
-    cell = job.cell
+    cell, scene = job.cell, job.scene
     with memory.track("load encoding"):
         sequences, meta = load_encoding(job.encoding_dir)
-    scene, data = job.scene, job.data
-    labels = np.asarray(data.labels, dtype=np.int64)
-    splits = make_splits(scene.split, labels=labels, users=data.users, seed=cell.seed,
-                         test_per_class=scene.test_per_class,
-                         groups=data.groups)
-    rss0 = 0.0
-    train_s = infer_s = 0.0
-    n_train = n_test = 0
-    indices, truths, predictions, fits = [], [], [], []
-    for fold, split in enumerate(splits):
-        with memory.track("windows"):
-            train, test = _windows(job, sequences, labels, split)
-            # The planned component, not a fresh plugin lookup: see the module docstring.
-            clf = Registry([job.classifier]).build("classifier", cell.classifier,
-                                                   classes=len(data.classes))
-        if fold == 0:
-            rss0 = memory.peak_mb
-        # one split keeps the seed it always had; the folds of a k-fold split differ
-        seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.L,
-                           *(() if len(splits) == 1 else (f"fold {fold}",)),
-                           *(() if cell.init_seed is None else (f"init {cell.init_seed}",)))
-        with memory.track("fit"):
-            t0 = time.perf_counter()
-            fits.append(clf.fit(train, None, seed=seed, device=scene.device,
-                                progress=progress))
-            train_s += time.perf_counter() - t0
-        with memory.track("predict"):
-            t0 = time.perf_counter()
-            predicted = _predict(clf, test, scene.test_window, len(split.test))
-            infer_s += time.perf_counter() - t0
-        indices.append(np.asarray(split.test))
-        truths.append(labels[split.test])
-        predictions.append(predicted)
-        n_train += len(train)
-        n_test += len(split.test)
-    test_index = np.concatenate(indices)
-    truth = np.concatenate(truths)
-    predicted = np.concatenate(predictions)
+    # The planned components, not a fresh plugin lookup: see the module docstring.
+    registry = Registry([job.classifier, job.split, job.test_window])
+    data = job.data.split_data(scene.test_per_class)
+    splits = check_splits(build_split(scene.split, registry).split(data, seed=cell.seed),
+                          len(data), f"split {scene.split!r}")
+    tested = _train_and_predict(job, registry, sequences, data.labels, splits, progress,
+                                memory)
+    truth, predicted = tested["labels"], tested["predictions"]
     if job.model_path:  # planning allows saving only with one split (one model per cell)
         with memory.track("save model"):
-            clf.save(job.model_path, {**(job.model_meta or {}), "classifier": cell.classifier,
-                                      "seed": cell.seed, "cell": cell.key,
-                                      "test_accuracy": float((predicted == truth).mean())})
-
-    confusion, per_class = _confusion(data.classes, truth, predicted)
+            tested["model"].save(job.model_path, {
+                **(job.model_meta or {}), "classifier": cell.classifier, "seed": cell.seed,
+                "cell": cell.key, "test_accuracy": float((predicted == truth).mean())})
+    confusion, per_class = _confusion(job.data.classes, truth, predicted)
     frames = max(1, int(meta.get("frames", 1)))
     return {
         "key": cell.key,
         **job.identity,
         "status": OK,
-        **describe_splits(splits),
-        "test_window": scene.test_window,
-        "classes": list(data.classes),
+        **describe_splits(job.identity["split"], cell.seed, splits),
+        "test_window": job.identity.get("test_window", UNNAMED_TEST_WINDOW),
+        "classes": list(job.data.classes),
         "accuracy": float((predicted == truth).mean()),
         "per_class_accuracy": per_class,
         "confusion": confusion.tolist(),
-        # per test sequence, for paired comparisons between cells (runner.summaries)
-        "test_predictions": {"indices": test_index.tolist(),
-                             "labels": truth.tolist(), "predictions": predicted.tolist()},
+        # per test recording, for paired comparisons between cells (runner.summaries):
+        # the fold that tested it and the group it was left out with
+        "test_predictions": {k: tested[k].tolist() for k in PREDICTION_LISTS},
         # cost on one core: wall time × workers that shared the encoding, per frame
         "encode_ms_per_frame": 1e3 * float(meta.get("encode_seconds", 0.0))
         * int(meta.get("workers", 1)) / frames,
-        "train_s": train_s,
-        "inference_ms_per_sequence": 1e3 * infer_s / max(1, n_test),
+        "train_s": tested["train_s"],
+        "inference_ms_per_sequence": 1e3 * tested["infer_s"] / max(1, len(truth)),
         "peak_rss_mb": memory.peak_mb,
         "peak_step": memory.peak_step,
         "memory": memory.as_dict(),
-        "rss_before_fit_mb": rss0,
-        "n_train_windows": n_train,
-        "n_test": n_test,
-        "fit": _jsonable(fits[0] if len(fits) == 1 else fits),
+        "rss_before_fit_mb": tested["rss0"],
+        "n_train_windows": tested["n_train_windows"],
+        "n_test": len(truth),
+        "fit": _jsonable(tested["fits"][0] if len(splits) == 1 else tested["fits"]),
         "device": scene.device,
         "threads": job.threads,
         "versions": versions(),
@@ -270,32 +262,69 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     }
 
 
-def _windows(job: CellJob, sequences: Sequence[Any], labels: "np.ndarray",
-             split: Any) -> tuple[Any, Any]:
-    """The training and test windows of one split, as the scene's test window says."""
-    mode, onsets, length = job.scene.test_window, job.data.onsets, job.cell.L
-
-    def onsets_of(indices: Any) -> list[int] | None:
-        return None if onsets is None else [onsets[i] for i in indices]
-
-    train = training_windows_for(mode, [sequences[i] for i in split.train],
-                                 labels[split.train], length, onsets=onsets_of(split.train))
-    test = test_windows_for(mode, [sequences[i] for i in split.test], labels[split.test],
-                            length, onsets=onsets_of(split.test))
-    return train, test
+#: The lists of a row's ``test_predictions``, one entry per test recording in the same
+#: order: its index, true class, predicted class, fold and group (rows made before folds
+#: and groups were stored lack the last two).
+PREDICTION_LISTS = ("indices", "labels", "predictions", "folds", "groups")
 
 
-def _predict(clf: Any, test: Any, mode: str, n_sequences: int) -> "np.ndarray":
-    """The predicted class of each test sequence: of its one window, or with ``mode``
-    ``"vote"`` of every window of it (probabilities averaged)."""
+def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any],
+                       labels: "np.ndarray", splits: Sequence[Split],
+                       progress: Callable[..., None] | None,
+                       memory: MemoryTracker) -> dict[str, Any]:
+    """Fit a model on each split's training windows and predict its test recordings:
+    the :data:`PREDICTION_LISTS` pooled over folds (arrays), the last model, each fit's
+    report, times and the memory before the first fit."""
     import numpy as np
 
-    if mode != "vote":
-        return np.asarray(clf.predict(test))
-    proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
-    summed = np.zeros((n_sequences, proba.shape[1]))
-    np.add.at(summed, test.seq_index, proba)
-    return summed.argmax(axis=1)
+    cell, scene = job.cell, job.scene
+    window = registry.build("test-window", scene.test_window)
+    prepared = job.data.prepared
+    out: dict[str, Any] = {k: [] for k in PREDICTION_LISTS}
+    out.update(fits=[], train_s=0.0, infer_s=0.0, n_train_windows=0, rss0=0.0)
+    for split in splits:
+        with memory.track("windows"):
+            train = window.training(*_recordings(sequences, labels, split.train),
+                                    cell.L, prepared=_prepared(prepared, split.train))
+            test = window.test(*_recordings(sequences, labels, split.test),
+                               cell.L, prepared=_prepared(prepared, split.test))
+            clf = registry.build("classifier", cell.classifier, classes=len(job.data.classes))
+        if split.fold == 0:
+            out["rss0"] = memory.peak_mb
+        # one split keeps the seed it always had; the folds of a k-fold split differ
+        seed = derive_seed(cell.seed, cell.encoder, cell.classifier, cell.L,
+                           *(() if len(splits) == 1 else (f"fold {split.fold}",)),
+                           *(() if cell.init_seed is None else (f"init {cell.init_seed}",)))
+        with memory.track("fit"):
+            t0 = time.perf_counter()
+            out["fits"].append(clf.fit(train, None, seed=seed, device=scene.device,
+                                       progress=progress))
+            out["train_s"] += time.perf_counter() - t0
+        with memory.track("predict"):
+            t0 = time.perf_counter()
+            predicted = np.asarray(window.combine(clf, test, len(split.test)))
+            out["infer_s"] += time.perf_counter() - t0
+        if predicted.shape != (len(split.test),):
+            raise ValueError(f"test window {scene.test_window!r} combined {predicted.shape} "
+                             f"predictions for {len(split.test)} test recordings")
+        for key, values in zip(PREDICTION_LISTS, (split.test, labels[split.test], predicted,
+                                                  [split.fold] * len(split.test),
+                                                  split.groups)):
+            out[key].append(np.asarray(values))
+        out["n_train_windows"] += len(train)
+    out.update({k: np.concatenate(out[k]) for k in PREDICTION_LISTS}, model=clf)
+    return out
+
+
+def _recordings(sequences: Sequence[Any], labels: "np.ndarray", indices: "np.ndarray",
+                ) -> tuple[list[Any], "np.ndarray"]:
+    """The sequences and labels of the recordings ``indices``."""
+    return [sequences[i] for i in indices], labels[indices]
+
+
+def _prepared(prepared: Sequence[Any] | None, indices: "np.ndarray") -> list[Any] | None:
+    """The test window's prepared values of the recordings ``indices`` (None: none)."""
+    return None if prepared is None else [prepared[i] for i in indices]
 
 
 def _confusion(classes: Sequence[str], truth: "np.ndarray", predicted: "np.ndarray",

@@ -19,35 +19,25 @@ import math
 import os
 import re
 import tempfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
 from tactbench.contracts import CLASSIFIER, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
-from tactbench.data.splits import canonical_split, dataset_groups, make_splits, parse_split
-from tactbench.data.windows import TEST_WINDOWS
+from tactbench.data.splits import SplitData, build_split, check_splits, split_spec
+from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.datasets.loading import check_informative, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
-from tactbench.errors import (
-    InputError,
-    check_choice,
-    check_positive_float,
-    check_positive_int,
-)
+from tactbench.errors import InputError
 from tactbench.paths import check_not_in_cache
 from tactbench.plugins import load_registry
-from tactbench.profiles import PRECISIONS, get_profile, profile_options
+from tactbench.profiles import profile_options
 from tactbench.budget import check_budget
 from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
-from tactbench.runner.scene import EXECUTORS, Scene, check_fields
-from tactbench.runner.system import check_scheduler
+from tactbench.runner.scene import Scene
 from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
-
-#: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
-#: model, and a larger grid is a typo (its plan alone would grow without bound).
-MAX_CELLS = 10_000
 
 #: What tactbench writes at the top of an out folder (see :func:`check_out_folder`).
 OUT_FOLDERS = ("cells", "models")
@@ -98,6 +88,8 @@ class Plan:
     cells: list[Cell]
     identities: dict[str, dict[str, Any]]  # cell key → identity
     registry: Any = None  # the tactbench.plugins.Registry the plan was checked with
+    split: Any = None  # the scene's split, built (a strategy: tactbench.contracts.SPLIT)
+    test_window: Any = None  # the scene's test window, built (TEST_WINDOW)
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
@@ -219,54 +211,33 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
         raise InputError(f"out folder {out} cannot be used: {exc.strerror or exc}") from None
 
 
-def check_scene(scene: Scene) -> None:
-    """Check ``scene`` before any work: every field's type first
-    (:func:`~tactbench.runner.scene.check_fields`), then each value's range and what the
-    values need together (a profile, split and test window that exist, one model per
-    cell when models are saved, a grid of at most :data:`MAX_CELLS`, a usable out
-    folder). Raises :class:`InputError` naming the field or option."""
-    check_fields({f.name: getattr(scene, f.name) for f in fields(Scene)}, ranges=False)
-    get_profile(scene.profile)
-    check_choice(scene.resolved_precision(), "precision", PRECISIONS)
-    check_choice(scene.test_window, "test window", TEST_WINDOWS)
-    if parse_split(scene.split)[1] is not None and scene.save_models:
+def _check_statistics(scene: Scene) -> None:
+    """The contrasts' syntax (see docs/statistics.md); the scene checked the rest."""
+    for text in scene.contrasts or ():
+        parse_contrast(text)
+
+
+def _build_designs(scene: Scene, registry) -> tuple[Any, Any, str, str]:
+    """The scene's split and test window built by ``registry`` (names and options
+    checked, contracts too), with how cell identities record them: ``(split, test
+    window, split spec, test window spec)``."""
+    split = build_split(scene.split, registry)
+    window = registry.build("test-window", scene.test_window)
+    return split, window, split_spec(split, scene.split), \
+        registry.resolve("test-window", scene.test_window)
+
+
+def _check_split(scene: Scene, split: Any, dataset) -> None:
+    """Draw the split once (seed: the first), so an impossible split, or a plugin's that
+    breaks its contract, fails before any work; and refuse saving models of a split that
+    trains one per fold."""
+    data = SplitData.of(dataset, test_per_class=scene.test_per_class)
+    splits = check_splits(split.split(data, seed=scene.seeds[0]), len(data),
+                          f"split {scene.split!r}")
+    if len(splits) > 1 and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
                          f"{scene.split!r} trains one per fold; save models with "
                          f"--split users, group:KEY or paper")
-    check_choice(scene.executor, "executor", EXECUTORS)
-    if scene.scheduler:
-        check_scheduler(scene.scheduler)
-    if not scene.encoders or not scene.classifiers or not scene.L or not scene.seeds:
-        raise InputError("a run needs at least one encoder, classifier, L and seed")
-    bad_l = [n for n in scene.L if int(n) < 1]
-    if bad_l:
-        raise InputError(f"window length L must be ≥ 1, got {bad_l}")
-    check_positive_int(scene.workers, "--workers")
-    if scene.threads is not None:  # torch refuses 0 only inside the cell, after the work
-        check_positive_int(scene.threads, "--threads")
-    check_positive_float(scene.resolved_pixel_mm(), "pixel size (mm)")
-    n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers))
-               * len(set(scene.L)) * len(set(scene.seeds))
-               * len(set(scene.init_seeds or [None])))
-    if n_cells > MAX_CELLS:
-        raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
-                         f"seeds); a run takes at most {MAX_CELLS}")
-    check_out_folder(scene.out, models=scene.save_models)
-    _check_statistics(scene)
-
-
-#: What ``--input`` may ask a classifier that takes either input for.
-INPUT_KINDS = ("images", "vectors")
-
-
-def _check_statistics(scene: Scene) -> None:
-    """The margin, contrasts' syntax and input kind of a scene (see docs/statistics.md)."""
-    if scene.margin is not None:
-        check_positive_float(scene.margin, "--margin (points)")
-    for text in scene.contrasts or ():
-        parse_contrast(text)
-    if scene.input is not None:
-        check_choice(scene.input, "--input", INPUT_KINDS)
 
 
 def _check_inputs(clf: str, enc: str, kind: str, frame_rank: int | None, dataset, *,
@@ -381,10 +352,11 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
 
 def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
                   encoder_version: str, classifier: str, L: int,
-                  seed: int, init_seed: int | None = None, *,
-                  either_input: bool = False) -> dict[str, Any]:
+                  seed: int, init_seed: int | None = None, *, split: str,
+                  test_window: str, either_input: bool = False) -> dict[str, Any]:
     """Everything that decides a cell's result; its :func:`digest` is the cell's key.
 
+    ``split`` and ``test_window`` are the specs :func:`plan` recorded them by.
     ``init_seed`` (``--init-seed``) and the input kind of a classifier taking either
     (``either_input``, when ``--input`` is given) enter only where asked for, so every
     other cell keeps its key."""
@@ -392,9 +364,9 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
         "schema": ROW_SCHEMA,
         "dataset": dataset.name,
         "dataset_hash": dataset_hash,
-        "split": canonical_split(scene.split),
+        "split": split,
         # the study's test window keeps the keys cells always had
-        **({} if scene.test_window == "first" else {"test_window": scene.test_window}),
+        **({} if test_window == UNNAMED_TEST_WINDOW else {"test_window": test_window}),
         "test_per_class": scene.test_per_class,
         "imaging": imaging_identity(scene, kind),
         "encoder": encoder,
@@ -419,8 +391,11 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     computed or written.
     """
     registry = registry or load_registry()
-    check_scene(scene)
+    # The scene checked itself when it was made; here what needs the plugins and the disk.
+    check_out_folder(scene.out, models=scene.save_models)
+    _check_statistics(scene)
     # Names and options first (cheap), so a typo fails before a dataset is loaded.
+    split, window, *designs = _build_designs(scene, registry)
     encoders, versions = _build_encoders(scene, registry)
     frame_ranks, batch_sizes = _build_classifiers(scene, registry)
     classifier_specs = list(frame_ranks)
@@ -440,9 +415,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     _check_lengths(scene, dataset)
     _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
-    make_splits(scene.split, labels=dataset.labels, users=dataset.users, seed=scene.seeds[0],
-                test_per_class=scene.test_per_class,
-                groups=dataset_groups(dataset))  # fails early on an impossible split
+    _check_split(scene, split, dataset)
 
     cells: list[Cell] = []
     identities: dict[str, dict[str, Any]] = {}
@@ -453,6 +426,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                                    for i in dict.fromkeys(scene.init_seeds or [None])):
                     identity = cell_identity(scene, dataset, dataset_hash, kinds[clf], enc,
                                              versions[enc], clf, length, seed, init,
+                                             split=designs[0], test_window=designs[1],
                                              either_input=frame_ranks[clf] is None)
                     key = digest(identity)
                     cells.append(Cell(enc, clf, int(length), int(seed), key,
@@ -462,4 +436,4 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         check_contrasts(scene.contrasts, [{"encoder": c.encoder, "classifier": c.classifier,
                                            "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
-                kinds, cells, identities, registry)
+                kinds, cells, identities, registry, split, window)

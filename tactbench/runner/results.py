@@ -35,6 +35,7 @@ import sys
 from pathlib import Path
 from typing import Any, Iterable
 
+from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import CorruptArtefactError, InputError
 from tactbench.integrity import hash_bytes
 from tactbench.paths import (
@@ -62,8 +63,8 @@ REPORT_JSON = "results.json"
 
 #: Identity fields that a cell's identity leaves out at their default (see
 #: :func:`tactbench.runner.planning.cell_identity`), with that default.
-IDENTITY_DEFAULTS = {"test_window": "first", "precision": "float32", "init_seed": None,
-                     "input": None}
+IDENTITY_DEFAULTS = {"test_window": UNNAMED_TEST_WINDOW, "precision": "float32",
+                     "init_seed": None, "input": None}
 
 
 def row_status(row: dict[str, Any]) -> str:
@@ -141,20 +142,24 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
 
 
 def _check_predictions(tp: Any, k: int) -> str | None:
-    """Problems of a row's per-sequence predictions (optional: older rows lack them)."""
+    """Problems of a row's per-sequence predictions (optional: older rows lack them, and
+    rows made before folds and groups were stored lack those two lists)."""
     if tp is None:
         return None
-    if not isinstance(tp, dict) or set(tp) != {"indices", "labels", "predictions"}:
-        return "has test_predictions that are not {indices, labels, predictions}"
-    lists = [tp["indices"], tp["labels"], tp["predictions"]]
+    if not isinstance(tp, dict) or not {"indices", "labels", "predictions"} <= set(tp) \
+            or not set(tp) <= {"indices", "labels", "predictions", "folds", "groups"}:
+        return "has test_predictions that are not {indices, labels, predictions[, folds, " \
+               "groups]}"
+    lists = list(tp.values())
     if not all(isinstance(v, list) for v in lists) or len({len(v) for v in lists}) != 1:
-        return "has test_predictions that are not three lists of one length"
-    for name, values, top in (("indices", lists[0], None), ("labels", lists[1], k),
-                              ("predictions", lists[2], k)):
+        return "has test_predictions that are not lists of one length"
+    for name, top in (("indices", None), ("labels", k), ("predictions", k), ("folds", None)):
         if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
-                   and (top is None or n < top) for n in values):
-            return f"has test_predictions {name} that are not class/sequence numbers"
-    if len(set(lists[0])) != len(lists[0]):
+                   and (top is None or n < top) for n in tp.get(name, ())):
+            return f"has test_predictions {name} that are not class/sequence/fold numbers"
+    if not all(isinstance(g, str) for g in tp.get("groups", ())):
+        return "has test_predictions groups that are not text"
+    if len(set(tp["indices"])) != len(tp["indices"]):
         return "has test_predictions that name a test sequence twice"
     return None
 

@@ -4,10 +4,18 @@ A scene file is TOML (or JSON, for a ``.json`` file) with the same fields as
 :class:`Scene`; ``encoder``, ``classifier`` and ``seed`` are accepted for their plural
 fields, and a single value for a list field. The window length is ``L`` everywhere (the
 ``-L`` option, this field, cell identities, model metadata); a name that changed
-(``lengths``) is refused with a line naming the new one. Every field's type is checked
-(:func:`check_fields`): ``seeds = [1.5]``, ``encoders = [1]``, an unknown field or a field
-given twice (``seed`` and ``seeds``, or a JSON key twice) is refused in one line naming
-the file and the field.
+(``lengths``) is refused with a line naming the new one.
+
+A :class:`Scene` is frozen and checks itself when it is made, once: every field's type
+and range (:func:`check_fields`: ``seeds = [1.5]``, ``encoders = [1]``, ``threads = 0``,
+``L = 0``), and what the fields need together without a dataset or the plugins (a
+profile, precision, executor and input that exist, a grid of at most
+:data:`MAX_CELLS`, a split and test window written in their grammar). What needs the
+plugins or the disk (the split's and test window's names, the out folder, the dataset)
+is checked once by :func:`tactbench.runner.planning.plan`; neither checks the other's
+part again. An unknown field or a field given twice in a scene file (``seed`` and
+``seeds``, or a JSON key twice) is refused in one line naming the file and the field;
+:meth:`Scene.of` names a refused field as its source does (``--threads``).
 
 (The runner's scene is the run configuration; the synthetic flow scenes of
 :mod:`tactbench.encoders.evaluation.flowbench` are a different thing with their own name.)
@@ -23,32 +31,45 @@ import os
 import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Mapping
 
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
+from tactbench.data.splits import parse_split
 from tactbench.datasets.loading import is_path_spec
-from tactbench.errors import InputError, MissingFileError
-from tactbench.profiles import get_profile
+from tactbench.errors import InputError, MissingFileError, check_choice
+from tactbench.profiles import PRECISIONS, get_profile
+from tactbench.runner.system import check_scheduler
+from tactbench.specs import parse_spec
 
 #: Where cells run: this machine (serially or in ``workers`` processes) or a dask cluster.
 EXECUTORS = ("local", "dask")
+#: What ``--input`` may ask a classifier that takes either input for.
+INPUT_KINDS = ("images", "vectors")
+#: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
+#: model, and a larger grid is a typo (its plan alone would grow without bound).
+MAX_CELLS = 10_000
 
 
-@dataclass
+@dataclass(frozen=True)
 class Scene:
-    """Everything a run needs to know; a scene file holds the same fields (TOML)."""
+    """Everything a run needs to know; a scene file holds the same fields (TOML).
+
+    Frozen, and checked when made (see the module docstring): a ``Scene`` that exists is
+    a valid one, and the runner trusts it. The defaults here are the run's, the one place
+    they are written: the split ``paper`` and the test window ``vote``.
+    """
 
     dataset: str = "synthetic-forearm"
     encoders: list[str] = field(default_factory=lambda: ["raw", "farneback"])
     classifiers: list[str] = field(default_factory=lambda: ["small-cnn-lstm"])
     L: list[int] = field(default_factory=lambda: [5])  # window lengths, frames
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
-    split: str = "paper"  # paper, users, users:folds=K or group:KEY[:folds=K]
-    test_window: str = "vote"  # vote, onset or first (the study's): see data/windows.py
+    split: str = "paper"  # a registered split: paper, users[:folds=K], group:KEY[...], kfold
+    test_window: str = "vote"  # a registered test window: vote, onset or first (the study's)
     test_per_class: int = 30
     profile: str = "quick"
     pixel_mm: float | None = None  # None: the profile's
@@ -69,6 +90,24 @@ class Scene:
     contrasts: list[str] | None = None
     input: str | None = None  # images or vectors; None: images where there is a layout
     init_seeds: list[int] | None = None
+
+    def __post_init__(self) -> None:
+        checked = check_fields({f.name: getattr(self, f.name) for f in fields(self)})
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)  # lists copied, lengths parsed
+        _check_together(self)
+
+    @classmethod
+    def of(cls, values: Mapping[str, Any], *,
+           labels: Mapping[str, str] | None = None) -> "Scene":
+        """The scene of ``values`` (field → value), a refused field named as ``labels``
+        says (``{"threads": "--threads"}``; default ``scene field 'threads'``)."""
+        try:
+            return cls(**values)
+        except FieldError as exc:
+            if labels and exc.field in labels:
+                raise InputError(f"{labels[exc.field]}{exc.detail}") from None
+            raise
 
     def resolved_pixel_mm(self) -> float:
         """The tactile-image pixel size in mm: the scene's, else its profile's."""
@@ -194,7 +233,7 @@ def _check_text(value: Any, name: str) -> str:
     return value
 
 
-def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
+def _check_field(name: str, value: Any, label: str) -> Any:
     """``value`` of field ``name`` checked (and, for list fields, made a list)."""
     kind = _KINDS[name]
     if value is None and kind.endswith("?"):
@@ -209,7 +248,7 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
             raise InputError(f"{label} is empty")
         example = "1-6" if kind == "lengths" else "0-9"
         for v in value:
-            if not (_is_int(v) or (ranges and isinstance(v, str))):
+            if not (_is_int(v) or isinstance(v, str)):
                 raise InputError(f"{label} must be whole numbers or ranges such as "
                                  f"\"{example}\", got {_show(v)} ({type(v).__name__})")
         try:
@@ -231,7 +270,7 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
         if not _is_int(value):
             raise InputError(f"{label} must be a whole number, got {type(value).__name__} "
                              f"{_show(value)}")
-        if ranges and value < 1:
+        if value < 1:
             raise InputError(f"{label} must be ≥ 1, got {value}")
         if kind == "workers" and value > MAX_WORKERS:
             raise InputError(f"{label} must be at most {MAX_WORKERS}, got {_show(value)}")
@@ -240,7 +279,7 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise InputError(f"{label} must be a number, got {type(value).__name__} "
                              f"{_show(value)}")
-        if ranges and not (math.isfinite(value) and value > 0):
+        if not (math.isfinite(value) and value > 0):
             raise InputError(f"{label} must be a finite number > 0, got {value}")
         return value
     assert kind == "bool", kind
@@ -250,21 +289,54 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
     return value
 
 
-def check_fields(values: dict[str, Any], where: str | None = None, *,
-                 ranges: bool = True) -> dict[str, Any]:
-    """Check the type of every field of a scene (a scene file's table, or a
-    :class:`Scene`'s fields) and return them normalised: single values of list fields
-    become lists, window lengths are parsed.
+class FieldError(InputError):
+    """A scene field's value refused: ``field`` and ``detail``, the message after the
+    field's name (``" must be ≥ 1, got 0"``), so that a caller can name the field as its
+    source does (:meth:`Scene.of`)."""
 
-    ``where`` (a scene file) starts every message. ``ranges=False`` checks types only,
-    leaving ranges to :func:`tactbench.runner.planning.plan` (which names the options of
-    the command line). Raises :class:`InputError` naming the field.
-    """
+    def __init__(self, field: str, detail: str) -> None:
+        self.field, self.detail = field, detail
+        super().__init__(f"scene field '{field}'{detail}")
+
+
+def check_fields(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Check the type and range of every field of a scene (a :class:`Scene`'s, or a
+    scene file's table) and return them normalised: single values of list fields become
+    lists, window lengths and seeds are parsed (lengths ≥ 1). Raises :class:`FieldError`
+    naming the field."""
     out: dict[str, Any] = {}
     for name, value in values.items():
-        label = f"{where}: field '{name}'" if where else f"scene field '{name}'"
-        out[name] = _check_field(name, value, label, ranges=ranges)
+        label = f"scene field '{name}'"
+        try:
+            out[name] = _check_field(name, value, label)
+            if name == "L" and any(n < 1 for n in out[name]):
+                raise InputError(f"{label} must be ≥ 1, got {[n for n in out[name] if n < 1]}")
+        except FieldError:
+            raise
+        except InputError as exc:  # every message of _check_field starts with the label
+            raise FieldError(name, str(exc)[len(label):]) from None
     return out
+
+
+def _check_together(scene: Scene) -> None:
+    """What a scene's fields need together, without the plugins, a dataset or the disk:
+    a profile, precision, executor and input kind that exist, a split and a test window
+    written in their grammar, a scheduler only for dask, a grid of at most
+    :data:`MAX_CELLS`."""
+    get_profile(scene.profile)
+    check_choice(scene.resolved_precision(), "precision", PRECISIONS)
+    check_choice(scene.executor, "executor", EXECUTORS)
+    if scene.scheduler:
+        check_scheduler(scene.scheduler)
+    if scene.input is not None:
+        check_choice(scene.input, "--input", INPUT_KINDS)
+    parse_split(scene.split)
+    parse_spec(scene.test_window)
+    n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers)) * len(set(scene.L))
+               * len(set(scene.seeds)) * len(set(scene.init_seeds or [None])))
+    if n_cells > MAX_CELLS:
+        raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
+                         f"seeds); a run takes at most {MAX_CELLS}")
 
 
 def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -278,7 +350,21 @@ def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 def load_scene_file(path: str | Path) -> dict[str, Any]:
     """Read a scene file (TOML, or JSON when it ends in ``.json``) into a dict of
-    :class:`Scene` fields: names, types and ranges checked (:func:`check_fields`)."""
+    :class:`Scene` fields, checked by the Scene they make (:meth:`Scene.of`, messages
+    naming the file and the field), normalised (lists, parsed lengths and seeds), paths
+    taken from the file's folder."""
+    path = Path(path)
+    raw = read_scene_file(path)
+    labels = {name: f"{path}: field '{name}'" for name in raw}
+    scene = Scene.of(raw, labels=labels)
+    return {name: getattr(scene, name) for name in raw}
+
+
+def read_scene_file(path: str | Path) -> dict[str, Any]:
+    """A scene file's fields as written (TOML, or JSON when it ends in ``.json``): field
+    names checked (an unknown or renamed field, one given twice), aliases taken
+    (``seed`` → ``seeds``), text paths taken from the file's folder; values unchecked
+    (the :class:`Scene` they make checks them)."""
     path = Path(path)
     is_json = path.suffix.lower() == ".json"
     try:
@@ -324,7 +410,7 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
                              f"'{given_as[name]}' and '{key}')")
         given_as[name] = key
         raw[name] = value
-    return _relative_to(check_fields(raw, str(path)), path.parent)
+    return _relative_to(raw, path.parent)
 
 
 def _relative_to(values: dict[str, Any], folder: Path) -> dict[str, Any]:
@@ -332,7 +418,8 @@ def _relative_to(values: dict[str, Any], folder: Path) -> dict[str, Any]:
     when relative, taken from the scene file's folder, not the working folder."""
     for name in ("out", "dataset"):
         text = values.get(name)
-        if isinstance(text, str) and (name == "out" or is_path_spec(text)):
+        if isinstance(text, str) and text.strip() and "\x00" not in text \
+                and (name == "out" or is_path_spec(text)):
             path = Path(os.path.expanduser(text))
             values[name] = str(path if path.is_absolute() else folder / path)
     return values

@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
+from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.paths import atomic_write_text
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import ok_rows, row_status
@@ -162,7 +163,7 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
         f"- dataset: `{first.get('dataset', '?')}` (content hash "
         f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
         f"- split: `{first.get('split', '?')}`; test window: "
-        f"`{first.get('test_window', 'first')}` (the L frames each test sequence is "
+        f"`{first.get('test_window', UNNAMED_TEST_WINDOW)}` (the L frames each test sequence is "
         f"classified on); profile: `{first.get('profile', '?')}`; "
         f"device: `{first.get('device', '?')}`",
         f"- cells: {len(rows)}" + (f" ({n_failed} failed, listed below)" if n_failed else "")
