@@ -124,9 +124,12 @@ def test_onset_is_the_first_frame_reaching_a_tenth_of_the_peak():
     assert onset_frame(pressure + 0.3) == 4  # a noise floor is not contact
 
 
-def test_each_test_window_mode_picks_its_frames():
-    from tactbench.data.windows import test_windows_for, training_windows_for, window_starts
+def test_each_test_window_picks_its_frames_and_combines_its_predictions():
+    from tactbench.data.windows import window_starts
+    from tactbench.plugins import load_registry
 
+    registry = load_registry()
+    first, onset, vote = (registry.build("test-window", n) for n in ("first", "onset", "vote"))
     seqs = [np.arange(10, dtype=np.float32)[:, None] * np.ones((1, 2), np.float32),
             np.arange(4, dtype=np.float32)[:, None] * np.ones((1, 2), np.float32)]
     labels = [0, 1]
@@ -134,18 +137,30 @@ def test_each_test_window_mode_picks_its_frames():
     # the onset window moves back to end at the last frame; never before frame 0
     assert window_starts([10, 4], 3, onsets).tolist() == [6, 1]
     assert window_starts([10, 2], 3, [9, 1]).tolist() == [7, 0]
-    first = test_windows_for("first", seqs, labels, 3)
-    assert first.starts.tolist() == [0, 0]
-    onset = test_windows_for("onset", seqs, labels, 3, onsets)
-    assert onset.starts.tolist() == [6, 1]
-    np.testing.assert_array_equal(onset.batch(np.arange(2))[0, :, 0], [6, 7, 8])
-    vote = test_windows_for("vote", seqs, labels, 3)
-    assert vote.seq_index.tolist() == [0] * 8 + [1] * 2
-    train = training_windows_for("onset", seqs, labels, 3, onsets)
+    assert first.test(seqs, labels, 3).starts.tolist() == [0, 0]
+    at_onset = onset.test(seqs, labels, 3, prepared=onsets)
+    assert at_onset.starts.tolist() == [6, 1]
+    np.testing.assert_array_equal(at_onset.batch(np.arange(2))[0, :, 0], [6, 7, 8])
+    every = vote.test(seqs, labels, 3)
+    assert every.seq_index.tolist() == [0] * 8 + [1] * 2
+    train = onset.training(seqs, labels, 3, prepared=onsets)
     assert list(zip(train.seq_index.tolist(), train.starts.tolist())) == \
         [(0, 6), (0, 7), (1, 1)]
-    assert len(training_windows_for("vote", seqs, labels, 3)) == 10
-    from tactbench.errors import InputError
+    assert len(vote.training(seqs, labels, 3)) == len(first.training(seqs, labels, 3)) == 10
 
-    with pytest.raises(InputError, match="did you mean 'onset'"):
-        test_windows_for("onsets", seqs, labels, 3, onsets)
+    class Model:  # predicts class 1 for a window starting at frame ≥ 3, else 0
+        def predict(self, windows):
+            return (windows.starts >= 3).astype(int)
+
+        def predict_proba(self, windows):
+            p = (windows.starts >= 3).astype(float)
+            return np.stack([1 - p, p], axis=1)
+
+    assert first.combine(Model(), first.test(seqs, labels, 3), 2).tolist() == [0, 0]
+    assert onset.combine(Model(), at_onset, 2).tolist() == [1, 0]
+    # vote: 5 of sequence 0's 8 windows start at frame ≥ 3, none of sequence 1's 2
+    assert vote.combine(Model(), every, 2).tolist() == [1, 0]
+    from tactbench.contracts import TEST_WINDOW
+
+    assert TEST_WINDOW.get(first, "prepare") is None and TEST_WINDOW.get(vote, "prepare") is None
+    assert callable(TEST_WINDOW.get(onset, "prepare"))
