@@ -136,3 +136,87 @@ def test_a_k_fold_users_cell_tests_every_sample_once(tiny_scene, cache):
 
     with pytest.raises(InputError, match="trains one per fold"):
         run(tiny_scene(split="users:folds=2", save_models=True), progress=False, cache=cache)
+
+
+@pytest.fixture
+def three_by_three(tmp_path):
+    """A saved dataset of taxel vectors: 3 users × 3 positions × 2 classes × 2
+    repetitions, each class a different taxel pressed."""
+    import numpy as np
+
+    from tactbench.data.dataset import Dataset
+    from tactbench.data.recording import Recording, Sample
+
+    rng = np.random.default_rng(1)
+    samples = []
+    for i in range(36):
+        label, user, position, rep = i % 2, (i // 2) % 3, (i // 6) % 3, 1 + i // 18
+        values = rng.uniform(0.0, 0.1, (6, 4)).astype(np.float32)
+        values[:, label] += 0.8
+        samples.append(Sample(Recording(values, np.arange(6) * 0.1, np.arange(4)),
+                              label=label, user=f"u{user}", position=f"p{position}",
+                              repetition=rep, source="test"))
+    path = tmp_path / "three"
+    Dataset(name="three", samples=samples, classes=("a", "b"), layout=None).save(path)
+    return path
+
+
+@pytest.mark.parametrize("split, key", [("users:folds=3", "user"),
+                                        ("group:position:folds=3", "position")])
+def test_a_k_fold_row_stores_the_fold_and_group_each_recording_was_tested_in(
+        tiny_scene, cache, three_by_three, split, key):
+    """The fold ids of a row are the folds its models were trained on: drawn again here,
+    fold k's test recordings are those the row says fold k tested."""
+    import numpy as np
+
+    from tactbench.data.dataset import Dataset
+    from tactbench.data.splits import dataset_groups, make_splits
+    from tactbench.runner import run
+
+    scene = tiny_scene(dataset=str(three_by_three), encoders=["raw"],
+                       classifiers=["logreg"], seeds=[4], split=split)
+    [row] = run(scene, progress=False, cache=cache).rows
+    assert row["status"] == "ok", row.get("error")
+    tp = row["test_predictions"]
+    assert set(tp) == {"indices", "labels", "predictions", "folds", "groups"}
+    assert len(tp["folds"]) == len(tp["groups"]) == len(tp["indices"]) == row["n_test"]
+    ds = Dataset.load(three_by_three)
+    folds = make_splits(split, labels=ds.labels, users=ds.users, seed=4,
+                        groups=dataset_groups(ds))
+    indices, fold_of = np.asarray(tp["indices"]), np.asarray(tp["folds"])
+    assert sorted(set(fold_of.tolist())) == [0, 1, 2] and row["folds"] == 3
+    for f in folds:
+        assert sorted(indices[fold_of == f.fold].tolist()) == f.test.tolist()
+    values = dict(dataset_groups(ds))[key]
+    assert tp["groups"] == [values[i] for i in tp["indices"]]
+    # a group is tested in one fold only: what the fold left out
+    assert all(len({k for k, g in zip(tp["folds"], tp["groups"]) if g == v}) == 1
+               for v in set(tp["groups"]))
+
+
+def test_a_one_split_row_stores_fold_0_and_each_recordings_own_group(tiny_scene, cache):
+    from tactbench.runner import run
+
+    [row] = run(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0]),
+                progress=False, cache=cache).rows
+    tp = row["test_predictions"]
+    assert set(tp["folds"]) == {0} and "folds" not in row
+    assert tp["groups"] == [str(i) for i in tp["indices"]]  # paper: each its own group
+
+
+def test_a_plugins_split_and_test_window_registered_through_the_hooks_run(
+        tiny_scene, cache, fake_registry):
+    from tactbench.runner import run
+
+    scene = tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0], split="parity",
+                       test_window="last")
+    result = run(scene, registry=fake_registry, progress=False, cache=cache)
+    [row] = result.rows
+    assert row["status"] == "ok", row.get("error")
+    assert (row["split"], row["folds"], row["test_window"]) == ("parity", 2, "last")
+    assert row["test_users"] == ["even", "odd"]
+    tp = row["test_predictions"]
+    assert all(i % 2 == k and g == ("even", "odd")[k]
+               for i, k, g in zip(tp["indices"], tp["folds"], tp["groups"]))
+    identity = result.plan.identities[row["key"]]
+    assert (identity["split"], identity["test_window"]) == ("parity", "last")

@@ -12,15 +12,18 @@ from tactbench.runner.planning import input_kind
 @pytest.mark.parametrize("over, error, match", [
     ({"encoders": ["farnback"]}, UnknownComponentError, "did you mean 'farneback'"),
     ({"classifiers": ["small-cnn"]}, UnknownComponentError, "unknown classifier"),
-    ({"L": [0, 5]}, InputError, "L must be ≥ 1"),
+    ({"L": [0, 5]}, InputError, "'L' must be ≥ 1, got \\[0\\]"),
     ({"encoders": ["raw:winsize=3"]}, InputError, "no option 'winsize'"),
-    ({"split": "random"}, InputError, "unknown split"),
+    ({"split": "random"}, UnknownComponentError, "unknown split 'random'"),
+    ({"split": "users:k=3"}, InputError, "split 'users' has no option 'k'"),
+    ({"test_window": "votes"}, UnknownComponentError,
+     "unknown test-window 'votes'; did you mean 'vote'"),
     ({"profile": "fast"}, InputError, "unknown profile 'fast'"),
     ({"executor": "slurm"}, InputError, "unknown executor"),
-    ({"workers": 0}, InputError, "--workers must be ≥ 1"),
-    ({"threads": 0}, InputError, "--threads must be ≥ 1"),
-    ({"threads": -2}, InputError, "--threads must be ≥ 1"),
-    ({"pixel_mm": 0.0}, InputError, "pixel size"),
+    ({"workers": 0}, InputError, "'workers' must be ≥ 1"),
+    ({"threads": 0}, InputError, "'threads' must be ≥ 1"),
+    ({"threads": -2}, InputError, "'threads' must be ≥ 1"),
+    ({"pixel_mm": 0.0}, InputError, "'pixel_mm' must be a finite number > 0"),
 ])
 def test_the_whole_grid_is_checked_before_any_work(tmp_path, cache, tiny_scene, over, error,
                                                    match):
@@ -328,7 +331,7 @@ def test_init_seeds_multiply_the_cells_and_keep_other_keys(tiny_scene):
 
 
 def test_margin_and_contrasts_are_checked_before_any_work(tiny_scene):
-    with pytest.raises(InputError, match="--margin"):
+    with pytest.raises(InputError, match="'margin' must be a finite number > 0, got -1.0"):
         plan(tiny_scene(margin=-1.0))
     with pytest.raises(InputError, match="'..'"):
         plan(tiny_scene(contrasts=["raw"]))

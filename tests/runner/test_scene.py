@@ -174,9 +174,7 @@ def test_a_range_of_lengths_is_refused_before_it_is_expanded(memory_cap):
             parse_lengths([bad])
 
 
-def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
-    from tactbench.runner import plan
-
+def test_scene_fields_given_in_python_are_checked_when_the_scene_is_made():
     for over, match in [({"seeds": [1.5]}, "scene field 'seeds' must be whole numbers"),
                         ({"encoders": [1]}, "scene field 'encoders' entry 1 must be text"),
                         ({"L": [True]}, "scene field 'L' must be whole numbers"),
@@ -185,7 +183,7 @@ def test_scene_fields_given_in_python_have_their_types_checked_by_planning():
                         ({"workers": 10 ** 5000}, "'workers' must be at most 1024, got an "
                                                   "integer of")]:
         with pytest.raises(InputError, match=match):
-            plan(Scene(dataset="no-such-dataset", **over))
+            Scene(dataset="no-such-dataset", **over)
 
 
 @pytest.mark.parametrize("parse, what", [(parse_lengths, "window length"),
@@ -232,3 +230,61 @@ def test_seeds_take_ranges_in_files_and_on_the_command_line(tmp_path):
     scene.write_text('seeds = [true]\n')
     with pytest.raises(InputError, match="field 'seeds' must be whole numbers or ranges"):
         load_scene_file(scene)
+
+
+def test_a_scene_is_frozen_checked_once_when_made_and_trusted_by_planning(tmp_path,
+                                                                        monkeypatch):
+    import dataclasses
+
+    from tactbench.runner import plan, scene as scene_module
+
+    scene = Scene(L=["1-2"], seeds=3, encoders="raw", out=str(tmp_path / "out"))
+    assert (scene.L, scene.seeds, scene.encoders) == ([1, 2], [3], ["raw"])  # normalised
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scene.split = "users"  # type: ignore[misc]
+    for over, match in [({"profile": "fast"}, "unknown profile 'fast'"),
+                        ({"precision": "int4"}, "unknown precision 'int4'"),
+                        ({"input": "pixels"}, "unknown --input 'pixels'"),
+                        ({"executor": "slurm"}, "unknown executor 'slurm'"),
+                        ({"scheduler": "nowhere"}, "not a dask scheduler address"),
+                        ({"split": "users:folds=3,k"}, "bad option 'k'"),
+                        ({"seeds": "0-99", "L": "1-99", "encoders": ["a", "b"]},
+                         "the grid has 19800 cells"),
+                        ({"L": [0]}, "scene field 'L' must be ≥ 1, got \\[0\\]")]:
+        with pytest.raises(InputError, match=match):
+            Scene(**over)
+        with pytest.raises(InputError, match=match):  # replace() makes a Scene too
+            dataclasses.replace(scene, **over)
+    calls = []
+    real = scene_module.check_fields
+    monkeypatch.setattr(scene_module, "check_fields",
+                        lambda values: calls.append(1) or real(values))
+    made = Scene(dataset="synthetic-forearm:users=2,repetitions=1", encoders=["raw"],
+                 classifiers=["logreg"], L=[3], seeds=[0], pixel_mm=10.0,
+                 out=str(tmp_path / "out"))
+    plan(made)
+    assert len(calls) == 1  # when the scene was made; planning trusts it
+
+
+def test_a_refused_field_is_named_as_its_source_names_it(tmp_path):
+    with pytest.raises(InputError, match="^--threads must be ≥ 1, got 0$"):
+        Scene.of({"threads": 0}, labels={"threads": "--threads"})
+    with pytest.raises(InputError, match="^scene field 'workers' must be ≥ 1, got 0$"):
+        Scene.of({"workers": 0}, labels={"threads": "--threads"})
+    path = tmp_path / "scene.toml"
+    path.write_text("workers = 0\n")
+    with pytest.raises(InputError, match=f"^{re.escape(str(path))}: field 'workers' must be"):
+        load_scene_file(path)
+
+
+def test_the_run_defaults_are_written_once_in_the_scene():
+    """One default for the split, one for the test window: the Scene's; the test window a
+    row or identity leaves out is the study's ('first'), for keys made before windows."""
+    import dataclasses
+
+    from tactbench.data.windows import UNNAMED_TEST_WINDOW
+    from tactbench.runner.results import IDENTITY_DEFAULTS
+
+    defaults = {f.name: f.default for f in dataclasses.fields(Scene)}
+    assert (defaults["split"], defaults["test_window"]) == ("paper", "vote")
+    assert IDENTITY_DEFAULTS["test_window"] == UNNAMED_TEST_WINDOW == "first"
