@@ -122,8 +122,10 @@ def _text(value: Any) -> str | None:
     return None
 
 
-def _optional_text(value: Any) -> str | None:
-    return None if value == "" else _text(value)
+def _spec(value: Any) -> str | None:
+    if not isinstance(value, str) or value != value.strip() or any(c.isspace() for c in value):
+        return f"must be a non-empty string without spaces, or '', got {value!r}"
+    return None
 
 
 def _count(value: Any) -> str | None:
@@ -260,7 +262,7 @@ SPLIT = Contract("split", (
     Member("split", True, "split(data: SplitData, *, seed) → [Split, ...], one per fold, "
            "folds 0, 1, ...; the same for the same data and seed"),
     Member("spec", False, "how cell identities and rows record this split ('users:folds=5'); "
-           "'' means its name with its options sorted", default="", check=_optional_text),
+           "'' means its name with its options sorted", default="", check=_spec),
 ))
 
 #: Test windows: which L-frame windows of a recording a classifier is trained and tested

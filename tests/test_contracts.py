@@ -71,12 +71,31 @@ class NoBatch(MinimalClassifier):
     batch_size = 0
 
 
+class NoSplitMethod:
+    spec = "no-split"
+
+
+class NumberSpec:
+    spec = 3
+
+    def split(self, data, *, seed):
+        return []
+
+
+class NoCombine:
+    def training(self, sequences, labels, L, *, prepared=None):
+        return None
+
+    def test(self, sequences, labels, L, *, prepared=None):
+        return None
+
+
 @pytest.fixture
 def registry(monkeypatch):
     """Built-ins plus a plugin ``tiny`` registering the classes above by target."""
     module = types.ModuleType(MODULE)
     for cls in (MinimalEncoder, MinimalClassifier, NoEncode, NoProba, NamelessChannels,
-                BadRank, NoBatch):
+                BadRank, NoBatch, NoSplitMethod, NumberSpec, NoCombine):
         setattr(module, cls.__name__, cls)
     monkeypatch.setitem(sys.modules, MODULE, module)
 
@@ -92,8 +111,19 @@ def registry(monkeypatch):
                           ("rank-2", "BadRank"), ("no-batch", "NoBatch")):
             register(name, f"{MODULE}:{cls}", summary=name)
 
+    @hookimpl
+    def register_splits(register):
+        for name, cls in (("no-split", "NoSplitMethod"), ("number-spec", "NumberSpec")):
+            register(name, f"{MODULE}:{cls}", summary=name)
+
+    @hookimpl
+    def register_test_windows(register):
+        register("no-combine", f"{MODULE}:NoCombine", summary="no-combine")
+
     tiny = types.SimpleNamespace(register_encoders=register_encoders,
-                                 register_classifiers=register_classifiers)
+                                 register_classifiers=register_classifiers,
+                                 register_splits=register_splits,
+                                 register_test_windows=register_test_windows)
     return collect_registry(make_plugin_manager(entry_points=False, extra=[("tiny", tiny)]))
 
 
@@ -106,6 +136,9 @@ def registry(monkeypatch):
     ("classifier", "no-proba", "'predict_proba' is not callable"),
     ("classifier", "rank-2", "'frame_rank' must be 3 (images), 1 (taxel vectors) or None"),
     ("classifier", "no-batch", "'batch_size' must be a positive integer, got 0"),
+    ("split", "no-split", "no method 'split'"),
+    ("split", "number-spec", "'spec' must be a non-empty string without spaces, or '', got 3"),
+    ("test-window", "no-combine", "no method 'combine'"),
 ])
 def test_a_component_breaking_its_contract_is_refused_at_build(registry, kind, name, missing):
     with pytest.raises(ContractError) as err:
@@ -200,6 +233,7 @@ def _builtin_specs(registry, kind, tmp_path):
         ("dataset", "cyskin-text"): {"path": str(tmp_path)},
         ("dataset", "cost"): {"path": str(tmp_path / "cost.csv")},
         ("dataset", "folder"): {"path": str(tmp_path)},
+        ("split", "group"): {"key": "position"},
     }
     for comp in registry.components(kind):
         if comp.plugin.startswith("tactbench."):
@@ -222,7 +256,8 @@ def test_every_builtin_component_satisfies_its_contract(kind, tmp_path):
                 obj.close()
                 getattr(obj, "bus", None) and obj.bus.shutdown()
         built += 1
-    assert built >= {"sensor": 2, "dataset": 3, "encoder": 3, "classifier": 4}[kind]
+    assert built >= {"sensor": 2, "dataset": 3, "encoder": 3, "classifier": 4, "split": 4,
+                     "test-window": 3}[kind]
 
 
 def test_sensors_know_their_taxels_when_built():

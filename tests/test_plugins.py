@@ -12,7 +12,13 @@ import click
 import pytest
 
 from tactbench import hookimpl, hookspecs
-from tactbench.errors import ComponentLoadError, InputError, PluginError, UnknownComponentError
+from tactbench.errors import (
+    ComponentLoadError,
+    ContractError,
+    InputError,
+    PluginError,
+    UnknownComponentError,
+)
 from tactbench.plugins import collect_registry, make_plugin_manager
 from tactbench.specs import format_spec, parse_spec
 
@@ -108,6 +114,52 @@ def test_hook_register_classifiers():
     assert reg.get("classifier", "majority").target == "collections:Counter"
 
 
+def test_hook_register_splits():
+    import numpy as np
+
+    from tactbench.data.splits import Split, make_splits
+
+    class Halves:  # the first half of the recordings trains, the second tests
+        spec = "halves"
+
+        def split(self, data, *, seed):
+            n = len(data.labels)
+            test = np.arange(n // 2, n)
+            return [Split(np.arange(n // 2), test, [str(i) for i in test])]
+
+    module = types.ModuleType("halves_plugin")
+    module.Halves = Halves
+    sys.modules["halves_plugin"] = module
+    try:
+        def register_splits(register):
+            register("halves", "halves_plugin:Halves", summary="a split")
+
+        reg = registry_with(("p", namespace(register_splits=register_splits)))
+        assert reg.get("split", "halves").plugin == "p"
+        assert {"paper", "users", "group", "kfold"} <= set(reg.names("split"))
+        [s] = make_splits("halves", labels=[0, 1] * 3, users=[""] * 6, seed=0, registry=reg)
+        assert (s.train.tolist(), s.test.tolist(), s.fold) == ([0, 1, 2], [3, 4, 5], 0)
+        with pytest.raises(ContractError, match="split 'halves' .*no method 'split'"):
+            module.Halves = object
+            reg.build("split", "halves")
+    finally:
+        del sys.modules["halves_plugin"]
+
+
+def test_hook_register_test_windows():
+    def register_test_windows(register):
+        register("middle", "somewhere.windows:Middle", summary="a test window")
+
+    reg = registry_with(("p", namespace(register_test_windows=register_test_windows)))
+    comp = reg.get("test-window", "middle")
+    assert (comp.kind, comp.plugin) == ("test-window", "p")
+    assert {"first", "onset", "vote"} <= set(reg.names("test-window"))
+    built = reg.build("test-window", "vote")
+    assert callable(built.training) and callable(built.combine)
+    with pytest.raises(ComponentLoadError, match="test-window 'middle'.*cannot import"):
+        reg.build("test-window", "middle")
+
+
 def test_hook_register_commands(plugin_dist):
     plugin_dist("cmd-dist", "cmdplug", """
         import click
@@ -128,7 +180,7 @@ def test_hook_register_commands(plugin_dist):
 
 def test_every_hook_has_its_own_test():
     hooks = [n for n in dir(hookspecs) if n.startswith("register_")]
-    assert len(hooks) == 5
+    assert len(hooks) == 7
     missing = [h for h in hooks if f"test_hook_{h}" not in globals()]
     assert not missing, f"hooks without a test: {missing}"
 
