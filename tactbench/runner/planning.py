@@ -1,11 +1,18 @@
 """Planning: check a whole scene before any work and expand it into cells.
 
+A :class:`~tactbench.runner.scene.Scene` checked its own fields when it was made; planning
+checks, once, what needs the plugins, the dataset or the disk: every component's name and
+options (encoders, classifiers, the split and the test window, built by the registry),
+the inputs each classifier can be fed, L against the longest sequence, the memory of the
+large steps, the split drawn once for the first seed, the out folder.
+
 A cell is one point of the grid (encoder × classifier × L × seed). Its *identity* is
 everything that decides its result (dataset content hash, split, imaging, encoder and
 version, storage precision, classifier with all options, profile, L, seed); the hash of
 the identity is the cell's key, which names its result file, so a changed setting is a
-new cell. The precision is written into the identity only when it is not ``float32``, so
-float32 cells keep the keys they had before precisions existed.
+new cell. The precision is written into the identity only when it is not ``float32``, and the
+test window only when it is not the study's ``first``, so cells keep the keys they had
+before either existed.
 
 (Named ``planning``, not ``plan``: the package re-exports the function :func:`plan`,
 which would hide a submodule of the same name.)
