@@ -229,7 +229,7 @@ def test_the_checker_catches_what_it_should(tmp_path):
     with pytest.raises(click.UsageError):
         check_command("tactbench run --threads many")
     with pytest.raises(click.UsageError):
-        check_command("tactbench run --test-window middle")
+        check_command("tactbench run --profile fast")
     doc = tmp_path / "x.md"
     doc.write_text("text\n<!-- example: not run (needs a SLURM cluster) -->\n```python\n"
                    "import nowhere\n```\n\n```console\n$ tactbench run \\\n"
