@@ -42,7 +42,7 @@ BUILTIN_COMMANDS: dict[str, str] = {
 #: drawn without importing the commands (whose modules import the library they drive).
 #: ``tests/test_cli.py`` checks each is the command's own short help.
 BUILTIN_SUMMARIES: dict[str, str] = {
-    "list": "List registered sensors, datasets, encoders and classifiers.",
+    "list": "List registered sensors, datasets, encoders, classifiers, splits and test windows.",
     "plugins": "List plugins (built-in and installed), their versions and load errors.",
     "data": "Inspect, simulate and preview datasets.",
     "can": "CySkin taxel traffic on a CAN bus: simulate, record, bus load, log info.",

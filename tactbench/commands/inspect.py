@@ -6,6 +6,7 @@ import click
 
 from tactbench.cli import get_registry, json_text
 from tactbench.contracts import CLASSIFIER
+from tactbench.registry import KINDS
 
 
 def _component_dict(comp) -> dict:
@@ -45,11 +46,10 @@ def _problem_dict(problem) -> dict:
 
 
 @click.command("list")
-@click.option("--kind", type=click.Choice(["sensor", "dataset", "encoder", "classifier"]),
-              help="Only components of this kind.")
+@click.option("--kind", type=click.Choice(list(KINDS)), help="Only components of this kind.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def list_cmd(kind: str | None, as_json: bool) -> None:
-    """List registered sensors, datasets, encoders and classifiers."""
+    """List registered sensors, datasets, encoders, classifiers, splits and test windows."""
     registry = get_registry()
     components = list(registry.components(kind))
     rows = [_component_dict(c) for c in components]

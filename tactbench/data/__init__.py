@@ -25,8 +25,9 @@ module              what it holds
 ==================  ========================================================================
 
 Datasets themselves (the simulator, file formats, the generated forearm) are in
-:mod:`tactbench.datasets`. Nothing here imports a heavy library at import time. This module is a built-in plugin:
-it registers the splits and test windows, by name, the way plugins register theirs.
+:mod:`tactbench.datasets`. Nothing here imports a heavy library at import time. This
+module is a built-in plugin: it registers the splits and test windows, by name, the way
+plugins register theirs.
 """
 
 from __future__ import annotations
