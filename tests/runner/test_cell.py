@@ -220,3 +220,25 @@ def test_a_plugins_split_and_test_window_registered_through_the_hooks_run(
                for i, k, g in zip(tp["indices"], tp["folds"], tp["groups"]))
     identity = result.plan.identities[row["key"]]
     assert (identity["split"], identity["test_window"]) == ("parity", "last")
+
+
+def test_rows_with_and_without_fold_and_group_lists_read_back(tiny_scene, cache):
+    """Rows made before folds and groups were stored still verify; lists that do not
+    match, or are not fold numbers and text, are refused."""
+    from tactbench.runner import run
+    from tactbench.runner.results import check_row
+
+    [row] = run(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0]),
+                progress=False, cache=cache).rows
+    row = {k: v for k, v in row.items() if k != "checksum"}
+    tp = row["test_predictions"]
+    assert check_row(row, row["key"]) is None
+    old = {**row, "test_predictions": {k: tp[k] for k in ("indices", "labels",
+                                                          "predictions")}}
+    assert check_row(old, row["key"]) is None
+    for bad, problem in [({"folds": tp["folds"][:-1]}, "lists of one length"),
+                         ({"folds": [-1] * len(tp["folds"])}, "fold numbers"),
+                         ({"groups": [1] * len(tp["groups"])}, "groups that are not text"),
+                         ({"fold": tp["folds"]}, "not {indices, labels, predictions")]:
+        damaged = {**row, "test_predictions": {**tp, **bad}}
+        assert problem in (check_row(damaged, row["key"]) or ""), bad
