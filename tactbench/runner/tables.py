@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Mapping, Sequence
 
+from tactbench.runner.comparisons import Comparison, read_comparisons
 from tactbench.runner.summaries import (
     FACTORS,
     failed_cells,
@@ -15,6 +16,9 @@ from tactbench.runner.summaries import (
 
 #: Classifier spec → the name shown for it (:func:`tactbench.runner.summaries.spec_labels`).
 Labels = Mapping[str, str]
+#: Comparisons as records, or as results.json stores them (read through
+#: :func:`tactbench.runner.comparisons.read_comparisons`, which verifies them).
+Comparisons = Sequence["Comparison | Mapping[str, Any]"]
 
 
 def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
@@ -22,24 +26,24 @@ def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
     return spec_labels(s["classifier"] for s in summaries)
 
 
-def comparison_labels(comps: Iterable[dict[str, Any]]) -> dict[str, str]:
+def comparison_labels(comps: Comparisons) -> dict[str, str]:
     """The labels of the classifiers ``comps`` compare or share."""
     specs = []
-    for c in comps:
-        if c["factor"] == "classifier":
-            specs += [c["a"], c["b"]]
-        if "classifier" in c:
-            specs.append(c["classifier"])
+    for c in read_comparisons(comps):
+        if c.factor == "classifier":
+            specs += [c.a, c.b]
+        if "classifier" in c.where:
+            specs.append(c.where["classifier"])
     return spec_labels(specs)
 
 
-def _comparison_label(c: dict[str, Any], side: str, labels: Labels | None = None) -> str:
-    value = c[side]
-    if c["factor"] == "classifier":
+def _comparison_label(c: Comparison, side: str, labels: Labels | None = None) -> str:
+    value = getattr(c, side)
+    if c.factor == "classifier":
         return spec_label(value, labels)
-    if c["factor"] == "L":
+    if c.factor == "L":
         return f"L={value}"
-    if c["factor"] == "contrast":  # "encoder=raw,L=6" → "raw L=6"
+    if c.factor == "contrast":  # "encoder=raw,L=6" → "raw L=6"
         parts = []
         for item in str(value).split(","):
             k, _, v = item.partition("=")
@@ -48,14 +52,21 @@ def _comparison_label(c: dict[str, Any], side: str, labels: Labels | None = None
     return str(value)
 
 
-def _context(c: dict[str, Any], labels: Labels | None = None) -> str:
+def _context(c: Comparison, labels: Labels | None = None) -> str:
     parts = []
     for k in FACTORS:
-        if k == c["factor"] or k not in c:
+        if k == c.factor or k not in c.where:
             continue
-        parts.append(f"L={c[k]}" if k == "L" else spec_label(c[k], labels) if
-                     k == "classifier" else str(c[k]))
+        value = c.where[k]
+        parts.append(f"L={value}" if k == "L" else spec_label(value, labels) if
+                     k == "classifier" else str(value))
     return " ".join(parts) or "-"
+
+
+def _pair(c: Comparison, labels: Labels | None) -> list[str]:
+    """The cells naming a comparison in every table of comparisons: factor, A, B, where."""
+    return [c.factor, _comparison_label(c, "a", labels), _comparison_label(c, "b", labels),
+            _context(c, labels)]
 
 
 COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
@@ -63,42 +74,33 @@ COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
                      "p (t / sign-flip)", "Holm p", "runs for ±2 (±margin)", "verdict"]
 
 
-def verdict_text(c: dict[str, Any], labels: Labels | None = None) -> str:
+def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
     """The verdict in words: ``farneback better``, ``equivalent within ±2``, ..."""
-    verdict = c["verdict"]
-    if verdict == "B better":
+    [c] = read_comparisons([c])
+    if c.verdict == "B better":
         return f"{_comparison_label(c, 'b', labels)} better"
-    if verdict == "A better":
+    if c.verdict == "A better":
         return f"{_comparison_label(c, 'a', labels)} better"
-    if verdict == "equivalent":
-        return f"equivalent within ±{c['equivalence_margin']:g}"
-    return verdict
+    if c.verdict == "equivalent":
+        return f"equivalent within ±{c.equivalence_margin:g}"
+    return c.verdict
 
 
-def _runs_needed(c: dict[str, Any]) -> str:
-    n = c.get("runs_needed")
-    return "unreachable" if n is None else str(n)
-
-
-def comparison_rows(comps: Sequence[dict[str, Any]], labels: Labels | None = None
-                    ) -> list[list[str]]:
+def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[list[str]]:
     """Table cells: factor, A, B, where (the shared factors), B − A (points), the
     run-level interval, runs B>A/A>B/tied, p of the corrected t and of the sign-flip
     test, the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
     and the verdict. A classifier is named by its label in ``labels`` (by default the
     labels among the classifiers of ``comps``, :func:`comparison_labels`)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    rows = []
-    for c in comps:
-        rows.append([
-            c["factor"], _comparison_label(c, "a", labels), _comparison_label(c, "b", labels),
-            _context(c, labels),
-            f"{100 * c['difference']:+.1f}",
-            f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]" if c["df"] else "-",
-            f"{c['b_better_runs']}/{c['a_better_runs']}/{c['tied_runs']}",
-            f"{_p_value(c['t_p'])} / {_p_value(c['permutation_p'])}",
-            _p_value(c["p_holm"]), _runs_needed(c), verdict_text(c, labels)])
-    return rows
+    return [[*_pair(c, labels), f"{100 * c.difference:+.1f}",
+             f"[{100 * c.low:+.1f}, {100 * c.high:+.1f}]" if c.df else "-",
+             f"{c.b_better_runs}/{c.a_better_runs}/{c.tied_runs}",
+             f"{_p_value(c.t_p)} / {_p_value(c.permutation_p)}", _p_value(c.p_holm),
+             "unreachable" if c.runs_needed is None else str(c.runs_needed),
+             verdict_text(c, labels)]
+            for c in comps]
 
 
 def _p_value(p: float | None) -> str:
@@ -107,7 +109,7 @@ def _p_value(p: float | None) -> str:
     return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
-def comparisons_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None = None) -> str:
+def comparisons_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     if not comps:
         return ""
     lines = ["| " + " | ".join(COMPARISON_HEADER) + " |",
@@ -116,13 +118,13 @@ def comparisons_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None 
     return "\n".join(lines)
 
 
-def print_comparisons(comps: Sequence[dict[str, Any]], *,
-                      factors: Sequence[str] = ("encoder", "classifier"),
+def print_comparisons(comps: Comparisons, *, factors: Sequence[str] = ("encoder", "classifier"),
                       labels: Labels | None = None) -> None:
     """The terminal's table of paired comparisons (by default of encoders and classifiers;
     report.md and results.json hold every factor)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    shown = [c for c in comps if c["factor"] in factors]
+    shown = [c for c in comps if c.factor in factors]
     if not shown:
         return
     from rich.console import Console
@@ -259,53 +261,90 @@ def reference_markdown(reference: Sequence[dict[str, Any]],
     return "\n".join(lines)
 
 
-def per_class_gains_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None = None
-                             ) -> str:
+def per_class_gains_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     """Per-class gains B − A (points) with their run-level intervals, one line per
     comparison ("" when none has them)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    comps = [c for c in comps if c.get("per_class")]
+    comps = [c for c in comps if c.per_class]
     if not comps:
         return ""
-    classes = list(dict.fromkeys(k for c in comps for k in c["per_class"]))
+    classes = list(dict.fromkeys(k for c in comps for k in c.per_class))
     lines = ["| factor | A | B | where | " + " | ".join(classes) + " |",
              "|" + "---|" * (4 + len(classes))]
     for c in comps:
         cells = []
         for k in classes:
-            g = c["per_class"].get(k)
+            g = c.per_class.get(k)
             if g is None:
                 cells.append("-")
-            elif g["low"] is None:
-                cells.append(f"{100 * g['difference']:+.1f}")
+            elif g.low is None:
+                cells.append(f"{100 * g.difference:+.1f}")
             else:
-                cells.append(f"{100 * g['difference']:+.1f} [{100 * g['low']:+.1f}, "
-                             f"{100 * g['high']:+.1f}]")
-        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a', labels)} | "
-                     f"{_comparison_label(c, 'b', labels)} | {_context(c, labels)} | "
-                     + " | ".join(cells)
-                     + " |")
+                cells.append(f"{100 * g.difference:+.1f} [{100 * g.low:+.1f}, "
+                             f"{100 * g.high:+.1f}]")
+        lines.append("| " + " | ".join(_pair(c, labels) + cells) + " |")
     return "\n".join(lines)
 
 
-def per_user_gains_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None = None
-                            ) -> str:
+def per_user_gains_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     """Per-user gains of every pair: users tested, helped, hurt, median and quartiles
     (points) ("" when no comparison has them: not a users split, or no user ids)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    comps = [c for c in comps if c.get("per_user")]
+    comps = [c for c in comps if c.per_user]
     if not comps:
         return ""
     lines = ["| factor | A | B | where | users | helped | hurt | median gain | "
              "quartiles |", "|---|---|---|---|---|---|---|---|---|"]
     for c in comps:
-        u = c["per_user"]
-        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a', labels)} | "
-                     f"{_comparison_label(c, 'b', labels)} | {_context(c, labels)} | "
-                     f"{u['users']} | "
-                     f"{u['helped']} | {u['hurt']} | {100 * u['median']:+.1f} | "
-                     f"{100 * u['q25']:+.1f} … {100 * u['q75']:+.1f} |")
+        u = c.per_user
+        lines.append("| " + " | ".join(_pair(c, labels)) + f" | {u.users} | "
+                     f"{u.helped} | {u.hurt} | {100 * u.median:+.1f} | "
+                     f"{100 * u.q25:+.1f} … {100 * u.q75:+.1f} |")
     return "\n".join(lines)
+
+
+#: What report.md says above its table of comparisons.
+COMPARISONS_TEXT = (
+    "Every two cells that differ in one factor (and every contrast asked for), compared "
+    "on the same test sequences run by run: B − A is the mean over runs (a run: one split "
+    "seed, its split and initialisation) of the difference of accuracy. The interval is "
+    "the corrected resampled t over runs (Nadeau–Bengio; for K folds Bouckaert–Frank), "
+    "which counts the training variability, not only the test set's; p is the larger of "
+    "its p and the exact sign-flip test over runs; Holm adjusts p within this run's "
+    "comparisons, and the verdict rests on the adjusted p. Fewer than 3 runs give no "
+    "verdict; an interval touching 0 is unresolved; \"runs for ±2\" is how many runs the "
+    "observed variance needs for an interval of ±2 points (or ±margin), \"unreachable\" "
+    "where the correction keeps it wider however many runs of these data there are. "
+    "McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of those trained "
+    "models only. See docs/statistics.md.")
+
+
+def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> list[str]:
+    """report.md's lines on the paired comparisons (none without comparisons): the
+    table of verdicts, the notes, and the table of each further result (per-class and
+    per-user gains) — where a new test's table goes."""
+    comps = read_comparisons(comps)
+    if not comps:
+        return []
+    lines = ["## Paired comparisons over runs", "", COMPARISONS_TEXT, "",
+             comparisons_markdown(comps, labels), ""]
+    notes = [c.note for c in comps if c.note]
+    for note in dict.fromkeys(notes):
+        lines.append(f"- {notes.count(note)} comparison(s): {note}.")
+    if notes:
+        lines.append("")
+    gains = per_class_gains_markdown(comps, labels)
+    if gains:
+        lines += ["### Per-class gains (B − A, points, 95 % interval over runs)", "",
+                  gains, ""]
+    people = per_user_gains_markdown(comps, labels)
+    if people:
+        lines += ["### Per-user gains (B − A on each test user's recordings)", "",
+                  "A user is helped when B's accuracy on their recordings, averaged "
+                  "over the runs that test them, is above A's.", "", people, ""]
+    return lines
 
 
 def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]],

@@ -1,0 +1,560 @@
+"""Paired comparisons of cells over runs: the :class:`Comparison` record and how rows make it.
+
+Two cells that differ in one factor (or that a contrast names,
+:func:`tactbench.runner.summaries.parse_contrast`) are compared run by run on the test
+recordings both predicted: :func:`comparisons` pairs them, :func:`compare_cells` computes
+one record, and the family step (Holm, verdicts) closes the run. The tests themselves are
+pure functions of :mod:`tactbench.runner.statistics`; :func:`run_level_tests` is the one
+place they are called over a pair's differences, and a :class:`Comparison` holds what
+they give. results.json stores each record as :meth:`Comparison.to_dict` (flat JSON, the
+field names of the reports made before the record), read back by
+:meth:`Comparison.from_dict`, which verifies it.
+
+Folds are read from the rows: a K-fold row's ``test_predictions`` carries ``folds``, the
+fold id of each test recording, beside ``indices``; no fold is drawn again here.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Iterable, Mapping, NamedTuple, Sequence
+
+import numpy as np
+
+from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.runner.statistics import (
+    TARGET_HALF_WIDTH,
+    corrected_t,
+    holm,
+    mcnemar_p,
+    pairs_differing_in_one_factor,
+    runs_needed,
+    sign_flip_p,
+    tost_p,
+    verdict,
+)
+from tactbench.runner.summaries import (
+    CONFIDENCE,
+    FACTORS,
+    cell_groups,
+    contrast_pairs,
+    parse_contrast,
+    spec_label,
+    spec_labels,
+)
+
+#: The verdict's p: False (the choice, docs/statistics.md), the corrected t's, with the
+#: exact sign-flip p reported beside it as a distribution-free check; True, the larger of
+#: the two (the sign-flip's floor 2 / 2^J then forbids any verdict below 6 runs).
+PERMUTATION_GOVERNS = False
+
+
+@dataclass(frozen=True)
+class ClassGain:
+    """The gain B − A on one class's test recordings: the mean over runs, its run-level
+    interval (None where fewer than 2 runs test the class) and the runs that test it."""
+
+    difference: float
+    low: float | None
+    high: float | None
+    runs: int
+
+
+@dataclass(frozen=True)
+class UserGains:
+    """Per-user gains B − A (accuracy fractions): users tested, helped (gain > 0), hurt
+    (gain < 0), the median and quartiles of the gains, and user → gain."""
+
+    users: int
+    helped: int
+    hurt: int
+    median: float
+    q25: float
+    q75: float
+    gains: dict[str, float]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Two cells A and B compared run by run; differences are B − A, accuracy fractions.
+
+    - which: ``dataset``, ``split``, ``factor`` (one of :data:`FACTORS`, or
+      ``"contrast"``), ``a``, ``b`` (their values; a contrast's sides as
+      ``encoder=raw,L=6``) and ``where`` (the factors both share: factor → value);
+    - the run-level tests (:func:`run_level_tests`): ``difference`` (mean over runs),
+      ``low``/``high`` (the interval at ``confidence``, by ``method`` with ``ratio`` =
+      n_test/n_train or 1/(K − 1); ``df`` None below 2 runs), ``t_p``,
+      ``permutation_p`` (exact sign-flip over runs), ``p`` (the one the verdict rests
+      on), ``equivalence_margin`` (points) and ``equivalence_p`` (TOST), ``runs_needed``
+      for an interval of ±``runs_needed_half_width`` points;
+    - the runs: ``runs``, ``per_run`` (split seed → difference), ``b_better_runs``,
+      ``a_better_runs``, ``tied_runs``, ``p_b_better`` (share of runs where B is higher),
+      ``accuracy_a``/``accuracy_b``;
+    - the recordings: ``a_only``/``b_only`` (rows only A / only B got right),
+      ``discordant_recordings``, ``test_recordings``, ``mcnemar_per_seed`` (seed → p;
+      about those trained models only), ``per_class`` (class → :class:`ClassGain`),
+      ``per_user`` (:class:`UserGains`, with the users known);
+    - the family (all comparisons of a run): ``p_holm``, ``equivalence_p_holm``,
+      ``family_size``, ``verdict`` and ``note``
+      (:func:`tactbench.runner.statistics.verdict`).
+    """
+
+    dataset: str
+    split: str
+    factor: str
+    a: Any
+    b: Any
+    where: dict[str, Any]
+    difference: float
+    low: float
+    high: float
+    confidence: float
+    method: str
+    ratio: float
+    df: int | None
+    runs: int
+    per_run: dict[str, float]
+    b_better_runs: int
+    a_better_runs: int
+    tied_runs: int
+    p_b_better: float
+    t_p: float | None
+    permutation_p: float
+    p: float | None
+    accuracy_a: float
+    accuracy_b: float
+    equivalence_margin: float | None
+    equivalence_p: float | None
+    runs_needed: int | None
+    runs_needed_half_width: float
+    a_only: int
+    b_only: int
+    discordant_recordings: int
+    test_recordings: int
+    mcnemar_per_seed: dict[str, float]
+    per_class: dict[str, ClassGain]
+    per_user: UserGains | None
+    p_holm: float | None = None
+    equivalence_p_holm: float | None = None
+    family_size: int = 0
+    verdict: str = ""
+    note: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON entry of results.json: every field by name, ``where``'s factors
+        spread among them (after ``b``), nested records as dicts."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "where":
+                out.update(value)
+            elif f.name == "per_class":
+                out[f.name] = {k: asdict(g) for k, g in value.items()}
+            elif f.name == "per_user":
+                out[f.name] = None if value is None else asdict(value)
+            else:
+                out[f.name] = value
+        return out
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any], *, source: str = "results.json"
+                  ) -> Comparison:
+        """The record of a stored entry (:meth:`to_dict`), verified: every field present
+        with a value of its kind, no unknown one; else :class:`CorruptArtefactError`
+        naming ``source`` and the field."""
+        if not isinstance(entry, Mapping):
+            raise CorruptArtefactError(source, "a comparison that is not an object")
+        names = [f.name for f in fields(cls) if f.name != "where"]
+        unknown = sorted(set(entry) - set(names) - set(FACTORS))
+        if unknown:
+            raise CorruptArtefactError(source, f"a comparison with unknown field {unknown[0]!r}")
+        for name in names:
+            if name not in entry:
+                raise CorruptArtefactError(source, f"a comparison without {name!r}")
+            if not _STORED_KIND[name](entry[name]):
+                raise CorruptArtefactError(
+                    source, f"a comparison whose {name} is {str(entry[name])[:40]!r}")
+        values = {name: entry[name] for name in names}
+        values["per_class"] = {str(k): ClassGain(**g) for k, g in entry["per_class"].items()}
+        if entry["per_user"] is not None:
+            values["per_user"] = UserGains(**entry["per_user"])
+        return cls(where={k: entry[k] for k in FACTORS if k in entry}, **values)
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _count(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+def _maybe(check):
+    return lambda v: v is None or check(v)
+
+
+def _numbers_by_text(v: Any) -> bool:
+    return isinstance(v, Mapping) and all(isinstance(k, str) and _number(x)
+                                          for k, x in v.items())
+
+
+def _class_gains(v: Any) -> bool:
+    keys = {f.name for f in fields(ClassGain)}
+    return isinstance(v, Mapping) and all(
+        isinstance(g, Mapping) and set(g) == keys and _number(g["difference"])
+        and _count(g["runs"]) and _maybe(_number)(g["low"]) and _maybe(_number)(g["high"])
+        for g in v.values())
+
+
+def _user_gains(v: Any) -> bool:
+    keys = {f.name for f in fields(UserGains)}
+    return isinstance(v, Mapping) and set(v) == keys and all(
+        _count(v[k]) for k in ("users", "helped", "hurt")) and all(
+        isinstance(v[k], (int, float)) for k in ("median", "q25", "q75")) and \
+        _numbers_by_text(v["gains"])
+
+
+#: What each stored field of a comparison may hold (:meth:`Comparison.from_dict`).
+_STORED_KIND = {
+    **{k: lambda v: isinstance(v, str) for k in ("dataset", "split", "factor", "method",
+                                                 "verdict", "note")},
+    "a": lambda v: isinstance(v, (str, int)), "b": lambda v: isinstance(v, (str, int)),
+    **{k: _number for k in ("difference", "low", "high", "confidence", "ratio",
+                            "p_b_better", "permutation_p", "accuracy_a", "accuracy_b",
+                            "runs_needed_half_width")},
+    **{k: _maybe(_number) for k in ("t_p", "p", "equivalence_margin", "equivalence_p",
+                                    "p_holm", "equivalence_p_holm")},
+    **{k: _count for k in ("runs", "b_better_runs", "a_better_runs", "tied_runs", "a_only",
+                           "b_only", "discordant_recordings", "test_recordings",
+                           "family_size")},
+    "df": _maybe(_count), "runs_needed": _maybe(_count),
+    "per_run": _numbers_by_text, "mcnemar_per_seed": _numbers_by_text,
+    "per_class": _class_gains, "per_user": _maybe(_user_gains),
+}
+
+
+def read_comparisons(entries: Iterable[Comparison | Mapping[str, Any]], *,
+                     source: str = "results.json") -> list[Comparison]:
+    """Records of ``entries``: records as they are, stored entries (results.json's
+    ``comparisons``) through :meth:`Comparison.from_dict`."""
+    return [e if isinstance(e, Comparison) else Comparison.from_dict(e, source=source)
+            for e in entries]
+
+
+# --------------------------------------------------------------------- a run's family
+
+
+def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = (),
+                margin: float | None = None, users: Sequence[str] | None = None,
+                confidence: float = CONFIDENCE) -> list[Comparison]:
+    """Paired comparisons at run level: every two cells that differ in one of
+    :data:`FACTORS`, and every pair a ``contrasts`` entry names (:func:`parse_contrast`).
+
+    Only runs (seeds) both cells finished, and test sequences both predicted with the
+    same label, are paired; rows without ``test_predictions`` are left out. A is the
+    cell that comes first in the run (the scene's order), so a run listing ``raw`` before
+    ``farneback`` reports farneback − raw; a contrast gives its own A and B.
+
+    Every comparison of one run forms one family: its p-values (the corrected t's; see
+    :data:`PERMUTATION_GOVERNS`) are Holm-adjusted together, and the verdicts
+    rest on the adjusted ones (:func:`tactbench.runner.statistics.verdict`). ``margin``
+    (points) adds the equivalence test; ``users`` (the user of each dataset sample, by
+    index) adds per-user gains. See :class:`Comparison` for each record's fields.
+    """
+    if margin is not None and not (isinstance(margin, (int, float)) and margin > 0):
+        raise InputError(f"margin must be a number of points > 0, got {margin!r}")
+    groups = cell_groups(rows)
+    blocks: dict[tuple, list[tuple]] = {}
+    for key in groups:  # first-appearance order within each (dataset, split)
+        blocks.setdefault(key[:2], []).append(key)
+    out: list[Comparison] = []
+    for (dataset, split), keys in blocks.items():
+        cells = [dict(zip(FACTORS, key[2:])) for key in keys]
+        for i, j, factor, value_a, value_b in _pairs(cells, contrasts):
+            named = set(parse_contrast_factors(factor, value_a))
+            where = {k: v for k, v in cells[i].items() if k != factor and k not in named}
+            res = compare_cells(groups[keys[i]], groups[keys[j]], margin=margin,
+                                users=users, confidence=confidence,
+                                names={"dataset": dataset, "split": split, "factor": factor,
+                                       "a": value_a, "b": value_b, "where": where})
+            if res is not None:
+                out.append(res)
+    return _family(out, confidence)
+
+
+def _pairs(cells: list[dict[str, Any]], contrasts: Sequence[str]) -> list[tuple]:
+    """(index of A, index of B, factor, value of A, value of B) of every pair of
+    ``cells`` compared: those differing in one factor, then the contrasts'."""
+    labels = spec_labels(c["classifier"] for c in cells)
+    todo = [(p.a, p.b, p.factor, p.value_a, p.value_b)
+            for p in pairs_differing_in_one_factor(cells)]
+    for text in contrasts:
+        a_side, b_side = parse_contrast(text)
+        for i, j in contrast_pairs(text, cells):
+            todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
+                         _side_label(cells[j], b_side, labels)))
+    return todo
+
+
+def _family(comps: list[Comparison], confidence: float) -> list[Comparison]:
+    """The run's comparisons as one family: Holm on the governing p (NaN: too few runs)
+    and on the equivalence p, then each verdict and its note."""
+    alpha = 1 - confidence
+    p = holm([c.p if c.p is not None else math.nan for c in comps])
+    eq = holm([c.equivalence_p if c.equivalence_p is not None else math.nan for c in comps])
+    size = int(sum(c.p is not None for c in comps))
+    out = []
+    for c, p_adj, eq_adj in zip(comps, p, eq):
+        p_holm = None if math.isnan(p_adj) else float(p_adj)
+        eq_holm = None if math.isnan(eq_adj) else float(eq_adj)
+        said, note = verdict(c.low, c.high, 1.0 if p_holm is None else p_holm, c.runs,
+                             alpha=alpha, discordant_recordings=c.discordant_recordings,
+                             equivalence_p_adjusted=eq_holm)
+        floor = 2.0 ** (1 - c.runs)
+        if PERMUTATION_GOVERNS and said == "unresolved" and not note and floor >= alpha:
+            note = (f"{c.runs} runs: the sign-flip floor is p = {floor:.3g}; a "
+                    f"verdict needs ≥ {_runs_for_floor(alpha)} runs")
+        elif said in ("A better", "B better") and floor >= alpha:
+            note = (f"rests on the corrected t: with {c.runs} runs the exact "
+                    f"sign-flip test cannot go below p = {floor:.3g}")
+        out.append(replace(c, p_holm=p_holm, equivalence_p_holm=eq_holm, family_size=size,
+                           verdict=said, note=note))
+    return out
+
+
+def _runs_for_floor(alpha: float) -> int:
+    """The fewest runs whose smallest sign-flip p (2 / 2^J) is below ``alpha``."""
+    j = 1
+    while 2.0 ** (1 - j) >= alpha:
+        j += 1
+    return j
+
+
+def _side_label(cell: dict[str, Any], side: dict[str, str],
+                labels: Mapping[str, str] | None = None) -> str:
+    """``encoder=raw,L=6`` with the cell's own values (a classifier by its label in
+    ``labels``, :func:`spec_labels`)."""
+    return ",".join(f"{f}={spec_label(cell[f], labels) if f == 'classifier' else cell[f]}"
+                    for f in side)
+
+
+def parse_contrast_factors(factor: str, label: Any) -> list[str]:
+    """The factors a comparison's ``a`` value sets: a contrast's (``encoder=raw,L=6``),
+    or the one factor of a one-factor pair."""
+    if factor != "contrast":
+        return [factor]
+    return [item.partition("=")[0] for item in str(label).split(",")]
+
+
+# --------------------------------------------------------------------- one pair of cells
+
+
+class _Run(NamedTuple):
+    """One run's test recordings both cells predicted with the same label: their ids,
+    true labels, whether A and B were right, and their fold ids (None: not in the rows)."""
+
+    ids: np.ndarray
+    y: np.ndarray
+    ca: np.ndarray
+    cb: np.ndarray
+    folds: np.ndarray | None
+
+
+def _predictions(row: dict[str, Any]) -> dict[int, tuple[int, int]]:
+    """Test sequence index → (true label, predicted label) of one row."""
+    tp = row["test_predictions"]
+    return {int(i): (int(t), int(p))
+            for i, t, p in zip(tp["indices"], tp["labels"], tp["predictions"])}
+
+
+def _fold_ids(row: dict[str, Any]) -> dict[int, int] | None:
+    """Test sequence index → the fold that tested it, as the row records it (None for a
+    row made before rows kept their folds)."""
+    tp = row["test_predictions"]
+    if tp.get("folds") is None:
+        return None
+    return {int(i): int(f) for i, f in zip(tp["indices"], tp["folds"])}
+
+
+def _aligned(row_a: dict[str, Any], row_b: dict[str, Any]) -> _Run:
+    """The test sequences both rows predicted with the same label; their fold ids where
+    both rows record the same fold for each (None otherwise)."""
+    ta, tb = _predictions(row_a), _predictions(row_b)
+    ids = [i for i in sorted(set(ta) & set(tb)) if ta[i][0] == tb[i][0]]
+    fa, fb = _fold_ids(row_a), _fold_ids(row_b)
+    folds = None
+    if fa is not None and fb is not None and all(fa[i] == fb[i] for i in ids):
+        folds = np.array([fa[i] for i in ids], dtype=np.int64)
+    return _Run(np.array(ids, dtype=np.int64), np.array([ta[i][0] for i in ids], dtype=np.int64),
+                np.array([ta[i][1] == ta[i][0] for i in ids], dtype=bool),
+                np.array([tb[i][1] == tb[i][0] for i in ids], dtype=bool), folds)
+
+
+def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
+    """The correction n_test/n_train of these runs and the test's name."""
+    folds = rows[0].get("folds")
+    if folds:
+        return 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "
+                                        "(Bouckaert–Frank)")
+    ratios = [r["n_test"] / r["n_train"] for r in rows if r.get("n_train") and r.get("n_test")]
+    return (statistics.fmean(ratios) if ratios else 1.0,
+            "corrected resampled t (Nadeau–Bengio)")
+
+
+def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[str, Any]],
+                  *, names: Mapping[str, Any], margin: float | None = None,
+                  users: Sequence[str] | None = None, confidence: float = CONFIDENCE
+                  ) -> Comparison | None:
+    """Two cells compared run by run (``runs_*``: run key → row); None when they share
+    no run with a paired test sequence. ``names``: the record's ``dataset``, ``split``,
+    ``factor``, ``a``, ``b`` and ``where``.
+
+    A run is one split seed; where the rows vary the initialisation too (``init_seed``),
+    a split's runs are averaged first and the split is the unit. For K folds repeated
+    over seeds, the corrected t runs over the K·r per-fold differences (Bouckaert–Frank)
+    from the fold ids the rows record; rows without them (made before rows kept their
+    folds) give the split seeds' means, and ``method`` says which.
+    """
+    shared = sorted(set(runs_a) & set(runs_b), key=lambda k: (k[0], -1 if k[1] is None else k[1]))
+    per_seed = {key: run for key in shared
+                if len((run := _aligned(runs_a[key], runs_b[key])).ids)}
+    if not per_seed:
+        return None
+    rows_a = [runs_a[k] for k in per_seed]
+    ratio, method = _ratio(rows_a)
+    splits: dict[int, list[tuple]] = {}  # the unit: a split seed (its init seeds averaged)
+    for key in per_seed:
+        splits.setdefault(key[0], []).append(key)
+    d_run = np.array([np.mean([(per_seed[k].cb.mean() - per_seed[k].ca.mean()) for k in ks])
+                      for ks in splits.values()])
+    d_t = d_run
+    if rows_a[0].get("folds"):
+        per_fold = _fold_differences(per_seed, splits)
+        d_t = d_run if per_fold is None else per_fold
+        method += (f" over {len(d_run)} split-seed means (the rows carry no fold ids)"
+                   if per_fold is None else f" over {len(per_fold)} fold differences")
+    return Comparison(
+        **names, **run_level_tests(d_run, d_t, ratio, margin=margin, confidence=confidence),
+        method=method, ratio=ratio, runs=len(d_run),
+        per_run={str(s): float(v) for s, v in zip(splits, d_run)},
+        b_better_runs=int(np.sum(d_run > 0)), a_better_runs=int(np.sum(d_run < 0)),
+        tied_runs=int(np.sum(d_run == 0)), p_b_better=float(np.mean(d_run > 0)),
+        accuracy_a=float(np.mean([run.ca.mean() for run in per_seed.values()])),
+        accuracy_b=float(np.mean([run.cb.mean() for run in per_seed.values()])),
+        **_recordings(per_seed),
+        per_class=_per_class_gains(per_seed, splits, list(rows_a[0]["classes"]), ratio,
+                                   confidence),
+        per_user=None if users is None else _per_user_gains(per_seed, users))
+
+
+def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, *,
+                    margin: float | None, confidence: float) -> dict[str, Any]:
+    """Every test over a pair's runs, by field of :class:`Comparison` — the one place a
+    test of :mod:`tactbench.runner.statistics` is called on a comparison.
+
+    ``d_run``: B − A per run (split seed); ``d_t``: the differences the corrected t runs
+    over (per fold for K folds, else ``d_run``); ``ratio``: its correction; ``margin``
+    (points): the equivalence margin, None for none.
+    """
+    j = len(d_run)
+    diff = float(d_run.mean())
+    res: dict[str, Any] = {"difference": diff, "low": diff, "high": diff,
+                           "confidence": confidence, "df": None, "t_p": None,
+                           "permutation_p": float(sign_flip_p(d_run)), "p": None}
+    if j >= 2:
+        t = corrected_t(d_t, ratio, confidence=confidence)
+        # a difference of accuracies lies in [−1, 1]; the t-interval of a few runs can pass it
+        res.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])),
+                   df=int(t["df"]), t_p=float(t["p"]))
+        res["p"] = (max(res["t_p"], res["permutation_p"]) if PERMUTATION_GOVERNS
+                    else res["t_p"])
+    half = (margin / 100) if margin else TARGET_HALF_WIDTH
+    sd = float(d_run.std(ddof=1)) if j > 1 else None
+    res["equivalence_margin"] = margin
+    res["equivalence_p"] = (float(tost_p(d_run, ratio, margin / 100))
+                            if margin and j >= 2 else None)
+    res["runs_needed"] = runs_needed(sd, ratio, half, confidence=confidence)
+    res["runs_needed_half_width"] = 100 * half
+    return res
+
+
+def _recordings(per_seed: Mapping[tuple, _Run]) -> dict[str, Any]:
+    """The rows and recordings the cells disagree on, and McNemar's p per seed."""
+    discordant: set[int] = set()
+    recordings: set[int] = set()
+    for run in per_seed.values():
+        discordant.update(run.ids[run.ca != run.cb].tolist())
+        recordings.update(run.ids.tolist())
+    return {"a_only": sum(int(np.sum(r.ca & ~r.cb)) for r in per_seed.values()),
+            "b_only": sum(int(np.sum(r.cb & ~r.ca)) for r in per_seed.values()),
+            "discordant_recordings": len(discordant), "test_recordings": len(recordings),
+            "mcnemar_per_seed": {_seed_label(k): mcnemar_p(r.ca, r.cb)
+                                 for k, r in per_seed.items()}}
+
+
+def _fold_differences(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[tuple]]
+                      ) -> np.ndarray | None:
+    """The differences B − A of every (split seed, fold), each fold's test recordings
+    found by the fold ids the rows record (a split seed's init seeds averaged); None
+    where a run has no fold ids, or fewer than 2 differences come out."""
+    out = []
+    for keys in splits.values():
+        if any(per_seed[k].folds is None for k in keys):
+            return None
+        for fold in sorted({int(f) for k in keys for f in per_seed[k].folds}):
+            vals = []
+            for key in keys:
+                run = per_seed[key]
+                m = run.folds == fold
+                if m.any():
+                    vals.append(float(run.cb[m].mean() - run.ca[m].mean()))
+            out.append(float(np.mean(vals)))
+    return np.array(out) if len(out) >= 2 else None
+
+
+def _seed_label(key: tuple) -> str:
+    return str(key[0]) if key[1] is None else f"{key[0]}/{key[1]}"
+
+
+def _per_class_gains(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[tuple]],
+                     classes: Sequence[str], ratio: float, confidence: float
+                     ) -> dict[str, ClassGain]:
+    """Class → gain B − A on that class's test sequences, per run, with the run-level
+    interval (None where fewer than 2 runs test the class)."""
+    out = {}
+    for c, name in enumerate(classes):
+        d = []
+        for ks in splits.values():
+            vals = [per_seed[k].cb[per_seed[k].y == c].mean()
+                    - per_seed[k].ca[per_seed[k].y == c].mean()
+                    for k in ks if np.any(per_seed[k].y == c)]
+            if vals:
+                d.append(float(np.mean(vals)))
+        if not d:
+            continue
+        low = high = None
+        if len(d) >= 2:
+            t = corrected_t(np.array(d), ratio, confidence=confidence)
+            low, high = max(-1.0, float(t["low"])), min(1.0, float(t["high"]))
+        out[name] = ClassGain(difference=float(np.mean(d)), low=low, high=high, runs=len(d))
+    return out
+
+
+def _per_user_gains(per_seed: Mapping[tuple, _Run], users: Sequence[str]) -> UserGains:
+    """Per user (the test sequences of each user, over the runs that test them): the
+    gain B − A, and how many users it helped or hurt, its median and quartiles."""
+    users = list(users)
+    gains: dict[str, list[float]] = {}
+    for run in per_seed.values():
+        who = np.array([str(users[i]) for i in run.ids])
+        for u in dict.fromkeys(who.tolist()):
+            m = who == u
+            gains.setdefault(u, []).append(float(run.cb[m].mean() - run.ca[m].mean()))
+    per_user = {u: float(np.mean(g)) for u, g in sorted(gains.items())}
+    values = np.array(list(per_user.values()))
+    q25, q50, q75 = np.percentile(values, [25, 50, 75]) if values.size else (math.nan,) * 3
+    return UserGains(users=len(per_user), helped=int(np.sum(values > 0)),
+                     hurt=int(np.sum(values < 0)), median=float(q50), q25=float(q25),
+                     q75=float(q75), gains=per_user)
