@@ -170,17 +170,25 @@ class Comparison:
         unknown = sorted(set(entry) - set(names) - set(FACTORS))
         if unknown:
             raise CorruptArtefactError(source, f"a comparison with unknown field {unknown[0]!r}")
-        for name in names:
-            if name not in entry:
-                raise CorruptArtefactError(source, f"a comparison without {name!r}")
-            if not _STORED_KIND[name](entry[name]):
+        missing = [n for n in names if n not in entry and n not in ADDED_FIELDS]
+        if missing:
+            raise CorruptArtefactError(source, f"a comparison without {missing[0]!r}")
+        values = {name: entry[name] for name in names if name in entry}
+        for name, value in values.items():
+            if not _STORED_KIND[name](value):
                 raise CorruptArtefactError(
-                    source, f"a comparison whose {name} is {str(entry[name])[:40]!r}")
-        values = {name: entry[name] for name in names}
+                    source, f"a comparison whose {name} is {str(value)[:40]!r}")
         values["per_class"] = {str(k): ClassGain(**g) for k, g in entry["per_class"].items()}
         if entry["per_user"] is not None:
             values["per_user"] = UserGains(**entry["per_user"])
         return cls(where={k: entry[k] for k in FACTORS if k in entry}, **values)
+
+
+#: Fields of :class:`Comparison` a stored entry may lack, because the reports were made
+#: before the field existed; they read back as the field's default. A test added to
+#: :func:`run_level_tests` names its new fields here (with a default in the record), so
+#: the committed reports still read.
+ADDED_FIELDS: frozenset[str] = frozenset()
 
 
 def _number(v: Any) -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -115,3 +116,16 @@ def test_every_stored_comparison_reads_back_as_a_record_and_writes_the_same_json
         for entry in json.loads(path.read_text())["comparisons"]:
             again = Comparison.from_dict(entry, source=str(path)).to_dict()
             assert again == entry and list(again) == list(entry)
+
+
+def test_a_field_added_after_a_report_was_made_reads_back_as_its_default(monkeypatch):
+    from tactbench.runner import comparisons as module
+
+    rows, _ = _position_fold_rows()
+    [c] = comparisons(rows)
+    entry = c.to_dict()
+    del entry["note"]
+    with pytest.raises(CorruptArtefactError, match="without 'note'"):
+        Comparison.from_dict(entry)
+    monkeypatch.setattr(module, "ADDED_FIELDS", frozenset({"note"}))
+    assert Comparison.from_dict(entry) == replace(c, note="")
