@@ -24,6 +24,12 @@ from typing import Any, Iterable, Mapping, NamedTuple, Sequence
 import numpy as np
 
 from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.runner.power import (
+    bayes_correlated_t,
+    detectable_effect,
+    runs_for_power,
+    seed_mean_ratio,
+)
 from tactbench.runner.statistics import (
     TARGET_HALF_WIDTH,
     corrected_t,
@@ -45,10 +51,19 @@ from tactbench.runner.summaries import (
     spec_labels,
 )
 
-#: The verdict's p: False (the choice, docs/statistics.md), the corrected t's, with the
-#: exact sign-flip p reported beside it as a distribution-free check; True, the larger of
-#: the two (the sign-flip's floor 2 / 2^J then forbids any verdict below 6 runs).
-PERMUTATION_GOVERNS = False
+#: The one rule for the p a verdict rests on, as report.md and docs/statistics.md state
+#: it: the corrected t's (``p``), Holm-adjusted within its family (``p_holm``). The
+#: sign-flip test over runs (``permutation_p``) is reported for reference only: it
+#: assumes independent runs, which runs of one data set are not, so it is no check on
+#: the correction (tests/runner/test_power.py shows it exceeding α).
+P_RULE = ("p is the corrected t's; Holm adjusts it within its family (primary or "
+          "exploratory), and the verdict rests on the adjusted p")
+
+#: The margin (points) of the Bayesian correlated t's region of practical equivalence
+#: when the run gives none (1 point, as Benavoli et al. 2017 use for accuracies).
+BAYES_DEFAULT_MARGIN = 1.0
+#: The two families a comparison belongs to.
+FAMILIES = ("primary", "exploratory")
 
 
 @dataclass(frozen=True)
@@ -96,9 +111,20 @@ class Comparison:
       ``discordant_recordings``, ``test_recordings``, ``mcnemar_per_seed`` (seed → p;
       about those trained models only), ``per_class`` (class → :class:`ClassGain`),
       ``per_user`` (:class:`UserGains`, with the users known);
-    - the family (all comparisons of a run): ``p_holm``, ``equivalence_p_holm``,
-      ``family_size``, ``verdict`` and ``note``
-      (:func:`tactbench.runner.statistics.verdict`).
+    - the family (``family``: ``primary``, the comparisons the run names with
+      ``--primary``, or ``exploratory``, all the others; each is Holm-adjusted apart):
+      ``p_holm``, ``equivalence_p_holm``, ``family_size``, ``verdict`` and ``note``
+      (:func:`tactbench.runner.statistics.verdict`); ``ceiling`` when both cells are
+      right on every paired recording of every run (a ceiling, not a precise zero);
+    - for a reader (:mod:`tactbench.runner.power`): the Bayesian correlated t's
+      ``bayes_a_better``/``bayes_equivalent``/``bayes_b_better`` within ±``bayes_margin``
+      points; ``runs_for_power`` (runs for 80 % power at the observed difference, at the
+      family's Bonferroni level; None when no number of runs of these data reaches it),
+      ``detectable_effect`` (points found with 80 % power at the runs made) and
+      ``test_sampling_share`` (the share of the per-run variance of the difference that
+      test sampling, ``(π − δ²)/n``, accounts for); ``run_ratio``: the correction of
+      a mean over per-run differences (``ratio``, or ``K/(K − 1)`` for seed means of K
+      folds, :func:`tactbench.runner.power.seed_mean_ratio`).
     """
 
     dataset: str
@@ -141,6 +167,16 @@ class Comparison:
     family_size: int = 0
     verdict: str = ""
     note: str = ""
+    family: str = "exploratory"
+    bayes_margin: float | None = None
+    bayes_a_better: float | None = None
+    bayes_equivalent: float | None = None
+    bayes_b_better: float | None = None
+    runs_for_power: int | None = None
+    detectable_effect: float | None = None
+    test_sampling_share: float | None = None
+    ceiling: bool = False
+    run_ratio: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON entry of results.json: every field by name, ``where``'s factors
@@ -188,7 +224,9 @@ class Comparison:
 #: before the field existed; they read back as the field's default. A test added to
 #: :func:`run_level_tests` names its new fields here (with a default in the record), so
 #: the committed reports still read.
-ADDED_FIELDS: frozenset[str] = frozenset()
+ADDED_FIELDS: frozenset[str] = frozenset({
+    "family", "run_ratio", "bayes_margin", "bayes_a_better", "bayes_equivalent", "bayes_b_better",
+    "runs_for_power", "detectable_effect", "test_sampling_share", "ceiling"})
 
 
 def _number(v: Any) -> bool:
@@ -228,6 +266,12 @@ def _user_gains(v: Any) -> bool:
 _STORED_KIND = {
     **{k: lambda v: isinstance(v, str) for k in ("dataset", "split", "factor", "method",
                                                  "verdict", "note")},
+    "family": lambda v: v in FAMILIES, "ceiling": lambda v: isinstance(v, bool),
+    **{k: _maybe(_number) for k in ("bayes_margin", "bayes_a_better", "bayes_equivalent",
+                                    "bayes_b_better", "detectable_effect",
+                                    "test_sampling_share")},
+    "run_ratio": _number,
+    "runs_for_power": _maybe(_count),
     "a": lambda v: isinstance(v, (str, int)), "b": lambda v: isinstance(v, (str, int)),
     **{k: _number for k in ("difference", "low", "high", "confidence", "ratio",
                             "p_b_better", "permutation_p", "accuracy_a", "accuracy_b",
@@ -256,20 +300,24 @@ def read_comparisons(entries: Iterable[Comparison | Mapping[str, Any]], *,
 
 def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = (),
                 margin: float | None = None, users: Sequence[str] | None = None,
-                confidence: float = CONFIDENCE) -> list[Comparison]:
-    """Paired comparisons at run level: every two cells that differ in one of
-    :data:`FACTORS`, and every pair a ``contrasts`` entry names (:func:`parse_contrast`).
+                confidence: float = CONFIDENCE, primary: Sequence[str] = ()
+                ) -> list[Comparison]:
+    """Paired comparisons at run level: the pairs ``primary`` names (contrasts,
+    :func:`parse_contrast`), then every two cells that differ in one of :data:`FACTORS`,
+    and every pair a ``contrasts`` entry names.
 
     Only runs (seeds) both cells finished, and test sequences both predicted with the
     same label, are paired; rows without ``test_predictions`` are left out. A is the
     cell that comes first in the run (the scene's order), so a run listing ``raw`` before
-    ``farneback`` reports farneback − raw; a contrast gives its own A and B.
+    ``farneback`` reports farneback − raw; a contrast (primary or not) gives its own A
+    and B. A pair a primary contrast names is not repeated among the others; one whose
+    cells differ in one factor is shown as that factor's comparison.
 
-    Every comparison of one run forms one family: its p-values (the corrected t's; see
-    :data:`PERMUTATION_GOVERNS`) are Holm-adjusted together, and the verdicts
-    rest on the adjusted ones (:func:`tactbench.runner.statistics.verdict`). ``margin``
-    (points) adds the equivalence test; ``users`` (the user of each dataset sample, by
-    index) adds per-user gains. See :class:`Comparison` for each record's fields.
+    Two families (:data:`P_RULE`): the primary comparisons (confirmatory), and all the
+    others (exploratory); each family's p-values are Holm-adjusted apart, and the
+    verdicts rest on the adjusted ones (:func:`tactbench.runner.statistics.verdict`).
+    ``margin`` (points) adds the equivalence test; ``users`` (the user of each dataset
+    sample, by index) adds per-user gains. See :class:`Comparison` for each field.
     """
     if margin is not None and not (isinstance(margin, (int, float)) and margin > 0):
         raise InputError(f"margin must be a number of points > 0, got {margin!r}")
@@ -280,7 +328,7 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     out: list[Comparison] = []
     for (dataset, split), keys in blocks.items():
         cells = [dict(zip(FACTORS, key[2:])) for key in keys]
-        for i, j, factor, value_a, value_b in _pairs(cells, contrasts):
+        for i, j, factor, value_a, value_b, family in _pairs(cells, contrasts, primary):
             named = set(parse_contrast_factors(factor, value_a))
             where = {k: v for k, v in cells[i].items() if k != factor and k not in named}
             res = compare_cells(groups[keys[i]], groups[keys[j]], margin=margin,
@@ -288,27 +336,49 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
                                 names={"dataset": dataset, "split": split, "factor": factor,
                                        "a": value_a, "b": value_b, "where": where})
             if res is not None:
-                out.append(res)
-    return _family(out, confidence)
+                out.append(replace(res, family=family))
+    for family in FAMILIES:
+        at = [n for n, c in enumerate(out) if c.family == family]
+        for n, c in zip(at, _family([out[n] for n in at], confidence)):
+            out[n] = c
+    return out
 
 
-def _pairs(cells: list[dict[str, Any]], contrasts: Sequence[str]) -> list[tuple]:
-    """(index of A, index of B, factor, value of A, value of B) of every pair of
-    ``cells`` compared: those differing in one factor, then the contrasts'."""
+def _pairs(cells: list[dict[str, Any]], contrasts: Sequence[str], primary: Sequence[str]
+           ) -> list[tuple]:
+    """(index of A, index of B, factor, value of A, value of B, family) of every pair of
+    ``cells`` compared: the primary ones first, then those differing in one factor and
+    the contrasts' (a pair already primary is not repeated)."""
     labels = spec_labels(c["classifier"] for c in cells)
-    todo = [(p.a, p.b, p.factor, p.value_a, p.value_b)
-            for p in pairs_differing_in_one_factor(cells)]
+    todo: list[tuple] = []
+    seen: set[frozenset] = set()
+    for text in primary:
+        a_side, b_side = parse_contrast(text)
+        for i, j in contrast_pairs(text, cells):
+            differ = [f for f in FACTORS if cells[i][f] != cells[j][f]]
+            if len(differ) == 1:  # shown as that factor's comparison, A and B as asked
+                f = differ[0]
+                todo.append((i, j, f, cells[i][f], cells[j][f], "primary"))
+            else:
+                todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
+                             _side_label(cells[j], b_side, labels), "primary"))
+            seen.add(frozenset((i, j)))
+    for p in pairs_differing_in_one_factor(cells):
+        if frozenset((p.a, p.b)) not in seen:
+            todo.append((p.a, p.b, p.factor, p.value_a, p.value_b, "exploratory"))
     for text in contrasts:
         a_side, b_side = parse_contrast(text)
         for i, j in contrast_pairs(text, cells):
-            todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
-                         _side_label(cells[j], b_side, labels)))
+            if frozenset((i, j)) not in seen:
+                todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
+                             _side_label(cells[j], b_side, labels), "exploratory"))
     return todo
 
 
 def _family(comps: list[Comparison], confidence: float) -> list[Comparison]:
-    """The run's comparisons as one family: Holm on the governing p (NaN: too few runs)
-    and on the equivalence p, then each verdict and its note."""
+    """One family's comparisons: Holm on the corrected t's p (NaN: too few runs) and on
+    the equivalence p, then each verdict and its note, and the runs 80 % power at the
+    observed difference needs at the family's Bonferroni level."""
     alpha = 1 - confidence
     p = holm([c.p if c.p is not None else math.nan for c in comps])
     eq = holm([c.equivalence_p if c.equivalence_p is not None else math.nan for c in comps])
@@ -320,24 +390,24 @@ def _family(comps: list[Comparison], confidence: float) -> list[Comparison]:
         said, note = verdict(c.low, c.high, 1.0 if p_holm is None else p_holm, c.runs,
                              alpha=alpha, discordant_recordings=c.discordant_recordings,
                              equivalence_p_adjusted=eq_holm)
-        floor = 2.0 ** (1 - c.runs)
-        if PERMUTATION_GOVERNS and said == "unresolved" and not note and floor >= alpha:
-            note = (f"{c.runs} runs: the sign-flip floor is p = {floor:.3g}; a "
-                    f"verdict needs ≥ {_runs_for_floor(alpha)} runs")
-        elif said in ("A better", "B better") and floor >= alpha:
-            note = (f"rests on the corrected t: with {c.runs} runs the exact "
-                    f"sign-flip test cannot go below p = {floor:.3g}")
+        if c.ceiling:
+            note = "a ceiling: both cells right on every recording of every run"
         out.append(replace(c, p_holm=p_holm, equivalence_p_holm=eq_holm, family_size=size,
-                           verdict=said, note=note))
+                           verdict=said, note=note, **_planning(c, alpha / max(1, size))))
     return out
 
 
-def _runs_for_floor(alpha: float) -> int:
-    """The fewest runs whose smallest sign-flip p (2 / 2^J) is below ``alpha``."""
-    j = 1
-    while 2.0 ** (1 - j) >= alpha:
-        j += 1
-    return j
+def _planning(c: Comparison, level: float) -> dict[str, Any]:
+    """``runs_for_power`` and ``detectable_effect`` of one comparison at ``level``, from
+    the spread of its per-run differences (None with fewer than 2 runs or none)."""
+    d = np.array(list(c.per_run.values()))
+    if len(d) < 2 or not np.all(np.isfinite(d)):
+        return {"runs_for_power": None, "detectable_effect": None}
+    sd, ratio = float(d.std(ddof=1)), c.run_ratio
+    effect = abs(c.difference)
+    return {"runs_for_power": runs_for_power(effect, sd, ratio, alpha=level)
+            if effect > 0 else None,
+            "detectable_effect": 100 * detectable_effect(sd, ratio, len(d), alpha=level)}
 
 
 def _side_label(cell: dict[str, Any], side: dict[str, str],
@@ -401,7 +471,8 @@ def _aligned(row_a: dict[str, Any], row_b: dict[str, Any]) -> _Run:
 
 
 def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
-    """The correction n_test/n_train of these runs and the test's name."""
+    """The correction of per-fold differences (1/(K − 1)) or of per-run differences
+    (n_test/n_train) of these runs, and the test's name."""
     folds = rows[0].get("folds")
     if folds:
         return 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "
@@ -437,34 +508,40 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
         splits.setdefault(key[0], []).append(key)
     d_run = np.array([np.mean([(per_seed[k].cb.mean() - per_seed[k].ca.mean()) for k in ks])
                       for ks in splits.values()])
-    d_t = d_run
-    if rows_a[0].get("folds"):
+    d_t, run_ratio = d_run, ratio
+    if rows_a[0].get("folds"):  # a run's difference is the mean of its K folds'
+        run_ratio = seed_mean_ratio(int(rows_a[0]["folds"]))
         per_fold = _fold_differences(per_seed, splits)
-        d_t = d_run if per_fold is None else per_fold
+        d_t, ratio = (d_run, run_ratio) if per_fold is None else (per_fold, ratio)
         method += (f" over {len(d_run)} split-seed means (the rows carry no fold ids)"
                    if per_fold is None else f" over {len(per_fold)} fold differences")
     return Comparison(
-        **names, **run_level_tests(d_run, d_t, ratio, margin=margin, confidence=confidence),
-        method=method, ratio=ratio, runs=len(d_run),
+        **names, **run_level_tests(d_run, d_t, ratio, run_ratio, margin=margin,
+                                   confidence=confidence),
+        method=method, ratio=ratio, run_ratio=run_ratio, runs=len(d_run),
         per_run={str(s): float(v) for s, v in zip(splits, d_run)},
         b_better_runs=int(np.sum(d_run > 0)), a_better_runs=int(np.sum(d_run < 0)),
         tied_runs=int(np.sum(d_run == 0)), p_b_better=float(np.mean(d_run > 0)),
         accuracy_a=float(np.mean([run.ca.mean() for run in per_seed.values()])),
         accuracy_b=float(np.mean([run.cb.mean() for run in per_seed.values()])),
         **_recordings(per_seed),
-        per_class=_per_class_gains(per_seed, splits, list(rows_a[0]["classes"]), ratio,
+        per_class=_per_class_gains(per_seed, splits, list(rows_a[0]["classes"]), run_ratio,
                                    confidence),
+        test_sampling_share=_test_sampling_share(per_seed, splits, d_run),
+        ceiling=all(bool(r.ca.all() and r.cb.all()) for r in per_seed.values()),
         per_user=None if users is None else _per_user_gains(per_seed, users))
 
 
-def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, *,
-                    margin: float | None, confidence: float) -> dict[str, Any]:
+def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio: float,
+                    *, margin: float | None, confidence: float) -> dict[str, Any]:
     """Every test over a pair's runs, by field of :class:`Comparison` — the one place a
-    test of :mod:`tactbench.runner.statistics` is called on a comparison.
+    test of :mod:`tactbench.runner.statistics` or :mod:`tactbench.runner.power` is called
+    on a comparison.
 
     ``d_run``: B − A per run (split seed); ``d_t``: the differences the corrected t runs
-    over (per fold for K folds, else ``d_run``); ``ratio``: its correction; ``margin``
-    (points): the equivalence margin, None for none.
+    over (per fold for K folds, else ``d_run``); ``ratio``: its correction;
+    ``run_ratio``: the correction of a mean of ``d_run`` (the same but for K folds);
+    ``margin`` (points): the equivalence margin, None for none.
     """
     j = len(d_run)
     diff = float(d_run.mean())
@@ -476,15 +553,19 @@ def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, *,
         # a difference of accuracies lies in [−1, 1]; the t-interval of a few runs can pass it
         res.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])),
                    df=int(t["df"]), t_p=float(t["p"]))
-        res["p"] = (max(res["t_p"], res["permutation_p"]) if PERMUTATION_GOVERNS
-                    else res["t_p"])
+        res["p"] = res["t_p"]  # the one rule: P_RULE
     half = (margin / 100) if margin else TARGET_HALF_WIDTH
     sd = float(d_run.std(ddof=1)) if j > 1 else None
     res["equivalence_margin"] = margin
-    res["equivalence_p"] = (float(tost_p(d_run, ratio, margin / 100))
+    res["equivalence_p"] = (float(tost_p(d_run, run_ratio, margin / 100))
                             if margin and j >= 2 else None)
-    res["runs_needed"] = runs_needed(sd, ratio, half, confidence=confidence)
+    res["runs_needed"] = runs_needed(sd, run_ratio, half, confidence=confidence)
     res["runs_needed_half_width"] = 100 * half
+    rope = margin if margin else BAYES_DEFAULT_MARGIN
+    if j >= 2:
+        bayes = bayes_correlated_t(d_run, run_ratio, rope / 100)
+        res.update(bayes_margin=rope, bayes_a_better=bayes["p_a_better"],
+                   bayes_equivalent=bayes["p_equivalent"], bayes_b_better=bayes["p_b_better"])
     return res
 
 
@@ -520,6 +601,27 @@ def _fold_differences(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[
                     vals.append(float(run.cb[m].mean() - run.ca[m].mean()))
             out.append(float(np.mean(vals)))
     return np.array(out) if len(out) >= 2 else None
+
+
+def _test_sampling_share(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[tuple]],
+                         d_run: np.ndarray) -> float | None:
+    """The share of the variance of the per-run differences that test sampling accounts
+    for: the mean over runs of ``(π − δ²)/n`` (π: the share of the run's recordings the
+    cells disagree on, δ its difference, n its recordings; a split seed's init seeds
+    averaged) over the variance of ``d_run``. None with fewer than 2 runs or no spread.
+    An estimate: above 1 where the runs happened to agree more than test sampling alone
+    would make them."""
+    if len(d_run) < 2 or float(d_run.var(ddof=1)) == 0:
+        return None
+    parts = []
+    for keys in splits.values():
+        v = []
+        for k in keys:
+            r = per_seed[k]
+            pi, delta = float(np.mean(r.ca != r.cb)), float(r.cb.mean() - r.ca.mean())
+            v.append(max(0.0, pi - delta * delta) / len(r.ids))
+        parts.append(float(np.mean(v)) / len(keys))
+    return float(np.mean(parts) / d_run.var(ddof=1))
 
 
 def _seed_label(key: tuple) -> str:

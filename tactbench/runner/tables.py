@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Mapping, Sequence
 
-from tactbench.runner.comparisons import Comparison, read_comparisons
+from tactbench.runner.comparisons import P_RULE, Comparison, read_comparisons
 from tactbench.runner.summaries import (
     FACTORS,
     failed_cells,
@@ -70,8 +70,9 @@ def _pair(c: Comparison, labels: Labels | None) -> list[str]:
 
 
 COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
-                     "95 % interval over runs", "runs B>A / A>B / tied",
-                     "p (t / sign-flip)", "Holm p", "runs for ±2 (±margin)", "verdict"]
+                     "95 % interval over runs (unadjusted)", "runs B>A / A>B / tied",
+                     "p (corrected t)", "Holm p (its family)",
+                     "P(A better / ≈ / B better)", "runs for 80 % power", "verdict"]
 
 
 def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
@@ -94,13 +95,32 @@ def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[li
     labels among the classifiers of ``comps``, :func:`comparison_labels`)."""
     comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    return [[*_pair(c, labels), f"{100 * c.difference:+.1f}",
+    return [[*_pair(c, labels), "ceiling" if c.ceiling else f"{100 * c.difference:+.1f}",
+             "both 100 %" if c.ceiling else
              f"[{100 * c.low:+.1f}, {100 * c.high:+.1f}]" if c.df else "-",
              f"{c.b_better_runs}/{c.a_better_runs}/{c.tied_runs}",
-             f"{_p_value(c.t_p)} / {_p_value(c.permutation_p)}", _p_value(c.p_holm),
-             "unreachable" if c.runs_needed is None else str(c.runs_needed),
+             _p_value(c.t_p), _p_value(c.p_holm), _bayes(c), _power_runs(c),
              verdict_text(c, labels)]
             for c in comps]
+
+
+def _bayes(c: Comparison) -> str:
+    """The Bayesian correlated t's three probabilities, within ±margin points."""
+    if c.bayes_b_better is None:
+        return "-"
+    return (f"{c.bayes_a_better:.2f} / {c.bayes_equivalent:.2f} / {c.bayes_b_better:.2f} "
+            f"(±{c.bayes_margin:g})")
+
+
+def _power_runs(c: Comparison) -> str:
+    """Runs for 80 % power at the observed difference, or why there is no number."""
+    if c.ceiling or c.verdict in ("B better", "A better", "equivalent"):
+        return "-"
+    if c.runs_for_power is not None:
+        return str(c.runs_for_power)
+    if c.runs < 2 or c.difference == 0:
+        return "-"
+    return "beyond these data"
 
 
 def _p_value(p: float | None) -> str:
@@ -120,29 +140,35 @@ def comparisons_markdown(comps: Comparisons, labels: Labels | None = None) -> st
 
 def print_comparisons(comps: Comparisons, *, factors: Sequence[str] = ("encoder", "classifier"),
                       labels: Labels | None = None) -> None:
-    """The terminal's table of paired comparisons (by default of encoders and classifiers;
-    report.md and results.json hold every factor)."""
+    """The terminal's tables of paired comparisons: the primary questions first (all of
+    them), then the exploratory ones (by default of encoders and classifiers; report.md
+    and results.json hold every factor)."""
     comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    shown = [c for c in comps if c.factor in factors]
-    if not shown:
-        return
+    primary = [c for c in comps if c.family == "primary"]
+    rest = [c for c in comps if c.family != "primary" and c.factor in factors]
     from rich.console import Console
-    from rich.table import Table
 
-    table = Table(title="paired comparisons over runs (B − A; Holm-adjusted within the run; "
-                        "an interval touching 0 is unresolved)",
-                  title_justify="left")
-    for col in COMPARISON_HEADER:
-        table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
-                                                        "verdict") else "right")
-    # the interval beside every verdict is the run-level one (comparison_rows)
-    for row in comparison_rows(shown, labels):
-        table.add_row(*row)
     console = Console()
     if not console.is_terminal:
         console = Console(width=160)
-    console.print(table)
+    for title, shown in (("primary questions (confirmatory; Holm within them)", primary),
+                         ("exploratory comparisons (Holm within them)", rest)):
+        if shown:
+            console.print(_rich_table(f"{title}: B − A over runs; an interval touching 0 "
+                                      "is unresolved", shown, labels))
+
+
+def _rich_table(title: str, comps: Sequence[Comparison], labels: Labels):
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left")
+    for col in COMPARISON_HEADER:
+        table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
+                                                        "verdict") else "right")
+    for row in comparison_rows(comps, labels):
+        table.add_row(*row)
+    return table
 
 
 def _interval(ci: Sequence[float] | None) -> str:
@@ -311,14 +337,16 @@ COMPARISONS_TEXT = (
     "on the same test sequences run by run: B − A is the mean over runs (a run: one split "
     "seed, its split and initialisation) of the difference of accuracy. The interval is "
     "the corrected resampled t over runs (Nadeau–Bengio; for K folds Bouckaert–Frank), "
-    "which counts the training variability, not only the test set's; p is the larger of "
-    "its p and the exact sign-flip test over runs; Holm adjusts p within this run's "
-    "comparisons, and the verdict rests on the adjusted p. Fewer than 3 runs give no "
-    "verdict; an interval touching 0 is unresolved; \"runs for ±2\" is how many runs the "
-    "observed variance needs for an interval of ±2 points (or ±margin), \"unreachable\" "
-    "where the correction keeps it wider however many runs of these data there are. "
-    "McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of those trained "
-    "models only. See docs/statistics.md.")
+    "which counts the training variability, not only the test set's, at 95 % for that "
+    f"comparison alone (unadjusted); {P_RULE}. Primary comparisons (named with "
+    "--primary) are the confirmatory family; the rest are exploratory. Fewer than 3 runs "
+    "give no verdict; an interval touching 0 is unresolved. P(A better / ≈ / B better) "
+    "is the Bayesian correlated t (Corani & Benavoli 2015) within ±margin points; "
+    "\"runs for 80 % power\" is how many runs would find the observed difference with "
+    "80 % power at the family's Bonferroni level, \"beyond these data\" where no number "
+    "of runs of these recordings would; \"ceiling\" is two models right on every "
+    "recording. McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of "
+    "those trained models only. See docs/statistics.md.")
 
 
 def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> list[str]:
@@ -328,8 +356,13 @@ def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> lis
     comps = read_comparisons(comps)
     if not comps:
         return []
-    lines = ["## Paired comparisons over runs", "", COMPARISONS_TEXT, "",
-             comparisons_markdown(comps, labels), ""]
+    lines = ["## Paired comparisons over runs", "", COMPARISONS_TEXT, ""]
+    primary = [c for c in comps if c.family == "primary"]
+    if primary:
+        lines += ["### Primary questions (confirmatory)", "",
+                  comparisons_markdown(primary, labels), "",
+                  "### Exploratory comparisons", ""]
+    lines += [comparisons_markdown([c for c in comps if c.family != "primary"], labels), ""]
     notes = [c.note for c in comps if c.note]
     for note in dict.fromkeys(notes):
         lines.append(f"- {notes.count(note)} comparison(s): {note}.")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import CorruptArtefactError
-from tactbench.runner.comparisons import Comparison, comparisons, read_comparisons
+from tactbench.runner.comparisons import ADDED_FIELDS, Comparison, comparisons, read_comparisons
 from tactbench.runner.statistics import corrected_t
 
 REPORTS = Path(__file__).resolve().parents[2] / "docs" / "reports"
@@ -80,8 +80,10 @@ def test_rows_without_fold_ids_fall_back_to_the_split_seeds_means_and_say_so():
                         "means (the rows carry no fold ids)")
     assert c.df == 3
     d = np.array(list(c.per_run.values()))
-    assert (c.low, c.high) == (pytest.approx(float(corrected_t(d, 1 / 2)["low"])),
-                               pytest.approx(float(corrected_t(d, 1 / 2)["high"])))
+    # seed means of K = 3 folds: the factor is K/(K − 1) = 3/2, not 1/(K − 1)
+    assert c.ratio == c.run_ratio == pytest.approx(3 / 2)
+    assert (c.low, c.high) == (pytest.approx(float(corrected_t(d, 3 / 2)["low"])),
+                               pytest.approx(float(corrected_t(d, 3 / 2)["high"])))
 
 
 def test_a_comparison_round_trips_through_its_json_form():
@@ -115,7 +117,9 @@ def test_every_stored_comparison_reads_back_as_a_record_and_writes_the_same_json
     for path in stored:
         for entry in json.loads(path.read_text())["comparisons"]:
             again = Comparison.from_dict(entry, source=str(path)).to_dict()
-            assert again == entry and list(again) == list(entry)
+            kept = {k: v for k, v in again.items() if k in entry}
+            assert kept == entry and list(kept) == list(entry)
+            assert set(again) - set(entry) <= ADDED_FIELDS  # made before those fields
 
 
 def test_a_field_added_after_a_report_was_made_reads_back_as_its_default(monkeypatch):

@@ -7,6 +7,7 @@ import dataclasses
 import io
 import json
 
+import numpy as np
 import pytest
 
 from tactbench.runner import run
@@ -149,20 +150,69 @@ def test_pairs_differing_in_one_factor_are_compared_run_by_run():
     assert set(c.per_class) == {"a", "b"} and c.per_class["a"].low is not None
 
 
-def test_five_runs_rest_on_the_corrected_t_and_the_note_says_so(monkeypatch):
-    """The corrected t governs; the sign-flip p (floor 2/2^5) stands beside it, and a
-    verdict it cannot confirm says so. With the sign-flip governing instead, 5 runs
-    give no verdict and the note says why."""
-    from tactbench.runner import comparisons as module
-    from tactbench.runner.comparisons import comparisons
+def test_the_verdict_rests_on_the_corrected_t_alone_as_the_one_rule_says():
+    """One rule (P_RULE): p is the corrected t's; the sign-flip p (floor 2/2^5 with 5
+    runs) is reported, never governs, and the report states the rule in its words."""
+    from tactbench.runner.comparisons import P_RULE, comparisons
+    from tactbench.runner.tables import COMPARISONS_TEXT
 
     [c] = comparisons(_clear_win_rows(seeds=range(5)))
     assert c.t_p < 0.05 and c.permutation_p == pytest.approx(2 / 32)
-    assert c.p == c.t_p
-    assert c.verdict == "B better" and "sign-flip" in c.note
-    monkeypatch.setattr(module, "PERMUTATION_GOVERNS", True)
-    [c] = comparisons(_clear_win_rows(seeds=range(5)))
-    assert c.verdict == "unresolved" and "sign-flip" in c.note
+    assert c.p == c.t_p and c.verdict == "B better" and "sign-flip" not in c.note
+    assert P_RULE in COMPARISONS_TEXT
+
+
+def test_primary_comparisons_form_their_own_family_and_come_first():
+    """--primary: the named pair is confirmatory, Holm-adjusted in a family of its own;
+    everything else is exploratory, in another family; the pair is not repeated."""
+    from tactbench.runner.comparisons import comparisons
+
+    truth = [0, 1] * 20
+    rows = []
+    for seed in range(6):
+        for enc, wrong in (("raw", 8), ("farneback", 2), ("dis", 5), ("tvl1", 6)):
+            rows.append(_row(enc, seed, truth, [1 - t if (i + seed) % 40 < wrong else t
+                                                for i, t in enumerate(truth)]))
+    everything = comparisons(rows)
+    comps = comparisons(rows, primary=["encoder=raw..encoder=farneback"])
+    primary = [c for c in comps if c.family == "primary"]
+    assert [(c.factor, c.a, c.b) for c in primary] == [("encoder", "raw", "farneback")]
+    assert primary[0].family_size == 1 and primary[0].p_holm == pytest.approx(primary[0].p)
+    explo = [c for c in comps if c.family == "exploratory"]
+    assert len(explo) == len(everything) - 1
+    assert all(c.family_size == len(explo) for c in explo)
+    assert all({c.a, c.b} != {"raw", "farneback"} for c in explo)
+
+
+def test_seed_means_of_k_folds_take_the_factor_k_over_k_minus_1():
+    """Rows of a 5-fold design without fold ids: the t over seed means, TOST, the runs
+    needed and the per-class gains all use K/(K − 1), not 1/(K − 1)."""
+    from scipy import stats
+
+    from tactbench.runner.comparisons import comparisons
+
+    rows = _clear_win_rows(seeds=range(6))
+    for r in rows:
+        r["folds"] = 5
+    [c] = comparisons(rows, margin=30)
+    d = np.array(list(c.per_run.values()))
+    half = stats.t.ppf(0.975, 5) * (stats.tvar(d) * (1 / 6 + 5 / 4)) ** 0.5
+    assert "split-seed means" in c.method and c.ratio == c.run_ratio == pytest.approx(1.25)
+    assert (c.low, c.high) == (pytest.approx(c.difference - half),
+                               pytest.approx(c.difference + half))
+
+
+def test_a_reader_gets_bayesian_probabilities_power_and_a_named_ceiling():
+    from tactbench.runner.comparisons import comparisons
+
+    [c] = comparisons(_clear_win_rows(seeds=range(6)))
+    probs = (c.bayes_a_better, c.bayes_equivalent, c.bayes_b_better)
+    assert sum(probs) == pytest.approx(1.0) and c.bayes_b_better > 0.9
+    assert c.bayes_margin == 1.0 and c.detectable_effect > 0
+    truth = [0, 1] * 20
+    perfect = [_row(e, s, truth, truth) for s in range(4) for e in ("raw", "farneback")]
+    [top] = comparisons(perfect)
+    assert top.ceiling and "ceiling" in top.note
 
 
 def test_fewer_than_3_runs_give_no_verdict_in_every_output(tmp_path):
