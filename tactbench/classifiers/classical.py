@@ -12,7 +12,7 @@ other classifiers).
 Memory: frames are read from the sequences a chunk at a time and reduced to their
 features at once (``F`` numbers per frame). The window features ``(B, L × F)`` float64
 are held whole when they fit the frame-bank budget
-(:func:`tactbench.classifiers.base.bank_budget_bytes`), as before; above it the
+(:func:`tactbench.classifiers.batching.bank_budget_bytes`), as before; above it the
 statistics, the loss and its gradient are accumulated over chunks of
 :data:`FEATURE_CHUNK` windows, gathered from a bank of per-frame features (or, when even
 that exceeds the budget, read from the sequences for each chunk).
@@ -26,9 +26,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tactbench.classifiers.base import (
+from tactbench.classifiers.base import SequenceClassifier
+from tactbench.classifiers.batching import (
     FrameBank,
-    SequenceClassifier,
     bank_budget_bytes,
     read_windows,
     streamed_mean_std,
