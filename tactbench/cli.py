@@ -46,12 +46,8 @@ class LazyCommand(click.Command):
 
 class TactbenchGroup(click.Group):
     """The ``tactbench`` group: every command, built-in or a plugin's, comes through the
-    ``register_commands`` hook, once per invocation, when a command is first looked up;
-    lazy commands are imported when they are used."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self._plugin_commands_loaded = False
+    ``register_commands`` hook (:func:`registered_commands`), once per invocation, from
+    that invocation's plugin manager; lazy commands are imported when they are used."""
 
     def add_lazy_command(self, name: str, target: str, *, summary: str) -> None:
         """Add command ``name`` whose click command is ``target`` (``"module:attribute"``),
@@ -59,55 +55,29 @@ class TactbenchGroup(click.Group):
         in ``tactbench --help`` (the command's own short help)."""
         self.add_command(LazyCommand(name, target, summary=summary))
 
-    def load_commands(self, pm) -> None:
-        """Call every plugin's ``register_commands`` (built-ins first). Each plugin adds
-        to a group of its own, merged when its hook returns: a hook that raises adds
-        nothing, and a name already taken is refused and reported (the first keeps it),
-        as for components."""
-        self._plugin_commands_loaded = True
-        owners = {name: "tactbench.cli" for name in self.commands}
-        staged: dict[str, tuple[str, TactbenchGroup]] = {}
-
-        def make_kwargs(plugin: str, dist: str) -> dict[str, Any]:
-            staged[plugin] = (dist, TactbenchGroup(name=self.name))
-            return {"cli": staged[plugin][1]}
-
-        def on_success(plugin: str, _kwargs: dict[str, Any]) -> None:
-            dist, group = staged[plugin]
-            for name, command in group.commands.items():
-                if name in owners:
-                    pm.report(plugin, dist, f"command '{name}' is already registered by "
-                                            f"plugin '{owners[name]}'; this one is skipped. "
-                                            f"Rename one of them.")
-                    continue
-                owners[name] = plugin
-                self.add_command(command, name)
-
-        try:
-            pm.call_each("register_commands", make_kwargs, on_success)
-        except PluginError as exc:  # strict mode: a broken plugin is the user's to fix
-            raise UserError(str(exc)) from exc
-
-    def _load_plugin_commands(self, ctx: click.Context) -> None:
-        if not self._plugin_commands_loaded:
-            self.load_commands(plugin_manager(ctx))
+    def registered(self, ctx: click.Context) -> dict[str, click.Command]:
+        """This invocation's commands: those added to the group in code, then those the
+        plugins register."""
+        state = _state(ctx)
+        if "commands" not in state:
+            state["commands"] = registered_commands(plugin_manager(ctx), dict(self.commands))
+        return state["commands"]
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        self._load_plugin_commands(ctx)
-        return sorted(self.commands)
+        return sorted(self.registered(ctx))
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        self._load_plugin_commands(ctx)
-        command = self.commands.get(cmd_name)
+        commands = self.registered(ctx)
+        command = commands.get(cmd_name)
         if isinstance(command, LazyCommand):
-            command = self.commands[cmd_name] = command.load()
+            command = commands[cmd_name] = command.load()
         return command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         """The command list of ``--help``, as click draws it, but from the commands as
         registered: a lazy command shows its summary and is not imported."""
-        listed = [(name, command) for name in self.list_commands(ctx)
-                  if (command := self.commands.get(name)) is not None and not command.hidden]
+        listed = [(name, command) for name, command in sorted(self.registered(ctx).items())
+                  if not command.hidden]
         if listed:
             limit = formatter.width - 6 - max(len(name) for name, _ in listed)
             with formatter.section("Commands"):
@@ -123,6 +93,37 @@ class TactbenchGroup(click.Group):
             raise UserError(" ".join(str(exc).split())) from exc
         except KeyboardInterrupt:  # Ctrl-C: not a failure, not a bug
             interrupted()
+
+
+def registered_commands(pm, commands: dict[str, click.Command] | None = None
+                        ) -> dict[str, click.Command]:
+    """``commands`` (name → command) with those of every plugin's ``register_commands``
+    (built-ins first) added. Each plugin adds to a group of its own, merged when its hook
+    returns: a hook that raises adds nothing, and a name already taken is refused and
+    reported (the first keeps it), as for components."""
+    commands = dict(commands or {})
+    owners = dict.fromkeys(commands, "tactbench.cli")
+    staged: dict[str, tuple[str, TactbenchGroup]] = {}
+
+    def make_kwargs(plugin: str, dist: str) -> dict[str, Any]:
+        staged[plugin] = (dist, TactbenchGroup(name="tactbench"))
+        return {"cli": staged[plugin][1]}
+
+    def on_success(plugin: str, _kwargs: dict[str, Any]) -> None:
+        dist, group = staged[plugin]
+        for name, command in group.commands.items():
+            if name in owners:
+                pm.report(plugin, dist, f"command '{name}' is already registered by plugin "
+                                        f"'{owners[name]}'; this one is skipped. Rename one "
+                                        f"of them.")
+                continue
+            owners[name], commands[name] = plugin, command
+
+    try:
+        pm.call_each("register_commands", make_kwargs, on_success)
+    except PluginError as exc:  # strict mode: a broken plugin is the user's to fix
+        raise UserError(str(exc)) from exc
+    return commands
 
 
 #: Exit statuses of every command (the CLI reference lists them).

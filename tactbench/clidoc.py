@@ -38,9 +38,10 @@ terminal whose encoding lacks a character (a forced ASCII locale) shows it as an
 """
 
 
-def _walk(command: click.Command, path: list[str], parent: click.Context | None):
+def _walk(command: click.Command, path: list[str], parent: click.Context | None,
+          obj: dict | None = None):
     ctx = click.Context(command, info_name=path[-1], parent=parent, terminal_width=WIDTH,
-                        max_content_width=WIDTH, **command.context_settings)
+                        max_content_width=WIDTH, obj=obj, **command.context_settings)
     yield path, command, ctx
     if isinstance(command, click.Group):
         for name in sorted(command.list_commands(ctx)):
@@ -50,20 +51,19 @@ def _walk(command: click.Command, path: list[str], parent: click.Context | None)
 
 
 def _builtin_cli() -> click.Group:
-    """A copy of the ``tactbench`` group with the built-in commands only (the file must not
-    vary with what is installed)."""
-    group = TactbenchGroup(name="tactbench", callback=cli.callback, params=cli.params,
-                           help=cli.help, context_settings=cli.context_settings)
-    group.load_commands(make_plugin_manager(entry_points=False, strict=True))
-    return group
+    """A copy of the ``tactbench`` group without its epilog (the header above says the
+    exit statuses)."""
+    return TactbenchGroup(name="tactbench", callback=cli.callback, params=cli.params,
+                          help=cli.help, context_settings=cli.context_settings)
 
 
 def render() -> str:
     """The whole reference as Markdown."""
-    cli = _builtin_cli()
+    # built-in commands only: the file must not vary with what is installed
+    builtins = {"pm": make_plugin_manager(entry_points=False, strict=True)}
     parts = [HEADER]
     toc, sections = [], []
-    for path, command, ctx in _walk(cli, ["tactbench"], None):
+    for path, command, ctx in _walk(_builtin_cli(), ["tactbench"], None, builtins):
         title = " ".join(path)
         anchor = "-".join(path)
         if len(path) > 1:

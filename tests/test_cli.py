@@ -150,3 +150,14 @@ def test_startup_leaves_heavy_libraries_out(argv):
     assert result.returncode == 0, result.stderr
     line = [ln for ln in result.stderr.splitlines() if ln.startswith("HEAVY:")][-1]
     assert line == "HEAVY:", f"{argv} imported heavy modules: {line[6:]}"
+
+
+def test_commands_are_those_of_the_invocations_plugins():
+    """Each invocation registers its own plugins' commands: one without plugins has no
+    command, and leaves none missing for the next."""
+    from tactbench.plugins import make_plugin_manager
+
+    bare = make_plugin_manager(builtins=False, entry_points=False)
+    result = CliRunner().invoke(cli, ["list"], obj={"pm": bare})
+    assert result.exit_code == 2 and "No such command 'list'" in result.output
+    assert run("list", "--kind", "encoder").exit_code == 0

@@ -1,10 +1,11 @@
 """Built-in commands: a plugin like any other, registered through ``register_commands``.
 
 Each command's module is imported only when the command runs: the hook registers every
-built-in as a lazy command (:meth:`tactbench.cli.TactbenchGroup.add_lazy_command`), which
-``tactbench --help`` lists from its summary here without importing it. A new built-in
-command is one entry of :data:`COMMANDS` (``tests/test_cli.py`` checks that every module
-of this package is named there and that each summary is its command's own short help).
+built-in as a lazy command (``cli.add_lazy_command``, :class:`tactbench.cli.TactbenchGroup`),
+which ``tactbench --help`` lists from its summary here without importing it. A new
+built-in command is one entry of :data:`COMMANDS` (``tests/test_cli.py`` checks that every
+module of this package is named there and that each summary is its command's own short
+help).
 """
 
 from __future__ import annotations
