@@ -39,6 +39,7 @@ memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
 :mod:`~tactbench.runner.plots` (one function per figure).
 """
 
+from tactbench.machine import git_revision
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
@@ -47,7 +48,6 @@ from tactbench.runner.orchestrate import RunResult, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
 from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
-from tactbench.runner.system import git_revision
 
 __all__ = [
     "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",

@@ -12,11 +12,11 @@ import json
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
+from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
 from tactbench.runner.comparisons import comparisons
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import ok_rows, row_status
-from tactbench.runner.system import describe_machines
 from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_section,
