@@ -281,8 +281,6 @@ KNOWN_LONG: set[str] = {
     "tactbench/datasets/folder.py",
     "tactbench/datasets/folder.py::read_folder",
     "tactbench/runner/cell.py::train_and_test",
-    "tactbench/runner/summaries.py",
-    "tactbench/runner/summaries.py::paired_runs",
 }
 
 

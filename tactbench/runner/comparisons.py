@@ -19,11 +19,21 @@ from __future__ import annotations
 import math
 import statistics
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Iterable, Mapping, NamedTuple, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.runner.pairing import (
+    ClassGain,
+    UserGains,
+    aligned,
+    fold_differences,
+    per_class_gains,
+    per_user_gains,
+    recordings,
+    sampling_share,
+)
 from tactbench.runner.power import (
     bayes_correlated_t,
     detectable_effect,
@@ -34,7 +44,6 @@ from tactbench.runner.statistics import (
     TARGET_HALF_WIDTH,
     corrected_t,
     holm,
-    mcnemar_p,
     pairs_differing_in_one_factor,
     runs_needed,
     sign_flip_p,
@@ -64,31 +73,6 @@ P_RULE = ("p is the corrected t's; Holm adjusts it within its family (primary or
 BAYES_DEFAULT_MARGIN = 1.0
 #: The two families a comparison belongs to.
 FAMILIES = ("primary", "exploratory")
-
-
-@dataclass(frozen=True)
-class ClassGain:
-    """The gain B − A on one class's test recordings: the mean over runs, its run-level
-    interval (None where fewer than 2 runs test the class) and the runs that test it."""
-
-    difference: float
-    low: float | None
-    high: float | None
-    runs: int
-
-
-@dataclass(frozen=True)
-class UserGains:
-    """Per-user gains B − A (accuracy fractions): users tested, helped (gain > 0), hurt
-    (gain < 0), the median and quartiles of the gains, and user → gain."""
-
-    users: int
-    helped: int
-    hurt: int
-    median: float
-    q25: float
-    q75: float
-    gains: dict[str, float]
 
 
 @dataclass(frozen=True)
@@ -429,47 +413,6 @@ def parse_contrast_factors(factor: str, label: Any) -> list[str]:
 # --------------------------------------------------------------------- one pair of cells
 
 
-class _Run(NamedTuple):
-    """One run's test recordings both cells predicted with the same label: their ids,
-    true labels, whether A and B were right, and their fold ids (None: not in the rows)."""
-
-    ids: np.ndarray
-    y: np.ndarray
-    ca: np.ndarray
-    cb: np.ndarray
-    folds: np.ndarray | None
-
-
-def _predictions(row: dict[str, Any]) -> dict[int, tuple[int, int]]:
-    """Test sequence index → (true label, predicted label) of one row."""
-    tp = row["test_predictions"]
-    return {int(i): (int(t), int(p))
-            for i, t, p in zip(tp["indices"], tp["labels"], tp["predictions"])}
-
-
-def _fold_ids(row: dict[str, Any]) -> dict[int, int] | None:
-    """Test sequence index → the fold that tested it, as the row records it (None for a
-    row made before rows kept their folds)."""
-    tp = row["test_predictions"]
-    if tp.get("folds") is None:
-        return None
-    return {int(i): int(f) for i, f in zip(tp["indices"], tp["folds"])}
-
-
-def _aligned(row_a: dict[str, Any], row_b: dict[str, Any]) -> _Run:
-    """The test sequences both rows predicted with the same label; their fold ids where
-    both rows record the same fold for each (None otherwise)."""
-    ta, tb = _predictions(row_a), _predictions(row_b)
-    ids = [i for i in sorted(set(ta) & set(tb)) if ta[i][0] == tb[i][0]]
-    fa, fb = _fold_ids(row_a), _fold_ids(row_b)
-    folds = None
-    if fa is not None and fb is not None and all(fa[i] == fb[i] for i in ids):
-        folds = np.array([fa[i] for i in ids], dtype=np.int64)
-    return _Run(np.array(ids, dtype=np.int64), np.array([ta[i][0] for i in ids], dtype=np.int64),
-                np.array([ta[i][1] == ta[i][0] for i in ids], dtype=bool),
-                np.array([tb[i][1] == tb[i][0] for i in ids], dtype=bool), folds)
-
-
 def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
     """The correction of per-fold differences (1/(K − 1)) or of per-run differences
     (n_test/n_train) of these runs, and the test's name."""
@@ -498,7 +441,7 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
     """
     shared = sorted(set(runs_a) & set(runs_b), key=lambda k: (k[0], -1 if k[1] is None else k[1]))
     per_seed = {key: run for key in shared
-                if len((run := _aligned(runs_a[key], runs_b[key])).ids)}
+                if len((run := aligned(runs_a[key], runs_b[key])).ids)}
     if not per_seed:
         return None
     rows_a = [runs_a[k] for k in per_seed]
@@ -511,7 +454,7 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
     d_t, run_ratio = d_run, ratio
     if rows_a[0].get("folds"):  # a run's difference is the mean of its K folds'
         run_ratio = seed_mean_ratio(int(rows_a[0]["folds"]))
-        per_fold = _fold_differences(per_seed, splits)
+        per_fold = fold_differences(per_seed, splits)
         d_t, ratio = (d_run, run_ratio) if per_fold is None else (per_fold, ratio)
         method += (f" over {len(d_run)} split-seed means (the rows carry no fold ids)"
                    if per_fold is None else f" over {len(per_fold)} fold differences")
@@ -524,12 +467,12 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
         tied_runs=int(np.sum(d_run == 0)), p_b_better=float(np.mean(d_run > 0)),
         accuracy_a=float(np.mean([run.ca.mean() for run in per_seed.values()])),
         accuracy_b=float(np.mean([run.cb.mean() for run in per_seed.values()])),
-        **_recordings(per_seed),
-        per_class=_per_class_gains(per_seed, splits, list(rows_a[0]["classes"]), run_ratio,
+        **recordings(per_seed),
+        per_class=per_class_gains(per_seed, splits, list(rows_a[0]["classes"]), run_ratio,
                                    confidence),
-        test_sampling_share=_test_sampling_share(per_seed, splits, d_run),
+        test_sampling_share=sampling_share(per_seed, splits, d_run),
         ceiling=all(bool(r.ca.all() and r.cb.all()) for r in per_seed.values()),
-        per_user=None if users is None else _per_user_gains(per_seed, users))
+        per_user=None if users is None else per_user_gains(per_seed, users))
 
 
 def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio: float,
@@ -569,102 +512,3 @@ def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio:
     return res
 
 
-def _recordings(per_seed: Mapping[tuple, _Run]) -> dict[str, Any]:
-    """The rows and recordings the cells disagree on, and McNemar's p per seed."""
-    discordant: set[int] = set()
-    recordings: set[int] = set()
-    for run in per_seed.values():
-        discordant.update(run.ids[run.ca != run.cb].tolist())
-        recordings.update(run.ids.tolist())
-    return {"a_only": sum(int(np.sum(r.ca & ~r.cb)) for r in per_seed.values()),
-            "b_only": sum(int(np.sum(r.cb & ~r.ca)) for r in per_seed.values()),
-            "discordant_recordings": len(discordant), "test_recordings": len(recordings),
-            "mcnemar_per_seed": {_seed_label(k): mcnemar_p(r.ca, r.cb)
-                                 for k, r in per_seed.items()}}
-
-
-def _fold_differences(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[tuple]]
-                      ) -> np.ndarray | None:
-    """The differences B − A of every (split seed, fold), each fold's test recordings
-    found by the fold ids the rows record (a split seed's init seeds averaged); None
-    where a run has no fold ids, or fewer than 2 differences come out."""
-    out = []
-    for keys in splits.values():
-        if any(per_seed[k].folds is None for k in keys):
-            return None
-        for fold in sorted({int(f) for k in keys for f in per_seed[k].folds}):
-            vals = []
-            for key in keys:
-                run = per_seed[key]
-                m = run.folds == fold
-                if m.any():
-                    vals.append(float(run.cb[m].mean() - run.ca[m].mean()))
-            out.append(float(np.mean(vals)))
-    return np.array(out) if len(out) >= 2 else None
-
-
-def _test_sampling_share(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[tuple]],
-                         d_run: np.ndarray) -> float | None:
-    """The share of the variance of the per-run differences that test sampling accounts
-    for: the mean over runs of ``(π − δ²)/n`` (π: the share of the run's recordings the
-    cells disagree on, δ its difference, n its recordings; a split seed's init seeds
-    averaged) over the variance of ``d_run``. None with fewer than 2 runs or no spread.
-    An estimate: above 1 where the runs happened to agree more than test sampling alone
-    would make them."""
-    if len(d_run) < 2 or float(d_run.var(ddof=1)) == 0:
-        return None
-    parts = []
-    for keys in splits.values():
-        v = []
-        for k in keys:
-            r = per_seed[k]
-            pi, delta = float(np.mean(r.ca != r.cb)), float(r.cb.mean() - r.ca.mean())
-            v.append(max(0.0, pi - delta * delta) / len(r.ids))
-        parts.append(float(np.mean(v)) / len(keys))
-    return float(np.mean(parts) / d_run.var(ddof=1))
-
-
-def _seed_label(key: tuple) -> str:
-    return str(key[0]) if key[1] is None else f"{key[0]}/{key[1]}"
-
-
-def _per_class_gains(per_seed: Mapping[tuple, _Run], splits: Mapping[int, list[tuple]],
-                     classes: Sequence[str], ratio: float, confidence: float
-                     ) -> dict[str, ClassGain]:
-    """Class → gain B − A on that class's test sequences, per run, with the run-level
-    interval (None where fewer than 2 runs test the class)."""
-    out = {}
-    for c, name in enumerate(classes):
-        d = []
-        for ks in splits.values():
-            vals = [per_seed[k].cb[per_seed[k].y == c].mean()
-                    - per_seed[k].ca[per_seed[k].y == c].mean()
-                    for k in ks if np.any(per_seed[k].y == c)]
-            if vals:
-                d.append(float(np.mean(vals)))
-        if not d:
-            continue
-        low = high = None
-        if len(d) >= 2:
-            t = corrected_t(np.array(d), ratio, confidence=confidence)
-            low, high = max(-1.0, float(t["low"])), min(1.0, float(t["high"]))
-        out[name] = ClassGain(difference=float(np.mean(d)), low=low, high=high, runs=len(d))
-    return out
-
-
-def _per_user_gains(per_seed: Mapping[tuple, _Run], users: Sequence[str]) -> UserGains:
-    """Per user (the test sequences of each user, over the runs that test them): the
-    gain B − A, and how many users it helped or hurt, its median and quartiles."""
-    users = list(users)
-    gains: dict[str, list[float]] = {}
-    for run in per_seed.values():
-        who = np.array([str(users[i]) for i in run.ids])
-        for u in dict.fromkeys(who.tolist()):
-            m = who == u
-            gains.setdefault(u, []).append(float(run.cb[m].mean() - run.ca[m].mean()))
-    per_user = {u: float(np.mean(g)) for u, g in sorted(gains.items())}
-    values = np.array(list(per_user.values()))
-    q25, q50, q75 = np.percentile(values, [25, 50, 75]) if values.size else (math.nan,) * 3
-    return UserGains(users=len(per_user), helped=int(np.sum(values > 0)),
-                     hurt=int(np.sum(values < 0)), median=float(q50), q25=float(q25),
-                     q75=float(q75), gains=per_user)
