@@ -35,7 +35,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -190,33 +189,15 @@ def _today() -> str:
 
 
 def machine() -> dict:
-    import numpy
+    """The machine and software a report was computed on (:mod:`tactbench.machine`)."""
+    from tactbench import machine as facts
 
-    cpu = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30
-    versions = {"python": platform.python_version(), "numpy": numpy.__version__}
-    for mod in ("tactbench", "torch", "cv2", "kornia", "scipy", "sklearn"):
-        try:
-            versions[mod] = __import__(mod).__version__
-        except Exception:  # noqa: BLE001 - a missing optional library is just not listed
-            pass
-    try:
-        import torch
-
-        gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "none"
-    except Exception:  # noqa: BLE001
-        gpu = "none"
-    git = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, text=True,
-                         capture_output=True).stdout.strip() or "?"
-    return {"cpu": cpu, "cores": os.cpu_count(), "ram_gib": round(ram, 1), "gpu": gpu,
-            "os": platform.platform(), "versions": versions, "git": git}
+    return {"cpu": facts.cpu_model() or "unknown CPU", "cores": os.cpu_count(),
+            "ram_gib": round(facts.memory_bytes() / 2 ** 30, 1), "gpu": facts.gpu_name(),
+            "os": facts.operating_system(),
+            "versions": facts.versions(("torch", "cv2", "kornia", "scipy", "sklearn"),
+                                       load=True),
+            "git": facts.git_revision(short=True) or "?"}
 
 
 def header(title: str, name: str, what: str, parts: list[dict], m: dict,

@@ -346,14 +346,14 @@ def step_flops(clf, train, batch: int, *, shared: bool = False) -> float:
     import torch.nn.functional as F
     from torch.utils.flop_counter import FlopCounterMode
 
-    from tactbench.classifiers.base import FrameBank
+    from tactbench.classifiers.batching import FrameBank
 
     torch.manual_seed(0)
     net = clf._build_net(tuple(train.frame_shape), 5, pretrained=False)
     with torch.no_grad():
         bank = FrameBank(train, net.prepare)
     if shared:  # a batch as shared_features draws it: whole runs of windows
-        from tactbench.classifiers.base import window_runs
+        from tactbench.classifiers.batching import window_runs
         from tactbench.classifiers.training import epoch_order
 
         idx = epoch_order(np.random.default_rng(0), len(train), 0, window_runs(train))[:batch]
@@ -462,7 +462,7 @@ def _quick_batch(train):
     frames and its first training batch (frames prepared): ``(clf, net, x, y)``."""
     import torch
 
-    from tactbench.classifiers.base import FrameBank
+    from tactbench.classifiers.batching import FrameBank
     from tactbench.plugins import load_registry
     from tactbench.profiles import profile_options
 

@@ -11,24 +11,17 @@ from __future__ import annotations
 import os
 
 from tactbench.errors import BudgetError, InputError
+from tactbench.machine import memory_bytes
 
 #: Environment variable that sets the memory budget, in MiB.
 BUDGET_ENV = "TACTBENCH_MEMORY_MIB"
-
-
-def machine_memory_bytes() -> int:
-    """Physical memory of this machine (bytes), or 8 GiB when it cannot be read."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
 
 
 def memory_budget_bytes() -> int:
     """The budget for one step: ``TACTBENCH_MEMORY_MIB`` or half this machine's memory."""
     text = os.environ.get(BUDGET_ENV)
     if text is None or text == "":
-        return machine_memory_bytes() // 2
+        return memory_bytes() // 2
     try:
         mib = float(text)
     except ValueError:

@@ -1,8 +1,8 @@
 """The ``tactbench`` command line.
 
-Start-up stays cheap: built-in commands are imported when they run (see
-:data:`BUILTIN_COMMANDS`; ``--help`` lists them from :data:`BUILTIN_SUMMARIES` without
-importing them), plugins load on first need, and heavy libraries are imported by the
+Start-up stays cheap: built-in commands come through the ``register_commands`` hook like
+a plugin's (:mod:`tactbench.commands`), as lazy commands that ``--help`` lists without
+importing them; plugins load on first need, and heavy libraries are imported by the
 components that use them.
 """
 
@@ -23,89 +23,66 @@ from tactbench.errors import InputError, PluginError, TactbenchError, check_numb
 from tactbench.machine import pin_cpu_kernels
 from tactbench.plugins import collect_registry, make_plugin_manager
 
-#: command name → "module:attribute" of its click command, imported on use.
-BUILTIN_COMMANDS: dict[str, str] = {
-    "list": "tactbench.commands.inspect:list_cmd",
-    "plugins": "tactbench.commands.inspect:plugins_cmd",
-    "data": "tactbench.commands.data:data_group",
-    "can": "tactbench.commands.can:can_group",
-    "live": "tactbench.commands.live:live_cmd",
-    "layout": "tactbench.commands.layout:layout_group",
-    "run": "tactbench.commands.run:run_cmd",
-    "cache": "tactbench.commands.cache:cache_group",
-    "encode": "tactbench.commands.encode:encode_cmd",
-    "flowbench": "tactbench.commands.flowbench:flowbench_cmd",
-    "stability": "tactbench.commands.stability:stability_cmd",
-}
-
-#: command name → its one-line summary, as ``tactbench --help`` lists it: the list is
-#: drawn without importing the commands (whose modules import the library they drive).
-#: ``tests/test_cli.py`` checks each is the command's own short help.
-BUILTIN_SUMMARIES: dict[str, str] = {
-    "list": "List registered sensors, datasets, encoders, classifiers, splits and test windows.",
-    "plugins": "List plugins (built-in and installed), their versions and load errors.",
-    "data": "Inspect, simulate and preview datasets.",
-    "can": "CySkin taxel traffic on a CAN bus: simulate, record, bus load, log info.",
-    "live": "Classify gestures live: each sweep is encoded once and the last L frames "
-            "classified.",
-    "layout": "Inspect and generate taxel layouts.",
-    "run": "Run a benchmark grid and report accuracy beside its cost.",
-    "cache": "Inspect or clear cached encodings (TACTBENCH_CACHE, default "
-             "~/.cache/tactbench).",
-    "encode": "Encode a (T, H, W) sequence into (T, C, H, W) feature images.",
-    "flowbench": "Endpoint error, angular error and ms per frame pair of flow encoders.",
-    "stability": "Every encoder on stiff and extreme inputs: pass or fail, with the reason.",
-}
-
 DEBUG_ENV = "TACTBENCH_DEBUG"
 
 
+class LazyCommand(click.Command):
+    """A command known by its name and summary, imported when it is used: ``target`` is
+    ``"module:attribute"`` of the click command. ``--help`` draws the group's command list
+    from the summary alone."""
+
+    def __init__(self, name: str, target: str, *, summary: str) -> None:
+        module_name, _, attr = target.partition(":")
+        if not module_name or not attr:
+            raise InputError(f"command '{name}': target {target!r} must look like "
+                             f"'package.module:attribute'")
+        super().__init__(name, help=summary)
+        self.target = target
+
+    def load(self) -> click.Command:
+        module_name, _, attr = self.target.partition(":")
+        return getattr(importlib.import_module(module_name), attr)
+
+
 class TactbenchGroup(click.Group):
-    """A group whose built-in commands load lazily and whose plugins add commands."""
+    """The ``tactbench`` group: every command, built-in or a plugin's, comes through the
+    ``register_commands`` hook (:func:`registered_commands`), once per invocation, from
+    that invocation's plugin manager; lazy commands are imported when they are used."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self._plugin_commands_loaded = False
+    def add_lazy_command(self, name: str, target: str, *, summary: str) -> None:
+        """Add command ``name`` whose click command is ``target`` (``"module:attribute"``),
+        imported only when the command runs or shows its own help; ``summary`` is its line
+        in ``tactbench --help`` (the command's own short help)."""
+        self.add_command(LazyCommand(name, target, summary=summary))
 
-    def _load_plugin_commands(self, ctx: click.Context) -> None:
-        if self._plugin_commands_loaded:
-            return
-        self._plugin_commands_loaded = True
-        pm = plugin_manager(ctx)
-        before = set(self.commands)
-        pm.call_each("register_commands", lambda _p, _d: {"cli": self})
-        for name in set(self.commands) - before:
-            if name in BUILTIN_COMMANDS:  # a plugin may not replace a built-in command
-                del self.commands[name]
+    def registered(self, ctx: click.Context) -> dict[str, click.Command]:
+        """This invocation's commands: those added to the group in code, then those the
+        plugins register."""
+        state = _state(ctx)
+        if "commands" not in state:
+            state["commands"] = registered_commands(plugin_manager(ctx), dict(self.commands))
+        return state["commands"]
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        self._load_plugin_commands(ctx)
-        return sorted(set(BUILTIN_COMMANDS) | set(self.commands))
+        return sorted(self.registered(ctx))
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        target = BUILTIN_COMMANDS.get(cmd_name)
-        if target is not None:
-            module_name, _, attr = target.partition(":")
-            return getattr(importlib.import_module(module_name), attr)
-        self._load_plugin_commands(ctx)
-        return self.commands.get(cmd_name)
+        commands = self.registered(ctx)
+        command = commands.get(cmd_name)
+        if isinstance(command, LazyCommand):
+            command = commands[cmd_name] = command.load()
+        return command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        """The command list of ``--help``, as click draws it, with the built-in commands'
-        summaries taken from :data:`BUILTIN_SUMMARIES` rather than imported."""
-        listed: list[tuple[str, click.Command]] = []
-        for name in self.list_commands(ctx):
-            if name in BUILTIN_COMMANDS:
-                listed.append((name, click.Command(name, help=BUILTIN_SUMMARIES[name])))
-                continue
-            cmd = self.commands.get(name)
-            if cmd is not None and not cmd.hidden:
-                listed.append((name, cmd))
+        """The command list of ``--help``, as click draws it, but from the commands as
+        registered: a lazy command shows its summary and is not imported."""
+        listed = [(name, command) for name, command in sorted(self.registered(ctx).items())
+                  if not command.hidden]
         if listed:
             limit = formatter.width - 6 - max(len(name) for name, _ in listed)
             with formatter.section("Commands"):
-                formatter.write_dl([(name, cmd.get_short_help_str(limit))
-                                    for name, cmd in listed])
+                formatter.write_dl([(name, command.get_short_help_str(limit))
+                                    for name, command in listed])
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
@@ -116,6 +93,37 @@ class TactbenchGroup(click.Group):
             raise UserError(" ".join(str(exc).split())) from exc
         except KeyboardInterrupt:  # Ctrl-C: not a failure, not a bug
             interrupted()
+
+
+def registered_commands(pm, commands: dict[str, click.Command] | None = None
+                        ) -> dict[str, click.Command]:
+    """``commands`` (name → command) with those of every plugin's ``register_commands``
+    (built-ins first) added. Each plugin adds to a group of its own, merged when its hook
+    returns: a hook that raises adds nothing, and a name already taken is refused and
+    reported (the first keeps it), as for components."""
+    commands = dict(commands or {})
+    owners = dict.fromkeys(commands, "tactbench.cli")
+    staged: dict[str, tuple[str, TactbenchGroup]] = {}
+
+    def make_kwargs(plugin: str, dist: str) -> dict[str, Any]:
+        staged[plugin] = (dist, TactbenchGroup(name="tactbench"))
+        return {"cli": staged[plugin][1]}
+
+    def on_success(plugin: str, _kwargs: dict[str, Any]) -> None:
+        dist, group = staged[plugin]
+        for name, command in group.commands.items():
+            if name in owners:
+                pm.report(plugin, dist, f"command '{name}' is already registered by plugin "
+                                        f"'{owners[name]}'; this one is skipped. Rename one "
+                                        f"of them.")
+                continue
+            owners[name], commands[name] = plugin, command
+
+    try:
+        pm.call_each("register_commands", make_kwargs, on_success)
+    except PluginError as exc:  # strict mode: a broken plugin is the user's to fix
+        raise UserError(str(exc)) from exc
+    return commands
 
 
 #: Exit statuses of every command (the CLI reference lists them).

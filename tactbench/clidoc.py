@@ -14,7 +14,8 @@ from pathlib import Path
 
 import click
 
-from tactbench.cli import BUILTIN_COMMANDS, TactbenchGroup, cli
+from tactbench.cli import TactbenchGroup, cli
+from tactbench.plugins import make_plugin_manager
 
 WIDTH = 96
 HEADER = """# Command-line reference
@@ -37,37 +38,32 @@ terminal whose encoding lacks a character (a forced ASCII locale) shows it as an
 """
 
 
-def _walk(command: click.Command, path: list[str], parent: click.Context | None):
+def _walk(command: click.Command, path: list[str], parent: click.Context | None,
+          obj: dict | None = None):
     ctx = click.Context(command, info_name=path[-1], parent=parent, terminal_width=WIDTH,
-                        max_content_width=WIDTH, **command.context_settings)
+                        max_content_width=WIDTH, obj=obj, **command.context_settings)
     yield path, command, ctx
     if isinstance(command, click.Group):
-        names = (list(_builtin_names()) if parent is None
-                 else sorted(command.list_commands(ctx)))
-        for name in names:
+        for name in sorted(command.list_commands(ctx)):
             sub = command.get_command(ctx, name)
             if sub is not None and not sub.hidden:
                 yield from _walk(sub, [*path, name], ctx)
 
 
-def _builtin_names():
-    return sorted(BUILTIN_COMMANDS)
-
-
 def _builtin_cli() -> click.Group:
-    """A copy of the ``tactbench`` group that never loads plugin commands."""
-    group = TactbenchGroup(name="tactbench", callback=cli.callback, params=cli.params,
-                           help=cli.help, context_settings=cli.context_settings)
-    group._plugin_commands_loaded = True  # built-ins only: the file must not vary
-    return group
+    """A copy of the ``tactbench`` group without its epilog (the header above says the
+    exit statuses)."""
+    return TactbenchGroup(name="tactbench", callback=cli.callback, params=cli.params,
+                          help=cli.help, context_settings=cli.context_settings)
 
 
 def render() -> str:
     """The whole reference as Markdown."""
-    cli = _builtin_cli()
+    # built-in commands only: the file must not vary with what is installed
+    builtins = {"pm": make_plugin_manager(entry_points=False, strict=True)}
     parts = [HEADER]
     toc, sections = [], []
-    for path, command, ctx in _walk(cli, ["tactbench"], None):
+    for path, command, ctx in _walk(_builtin_cli(), ["tactbench"], None, builtins):
         title = " ".join(path)
         anchor = "-".join(path)
         if len(path) > 1:

@@ -173,14 +173,7 @@ class LiveModel:
         if L == 0:
             raise TactbenchError(f"{where}: window length L unknown; give -L")
         L = check_positive_int(L, f"{where}: window length L")
-        norm = _dict_field(meta, "normalisation", where)
-        offset = norm.get("offset", 0.0)
-        if isinstance(offset, list):
-            offset = _numbers(offset, f"{where}: metadata 'normalisation.offset'", np.float32)
-        else:
-            offset = _finite(offset, f"{where}: metadata 'normalisation.offset'")
-        scale = check_positive_float(norm.get("scale", 65535.0),
-                                     f"{where}: metadata 'normalisation.scale'")
+        offset, scale = _normalisation(meta, where)
         frame_rank = CLASSIFIER.get(clf, "frame_rank")
         if frame_rank is None:  # images or vectors: what it was fitted on decides
             shape = CLASSIFIER.get(clf, "frame_shape")
@@ -231,6 +224,20 @@ class LiveModel:
                                  f"{px:g} mm gives {expected}")
         _check_window_budget(L, math.prod(expected), where)
         return model
+
+
+def _normalisation(meta: dict[str, Any], where: str) -> tuple[Any, float]:
+    """``(offset, scale)`` of the metadata's ``normalisation``: the offset one number or
+    one per taxel (float32 ``(N,)``), the scale positive (defaults 0 and 65535)."""
+    norm = _dict_field(meta, "normalisation", where)
+    offset = norm.get("offset", 0.0)
+    if isinstance(offset, list):
+        offset = _numbers(offset, f"{where}: metadata 'normalisation.offset'", np.float32)
+    else:
+        offset = _finite(offset, f"{where}: metadata 'normalisation.offset'")
+    scale = check_positive_float(norm.get("scale", 65535.0),
+                                 f"{where}: metadata 'normalisation.scale'")
+    return offset, scale
 
 
 def _check_window_budget(L: int, frame_values: int, where: str) -> None:

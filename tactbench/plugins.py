@@ -40,6 +40,7 @@ BUILTIN_PLUGINS: tuple[str, ...] = (
     "tactbench.datasets",
     "tactbench.sensors",
     "tactbench.classifiers",
+    "tactbench.commands",
 )
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.-]*$")

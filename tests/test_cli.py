@@ -11,7 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 import tactbench
-from tactbench.cli import BUILTIN_COMMANDS, BUILTIN_SUMMARIES, cli
+from tactbench.cli import cli
+from tactbench.commands import COMMANDS
 
 HEAVY = ("torch", "kornia", "cv2", "can", "skimage", "matplotlib", "dask")
 
@@ -33,24 +34,41 @@ def test_help_lists_builtin_commands():
 
 
 def test_every_builtin_command_target_imports():
-    for name, target in BUILTIN_COMMANDS.items():
+    for name, (target, _summary) in COMMANDS.items():
         module, _, attr = target.partition(":")
         command = getattr(__import__(module, fromlist=[attr]), attr)
-        assert command.name == name, f"BUILTIN_COMMANDS['{name}'] points at '{command.name}'"
+        assert command.name == name, f"COMMANDS['{name}'] points at '{command.name}'"
+
+
+def test_every_command_module_is_registered():
+    """A built-in command is one entry of COMMANDS: a module of tactbench/commands/ that no
+    entry names would be a command nobody can run."""
+    from pathlib import Path
+
+    folder = Path(tactbench.__file__).parent / "commands"
+    modules = {f"tactbench.commands.{p.stem}" for p in folder.glob("*.py")
+               if p.stem != "__init__"}
+    named = {target.partition(":")[0] for target, _summary in COMMANDS.values()}
+    assert modules == named
 
 
 def test_help_summaries_are_the_commands_own():
-    """``--help`` lists the built-ins from BUILTIN_SUMMARIES: the same lines click would
-    draw from the imported commands, at any width."""
+    """``--help`` lists the built-ins from their COMMANDS summaries: the same lines click
+    would draw from the imported commands, at any width."""
     import click
 
-    assert set(BUILTIN_SUMMARIES) == set(BUILTIN_COMMANDS)
     ctx = click.Context(cli)
-    for name in BUILTIN_COMMANDS:
+    for name, (_target, summary) in COMMANDS.items():
         real = cli.get_command(ctx, name)
-        stand_in = click.Command(name, help=BUILTIN_SUMMARIES[name])
+        stand_in = click.Command(name, help=summary)
         for limit in (30, 45, 60, 80, 200):
             assert stand_in.get_short_help_str(limit) == real.get_short_help_str(limit), name
+
+
+def test_builtin_commands_come_through_the_register_commands_hook():
+    doc = json.loads(run("plugins", "--json").output)
+    builtin = next(p for p in doc["plugins"] if p["name"] == "tactbench.commands")
+    assert builtin["source"] == "builtin" and builtin["hooks"] == ["register_commands"]
 
 
 def test_help_imports_no_command_and_no_numpy():
@@ -132,3 +150,14 @@ def test_startup_leaves_heavy_libraries_out(argv):
     assert result.returncode == 0, result.stderr
     line = [ln for ln in result.stderr.splitlines() if ln.startswith("HEAVY:")][-1]
     assert line == "HEAVY:", f"{argv} imported heavy modules: {line[6:]}"
+
+
+def test_commands_are_those_of_the_invocations_plugins():
+    """Each invocation registers its own plugins' commands: one without plugins has no
+    command, and leaves none missing for the next."""
+    from tactbench.plugins import make_plugin_manager
+
+    bare = make_plugin_manager(builtins=False, entry_points=False)
+    result = CliRunner().invoke(cli, ["list"], obj={"pm": bare})
+    assert result.exit_code == 2 and "No such command 'list'" in result.output
+    assert run("list", "--kind", "encoder").exit_code == 0

@@ -11,8 +11,13 @@ import sys
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.machine import KERNELS_ENV, _cpu_flags, machine, pin_cpu_kernels
-from tactbench.runner.system import describe_machines
+from tactbench.machine import (
+    KERNELS_ENV,
+    _cpu_flags,
+    describe_machines,
+    machine,
+    pin_cpu_kernels,
+)
 
 
 def test_machine_facts_name_the_cpu_and_the_kernels():

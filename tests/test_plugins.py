@@ -356,22 +356,58 @@ def test_format_spec_round_trips():
     assert parse_spec(format_spec(name, opts)) == (name, opts)
 
 
+def _group_with(*plugins):
+    """A fresh ``tactbench`` group and a context whose plugin manager holds the built-ins
+    and ``(name, object)`` plugins."""
+    from tactbench.cli import TactbenchGroup
+
+    pm = make_plugin_manager(entry_points=False, extra=plugins)
+    group = TactbenchGroup(name="tactbench")
+    return group, click.Context(group, obj={"pm": pm}), pm
+
+
 def test_plugin_commands_cannot_replace_builtin_commands():
-    from tactbench.cli import BUILTIN_COMMANDS, TactbenchGroup
-
-    group = TactbenchGroup()
-
     def register_commands(cli):
         @cli.command("list")
         def fake():
             pass
 
-    group._plugin_commands_loaded = False
-    ctx = click.Context(group, obj={"pm": make_plugin_manager(
-        entry_points=False, extra=[("x", namespace(register_commands=register_commands))])})
+    group, ctx, pm = _group_with(("x", namespace(register_commands=register_commands)))
     group.list_commands(ctx)
-    assert group.get_command(ctx, "list").callback.__module__ == \
-        BUILTIN_COMMANDS["list"].split(":")[0]
+    assert group.get_command(ctx, "list").callback.__module__ == "tactbench.commands.inspect"
+    assert any(p.plugin == "x" and "command 'list' is already registered by plugin "
+               "'tactbench.commands'" in p.message for p in pm.problems)
+
+
+def test_a_command_hook_that_raises_adds_no_command():
+    def register_commands(cli):
+        @cli.command("half")
+        def half():
+            pass
+        raise RuntimeError("broken after one command")
+
+    group, ctx, pm = _group_with(("x", namespace(register_commands=register_commands)))
+    assert "half" not in group.list_commands(ctx) and "run" in group.list_commands(ctx)
+    assert any(p.plugin == "x" and "broken after one command" in p.message
+               for p in pm.problems)
+
+
+def test_a_plugin_can_add_a_lazy_command_too(tmp_path, monkeypatch):
+    """``cli.add_lazy_command`` keeps a plugin's module out of ``--help``, as the
+    built-ins' are; the command is imported when it runs."""
+    (tmp_path / "lazyplug_cmd.py").write_text(
+        "import click\n\n@click.command('hi')\ndef hi():\n    \"Say hi.\"\n"
+        "    click.echo('hi there')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    def register_commands(cli):
+        cli.add_lazy_command("hi", "lazyplug_cmd:hi", summary="Say hi.")
+
+    group, ctx, _pm = _group_with(("x", namespace(register_commands=register_commands)))
+    help_text = group.get_help(ctx)
+    assert "Say hi." in help_text and "lazyplug_cmd" not in sys.modules
+    assert group.get_command(ctx, "hi").callback.__module__ == "lazyplug_cmd"
+    monkeypatch.delitem(sys.modules, "lazyplug_cmd")
 
 
 def test_hook_reference_documents_every_hook_with_its_signature():

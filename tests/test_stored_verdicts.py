@@ -20,8 +20,8 @@ FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "
           "runs", "runs_needed", "discordant_recordings", "equivalence_p_holm")
 
 
-def _recompute(path: Path) -> tuple[dict, list[dict]]:
-    from tactbench.runner.summaries import comparisons
+def _recompute(path: Path) -> tuple[dict, list]:
+    from tactbench.runner.comparisons import comparisons
 
     doc = json.loads(path.read_text())
     stats = doc["statistics"]
@@ -29,7 +29,7 @@ def _recompute(path: Path) -> tuple[dict, list[dict]]:
 
 
 @pytest.fixture(scope="module")
-def recomputed() -> dict[Path, tuple[dict, list[dict]]]:
+def recomputed() -> dict[Path, tuple[dict, list]]:
     return {path: _recompute(path) for path in STORED}
 
 
@@ -42,7 +42,8 @@ def test_each_stored_comparison_is_what_its_rows_give(path, recomputed):
     doc, comps = recomputed[path]
     stored = doc["comparisons"]
     assert len(stored) == len(comps)
-    for old, new in zip(stored, comps):
+    for old, record in zip(stored, comps):
+        new = record.to_dict()
         where = (f"{old['factor']} {old['a']} → {old['b']} "
                  f"({old.get('L')}, {old.get('classifier')})")
         for field in FIELDS:

@@ -46,6 +46,45 @@ class Recorded:
         return asdict(self)
 
 
+def _write_all(writer: Any, messages: Any) -> int:
+    """Write ``messages`` to the log; returns how many."""
+    count = 0
+    for msg in messages:
+        writer.on_message_received(msg)
+        count += 1
+    return count
+
+
+def _receive(bus: Any, writer: Any, *, bitrate: int, data_bitrate: int | None) -> float | None:
+    """Write the next message ``bus`` receives (waiting up to 50 ms) to the log; returns
+    its nominal bit times (0 for an error frame), or None when none came."""
+    msg = bus.recv(timeout=0.05)
+    if msg is None:
+        return None
+    # A log holds one bus. python-can's BLF writer turns a channel *name* into a number
+    # from its trailing digits ("rec-912345" → 912345) and fails above 65535, so the name
+    # is not written.
+    msg.channel = None
+    writer.on_message_received(msg)
+    if msg.is_error_frame:
+        return 0.0
+    return frame_bits(min(len(msg.data), 64 if msg.is_fd else 8), extended=msg.is_extended_id,
+                      fd=msg.is_fd, bitrate=bitrate, data_bitrate=data_bitrate)
+
+
+def _stop_reason(elapsed: float, idle: float, messages: int, *, duration: float | None,
+                 idle_timeout: float | None, max_messages: int | None) -> str | None:
+    """Why a recording stops now (``"duration"``, ``"idle"``, ``"max_messages"``), or
+    None to go on."""
+    if duration is not None and elapsed >= duration:
+        return "duration"
+    if idle_timeout is not None and idle >= idle_timeout:
+        return "idle"
+    if max_messages is not None and messages >= max_messages:
+        return "max_messages"
+    return None
+
+
 def record(bus: Any, out: str | Path, *, duration: float | None = None,
            idle_timeout: float | None = None, max_messages: int | None = None,
            label: dict[str, Any] | None = None, taxel_ids: Any = None,
@@ -87,49 +126,30 @@ def record(bus: Any, out: str | Path, *, duration: float | None = None,
     stopped = "interrupted"
     try:
         if taxel_ids is not None:
-            for msg in taxel_map_messages(taxel_ids, 0, timestamp=t_start):
-                writer.on_message_received(msg)
-                meta += 1
+            meta += _write_all(writer, taxel_map_messages(taxel_ids, 0, timestamp=t_start))
         if label is not None:
-            for msg in marker_messages(True, label, 1, timestamp=t_start):
-                writer.on_message_received(msg)
-                meta += 1
+            meta += _write_all(writer, marker_messages(True, label, 1, timestamp=t_start))
         start = last = shown = time.monotonic()
         while True:
             now = time.monotonic()
-            if duration is not None and now - start >= duration:
-                stopped = "duration"
-                break
-            if idle_timeout is not None and now - last >= idle_timeout:
-                stopped = "idle"
-                break
-            if max_messages is not None and n >= max_messages:
-                stopped = "max_messages"
+            stop = _stop_reason(now - start, now - last, n, duration=duration,
+                                idle_timeout=idle_timeout, max_messages=max_messages)
+            if stop is not None:
+                stopped = stop
                 break
             if progress is not None and now - shown >= PROGRESS_EVERY_S:
                 progress(n, max_messages, seconds=now - start)
                 shown = now
-            msg = bus.recv(timeout=0.05)
-            if msg is None:
-                continue
-            last = time.monotonic()
-            # A log holds one bus. python-can's BLF writer turns a channel *name* into a
-            # number from its trailing digits ("rec-912345" → 912345) and fails above
-            # 65535, so the name is not written.
-            msg.channel = None
-            writer.on_message_received(msg)
-            n += 1
-            if not msg.is_error_frame:
-                bits += frame_bits(min(len(msg.data), 64 if msg.is_fd else 8),
-                                   extended=msg.is_extended_id, fd=msg.is_fd,
-                                   bitrate=bitrate, data_bitrate=data_bitrate)
+            received = _receive(bus, writer, bitrate=bitrate, data_bitrate=data_bitrate)
+            if received is not None:
+                last = time.monotonic()
+                n += 1
+                bits += received
     except KeyboardInterrupt:
         stopped = "interrupted"  # the normal end of an open-ended recording
     finally:
         if label is not None:
-            for msg in marker_messages(False, label, 1, timestamp=time.time()):
-                writer.on_message_received(msg)
-                meta += 1
+            meta += _write_all(writer, marker_messages(False, label, 1, timestamp=time.time()))
         writer.stop()
     seconds = time.time() - t_start
     if progress is not None:

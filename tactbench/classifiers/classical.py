@@ -12,7 +12,7 @@ other classifiers).
 Memory: frames are read from the sequences a chunk at a time and reduced to their
 features at once (``F`` numbers per frame). The window features ``(B, L × F)`` float64
 are held whole when they fit the frame-bank budget
-(:func:`tactbench.classifiers.base.bank_budget_bytes`), as before; above it the
+(:func:`tactbench.classifiers.batching.bank_budget_bytes`), as before; above it the
 statistics, the loss and its gradient are accumulated over chunks of
 :data:`FEATURE_CHUNK` windows, gathered from a bank of per-frame features (or, when even
 that exceeds the budget, read from the sequences for each chunk).
@@ -26,9 +26,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tactbench.classifiers.base import (
+from tactbench.classifiers.base import SequenceClassifier
+from tactbench.classifiers.batching import (
     FrameBank,
-    SequenceClassifier,
     bank_budget_bytes,
     read_windows,
     streamed_mean_std,
@@ -59,6 +59,22 @@ def frame_features(frames, grid: int):
         pooled = F.adaptive_avg_pool1d(frames[:, None, :], grid * grid).flatten(1)
     return torch.cat(stats + [pooled], dim=1)
 
+
+def _standardised(chunks: list[tuple[slice, Callable[[], Any]]]):
+    """``(mean, std, z)`` of the window features in ``chunks`` (see
+    ``PooledLogReg._feature_chunks``): per-feature mean and standard deviation (1 where
+    a feature is constant), and ``z``, the standardised features, when they are one chunk
+    held whole (None otherwise)."""
+    import torch
+
+    feats = None
+    if len(chunks) == 1:
+        feats = chunks[0][1]()
+        mean, std = feats.mean(0), feats.std(0)
+    else:
+        mean, std = streamed_mean_std(read() for _, read in chunks)
+    std = torch.where(std < 1e-9, torch.ones_like(std), std)
+    return mean, std, None if feats is None else (feats - mean) / std
 
 @dataclass(eq=False, repr=False, kw_only=True)
 class PooledLogReg(SequenceClassifier):
@@ -140,17 +156,7 @@ class PooledLogReg(SequenceClassifier):
         start = time.perf_counter()
         chunks = self._feature_chunks(train)
         y = torch.from_numpy(np.asarray(train.labels, dtype=np.int64))
-        z = feats = None  # z: the standardised features, when held whole
-        if len(chunks) == 1:
-            feats = chunks[0][1]()
-            mean = feats.mean(0)
-            std = feats.std(0)
-        else:
-            mean, std = streamed_mean_std(read() for _, read in chunks)
-        std = torch.where(std < 1e-9, torch.ones_like(std), std)
-        if feats is not None:
-            z = (feats - mean) / std
-            del feats
+        mean, std, z = _standardised(chunks)
         weight = torch.zeros((k, mean.shape[0]), dtype=torch.float64, requires_grad=True)
         bias = torch.zeros(k, dtype=torch.float64, requires_grad=True)
         opt = torch.optim.LBFGS([weight, bias], lr=1.0, max_iter=self.max_iter,

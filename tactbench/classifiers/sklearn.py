@@ -49,7 +49,8 @@ from typing import Any, ClassVar, Iterator
 import numpy as np
 
 from tactbench.budget import check_budget
-from tactbench.classifiers.base import SequenceClassifier, _frames_per_chunk
+from tactbench.classifiers.base import SequenceClassifier
+from tactbench.classifiers.batching import frame_index, frames_per_chunk
 from tactbench.classifiers.training import FitReport, ProgressFn
 from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_positive_int
@@ -200,16 +201,12 @@ class SklearnClassifier(SequenceClassifier):
         check_budget((total + len(x) * x.L) * n_feat * 4,
                      f"{self.estimator_name} features of {len(x)} windows")
         bank = np.zeros((total + 1, n_feat), dtype=np.float32)  # last row: blank frame
-        lengths = np.array([int(s.shape[0]) for s in x.sequences], dtype=np.int64)
-        offsets = np.concatenate([[0], np.cumsum(lengths)])
-        step = _frames_per_chunk(x.frame_shape)
+        lengths, offsets, index = frame_index(x)
+        step = frames_per_chunk(x.frame_shape)
         for i, seq in enumerate(x.sequences):
             for a in range(0, int(lengths[i]), step):
                 b = min(int(lengths[i]), a + step)
                 bank[offsets[i] + a:offsets[i] + b] = frame_features(seq[a:b], self.grid)
-        pos = x.starts[:, None] + np.arange(x.L)[None, :]
-        index = offsets[x.seq_index][:, None] + pos
-        index[pos >= lengths[x.seq_index][:, None]] = total
         return bank[index].reshape(len(x), -1)
 
     # -- fit and predict ---------------------------------------------------------------

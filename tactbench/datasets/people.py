@@ -31,7 +31,6 @@ from tactbench.data.recording import Recording
 from tactbench.datasets import synthetic as v1
 from tactbench.datasets.synthetic import (
     LENGTH_MM,
-    PRESSURE_REF_KPA,
     RATE_HZ,
     TOP_X,
     Hand,
@@ -40,6 +39,7 @@ from tactbench.datasets.synthetic import (
     _rng,
     _smoothstep,
     _strokes,
+    push_parts,
 )
 from tactbench.errors import check_choice
 
@@ -399,17 +399,7 @@ def _push(p: Patches, person: Person, rep: _Rep, t: np.ndarray, x0: float, y0: f
     angle = rep.shift(0.15)
     along = person.push_along != rep.flip(REP_VARIANT_FLIP)
     flat = person.push_flat != rep.flip(REP_VARIANT_FLIP)
-    c, s = math.cos(angle), math.sin(angle)
-
-    def put(ox, oy, sx, sy, amp, reach):
-        on = np.clip((ramp - reach) / 0.35, 0, 1) if reach > 0 else 1.0
-        gx, gy = (ox, oy) if along else (oy, ox)
-        wx, wy = (sx, sy) if along else (sy, sx)
-        x = x0 + gx * c - gy * s
-        y = y0 + gx * s + gy * c
-        p.add(x + r.normal(0, 0.5, len(t)).cumsum() * 0.3, y, wx * spreading,
-              wy * (0.8 + 0.2 * spreading), PRESSURE_REF_KPA * amp * f * on, angle)
-
+    put = push_parts(p, r, len(t), (x0, y0), angle, along, ramp, f, spreading)
     if flat:
         put(0, -30 * k, 8 * k, 22 * k, 0.5 * rep.factor(0.1), 0.0)
         for i in range(4):

@@ -29,6 +29,7 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -371,6 +372,28 @@ def simulate_pressure(gesture: str, user: User, position: str, r: np.random.Gene
     return p.pressure(xy)
 
 
+def push_parts(p: Patches, r: np.random.Generator, n: int, centre: tuple[float, float],
+               angle: float, along: bool, ramp: np.ndarray, force: np.ndarray,
+               spreading: np.ndarray) -> Callable[..., None]:
+    """``put(ox, oy, sx, sy, amp, reach)`` for a pushing hand (both simulator versions):
+    adds to ``p`` a part at offset (ox, oy) mm from the hand's ``centre``, of widths
+    (sx, sy), rotated by ``angle`` (fingers ``along`` the arm or across it), that touches
+    once the push's ``ramp`` exceeds ``reach`` (0 = at once); ``force`` and ``spreading``
+    are the push's over the ``n`` frames."""
+    x0, y0 = centre
+    c, s = math.cos(angle), math.sin(angle)
+
+    def put(ox, oy, sx, sy, amp, reach):
+        on = np.clip((ramp - reach) / 0.35, 0, 1) if reach > 0 else 1.0
+        gx, gy = (ox, oy) if along else (oy, ox)
+        wx, wy = (sx, sy) if along else (sy, sx)
+        x = x0 + gx * c - gy * s
+        y = y0 + gx * s + gy * c
+        p.add(x + r.normal(0, 0.5, n).cumsum() * 0.3, y, wx * spreading,
+              wy * (0.8 + 0.2 * spreading), PRESSURE_REF_KPA * amp * force * on, angle)
+    return put
+
+
 def _push(p: Patches, user: User, r: np.random.Generator, t: np.ndarray, x0: float,
           y0: float, force: float, length: float) -> None:
     """An open hand (or its fingertips) pushing the arm away: pressure rises over
@@ -385,19 +408,7 @@ def _push(p: Patches, user: User, r: np.random.Generator, t: np.ndarray, x0: flo
     spreading = 0.45 + 0.75 * np.sqrt(np.clip(ramp, 0, 1))  # contact widens with force
     angle = r.normal(0.0, 0.3)
     along = r.random() < user.push_along  # fingers along the arm, or across it
-    c, s = math.cos(angle), math.sin(angle)
-
-    def put(ox, oy, sx, sy, amp, reach):
-        """A part at offset (ox, oy) from the hand centre that touches once the
-        push exceeds ``reach`` (0 = at once) of its full strength."""
-        on = np.clip((ramp - reach) / 0.35, 0, 1) if reach > 0 else 1.0
-        gx, gy = (ox, oy) if along else (oy, ox)
-        wx, wy = (sx, sy) if along else (sy, sx)
-        x = x0 + gx * c - gy * s
-        y = y0 + gx * s + gy * c
-        p.add(x + r.normal(0, 0.5, len(t)).cumsum() * 0.3, y, wx * spreading,
-              wy * (0.8 + 0.2 * spreading), PRESSURE_REF_KPA * amp * f * on, angle)
-
+    put = push_parts(p, r, len(t), (x0, y0), angle, along, ramp, f, spreading)
     if r.random() < user.push_style:  # flat hand
         put(0, -30 * k, 8 * k, 22 * k, 0.5 * r.lognormal(0, 0.2), 0.0)  # palm
         for i in range(4):

@@ -23,6 +23,7 @@ dataset; the workers never wait at a chunk's end.
 from __future__ import annotations
 
 import contextlib
+import functools
 import multiprocessing
 import sys
 import time
@@ -178,6 +179,12 @@ def _checked(fn: Callable[..., np.ndarray], arg: Any, index: int) -> np.ndarray:
         raise
 
 
+def _results(queued: tuple[int, dict[str, list[futures.Future]]]):
+    """A queued chunk ``(start, name → futures)`` as ``(start, name → their result)``."""
+    start, pending = queued
+    return start, {name: [fut.result for fut in futs] for name, futs in pending.items()}
+
+
 @dataclass
 class EncodedChunk:
     """One chunk of :func:`encode_chunks`'s stream, encoded by every encoder."""
@@ -221,34 +228,27 @@ def encode_chunks(encoders: Mapping[str, Any], chunks: Iterable[Sequence[np.ndar
         if progress:
             progress(done[name], total, encoder=name)
 
-    if workers == 1 or mode == "serial":
-        start = 0
-        for chunk in chunks:
-            encoded: dict[str, list[np.ndarray]] = {}
-            seconds = dict.fromkeys(encoders, 0.0)
-            for name, encoder in encoders.items():
-                encoded[name] = []
-                for i, seq in enumerate(chunk):
-                    out, cpu = _checked(lambda s=seq: _encode_timed(encoder, s), None,
-                                        start + i)
-                    encoded[name].append(out)
-                    seconds[name] += cpu
-                    report(name)
-            yield EncodedChunk(start, encoded, seconds)
-            start += len(chunk)
-        return
-
-    def collect(start: int, pending: dict[str, list[Any]]) -> EncodedChunk:
+    def collect(start: int, pending: dict[str, list[Callable[[], Any]]]) -> EncodedChunk:
+        """The chunk from ``start``: ``pending[name][i]()`` gives ``(encoded, cpu s)``."""
         encoded: dict[str, list[np.ndarray]] = {}
         seconds = dict.fromkeys(pending, 0.0)
-        for name, futs in pending.items():
+        for name, results in pending.items():
             encoded[name] = []
-            for i, fut in enumerate(futs):
-                out, cpu = _checked(fut.result, None, start + i)
+            for i, result in enumerate(results):
+                out, cpu = _checked(result, None, start + i)
                 encoded[name].append(out)
                 seconds[name] += cpu
                 report(name)
         return EncodedChunk(start, encoded, seconds)
+
+    if workers == 1 or mode == "serial":
+        start = 0
+        for chunk in chunks:
+            yield collect(start, {name: [functools.partial(_encode_timed, enc, seq)
+                                         for seq in chunk]
+                                  for name, enc in encoders.items()})
+            start += len(chunk)
+        return
 
     executor, limits = _pool(workers, mode)
     queue: deque[tuple[int, dict[str, list[Any]]]] = deque()
@@ -262,9 +262,9 @@ def encode_chunks(encoders: Mapping[str, Any], chunks: Iterable[Sequence[np.ndar
                 start += len(chunk)
                 del chunk  # the queued tasks hold the inputs until they are done
                 while len(queue) > ahead:
-                    yield collect(*queue.popleft())
+                    yield collect(*_results(queue.popleft()))
             while queue:
-                yield collect(*queue.popleft())
+                yield collect(*_results(queue.popleft()))
         except BaseException:
             for _, pending in queue:
                 for futs in pending.values():

@@ -31,13 +31,15 @@ that encodes a dataset is :mod:`tactbench.encoders.encoding`),
 :mod:`~tactbench.runner.executors` (local, processes, dask),
 :mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
 memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
-:mod:`~tactbench.runner.summaries` (aggregation over seeds, paired comparisons),
+:mod:`~tactbench.runner.summaries` (aggregation over seeds, cells, contrasts),
+:mod:`~tactbench.runner.comparisons` (paired comparisons of cells, as records),
 :mod:`~tactbench.runner.statistics` (the tests, with the training run as the unit),
 :mod:`~tactbench.runner.tables` (terminal and Markdown tables),
 :mod:`~tactbench.runner.writers` (results.json/csv, report.md),
 :mod:`~tactbench.runner.plots` (one function per figure).
 """
 
+from tactbench.machine import git_revision
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
@@ -46,7 +48,6 @@ from tactbench.runner.orchestrate import RunResult, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
 from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
-from tactbench.runner.system import git_revision
 
 __all__ = [
     "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",

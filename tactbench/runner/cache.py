@@ -37,6 +37,7 @@ from tactbench.encoders.encoding import (
     vector_width,
 )
 from tactbench.errors import CorruptArtefactError
+from tactbench.machine import peak_rss_mb
 from tactbench.paths import (
     Temporary,
     atomic_folder,
@@ -57,7 +58,6 @@ from tactbench.runner.entries import (
     verify_entry,
 )
 from tactbench.runner.planning import Cell, Plan, digest, imaging_identity, storage_identity
-from tactbench.runner.system import peak_rss_mb
 
 if TYPE_CHECKING:
     from tactbench.ui import Progress

@@ -38,8 +38,8 @@ from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
-from tactbench.machine import machine
-from tactbench.runner.system import MemoryTracker, host, now, versions
+from tactbench.machine import host, machine, versions
+from tactbench.runner.system import MemoryTracker, now
 from tactbench.seeds import derive_seed
 from tactbench.specs import parse_spec
 

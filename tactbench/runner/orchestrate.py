@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
@@ -20,7 +21,7 @@ from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.scene import Scene
 from tactbench.runner.results import REPORT_JSON, ResultStore, failed_rows, ok_rows
-from tactbench.runner.system import MemoryTracker, git_revision
+from tactbench.runner.system import MemoryTracker
 from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner")

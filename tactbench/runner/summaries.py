@@ -1,9 +1,10 @@
-"""Summaries of result rows: accuracy and costs over seeds, and paired comparisons.
+"""Summaries of result rows: accuracy and costs over seeds, the cells a run compares.
 
 Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.results`) are left
-out of every summary and listed on their own (:func:`failed_cells`). The statistics
-themselves are :mod:`tactbench.runner.statistics`; this module groups rows into cells and
-pairs of cells and hands them over.
+out of every summary and listed on their own (:func:`failed_cells`). This module groups
+rows into cells (:func:`cell_groups`), names them (:func:`spec_labels`) and reads the
+contrasts that pair them (:func:`parse_contrast`); the paired comparisons are
+:mod:`tactbench.runner.comparisons`, the statistics :mod:`tactbench.runner.statistics`.
 """
 
 from __future__ import annotations
@@ -13,31 +14,15 @@ import statistics
 from collections import Counter
 from typing import Any, Iterable, Mapping, Sequence
 
-from tactbench.data.splits import user_folds
 from tactbench.errors import InputError
 from tactbench.runner.results import failed_rows, ok_rows
-from tactbench.runner.statistics import (
-    TARGET_HALF_WIDTH,
-    corrected_t,
-    holm,
-    mcnemar_p,
-    pairs_differing_in_one_factor,
-    runs_needed,
-    seed_summary,
-    sign_flip_p,
-    tost_p,
-    variance_components,
-    verdict,
-)
+from tactbench.runner.statistics import seed_summary, variance_components
 
 GROUP_KEYS = ("dataset", "split", "encoder", "classifier", "L")
 #: The factors a paired comparison may differ in (the rest of GROUP_KEYS is shared).
 FACTORS = ("encoder", "classifier", "L")
+#: The confidence of every interval of the reports.
 CONFIDENCE = 0.95
-#: The verdict's p: False (the choice, docs/statistics.md), the corrected t's, with the
-#: exact sign-flip p reported beside it as a distribution-free check; True, the larger of
-#: the two (the sign-flip's floor 2 / 2^J then forbids any verdict below 6 runs).
-PERMUTATION_GOVERNS = False
 
 
 def _mean_std(values: Sequence[float]) -> tuple[float, float]:
@@ -176,7 +161,7 @@ def _run_key(row: dict[str, Any]) -> tuple[int, int | None]:
     return int(row["seed"]), (None if init is None else int(init))
 
 
-def _cell_groups(rows: Iterable[dict[str, Any]]) -> dict[tuple, dict[tuple, dict[str, Any]]]:
+def cell_groups(rows: Iterable[dict[str, Any]]) -> dict[tuple, dict[tuple, dict[str, Any]]]:
     """Cell (GROUP_KEYS values) → run key → row, for ok rows with test predictions."""
     groups: dict[tuple, dict[tuple, dict[str, Any]]] = {}
     for row in ok_rows(rows):
@@ -280,300 +265,6 @@ def check_contrasts(contrasts: Sequence[str], cells: Sequence[dict[str, Any]]) -
                              f"that match each side and share every other factor)")
 
 
-def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = (),
-                margin: float | None = None, users: Sequence[str] | None = None,
-                confidence: float = CONFIDENCE) -> list[dict[str, Any]]:
-    """Paired comparisons at run level: every two cells that differ in one of
-    :data:`FACTORS`, and every pair a ``contrasts`` entry names (:func:`parse_contrast`).
-
-    Only runs (seeds) both cells finished, and test sequences both predicted with the
-    same label, are paired; rows without ``test_predictions`` are left out. A is the
-    cell that comes first in the run (the scene's order), so a run listing ``raw`` before
-    ``farneback`` reports farneback − raw; a contrast gives its own A and B.
-
-    Every comparison of one run forms one family: its p-values (the corrected t's; see
-    :data:`PERMUTATION_GOVERNS`) are Holm-adjusted together, and the verdicts
-    rest on the adjusted ones (:func:`tactbench.runner.statistics.verdict`). ``margin``
-    (points) adds the equivalence test; ``users`` (the user of each dataset sample, by
-    index) adds per-user gains. See :func:`paired_runs` for each entry's fields.
-    """
-    if margin is not None and not (isinstance(margin, (int, float)) and margin > 0):
-        raise InputError(f"margin must be a number of points > 0, got {margin!r}")
-    groups = _cell_groups(rows)
-    blocks: dict[tuple, list[tuple]] = {}
-    for key in groups:  # first-appearance order within each (dataset, split)
-        blocks.setdefault(key[:2], []).append(key)
-    out: list[dict[str, Any]] = []
-    for (dataset, split), keys in blocks.items():
-        cells = [dict(zip(FACTORS, key[2:])) for key in keys]
-        labels = spec_labels(c["classifier"] for c in cells)
-        todo = [(p.a, p.b, p.factor, p.value_a, p.value_b)
-                for p in pairs_differing_in_one_factor(cells)]
-        for text in contrasts:
-            a_side, b_side = parse_contrast(text)
-            for i, j in contrast_pairs(text, cells):
-                todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
-                             _side_label(cells[j], b_side, labels)))
-        for i, j, factor, value_a, value_b in todo:
-            res = paired_runs(groups[keys[i]], groups[keys[j]], margin=margin, users=users,
-                              confidence=confidence)
-            if res is None:
-                continue
-            named = set(parse_contrast_factors(factor, value_a))
-            shared = {k: v for k, v in cells[i].items() if k != factor and k not in named}
-            out.append({"dataset": dataset, "split": split, "factor": factor,
-                        "a": value_a, "b": value_b, **shared, **res})
-    # the family: this run's comparisons; Holm on the governing p (NaN: too few runs)
-    alpha = 1 - confidence
-    p = holm([c["p"] if c["p"] is not None else math.nan for c in out])
-    eq = holm([c["equivalence_p"] if c.get("equivalence_p") is not None else math.nan
-               for c in out])
-    for c, p_adj, eq_adj in zip(out, p, eq):
-        c["p_holm"] = None if math.isnan(p_adj) else float(p_adj)
-        c["equivalence_p_holm"] = None if math.isnan(eq_adj) else float(eq_adj)
-        c["family_size"] = int(sum(x["p"] is not None for x in out))
-        c["verdict"], c["note"] = verdict(
-            c["low"], c["high"], 1.0 if c["p_holm"] is None else c["p_holm"], c["runs"],
-            alpha=alpha, discordant_recordings=c["discordant_recordings"],
-            equivalence_p_adjusted=c["equivalence_p_holm"])
-        floor = 2.0 ** (1 - c["runs"])
-        if PERMUTATION_GOVERNS and c["verdict"] == "unresolved" and not c["note"] \
-                and floor >= alpha:
-            c["note"] = (f"{c['runs']} runs: the sign-flip floor is p = {floor:.3g}; a "
-                         f"verdict needs ≥ {_runs_for_floor(alpha)} runs")
-        elif c["verdict"] in ("A better", "B better") and floor >= alpha:
-            c["note"] = (f"rests on the corrected t: with {c['runs']} runs the exact "
-                         f"sign-flip test cannot go below p = {floor:.3g}")
-    return out
-
-
-def _runs_for_floor(alpha: float) -> int:
-    """The fewest runs whose smallest sign-flip p (2 / 2^J) is below ``alpha``."""
-    j = 1
-    while 2.0 ** (1 - j) >= alpha:
-        j += 1
-    return j
-
-
-def _side_label(cell: dict[str, Any], side: dict[str, str],
-                labels: Mapping[str, str] | None = None) -> str:
-    """``encoder=raw,L=6`` with the cell's own values (a classifier by its label in
-    ``labels``, :func:`spec_labels`)."""
-    return ",".join(f"{f}={spec_label(cell[f], labels) if f == 'classifier' else cell[f]}"
-                    for f in side)
-
-
-def parse_contrast_factors(factor: str, label: Any) -> list[str]:
-    """The factors a comparison's ``a`` value sets: a contrast's (``encoder=raw,L=6``),
-    or the one factor of a one-factor pair."""
-    if factor != "contrast":
-        return [factor]
-    return [item.partition("=")[0] for item in str(label).split(",")]
-
-
-def _aligned(row_a: dict[str, Any], row_b: dict[str, Any]):
-    """(sequence ids, true labels, correct A, correct B) of the test sequences both rows
-    predicted with the same label."""
-    import numpy as np
-
-    ta, tb = _predictions(row_a), _predictions(row_b)
-    ids = [i for i in sorted(set(ta) & set(tb)) if ta[i][0] == tb[i][0]]
-    y = np.array([ta[i][0] for i in ids], dtype=np.int64)
-    ca = np.array([ta[i][1] == ta[i][0] for i in ids], dtype=bool)
-    cb = np.array([tb[i][1] == tb[i][0] for i in ids], dtype=bool)
-    return np.array(ids, dtype=np.int64), y, ca, cb
-
-
-def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
-    """The correction n_test/n_train of these runs and the test's name."""
-    folds = rows[0].get("folds")
-    if folds:
-        return 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "
-                                        "(Bouckaert–Frank)")
-    ratios = [r["n_test"] / r["n_train"] for r in rows if r.get("n_train") and r.get("n_test")]
-    return (statistics.fmean(ratios) if ratios else 1.0,
-            "corrected resampled t (Nadeau–Bengio)")
-
-
-def paired_runs(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[str, Any]], *,
-                margin: float | None = None, users: Sequence[str] | None = None,
-                confidence: float = CONFIDENCE) -> dict[str, Any] | None:
-    """Two cells compared run by run (``runs_*``: run key → row); None when they share
-    no run with a paired test sequence.
-
-    A run is one split seed; where the rows vary the initialisation too (``init_seed``),
-    a split's runs are averaged first and the split is the unit. Fields:
-
-    - ``difference`` (B − A, mean over runs), ``low``/``high``: the run-level interval
-      (``method``: corrected resampled t with ``ratio`` = n_test/n_train, or corrected
-      repeated k-fold t with 1/(K − 1)); ``per_run`` (seed → d_s), ``runs``,
-      ``b_better_runs``/``a_better_runs``/``tied_runs``, ``p_b_better`` (share of runs
-      where B is higher);
-    - ``t_p``, ``permutation_p`` (exact sign-flip over runs), ``p`` = the larger (None
-      with fewer than 2 runs);
-    - ``equivalence_margin`` (points) and ``equivalence_p`` (TOST) with a margin;
-    - ``runs_needed`` for an interval of ±``runs_needed_half_width`` points;
-    - ``discordant_rows`` (``a_only``, ``b_only``), ``discordant_recordings``,
-      ``test_recordings``; ``mcnemar_per_seed`` (seed → p; about those trained models
-      only);
-    - ``per_class``: class → gain with its run-level interval;
-    - ``per_user`` (with ``users``): users tested, helped, hurt, median and quartiles of
-      the per-user gain (points), and user → gain.
-    """
-    import numpy as np
-
-    shared = sorted(set(runs_a) & set(runs_b), key=lambda k: (k[0], -1 if k[1] is None else k[1]))
-    per_seed: dict[tuple, Any] = {}
-    for key in shared:
-        ids, y, ca, cb = _aligned(runs_a[key], runs_b[key])
-        if len(ids):
-            per_seed[key] = (ids, y, ca, cb)
-    if not per_seed:
-        return None
-    rows_a = [runs_a[k] for k in per_seed]
-    ratio, method = _ratio(rows_a)
-    classes = list(rows_a[0]["classes"])
-
-    # the unit: a split seed (its init seeds averaged)
-    splits: dict[int, list[tuple]] = {}
-    for key in per_seed:
-        splits.setdefault(key[0], []).append(key)
-    d_run = np.array([np.mean([(per_seed[k][3].mean() - per_seed[k][2].mean())
-                               for k in ks]) for ks in splits.values()])
-    acc_a = float(np.mean([per_seed[k][2].mean() for k in per_seed]))
-    acc_b = float(np.mean([per_seed[k][3].mean() for k in per_seed]))
-    j = len(d_run)
-    diff = float(d_run.mean())
-    # K folds repeated over seeds, with the users known: Bouckaert & Frank's k·r per-fold
-    # differences carry the t; the sign-flip test stays over the seeds
-    d_t = d_run
-    folds = rows_a[0].get("folds")
-    if folds and users is not None:
-        per_fold = _fold_differences(per_seed, splits, runs_a, users, int(folds))
-        if per_fold is not None:
-            d_t = per_fold
-            method += f" over {len(per_fold)} fold differences"
-    res: dict[str, Any] = {
-        "difference": diff, "low": diff, "high": diff, "confidence": confidence,
-        "method": method, "ratio": ratio, "df": None, "runs": j,
-        "per_run": {str(s): float(v) for s, v in zip(splits, d_run)},
-        "b_better_runs": int(np.sum(d_run > 0)), "a_better_runs": int(np.sum(d_run < 0)),
-        "tied_runs": int(np.sum(d_run == 0)), "p_b_better": float(np.mean(d_run > 0)),
-        "t_p": None, "permutation_p": float(sign_flip_p(d_run)), "p": None,
-        "accuracy_a": acc_a, "accuracy_b": acc_b,
-    }
-    sd = float(d_run.std(ddof=1)) if j > 1 else None
-    if j >= 2:
-        t = corrected_t(d_t, ratio, confidence=confidence)
-        # a difference of accuracies lies in [−1, 1]; the t-interval of a few runs can pass it
-        res.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])),
-                   df=int(t["df"]), t_p=float(t["p"]))
-        res["p"] = (max(res["t_p"], res["permutation_p"]) if PERMUTATION_GOVERNS
-                    else res["t_p"])
-    half = (margin / 100) if margin else TARGET_HALF_WIDTH
-    res["equivalence_margin"] = margin
-    res["equivalence_p"] = (float(tost_p(d_run, ratio, margin / 100))
-                            if margin and j >= 2 else None)
-    res["runs_needed"] = runs_needed(sd, ratio, half, confidence=confidence)
-    res["runs_needed_half_width"] = 100 * half
-    a_only = sum(int(np.sum(v[2] & ~v[3])) for v in per_seed.values())
-    b_only = sum(int(np.sum(v[3] & ~v[2])) for v in per_seed.values())
-    discordant = set()
-    recordings = set()
-    for ids, _, ca, cb in per_seed.values():
-        discordant.update(ids[ca != cb].tolist())
-        recordings.update(ids.tolist())
-    res.update(a_only=a_only, b_only=b_only, discordant_recordings=len(discordant),
-               test_recordings=len(recordings),
-               mcnemar_per_seed={_seed_label(k): mcnemar_p(v[2], v[3])
-                                 for k, v in per_seed.items()})
-    res["per_class"] = _per_class_gains(per_seed, splits, classes, ratio, confidence)
-    res["per_user"] = (_per_user_gains(per_seed, users) if users is not None else None)
-    return res
-
-
-def _fold_differences(per_seed, splits, runs, users, folds: int):
-    """The differences B − A of every (split seed, fold) of a ``users:folds=K`` run —
-    each fold's test recordings found again from the seed, as the cell drew them
-    (:func:`tactbench.data.splits.user_folds`), a split seed's init seeds averaged — or
-    None when the folds cannot be made again here."""
-    import numpy as np
-
-    users = [str(u) for u in users]
-    out = []
-    for seed, keys in splits.items():
-        row = runs[keys[0]]
-        tp = row["test_predictions"]
-        labels = np.zeros(len(users), dtype=np.int64)
-        try:
-            labels[np.asarray(tp["indices"], dtype=np.int64)] = tp["labels"]
-            made = user_folds(users, labels, seed=int(row.get("split_seed", seed)),
-                              folds=folds)
-        except (InputError, IndexError):
-            return None
-        fold_of = np.full(len(users), -1)
-        for k, split in enumerate(made):
-            fold_of[split.test] = k
-        for k in range(folds):
-            vals = []
-            for key in keys:
-                ids, _, ca, cb = per_seed[key]
-                m = fold_of[ids] == k
-                if m.any():
-                    vals.append(float(cb[m].mean() - ca[m].mean()))
-            if vals:
-                out.append(float(np.mean(vals)))
-    return np.array(out) if len(out) >= 2 else None
-
-
-def _seed_label(key: tuple) -> str:
-    return str(key[0]) if key[1] is None else f"{key[0]}/{key[1]}"
-
-
-def _per_class_gains(per_seed, splits, classes, ratio, confidence) -> dict[str, Any]:
-    """Class → gain B − A on that class's test sequences, per run, with the run-level
-    interval (None where fewer than 2 runs test the class)."""
-    import numpy as np
-
-    out = {}
-    for c, name in enumerate(classes):
-        d = []
-        for ks in splits.values():
-            vals = [per_seed[k][3][per_seed[k][1] == c].mean()
-                    - per_seed[k][2][per_seed[k][1] == c].mean()
-                    for k in ks if np.any(per_seed[k][1] == c)]
-            if vals:
-                d.append(float(np.mean(vals)))
-        if not d:
-            continue
-        entry = {"difference": float(np.mean(d)), "low": None, "high": None, "runs": len(d)}
-        if len(d) >= 2:
-            t = corrected_t(np.array(d), ratio, confidence=confidence)
-            entry.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])))
-        out[name] = entry
-    return out
-
-
-def _per_user_gains(per_seed, users: Sequence[str]) -> dict[str, Any]:
-    """Per user (the test sequences of each user, over the runs that test them): the
-    gain B − A, and how many users it helped or hurt, its median and quartiles."""
-    import numpy as np
-
-    users = list(users)
-    gains: dict[str, list[float]] = {}
-    for ids, _, ca, cb in per_seed.values():
-        who = np.array([str(users[i]) for i in ids])
-        for u in dict.fromkeys(who.tolist()):
-            m = who == u
-            gains.setdefault(u, []).append(float(cb[m].mean() - ca[m].mean()))
-    per_user = {u: float(np.mean(g)) for u, g in sorted(gains.items())}
-    values = np.array(list(per_user.values()))
-    q25, q50, q75 = np.percentile(values, [25, 50, 75]) if values.size else (math.nan,) * 3
-    return {"users": len(per_user), "helped": int(np.sum(values > 0)),
-            "hurt": int(np.sum(values < 0)), "median": float(q50), "q25": float(q25),
-            "q75": float(q75), "gains": per_user}
-
-
 def per_user_accuracy(rows: Iterable[dict[str, Any]], users: Sequence[str]
                       ) -> dict[tuple, dict[str, float]]:
     """Cell (GROUP_KEYS values) → user → accuracy on that user's test sequences, the
@@ -582,7 +273,7 @@ def per_user_accuracy(rows: Iterable[dict[str, Any]], users: Sequence[str]
 
     users = list(users)
     out: dict[tuple, dict[str, float]] = {}
-    for key, runs in _cell_groups(rows).items():
+    for key, runs in cell_groups(rows).items():
         acc: dict[str, list[float]] = {}
         for row in runs.values():
             tp = row["test_predictions"]
@@ -594,13 +285,6 @@ def per_user_accuracy(rows: Iterable[dict[str, Any]], users: Sequence[str]
     return out
 
 
-def _predictions(row: dict[str, Any]) -> dict[int, tuple[int, int]]:
-    """Test sequence index → (true label, predicted label) of one row."""
-    tp = row["test_predictions"]
-    return {int(i): (int(t), int(p))
-            for i, t, p in zip(tp["indices"], tp["labels"], tp["predictions"])}
-
-
 def variance_decomposition(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """For each cell whose runs vary split and initialisation separately (rows with
     ``init_seed``, at least 2 split seeds × 2 init seeds, every pair run): the variance
@@ -610,7 +294,7 @@ def variance_decomposition(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any
     import numpy as np
 
     out = []
-    for key, runs in _cell_groups(rows).items():
+    for key, runs in cell_groups(rows).items():
         if any(k[1] is None for k in runs):
             continue
         splits = sorted({k[0] for k in runs})

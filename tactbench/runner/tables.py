@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable, Mapping, Sequence
 
+from tactbench.runner.comparisons import P_RULE, Comparison, read_comparisons
 from tactbench.runner.summaries import (
     FACTORS,
     failed_cells,
@@ -15,6 +16,9 @@ from tactbench.runner.summaries import (
 
 #: Classifier spec → the name shown for it (:func:`tactbench.runner.summaries.spec_labels`).
 Labels = Mapping[str, str]
+#: Comparisons as records, or as results.json stores them (read through
+#: :func:`tactbench.runner.comparisons.read_comparisons`, which verifies them).
+Comparisons = Sequence["Comparison | Mapping[str, Any]"]
 
 
 def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
@@ -22,24 +26,24 @@ def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
     return spec_labels(s["classifier"] for s in summaries)
 
 
-def comparison_labels(comps: Iterable[dict[str, Any]]) -> dict[str, str]:
+def comparison_labels(comps: Comparisons) -> dict[str, str]:
     """The labels of the classifiers ``comps`` compare or share."""
     specs = []
-    for c in comps:
-        if c["factor"] == "classifier":
-            specs += [c["a"], c["b"]]
-        if "classifier" in c:
-            specs.append(c["classifier"])
+    for c in read_comparisons(comps):
+        if c.factor == "classifier":
+            specs += [c.a, c.b]
+        if "classifier" in c.where:
+            specs.append(c.where["classifier"])
     return spec_labels(specs)
 
 
-def _comparison_label(c: dict[str, Any], side: str, labels: Labels | None = None) -> str:
-    value = c[side]
-    if c["factor"] == "classifier":
+def _comparison_label(c: Comparison, side: str, labels: Labels | None = None) -> str:
+    value = getattr(c, side)
+    if c.factor == "classifier":
         return spec_label(value, labels)
-    if c["factor"] == "L":
+    if c.factor == "L":
         return f"L={value}"
-    if c["factor"] == "contrast":  # "encoder=raw,L=6" → "raw L=6"
+    if c.factor == "contrast":  # "encoder=raw,L=6" → "raw L=6"
         parts = []
         for item in str(value).split(","):
             k, _, v = item.partition("=")
@@ -48,57 +52,75 @@ def _comparison_label(c: dict[str, Any], side: str, labels: Labels | None = None
     return str(value)
 
 
-def _context(c: dict[str, Any], labels: Labels | None = None) -> str:
+def _context(c: Comparison, labels: Labels | None = None) -> str:
     parts = []
     for k in FACTORS:
-        if k == c["factor"] or k not in c:
+        if k == c.factor or k not in c.where:
             continue
-        parts.append(f"L={c[k]}" if k == "L" else spec_label(c[k], labels) if
-                     k == "classifier" else str(c[k]))
+        value = c.where[k]
+        parts.append(f"L={value}" if k == "L" else spec_label(value, labels) if
+                     k == "classifier" else str(value))
     return " ".join(parts) or "-"
 
 
+def _pair(c: Comparison, labels: Labels | None) -> list[str]:
+    """The cells naming a comparison in every table of comparisons: factor, A, B, where."""
+    return [c.factor, _comparison_label(c, "a", labels), _comparison_label(c, "b", labels),
+            _context(c, labels)]
+
+
 COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
-                     "95 % interval over runs", "runs B>A / A>B / tied",
-                     "p (t / sign-flip)", "Holm p", "runs for ±2 (±margin)", "verdict"]
+                     "95 % interval over runs (unadjusted)", "runs B>A / A>B / tied",
+                     "p (corrected t)", "Holm p (its family)",
+                     "P(A better / ≈ / B better)", "runs for 80 % power", "verdict"]
 
 
-def verdict_text(c: dict[str, Any], labels: Labels | None = None) -> str:
+def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
     """The verdict in words: ``farneback better``, ``equivalent within ±2``, ..."""
-    verdict = c["verdict"]
-    if verdict == "B better":
+    [c] = read_comparisons([c])
+    if c.verdict == "B better":
         return f"{_comparison_label(c, 'b', labels)} better"
-    if verdict == "A better":
+    if c.verdict == "A better":
         return f"{_comparison_label(c, 'a', labels)} better"
-    if verdict == "equivalent":
-        return f"equivalent within ±{c['equivalence_margin']:g}"
-    return verdict
+    if c.verdict == "equivalent":
+        return f"equivalent within ±{c.equivalence_margin:g}"
+    return c.verdict
 
 
-def _runs_needed(c: dict[str, Any]) -> str:
-    n = c.get("runs_needed")
-    return "unreachable" if n is None else str(n)
-
-
-def comparison_rows(comps: Sequence[dict[str, Any]], labels: Labels | None = None
-                    ) -> list[list[str]]:
+def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[list[str]]:
     """Table cells: factor, A, B, where (the shared factors), B − A (points), the
     run-level interval, runs B>A/A>B/tied, p of the corrected t and of the sign-flip
     test, the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
     and the verdict. A classifier is named by its label in ``labels`` (by default the
     labels among the classifiers of ``comps``, :func:`comparison_labels`)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    rows = []
-    for c in comps:
-        rows.append([
-            c["factor"], _comparison_label(c, "a", labels), _comparison_label(c, "b", labels),
-            _context(c, labels),
-            f"{100 * c['difference']:+.1f}",
-            f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]" if c["df"] else "-",
-            f"{c['b_better_runs']}/{c['a_better_runs']}/{c['tied_runs']}",
-            f"{_p_value(c['t_p'])} / {_p_value(c['permutation_p'])}",
-            _p_value(c["p_holm"]), _runs_needed(c), verdict_text(c, labels)])
-    return rows
+    return [[*_pair(c, labels), "ceiling" if c.ceiling else f"{100 * c.difference:+.1f}",
+             "both 100 %" if c.ceiling else
+             f"[{100 * c.low:+.1f}, {100 * c.high:+.1f}]" if c.df else "-",
+             f"{c.b_better_runs}/{c.a_better_runs}/{c.tied_runs}",
+             _p_value(c.t_p), _p_value(c.p_holm), _bayes(c), _power_runs(c),
+             verdict_text(c, labels)]
+            for c in comps]
+
+
+def _bayes(c: Comparison) -> str:
+    """The Bayesian correlated t's three probabilities, within ±margin points."""
+    if c.bayes_b_better is None:
+        return "-"
+    return (f"{c.bayes_a_better:.2f} / {c.bayes_equivalent:.2f} / {c.bayes_b_better:.2f} "
+            f"(±{c.bayes_margin:g})")
+
+
+def _power_runs(c: Comparison) -> str:
+    """Runs for 80 % power at the observed difference, or why there is no number."""
+    if c.ceiling or c.verdict in ("B better", "A better", "equivalent"):
+        return "-"
+    if c.runs_for_power is not None:
+        return str(c.runs_for_power)
+    if c.runs < 2 or c.difference == 0:
+        return "-"
+    return "beyond these data"
 
 
 def _p_value(p: float | None) -> str:
@@ -107,7 +129,7 @@ def _p_value(p: float | None) -> str:
     return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
-def comparisons_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None = None) -> str:
+def comparisons_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     if not comps:
         return ""
     lines = ["| " + " | ".join(COMPARISON_HEADER) + " |",
@@ -116,31 +138,37 @@ def comparisons_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None 
     return "\n".join(lines)
 
 
-def print_comparisons(comps: Sequence[dict[str, Any]], *,
-                      factors: Sequence[str] = ("encoder", "classifier"),
+def print_comparisons(comps: Comparisons, *, factors: Sequence[str] = ("encoder", "classifier"),
                       labels: Labels | None = None) -> None:
-    """The terminal's table of paired comparisons (by default of encoders and classifiers;
-    report.md and results.json hold every factor)."""
+    """The terminal's tables of paired comparisons: the primary questions first (all of
+    them), then the exploratory ones (by default of encoders and classifiers; report.md
+    and results.json hold every factor)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    shown = [c for c in comps if c["factor"] in factors]
-    if not shown:
-        return
+    primary = [c for c in comps if c.family == "primary"]
+    rest = [c for c in comps if c.family != "primary" and c.factor in factors]
     from rich.console import Console
-    from rich.table import Table
 
-    table = Table(title="paired comparisons over runs (B − A; Holm-adjusted within the run; "
-                        "an interval touching 0 is unresolved)",
-                  title_justify="left")
-    for col in COMPARISON_HEADER:
-        table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
-                                                        "verdict") else "right")
-    # the interval beside every verdict is the run-level one (comparison_rows)
-    for row in comparison_rows(shown, labels):
-        table.add_row(*row)
     console = Console()
     if not console.is_terminal:
         console = Console(width=160)
-    console.print(table)
+    for title, shown in (("primary questions (confirmatory; Holm within them)", primary),
+                         ("exploratory comparisons (Holm within them)", rest)):
+        if shown:
+            console.print(_rich_table(f"{title}: B − A over runs; an interval touching 0 "
+                                      "is unresolved", shown, labels))
+
+
+def _rich_table(title: str, comps: Sequence[Comparison], labels: Labels):
+    from rich.table import Table
+
+    table = Table(title=title, title_justify="left")
+    for col in COMPARISON_HEADER:
+        table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
+                                                        "verdict") else "right")
+    for row in comparison_rows(comps, labels):
+        table.add_row(*row)
+    return table
 
 
 def _interval(ci: Sequence[float] | None) -> str:
@@ -259,53 +287,97 @@ def reference_markdown(reference: Sequence[dict[str, Any]],
     return "\n".join(lines)
 
 
-def per_class_gains_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None = None
-                             ) -> str:
+def per_class_gains_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     """Per-class gains B − A (points) with their run-level intervals, one line per
     comparison ("" when none has them)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    comps = [c for c in comps if c.get("per_class")]
+    comps = [c for c in comps if c.per_class]
     if not comps:
         return ""
-    classes = list(dict.fromkeys(k for c in comps for k in c["per_class"]))
+    classes = list(dict.fromkeys(k for c in comps for k in c.per_class))
     lines = ["| factor | A | B | where | " + " | ".join(classes) + " |",
              "|" + "---|" * (4 + len(classes))]
     for c in comps:
         cells = []
         for k in classes:
-            g = c["per_class"].get(k)
+            g = c.per_class.get(k)
             if g is None:
                 cells.append("-")
-            elif g["low"] is None:
-                cells.append(f"{100 * g['difference']:+.1f}")
+            elif g.low is None:
+                cells.append(f"{100 * g.difference:+.1f}")
             else:
-                cells.append(f"{100 * g['difference']:+.1f} [{100 * g['low']:+.1f}, "
-                             f"{100 * g['high']:+.1f}]")
-        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a', labels)} | "
-                     f"{_comparison_label(c, 'b', labels)} | {_context(c, labels)} | "
-                     + " | ".join(cells)
-                     + " |")
+                cells.append(f"{100 * g.difference:+.1f} [{100 * g.low:+.1f}, "
+                             f"{100 * g.high:+.1f}]")
+        lines.append("| " + " | ".join(_pair(c, labels) + cells) + " |")
     return "\n".join(lines)
 
 
-def per_user_gains_markdown(comps: Sequence[dict[str, Any]], labels: Labels | None = None
-                            ) -> str:
+def per_user_gains_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     """Per-user gains of every pair: users tested, helped, hurt, median and quartiles
     (points) ("" when no comparison has them: not a users split, or no user ids)."""
+    comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
-    comps = [c for c in comps if c.get("per_user")]
+    comps = [c for c in comps if c.per_user]
     if not comps:
         return ""
     lines = ["| factor | A | B | where | users | helped | hurt | median gain | "
              "quartiles |", "|---|---|---|---|---|---|---|---|---|"]
     for c in comps:
-        u = c["per_user"]
-        lines.append(f"| {c['factor']} | {_comparison_label(c, 'a', labels)} | "
-                     f"{_comparison_label(c, 'b', labels)} | {_context(c, labels)} | "
-                     f"{u['users']} | "
-                     f"{u['helped']} | {u['hurt']} | {100 * u['median']:+.1f} | "
-                     f"{100 * u['q25']:+.1f} … {100 * u['q75']:+.1f} |")
+        u = c.per_user
+        lines.append("| " + " | ".join(_pair(c, labels)) + f" | {u.users} | "
+                     f"{u.helped} | {u.hurt} | {100 * u.median:+.1f} | "
+                     f"{100 * u.q25:+.1f} … {100 * u.q75:+.1f} |")
     return "\n".join(lines)
+
+
+#: What report.md says above its table of comparisons.
+COMPARISONS_TEXT = (
+    "Every two cells that differ in one factor (and every contrast asked for), compared "
+    "on the same test sequences run by run: B − A is the mean over runs (a run: one split "
+    "seed, its split and initialisation) of the difference of accuracy. The interval is "
+    "the corrected resampled t over runs (Nadeau–Bengio; for K folds Bouckaert–Frank), "
+    "which counts the training variability, not only the test set's, at 95 % for that "
+    f"comparison alone (unadjusted); {P_RULE}. Primary comparisons (named with "
+    "--primary) are the confirmatory family; the rest are exploratory. Fewer than 3 runs "
+    "give no verdict; an interval touching 0 is unresolved. P(A better / ≈ / B better) "
+    "is the Bayesian correlated t (Corani & Benavoli 2015) within ±margin points; "
+    "\"runs for 80 % power\" is how many runs would find the observed difference with "
+    "80 % power at the family's Bonferroni level, \"beyond these data\" where no number "
+    "of runs of these recordings would; \"ceiling\" is two models right on every "
+    "recording. McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of "
+    "those trained models only. See docs/statistics.md.")
+
+
+def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> list[str]:
+    """report.md's lines on the paired comparisons (none without comparisons): the
+    table of verdicts, the notes, and the table of each further result (per-class and
+    per-user gains) — where a new test's table goes."""
+    comps = read_comparisons(comps)
+    if not comps:
+        return []
+    lines = ["## Paired comparisons over runs", "", COMPARISONS_TEXT, ""]
+    primary = [c for c in comps if c.family == "primary"]
+    if primary:
+        lines += ["### Primary questions (confirmatory)", "",
+                  comparisons_markdown(primary, labels), "",
+                  "### Exploratory comparisons", ""]
+    lines += [comparisons_markdown([c for c in comps if c.family != "primary"], labels), ""]
+    notes = [c.note for c in comps if c.note]
+    for note in dict.fromkeys(notes):
+        lines.append(f"- {notes.count(note)} comparison(s): {note}.")
+    if notes:
+        lines.append("")
+    gains = per_class_gains_markdown(comps, labels)
+    if gains:
+        lines += ["### Per-class gains (B − A, points, 95 % interval over runs)", "",
+                  gains, ""]
+    people = per_user_gains_markdown(comps, labels)
+    if people:
+        lines += ["### Per-user gains (B − A on each test user's recordings)", "",
+                  "A user is helped when B's accuracy on their recordings, averaged "
+                  "over the runs that test them, is above A's.", "", people, ""]
+    return lines
 
 
 def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]],

@@ -13,24 +13,18 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
+from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
+from tactbench.runner.comparisons import comparisons
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import ok_rows, row_status
-from tactbench.runner.system import describe_machines
-from tactbench.runner.summaries import (
-    comparisons,
-    spec_labels,
-    summarise,
-    variance_decomposition,
-)
+from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
 from tactbench.runner.tables import (
-    comparisons_markdown,
+    comparisons_section,
     failed_cells_markdown,
     markdown_table,
-    per_class_gains_markdown,
     per_class_markdown,
     per_user_accuracy_markdown,
-    per_user_gains_markdown,
     reference_markdown,
     variance_markdown,
 )
@@ -81,7 +75,7 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
     kept in the JSON and CSV, and left out of summaries and plots). ``reference``: the
     published points to set beside ours (:func:`check_reference`): drawn in
     ``accuracy_vs_L.png``, tabled in report.md and kept in results.json. ``contrasts``
-    and ``margin`` (points): see :func:`tactbench.runner.summaries.comparisons`;
+    and ``margin`` (points): see :func:`tactbench.runner.comparisons.comparisons`;
     ``users``: the user of each dataset sample (by index), for per-user results.
     """
     out = Path(out)
@@ -104,22 +98,6 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
     return paths
 
 
-#: What report.md says above its table of comparisons.
-COMPARISONS_TEXT = (
-    "Every two cells that differ in one factor (and every contrast asked for), compared "
-    "on the same test sequences run by run: B − A is the mean over runs (a run: one split "
-    "seed, its split and initialisation) of the difference of accuracy. The interval is "
-    "the corrected resampled t over runs (Nadeau–Bengio; for K folds Bouckaert–Frank), "
-    "which counts the training variability, not only the test set's; p is the larger of "
-    "its p and the exact sign-flip test over runs; Holm adjusts p within this run's "
-    "comparisons, and the verdict rests on the adjusted p. Fewer than 3 runs give no "
-    "verdict; an interval touching 0 is unresolved; \"runs for ±2\" is how many runs the "
-    "observed variance needs for an interval of ±2 points (or ±margin), \"unreachable\" "
-    "where the correction keeps it wider however many runs of these data there are. "
-    "McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of those trained "
-    "models only. See docs/statistics.md.")
-
-
 def results_document(rows: Sequence[dict[str, Any]], *, meta: dict[str, Any] | None = None,
                      reference: Sequence[dict[str, Any]] = (), contrasts: Sequence[str] = (),
                      margin: float | None = None, users: Sequence[str] | None = None
@@ -130,7 +108,8 @@ def results_document(rows: Sequence[dict[str, Any]], *, meta: dict[str, Any] | N
     so a stored document can be recomputed (``benchmarks/reports.py --from-stored``)."""
     rows = list(rows)
     doc = {"meta": meta or {}, "summary": summarise(rows, users=users),
-           "comparisons": comparisons(rows, contrasts=contrasts, margin=margin, users=users),
+           "comparisons": [c.to_dict() for c in comparisons(
+               rows, contrasts=contrasts, margin=margin, users=users)],
            "statistics": {"unit": "run (one split seed)", "contrasts": list(contrasts),
                           "margin": margin, "per_user": users is not None},
            "variance": variance_decomposition(rows), "rows": rows}
@@ -185,23 +164,7 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
         "## Per-class accuracy (%, mean over seeds)", "", per_class_markdown(summaries, labels),
         "",
     ]
-    if comps:
-        lines += ["## Paired comparisons over runs", "", COMPARISONS_TEXT, "",
-                  comparisons_markdown(comps, labels), ""]
-        notes = [c for c in comps if c.get("note")]
-        for note in dict.fromkeys(c["note"] for c in notes):
-            lines.append(f"- {sum(c['note'] == note for c in notes)} comparison(s): {note}.")
-        if notes:
-            lines.append("")
-        gains = per_class_gains_markdown(comps, labels)
-        if gains:
-            lines += ["### Per-class gains (B − A, points, 95 % interval over runs)", "",
-                      gains, ""]
-        people = per_user_gains_markdown(comps, labels)
-        if people:
-            lines += ["### Per-user gains (B − A on each test user's recordings)", "",
-                      "A user is helped when B's accuracy on their recordings, averaged "
-                      "over the runs that test them, is above A's.", "", people, ""]
+    lines += comparisons_section(comps, labels)
     by_user = per_user_accuracy_markdown(summaries, labels)
     if by_user:
         lines += ["## Per-user accuracy (%, mean over the runs testing the user)", "",

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from tactbench.classifiers import base as base_module
-from tactbench.classifiers.base import FrameBank, WindowBatches, read_windows
+from tactbench.classifiers import base, batching
+from tactbench.classifiers.batching import FrameBank, WindowBatches, read_windows
 from tactbench.classifiers.io import ModelFileError, load_model, read_header
 from tactbench.classifiers.models import SmallCnnLstm
 from tactbench.classifiers.training import TrainingInterrupted
@@ -128,8 +128,6 @@ def test_predict_contract(fitted, name):
 @pytest.mark.parametrize("name", ["small-cnn-lstm", "taxel-lstm"])
 def test_prediction_steps_shrink_to_a_byte_budget_with_the_same_answers(fitted, name,
                                                                         monkeypatch):
-    import tactbench.classifiers.base as base
-
     clf, _report, test = fitted[name]
     whole = clf.predict_proba(test)
     assert clf._eval_step(test, clf.net) == clf.eval_batch_size  # tiny windows: no cap
@@ -278,7 +276,7 @@ def test_frame_bank_matches_windows_batch():
 def test_reading_per_batch_gives_the_same_model_as_the_frame_bank(monkeypatch, name):
     a, report_a, test = fit(name, seed=3)
     assert report_a["batches"] == "frame bank" and report_a["bank_mb"] > 0
-    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 0)  # nothing held: per batch
+    monkeypatch.setattr(batching, "BANK_BUDGET_BYTES", 0)  # nothing held: per batch
     b, report_b, _ = fit(name, seed=3)
     assert report_b["batches"] == "per batch" and report_b["loader_workers"] == 0
     assert np.array_equal(a.predict_proba(test), b.predict_proba(test))  # bit for bit
@@ -525,7 +523,7 @@ def test_read_windows_prepares_in_sub_batches_and_matches_the_frame_bank(monkeyp
     idx = np.arange(len(train))[::-1]
     bank = FrameBank(in_memory, prepare)
     one_window = 3 * 1 * 12 * 12 * 4  # L × C × H × W float32
-    monkeypatch.setattr(base_module, "READ_CHUNK_BYTES", 2 * one_window)
+    monkeypatch.setattr(batching, "READ_CHUNK_BYTES", 2 * one_window)
     reads.clear()
     x = read_windows(train, idx, prepare)
     assert x.shape == (len(train), 3, 1, 5, 5)
@@ -538,12 +536,12 @@ def test_read_windows_prepares_in_sub_batches_and_matches_the_frame_bank(monkeyp
 
 def test_a_fit_above_the_budget_reads_batches_and_never_builds_the_bank(monkeypatch):
     train, test, reads, _ = lazy_data()
-    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 1024)  # below this tiny bank
+    monkeypatch.setattr(batching, "BANK_BUDGET_BYTES", 1024)  # below this tiny bank
 
     def no_bank(*args, **kwargs):
         raise AssertionError("the frame bank was built above the budget")
 
-    monkeypatch.setattr(base_module.FrameBank, "__init__", no_bank)
+    monkeypatch.setattr(batching.FrameBank, "__init__", no_bank)
     clf = build("small-cnn-lstm")
     report = clf.fit(train, None, seed=0)
     assert report["batches"] == "per batch" and report["bank_mb"] * 2 ** 20 > 1024
@@ -558,8 +556,8 @@ def test_the_normalisation_sample_is_read_lazily_and_merged_above_the_budget(mon
     net = whole._build_net(train.frame_shape, 3, pretrained=False)
     with torch.no_grad():
         whole._set_normalization(net, in_memory, seed=0)
-    monkeypatch.setattr(base_module, "NORM_SAMPLE_BYTES", 0)
-    monkeypatch.setattr(base_module, "READ_CHUNK_BYTES", 7 * 2 * 12 * 12 * 4)  # 7 frames
+    monkeypatch.setattr(base, "NORM_SAMPLE_BYTES", 0)
+    monkeypatch.setattr(batching, "READ_CHUNK_BYTES", 7 * 2 * 12 * 12 * 4)  # 7 frames
     streamed = build("small-cnn-lstm")._build_net(train.frame_shape, 3, pretrained=False)
     reads.clear()
     with torch.no_grad():
@@ -570,7 +568,7 @@ def test_the_normalisation_sample_is_read_lazily_and_merged_above_the_budget(mon
 
 
 def test_streamed_statistics_equal_the_whole_arrays():
-    from tactbench.classifiers.base import streamed_mean_std
+    from tactbench.classifiers.batching import streamed_mean_std
 
     x = torch.rand(50, 3, 4, 5, dtype=torch.float64) * torch.tensor([1.0, 5.0, 0.1]
                                                                      ).reshape(1, 3, 1, 1)
@@ -589,7 +587,7 @@ def test_logreg_above_the_budget_accumulates_over_chunks_with_the_same_result(mo
     whole.fit(train, None, seed=0)
     monkeypatch.setattr(classical, "FEATURE_CHUNK", 16)
     for budget in (2000, 0):  # 2000 B: a bank of frame features; 0: read per chunk
-        monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", budget)
+        monkeypatch.setattr(batching, "BANK_BUDGET_BYTES", budget)
         reads.clear()
         chunked = build("logreg")
         chunked.fit(train, None, seed=0)
@@ -599,7 +597,7 @@ def test_logreg_above_the_budget_accumulates_over_chunks_with_the_same_result(mo
 
 
 def test_the_budget_can_be_set_from_the_environment(monkeypatch):
-    from tactbench.classifiers.base import bank_budget_bytes, loader_workers
+    from tactbench.classifiers.batching import bank_budget_bytes, loader_workers
     from tactbench.errors import InputError
 
     monkeypatch.setenv("TACTBENCH_BANK_MIB", "1.5")
@@ -608,7 +606,7 @@ def test_the_budget_can_be_set_from_the_environment(monkeypatch):
     with pytest.raises(InputError, match="TACTBENCH_BANK_MIB"):
         bank_budget_bytes()
     monkeypatch.delenv("TACTBENCH_BANK_MIB")
-    assert bank_budget_bytes() == base_module.BANK_BUDGET_BYTES
+    assert bank_budget_bytes() == batching.BANK_BUDGET_BYTES
     assert loader_workers(torch.device("cpu")) == 0
     monkeypatch.setenv("TACTBENCH_LOADER_WORKERS", "-1")
     with pytest.raises(InputError, match="TACTBENCH_LOADER_WORKERS"):
@@ -617,7 +615,7 @@ def test_the_budget_can_be_set_from_the_environment(monkeypatch):
 
 def test_dataloader_workers_give_the_same_model(monkeypatch):
     a, _, test = fit("small-cnn-lstm", seed=4)
-    monkeypatch.setattr(base_module, "BANK_BUDGET_BYTES", 0)
+    monkeypatch.setattr(batching, "BANK_BUDGET_BYTES", 0)
     b, _, _ = fit("small-cnn-lstm", seed=4)
     monkeypatch.setenv("TACTBENCH_LOADER_WORKERS", "1")
     c, report, _ = fit("small-cnn-lstm", seed=4)

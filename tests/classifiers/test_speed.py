@@ -13,7 +13,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from tactbench.classifiers.base import FrameBank, share_frames, window_runs
+from tactbench.classifiers.batching import FrameBank, share_frames, window_runs
 from tactbench.classifiers.efficientnet import EfficientNetB0
 from tactbench.classifiers.nets import SequenceNet, SharedWindows, SmallCNN, checkpointed
 from tactbench.classifiers.training import epoch_order
@@ -322,7 +322,7 @@ def test_voting_windows_encode_each_frame_once_with_the_same_probabilities(
 
 
 def test_one_window_per_sequence_keeps_the_plain_path():
-    from tactbench.classifiers.base import shares_at_inference
+    from tactbench.classifiers.batching import shares_at_inference
 
     seqs, labels = _seqs()
     net = SequenceNet(SmallCNN(2, 4, 2), frame_shape=(2, 9, 11), n_classes=3, hidden=6,

@@ -87,7 +87,8 @@ def test_a_failed_row_keeps_the_memory_of_the_steps_it_got_through(jobs, monkeyp
 def test_the_memory_tracker_names_the_step_that_set_the_peak():
     import numpy as np
 
-    from tactbench.runner.system import BEFORE, MemoryTracker, memory_mb
+    from tactbench.machine import memory_mb
+    from tactbench.runner.system import BEFORE, MemoryTracker
 
     current, peak = memory_mb()
     assert 0 < current <= peak

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import pytest
 
-from tactbench.runner.summaries import comparisons, failed_cells, spec_labels, summarise
+from tactbench.runner.comparisons import comparisons
+from tactbench.runner.summaries import failed_cells, spec_labels, summarise
 from tactbench.runner.writers import write_reports
 
 #: Two resolved specs of one classifier (profile defaults merged), as rows store them.
@@ -84,11 +85,11 @@ def test_two_variants_are_told_apart_in_the_paired_comparisons(tmp_path):
 
     rows = _variant_rows(seeds=range(6))
     comps = comparisons(rows)
-    [c] = [c for c in comps if {c["a"], c["b"]} == {WIDE, NARROW}]
+    [c] = [c for c in comps if {c.a, c.b} == {WIDE, NARROW}]
     [table_row] = [r for r in comparison_rows(comps) if {r[1], r[2]} == {
         "small-cnn-lstm (width=16)", "small-cnn-lstm (width=8)"}]
     wide_first = table_row[1] == "small-cnn-lstm (width=16)"
-    assert wide_first == (c["a"] == WIDE)
+    assert wide_first == (c.a == WIDE)
     assert table_row[-1] == "small-cnn-lstm (width=16) better"  # wrong on fewer, every run
     # the unique classifier keeps its short name beside them
     assert any(r[1] == "logreg" or r[2] == "logreg" for r in comparison_rows(comps))
@@ -106,15 +107,15 @@ def test_a_contrast_names_the_variant_of_each_side():
     # by the short name: every variant at L=5 against every variant at L=3, each named
     comps = comparisons(rows, contrasts=["classifier=small-cnn-lstm,L=5.."
                                          "classifier=small-cnn-lstm,L=3"])
-    pairs = {(c["a"], c["b"]) for c in comps if c["factor"] == "contrast"}
+    pairs = {(c.a, c.b) for c in comps if c.factor == "contrast"}
     assert pairs == {(f"classifier=small-cnn-lstm ({a}),L=5",
                       f"classifier=small-cnn-lstm ({b}),L=3")
                      for a in ("width=16", "width=8") for b in ("width=16", "width=8")}
     # by the label the reports show: that variant only
     comps = comparisons(rows, contrasts=["classifier=small-cnn-lstm (width=16),L=5.."
                                          "classifier=small-cnn-lstm (width=8),L=3"])
-    [c] = [c for c in comps if c["factor"] == "contrast"]
-    assert (c["a"], c["b"]) == ("classifier=small-cnn-lstm (width=16),L=5",
+    [c] = [c for c in comps if c.factor == "contrast"]
+    assert (c.a, c.b) == ("classifier=small-cnn-lstm (width=16),L=5",
                                 "classifier=small-cnn-lstm (width=8),L=3")
     [row] = comparison_rows([c])
     assert row[1:4] == ["small-cnn-lstm (width=16) L=5", "small-cnn-lstm (width=8) L=3",

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 
+import numpy as np
 import pytest
 
 from tactbench.runner import run
@@ -125,51 +127,100 @@ def _clear_win_rows(seeds=range(7), n=40, **kw):
 def test_pairs_differing_in_one_factor_are_compared_run_by_run():
     from scipy import stats
 
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     rows = _clear_win_rows()
     [c] = comparisons(rows)
-    assert (c["factor"], c["a"], c["b"], c["classifier"], c["L"]) == \
-        ("encoder", "raw", "farneback", "logreg", 5)  # A: the first in the run
+    assert (c.factor, c.a, c.b, c.where) == \
+        ("encoder", "raw", "farneback", {"classifier": "logreg", "L": 5})  # A: first in the run
     by = {(r["encoder"], r["seed"]): r["accuracy"] for r in rows}
     d = [by["farneback", s] - by["raw", s] for s in range(7)]
-    assert c["per_run"] == {str(s): pytest.approx(v) for s, v in enumerate(d)}
-    assert c["difference"] == pytest.approx(sum(d) / 7) and c["runs"] == 7
+    assert c.per_run == {str(s): pytest.approx(v) for s, v in enumerate(d)}
+    assert c.difference == pytest.approx(sum(d) / 7) and c.runs == 7
     # the interval is the corrected resampled t over runs, n_test/n_train = 1/3
     se = (stats.tvar(d) * (1 / 7 + 1 / 3)) ** 0.5
     half = stats.t.ppf(0.975, 6) * se
-    assert (c["low"], c["high"]) == (pytest.approx(c["difference"] - half),
-                                     pytest.approx(c["difference"] + half))
-    assert c["permutation_p"] == pytest.approx(2 / 2 ** 7) and c["p"] >= c["t_p"]
-    assert c["p_holm"] == c["p"] and c["family_size"] == 1  # a family of one
-    assert c["verdict"] == "B better" and c["b_better_runs"] == 7
-    assert set(c["mcnemar_per_seed"]) == {str(s) for s in range(7)}
-    assert c["discordant_recordings"] >= 10 and c["test_recordings"] == 40
-    assert set(c["per_class"]) == {"a", "b"} and c["per_class"]["a"]["low"] is not None
+    assert (c.low, c.high) == (pytest.approx(c.difference - half),
+                               pytest.approx(c.difference + half))
+    assert c.permutation_p == pytest.approx(2 / 2 ** 7) and c.p >= c.t_p
+    assert c.p_holm == c.p and c.family_size == 1  # a family of one
+    assert c.verdict == "B better" and c.b_better_runs == 7
+    assert set(c.mcnemar_per_seed) == {str(s) for s in range(7)}
+    assert c.discordant_recordings >= 10 and c.test_recordings == 40
+    assert set(c.per_class) == {"a", "b"} and c.per_class["a"].low is not None
 
 
-def test_five_runs_rest_on_the_corrected_t_and_the_note_says_so(monkeypatch):
-    """The corrected t governs; the sign-flip p (floor 2/2^5) stands beside it, and a
-    verdict it cannot confirm says so. With the sign-flip governing instead, 5 runs
-    give no verdict and the note says why."""
-    from tactbench.runner import summaries
-    from tactbench.runner.summaries import comparisons
+def test_the_verdict_rests_on_the_corrected_t_alone_as_the_one_rule_says():
+    """One rule (P_RULE): p is the corrected t's; the sign-flip p (floor 2/2^5 with 5
+    runs) is reported, never governs, and the report states the rule in its words."""
+    from tactbench.runner.comparisons import P_RULE, comparisons
+    from tactbench.runner.tables import COMPARISONS_TEXT
 
     [c] = comparisons(_clear_win_rows(seeds=range(5)))
-    assert c["t_p"] < 0.05 and c["permutation_p"] == pytest.approx(2 / 32)
-    assert c["p"] == c["t_p"]
-    assert c["verdict"] == "B better" and "sign-flip" in c["note"]
-    monkeypatch.setattr(summaries, "PERMUTATION_GOVERNS", True)
-    [c] = comparisons(_clear_win_rows(seeds=range(5)))
-    assert c["verdict"] == "unresolved" and "sign-flip" in c["note"]
+    assert c.t_p < 0.05 and c.permutation_p == pytest.approx(2 / 32)
+    assert c.p == c.t_p and c.verdict == "B better" and "sign-flip" not in c.note
+    assert P_RULE in COMPARISONS_TEXT
+
+
+def test_primary_comparisons_form_their_own_family_and_come_first():
+    """--primary: the named pair is confirmatory, Holm-adjusted in a family of its own;
+    everything else is exploratory, in another family; the pair is not repeated."""
+    from tactbench.runner.comparisons import comparisons
+
+    truth = [0, 1] * 20
+    rows = []
+    for seed in range(6):
+        for enc, wrong in (("raw", 8), ("farneback", 2), ("dis", 5), ("tvl1", 6)):
+            rows.append(_row(enc, seed, truth, [1 - t if (i + seed) % 40 < wrong else t
+                                                for i, t in enumerate(truth)]))
+    everything = comparisons(rows)
+    comps = comparisons(rows, primary=["encoder=raw..encoder=farneback"])
+    primary = [c for c in comps if c.family == "primary"]
+    assert [(c.factor, c.a, c.b) for c in primary] == [("encoder", "raw", "farneback")]
+    assert primary[0].family_size == 1 and primary[0].p_holm == pytest.approx(primary[0].p)
+    explo = [c for c in comps if c.family == "exploratory"]
+    assert len(explo) == len(everything) - 1
+    assert all(c.family_size == len(explo) for c in explo)
+    assert all({c.a, c.b} != {"raw", "farneback"} for c in explo)
+
+
+def test_seed_means_of_k_folds_take_the_factor_k_over_k_minus_1():
+    """Rows of a 5-fold design without fold ids: the t over seed means, TOST, the runs
+    needed and the per-class gains all use K/(K − 1), not 1/(K − 1)."""
+    from scipy import stats
+
+    from tactbench.runner.comparisons import comparisons
+
+    rows = _clear_win_rows(seeds=range(6))
+    for r in rows:
+        r["folds"] = 5
+    [c] = comparisons(rows, margin=30)
+    d = np.array(list(c.per_run.values()))
+    half = stats.t.ppf(0.975, 5) * (stats.tvar(d) * (1 / 6 + 5 / 4)) ** 0.5
+    assert "split-seed means" in c.method and c.ratio == c.run_ratio == pytest.approx(1.25)
+    assert (c.low, c.high) == (pytest.approx(c.difference - half),
+                               pytest.approx(c.difference + half))
+
+
+def test_a_reader_gets_bayesian_probabilities_power_and_a_named_ceiling():
+    from tactbench.runner.comparisons import comparisons
+
+    [c] = comparisons(_clear_win_rows(seeds=range(6)))
+    probs = (c.bayes_a_better, c.bayes_equivalent, c.bayes_b_better)
+    assert sum(probs) == pytest.approx(1.0) and c.bayes_b_better > 0.9
+    assert c.bayes_margin == 1.0 and c.detectable_effect > 0
+    truth = [0, 1] * 20
+    perfect = [_row(e, s, truth, truth) for s in range(4) for e in ("raw", "farneback")]
+    [top] = comparisons(perfect)
+    assert top.ceiling and "ceiling" in top.note
 
 
 def test_fewer_than_3_runs_give_no_verdict_in_every_output(tmp_path):
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     rows = _clear_win_rows(seeds=(0, 1))
     c = comparisons(rows)[0]
-    assert c["verdict"] == "too few runs" and c["p_holm"] is not None
+    assert c.verdict == "too few runs" and c.p_holm is not None
     paths = write_reports(tmp_path / "out", rows, plots=False)
     report = paths["markdown"].read_text()
     assert "## Paired comparisons over runs" in report and "| too few runs |" in report
@@ -179,7 +230,7 @@ def test_fewer_than_3_runs_give_no_verdict_in_every_output(tmp_path):
 
 
 def test_a_few_discordant_recordings_give_no_verdict_however_many_rows():
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -188,12 +239,12 @@ def test_a_few_discordant_recordings_give_no_verdict_however_many_rows():
                                               for i, t in enumerate(truth)]))
         rows.append(_row("farneback", seed, truth, truth))
     [c] = comparisons(rows)
-    assert c["b_only"] == 24 and c["discordant_recordings"] == 3
-    assert c["verdict"] == "unresolved" and "3 distinct test recording" in c["note"]
+    assert c.b_only == 24 and c.discordant_recordings == 3
+    assert c.verdict == "unresolved" and "3 distinct test recording" in c.note
 
 
 def test_holm_adjusts_within_the_family_and_a_margin_shows_equivalence():
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -203,27 +254,28 @@ def test_holm_adjusts_within_the_family_and_a_margin_shows_equivalence():
                                                 for i, t in enumerate(truth)]))
     rows += [dict(r, L=3, key=r["key"] + "-3") for r in rows]
     comps = comparisons(rows, margin=2.0)
-    assert len(comps) == 4 and {c["family_size"] for c in comps} == {4}
+    assert len(comps) == 4 and {c.family_size for c in comps} == {4}
     for c in comps:
-        assert c["p_holm"] >= c["p"]
-    enc = [c for c in comps if c["factor"] == "encoder"]
-    assert all(c["difference"] == 0 for c in enc)
-    assert all(c["verdict"] == "equivalent" and c["equivalence_margin"] == 2.0 for c in enc)
+        assert c.p_holm >= c.p
+    enc = [c for c in comps if c.factor == "encoder"]
+    assert all(c.difference == 0 for c in enc)
+    assert all(c.verdict == "equivalent" and c.equivalence_margin == 2.0 for c in enc)
 
 
 def test_a_contrast_pairs_two_cells_differing_in_two_factors():
     from tactbench.errors import InputError
-    from tactbench.runner.summaries import comparisons, parse_contrast
+    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.summaries import parse_contrast
 
     rows = _clear_win_rows(seeds=range(6), L=3) + [
         dict(r, L=6, key=r["key"] + "-6") for r in _clear_win_rows(seeds=range(6))
         if r["encoder"] == "raw"]
     comps = comparisons(rows, contrasts=["encoder=raw,L=6..encoder=farneback,L=3"])
-    [c] = [c for c in comps if c["factor"] == "contrast"]
-    assert (c["a"], c["b"], c["classifier"]) == ("encoder=raw,L=6", "encoder=farneback,L=3",
-                                                 "logreg")
-    assert c["difference"] > 0 and c["runs"] == 6
-    assert len(comps) == 3 and all(x["family_size"] == 3 for x in comps)
+    [c] = [c for c in comps if c.factor == "contrast"]
+    assert (c.a, c.b, c.where) == ("encoder=raw,L=6", "encoder=farneback,L=3",
+                                   {"classifier": "logreg"})
+    assert c.difference > 0 and c.runs == 6
+    assert len(comps) == 3 and all(x.family_size == 3 for x in comps)
     for bad, match in (("raw..farneback", "factor=value"), ("encoder=raw", "'..'"),
                        ("encoder=raw..L=3", "same factors"), ("seed=1..seed=2", "unknown"),
                        ("encoder=raw..encoder=raw", "itself")):
@@ -237,22 +289,23 @@ def test_a_contrast_pairs_two_cells_differing_in_two_factors():
 
 
 def test_per_user_accuracy_and_gains_on_a_users_split(tmp_path):
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     rows = _clear_win_rows(seeds=range(6))
     users = [f"u{i // 10}" for i in range(40)]  # four users, ten recordings each
     [c] = comparisons(rows, users=users)
-    u = c["per_user"]
-    assert u["users"] == 4 and u["helped"] + u["hurt"] <= 4 and u["helped"] >= 1
-    assert set(u["gains"]) == {"u0", "u1", "u2", "u3"}
+    u = c.per_user
+    assert u.users == 4 and u.helped + u.hurt <= 4 and u.helped >= 1
+    assert set(u.gains) == {"u0", "u1", "u2", "u3"}
     raw = [s for s in summarise(rows, users=users) if s["encoder"] == "raw"][0]
-    assert set(raw["per_user_accuracy"]) == set(u["gains"])
+    assert set(raw["per_user_accuracy"]) == set(u.gains)
     report = write_reports(tmp_path, rows, plots=False, users=users)["markdown"].read_text()
     assert "### Per-user gains" in report and "## Per-user accuracy" in report
 
 
 def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_path):
-    from tactbench.runner.summaries import comparisons, variance_decomposition
+    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.summaries import variance_decomposition
 
     rows = []
     for split in range(3):
@@ -262,19 +315,19 @@ def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_pat
     [v] = [v for v in variance_decomposition(rows) if v["encoder"] == "raw"]
     assert (v["split_seeds"], v["init_seeds"]) == (3, 2) and v["init_sd"] == 0
     [c] = comparisons(rows)
-    assert c["runs"] == 3  # a split is the unit; its init seeds are averaged
+    assert c.runs == 3  # a split is the unit; its init seeds are averaged
     report = write_reports(tmp_path, rows, plots=False)["markdown"].read_text()
     assert "## Where the variance comes from" in report
 
 
 def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
     from tactbench.runner.tables import markdown_table
 
     truth = [0, 1] * 10
     rows = [_row("raw", s, truth, truth, L=L, classifier=clf)
             for s in (0, 1, 2) for L in (3, 5) for clf in ("logreg", "taxel-lstm:epochs=3")]
-    factors = sorted(c["factor"] for c in comparisons(rows))
+    factors = sorted(c.factor for c in comparisons(rows))
     assert factors == ["L", "L", "classifier", "classifier"]
     rows[0]["accuracy"] = 0.9
     summary = [s for s in summarise(rows) if s["L"] == 3 and s["classifier"] == "logreg"][0]
@@ -289,7 +342,7 @@ def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
 
 
 def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     truth = [0, 1] * 10
     a = _row("raw", 0, truth, truth)
@@ -297,7 +350,7 @@ def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
     b["test_predictions"]["labels"] = [truth[i] for i in range(5, 15)]
     extra_seed = _row("farneback", 1, truth, truth)
     c = comparisons([a, b, extra_seed])[0]
-    assert c["test_recordings"] == 10 and c["runs"] == 1
+    assert c.test_recordings == 10 and c.runs == 1
     old = dict(a)
     del old["test_predictions"]
     assert comparisons([old, b]) == []
@@ -516,7 +569,7 @@ def test_short_names_keep_the_estimator():
 
 def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differences():
     from tactbench.data.splits import user_folds
-    from tactbench.runner.summaries import comparisons
+    from tactbench.runner.comparisons import comparisons
 
     users = [f"u{i // 4}" for i in range(40)]  # ten users, four recordings each
     truth = [i % 2 for i in range(40)]
@@ -524,20 +577,26 @@ def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differe
     for seed in range(4):
         folds = user_folds(users, truth, seed=seed, folds=5)
         order = [int(i) for f in folds for i in f.test]  # the cell's pooled fold order
+        fold_ids = [k for k, f in enumerate(folds) for _ in f.test]
         for enc, wrong in (("raw", {o for o in order if (o + seed) % 5 == 0}),
                            ("farneback", {o for o in order if (o + seed) % 9 == 0})):
             y = [truth[i] for i in order]
             pred = [1 - truth[i] if i in wrong else truth[i] for i in order]
             r = _row(enc, seed, y, pred, indices=order)
+            r["test_predictions"].update(folds=fold_ids, groups=[users[i] for i in order])
             r.update(split="users:folds=5", folds=5, split_seed=seed, n_train=32, n_test=40)
             rows.append(r)
     [c] = comparisons(rows, users=users)
-    assert c["method"].startswith("corrected repeated 5-fold t (Bouckaert–Frank) over 20")
-    assert c["df"] == 19 and c["ratio"] == pytest.approx(1 / 4)
-    [plain] = comparisons(rows)  # without the users the folds cannot be told: seed means
-    assert plain["df"] == 3 and plain["difference"] == pytest.approx(c["difference"])
-    assert plain["method"] == "corrected repeated 5-fold t (Bouckaert–Frank)"
-    assert c["permutation_p"] == plain["permutation_p"]  # the sign-flip is over seeds
+    assert c.method == "corrected repeated 5-fold t (Bouckaert–Frank) over 20 fold differences"
+    assert c.df == 19 and c.ratio == pytest.approx(1 / 4)
+    assert comparisons(rows) == [dataclasses.replace(c, per_user=None)]  # folds: the rows'
+    for r in rows:  # rows made before they kept their folds: the seeds' means
+        del r["test_predictions"]["folds"]
+    [plain] = comparisons(rows)
+    assert plain.df == 3 and plain.difference == pytest.approx(c.difference)
+    assert plain.method == ("corrected repeated 5-fold t (Bouckaert–Frank) over 4 split-seed "
+                            "means (the rows carry no fold ids)")
+    assert c.permutation_p == plain.permutation_p  # the sign-flip is over seeds
 
 
 def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():

@@ -128,6 +128,31 @@ def _render(contacts: Sequence[_Contact], grid: tuple[np.ndarray, np.ndarray],
     return 1.0 - rest, strongest
 
 
+def _true_flow(motion: str, grid: tuple[np.ndarray, np.ndarray],
+               centre: tuple[float, float], contacts: list[_Contact], owner: np.ndarray, *,
+               speed: float, theta: float, omega: float, scale: float) -> np.ndarray:
+    """The true flow ``(H, W, 2)`` (u, v in px) of one frame pair of a tactile scene:
+    ``grid`` the pixel rows and columns, ``owner`` the contact each pixel belongs to."""
+    ys, xs = grid
+    cy0, cx0 = centre
+    if motion == "translate":
+        u = np.full_like(xs, speed * math.cos(theta))
+        v = np.full_like(xs, speed * math.sin(theta))
+    elif motion == "twist":
+        dx, dy = xs - cx0, ys - cy0
+        u = cx0 + math.cos(omega) * dx - math.sin(omega) * dy - xs
+        v = cy0 + math.sin(omega) * dx + math.cos(omega) * dy - ys
+    elif motion == "push":
+        c = contacts[0]
+        u, v = (scale - 1.0) * (xs - c.cx), (scale - 1.0) * (ys - c.cy)
+    elif motion == "pull":
+        moving = np.array([c.moving for c in contacts])[owner]
+        u, v = np.where(moving, -speed, 0.0), np.zeros_like(xs)
+    else:
+        u, v = np.zeros_like(xs), np.zeros_like(xs)
+    return np.stack([u, v], axis=-1)
+
+
 def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], *,
                   pairs: int = 2, seed: int = 0) -> FlowScene:
     """One tactile scene: ``pairs`` consecutive frame pairs under ``motion``."""
@@ -143,6 +168,7 @@ def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], 
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
     cy0, cx0 = (h - 1) / 2.0, (w - 1) / 2.0
     theta = rng.uniform(0, 2 * math.pi)  # translation direction
+    omega = scale = 0.0  # twist's angle and push's scale per frame, set below
     contacts: list[_Contact] = []
 
     def fingertips(n: int, radius: float, elong: float = 1.3) -> None:
@@ -194,24 +220,8 @@ def tactile_scene(motion: str, speed: float, size: str, shape: tuple[int, int], 
         frames.append(img)
         owners.append(owner)
 
-    flows = []
-    for k in range(pairs):
-        if motion == "translate":
-            u = np.full_like(xs, speed * math.cos(theta))
-            v = np.full_like(xs, speed * math.sin(theta))
-        elif motion == "twist":
-            dx, dy = xs - cx0, ys - cy0
-            u = cx0 + math.cos(omega) * dx - math.sin(omega) * dy - xs
-            v = cy0 + math.sin(omega) * dx + math.cos(omega) * dy - ys
-        elif motion == "push":
-            c = contacts[0]
-            u, v = (scale - 1.0) * (xs - c.cx), (scale - 1.0) * (ys - c.cy)
-        elif motion == "pull":
-            moving = np.array([c.moving for c in contacts])[owners[k]]
-            u, v = np.where(moving, -speed, 0.0), np.zeros_like(xs)
-        else:
-            u, v = np.zeros_like(xs), np.zeros_like(xs)
-        flows.append(np.stack([u, v], axis=-1))
+    flows = [_true_flow(motion, (ys, xs), (cy0, cx0), contacts, owners[k], speed=speed,
+                        theta=theta, omega=omega, scale=scale) for k in range(pairs)]
 
     stack = np.asarray(frames, dtype=np.float32)
     prev, curr = stack[:-1], stack[1:]

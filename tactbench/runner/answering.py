@@ -1,0 +1,106 @@
+"""Runs added until the primary questions are answered: the looks, replayed from the rows.
+
+``tactbench run --until answered`` runs the grid's seeds in batches (a *look* after each)
+and stops when every primary comparison (``--primary``) is decided — better, worse,
+equivalent within ``--margin``, or futile — or when ``--max-runs`` or ``--budget`` is
+reached. What each look saw is never stored apart from the cells: :func:`replay`
+recomputes every look from the rows (the first ``n_k`` seeds of the run's seed order at
+look k), so a resumed or re-rendered report shows the same looks, and a look's decision
+cannot drift from its evidence. The decisions follow :mod:`tactbench.runner.sequential`
+(α spent over the looks, Holm carried over them).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+from tactbench.errors import InputError
+from tactbench.runner.comparisons import Comparison, comparisons
+from tactbench.runner.results import ok_rows
+from tactbench.runner.sequential import FamilyState, Look, family_look
+
+#: The first look comes after this many runs (fewer spend α on noise: see
+#: docs/statistics.md) and each later one after ``batch`` more.
+FIRST_LOOK = 5
+
+
+def schedule(max_runs: int, batch: int, first: int = FIRST_LOOK) -> list[int]:
+    """The run counts of the looks: ``first``, ``first + batch``, … up to ``max_runs``
+    (which is always the last)."""
+    for value, name, low in ((max_runs, "max-runs", first), (batch, "batch", 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise InputError(f"--{name} must be a whole number ≥ {low}, got {value!r}")
+    looks = list(range(first, max_runs, batch))
+    return [*looks, max_runs]
+
+
+def comparison_name(c: Comparison) -> str:
+    """A primary comparison's name in the looks: ``raw → farneback (L=5, small-cnn-lstm)``."""
+    where = ", ".join(f"{k}={v}" if k == "L" else str(v) for k, v in c.where.items())
+    return f"{c.a} → {c.b}" + (f" ({where})" if where else "")
+
+
+@dataclass
+class History:
+    """Every look so far: its run count, each primary comparison's :class:`Look`, and
+    the final state (decided comparisons and α shares)."""
+
+    looks: list[int]
+    max_runs: int
+    seen: list[dict[str, Look]] = field(default_factory=list)
+    state: FamilyState | None = None
+
+    @property
+    def answered(self) -> bool:
+        """Whether every primary comparison is decided (or there is none)."""
+        return self.state is not None and len(self.state.closed) == len(self.state.names)
+
+    def stopped_because(self) -> str:
+        if self.state is None:
+            return "no primary comparison has 2 runs yet"
+        if self.answered:
+            return "every primary question is answered"
+        done = self.looks[len(self.seen) - 1] if self.seen else 0
+        return f"{done} of {self.max_runs} runs made; questions still open"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"looks": [{"runs": self.looks[k], "comparisons": {
+                    name: look.as_dict() for name, look in seen.items()}}
+                          for k, seen in enumerate(self.seen)],
+                "max_runs": self.max_runs, "answered": self.answered,
+                "stopped": self.stopped_because(),
+                "decisions": {} if self.state is None else {
+                    n: lk.decision for n, lk in self.state.closed.items()}}
+
+
+def replay(rows: Sequence[dict[str, Any]], *, seed_order: Sequence[int],
+           looks: Sequence[int], primary: Sequence[str], margin: float | None = None,
+           alpha: float = 0.05) -> History:
+    """Every look the rows allow: at look k, the comparisons of the rows of the first
+    ``looks[k]`` seeds of ``seed_order``; a look is made only when every one of those
+    seeds has a row of each primary cell. ``primary``: the contrasts naming the
+    confirmatory comparisons."""
+    if not primary:
+        raise InputError("--until answered needs at least one --primary comparison")
+    rows = ok_rows(rows)
+    history = History(list(looks), looks[-1])
+    for k, n in enumerate(looks):
+        seeds = set(seed_order[:n])
+        subset = [r for r in rows if int(r["seed"]) in seeds]
+        prim = [c for c in comparisons(subset, primary=primary, margin=margin,
+                                       confidence=1 - alpha) if c.family == "primary"]
+        if not prim or any(c.runs < n for c in prim):
+            break  # this look's runs are not all there yet
+        diffs = {comparison_name(c): list(c.per_run.values()) for c in prim}
+        if history.state is None:
+            history.state = FamilyState(alpha, list(diffs))
+        open_now = [name for name in history.state.names if name not in history.state.closed]
+        ratios = {comparison_name(c): c.run_ratio for c in prim}
+        seen = family_look(history.state, {n_: diffs[n_] for n_ in open_now},
+                           {n_: ratios[n_] for n_ in open_now}, looks=looks[:k + 1],
+                           max_runs=looks[-1], margin=None if margin is None else margin / 100)
+        history.seen.append(seen)
+        if history.answered:
+            break
+    return history

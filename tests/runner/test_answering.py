@@ -1,0 +1,68 @@
+"""tactbench.runner.answering: looks replayed from rows, and when they stop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactbench.errors import InputError
+from tactbench.runner.answering import replay, schedule
+
+PRIMARY = ["encoder=raw..encoder=farneback"]
+
+
+def _row(encoder, seed, truth, predicted):
+    acc = float(np.mean(np.asarray(truth) == np.asarray(predicted)))
+    return {"key": f"{encoder}-{seed}", "dataset": "d", "split": "paper",
+            "encoder": encoder, "classifier": "logreg", "L": 5, "seed": seed,
+            "status": "ok", "classes": ["a", "b"], "accuracy": acc,
+            "per_class_accuracy": {"a": acc, "b": acc}, "confusion": [[1, 0], [0, 1]],
+            "n_train": 4 * len(truth), "n_test": len(truth),
+            "test_predictions": {"indices": list(range(len(truth))), "labels": list(truth),
+                                 "predictions": list(predicted)}}
+
+
+def _rows(seeds, gain, n=400, rng_seed=0):
+    """Two encoders per seed: raw right on ~70 % of n recordings, farneback on ~70 % +
+    ``gain`` (each run draws its own errors)."""
+    rng = np.random.default_rng(rng_seed)
+    truth = [i % 2 for i in range(n)]
+    rows = []
+    for seed in seeds:
+        for enc, acc in (("raw", 0.7), ("farneback", 0.7 + gain)):
+            right = rng.random(n) < acc
+            rows.append(_row(enc, seed, truth, [t if ok else 1 - t
+                                                for t, ok in zip(truth, right)]))
+    return rows
+
+
+def test_schedule_starts_at_five_runs_and_ends_at_the_maximum():
+    assert schedule(20, 5) == [5, 10, 15, 20]
+    assert schedule(12, 5) == [5, 10, 12]
+    with pytest.raises(InputError, match="max-runs"):
+        schedule(3, 5)
+
+
+def test_a_clear_gain_is_answered_at_the_first_look():
+    looks = schedule(20, 5)
+    h = replay(_rows(range(5), 0.2), seed_order=list(range(20)), looks=looks,
+               primary=PRIMARY)
+    assert h.answered and len(h.seen) == 1
+    [(name, look)] = h.seen[0].items()
+    assert name.startswith("raw → farneback") and look.decision == "B better"
+    assert h.as_dict()["decisions"] == {name: "B better"}
+
+
+def test_looks_wait_for_their_runs_and_say_why_they_stopped():
+    looks = schedule(20, 5)
+    h = replay(_rows(range(7), 0.0), seed_order=list(range(20)), looks=looks,
+               primary=PRIMARY)
+    assert len(h.seen) == 1  # the second look (10 runs) has only 7
+    assert not h.answered or h.state.closed  # futile at most, never a verdict
+    assert all(lk.decision not in ("A better", "B better") for lk in h.seen[0].values())
+    assert "of 20 runs" in h.stopped_because() or h.answered
+
+
+def test_no_primary_is_a_clear_error():
+    with pytest.raises(InputError, match="--primary"):
+        replay(_rows(range(5), 0.1), seed_order=list(range(5)), looks=[5], primary=[])
