@@ -1,9 +1,17 @@
 """One cell: train a classifier on the cached encoding, test it, return its result row.
 
 :func:`run_cell` runs in any process (this one, a worker process, a dask worker): a
-:class:`CellJob` carries everything it needs, the classifier's registered
-:class:`~tactbench.plugins.Component` included, so a cell builds its classifier from the
-plugins the run was planned with, not from whatever is installed where it runs.
+:class:`CellJob` carries everything it needs, the registered
+:class:`~tactbench.plugins.Component` of its classifier, split and test window included,
+so a cell builds them from the plugins the run was planned with, not from whatever is
+installed where it runs.
+
+A cell draws its split (one train/test pair, or one per fold), checks what the split
+returned (:func:`~tactbench.data.splits.check_splits`), and per fold makes the test
+window's training and test windows, fits a model and lets the test window combine the
+predictions of each test recording's windows. The row keeps, for every test recording,
+its index, true and predicted class, the fold that tested it and the group it was left
+out with (:data:`PREDICTION_LISTS`).
 
 A cell that raises (a bug in a plugin, a classifier that fails in ``fit``, out of memory)
 returns a *failed* row instead (see :mod:`tactbench.runner.results`): no exception object
