@@ -243,3 +243,18 @@ def test_rows_with_and_without_fold_and_group_lists_read_back(tiny_scene, cache)
                          ({"fold": tp["folds"]}, "not {indices, labels, predictions")]:
         damaged = {**row, "test_predictions": {**tp, **bad}}
         assert problem in (check_row(damaged, row["key"]) or ""), bad
+
+
+def test_a_kfold_cell_tests_every_recording_once_by_the_fold_it_was_dealt_to(tiny_scene,
+                                                                             cache):
+    from tactbench.runner import run
+
+    [row] = run(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[1],
+                           split="kfold"), progress=False, cache=cache).rows
+    assert row["status"] == "ok", row.get("error")
+    assert (row["split"], row["folds"], row["test_users"]) == ("kfold:folds=5", 5, [])
+    tp = row["test_predictions"]
+    assert sorted(tp["indices"]) == list(range(row["n_test"]))  # each recording once
+    assert sorted(set(tp["folds"])) == list(range(5))
+    assert tp["groups"] == [str(i) for i in tp["indices"]]
+    assert len(row["fit"]) == 5  # one model per fold
