@@ -12,8 +12,9 @@ Nothing is computed twice:
   version, so each encoding is computed once across runs;
 - each finished cell is written at once, atomically, to ``OUT/cells/<key>.json``
   (:class:`ResultStore`); running the same scene again skips finished cells, and a
-  run killed mid-cell loses only that cell. An out folder without its ``cells/`` (git
-  ignores it) gets the rows its ``results.json`` keeps put back, verified.
+  run killed mid-cell loses only that cell. ``OUT/cells`` is the one store of a run
+  folder: results.json, results.csv and report.md are rendered from it, never read back
+  (:func:`render_folder` renders them again, training nothing).
 
 A cell that raises is stored as a *failed* row (error type, message, last traceback
 frames) and the rest of the grid goes on; the next run retries it.
@@ -30,11 +31,11 @@ that encodes a dataset is :mod:`tactbench.encoders.encoding`),
 :mod:`~tactbench.runner.cell` (train and test one cell),
 :mod:`~tactbench.runner.executors` (local, processes, dask),
 :mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
-memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
+memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`, :func:`render_folder`),
 :mod:`~tactbench.runner.summaries` (aggregation over seeds, paired comparisons),
 :mod:`~tactbench.runner.statistics` (the tests, with the training run as the unit),
 :mod:`~tactbench.runner.tables` (terminal and Markdown tables),
-:mod:`~tactbench.runner.writers` (results.json/csv, report.md),
+:mod:`~tactbench.runner.writers` (the :class:`Report`; results.json/csv, report.md),
 :mod:`~tactbench.runner.plots` (one function per figure).
 """
 
@@ -42,11 +43,12 @@ from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported i
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
 from tactbench.runner.entries import load_encoding
-from tactbench.runner.orchestrate import RunResult, run
+from tactbench.runner.orchestrate import render_folder, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
 from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
 from tactbench.runner.system import git_revision
+from tactbench.runner.writers import Report
 
 __all__ = [
     "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",
@@ -54,5 +56,5 @@ __all__ = [
     "EncodingCache", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row",
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows",
-    "run", "RunResult", "git_revision",
+    "run", "render_folder", "Report", "git_revision",
 ]
