@@ -32,6 +32,7 @@ BUILTIN_COMMANDS: dict[str, str] = {
     "live": "tactbench.commands.live:live_cmd",
     "layout": "tactbench.commands.layout:layout_group",
     "run": "tactbench.commands.run:run_cmd",
+    "report": "tactbench.commands.report:report_cmd",
     "cache": "tactbench.commands.cache:cache_group",
     "encode": "tactbench.commands.encode:encode_cmd",
     "flowbench": "tactbench.commands.flowbench:flowbench_cmd",
@@ -50,6 +51,8 @@ BUILTIN_SUMMARIES: dict[str, str] = {
             "classified.",
     "layout": "Inspect and generate taxel layouts.",
     "run": "Run a benchmark grid and report accuracy beside its cost.",
+    "report": "Render a run folder's report again from its stored cell rows, training "
+              "nothing.",
     "cache": "Inspect or clear cached encodings (TACTBENCH_CACHE, default "
              "~/.cache/tactbench).",
     "encode": "Encode a (T, H, W) sequence into (T, C, H, W) feature images.",

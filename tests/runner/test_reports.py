@@ -17,7 +17,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 def test_reports_are_written(tmp_path, tiny_scene, cache):
     result = run(tiny_scene(seeds=[0]), progress=False, cache=cache)
-    paths = write_reports(tmp_path / "out", result.rows, meta={"command": "test"})
+    paths = write_reports(tmp_path / "out", result.rows)
     for name in ("results.json", "results.csv", "report.md", "cost_vs_accuracy.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0, name
     # one L: no figure against L
@@ -68,7 +68,7 @@ def test_failed_cells_are_listed_and_left_out_of_the_accuracies(
         ("failing", "0", "RuntimeError: deliberate failure in fit"),
         ("failing", "1", "RuntimeError: deliberate failure in fit")]
 
-    paths = write_reports(tmp_path / "out", result.rows, meta={"command": "test"})
+    paths = write_reports(tmp_path / "out", result.rows)
     report = paths["markdown"].read_text()
     assert "cells: 4 (2 failed, listed below)" in report
     failed_part = report.split("## Failed cells", 1)[1]
@@ -359,7 +359,8 @@ def test_pareto_front_by_hand():
 
 
 def test_accuracy_against_l_has_ci_bands_and_the_other_figures_apply(tmp_path, drawn):
-    from tactbench.runner.planning import check_out_folder
+    from tactbench.paths import check_output_folder
+    from tactbench.runner.writers import is_run_output
 
     rows = _grid()
     paths = write_reports(tmp_path / "out", rows)
@@ -394,7 +395,7 @@ def test_accuracy_against_l_has_ci_bands_and_the_other_figures_apply(tmp_path, d
     assert list(far_b.get_ydata()) == pytest.approx([100 - 100 * (2 + 1 / 3) / 10,
                                                      100 - 100 * (1 + 1 / 3) / 10])
     # the next run into the same folder is not refused for the new figures
-    check_out_folder(tmp_path / "out")
+    check_output_folder(tmp_path / "out", option="out folder", ours=is_run_output)
 
 
 def test_cost_against_accuracy_draws_the_pareto_front(tmp_path, drawn):
