@@ -138,6 +138,26 @@ def test_one_grid_per_folder_is_decided_by_its_cells_alone(tmp_path, tiny_scene,
                                           .read_text())["rows"]] == [2]
 
 
+def test_per_user_results_need_the_rows_dataset_and_say_when_it_is_gone(
+        tmp_path, nolayout_dataset, cache, caplog):
+    import shutil
+
+    from tactbench.runner import Scene, render_folder
+
+    scene = Scene(dataset=str(nolayout_dataset), encoders=["raw"], classifiers=[FAST_CLF],
+                  L=[3], seeds=[0], test_per_class=1, threads=1, out=str(tmp_path / "out"))
+    first = run(scene, progress=False, cache=cache, plots=False)
+    assert first.statistics["per_user"] is True
+    again = render_folder(scene.out, plots=False)
+    assert again.summaries == first.summaries  # the dataset is there: per-user results
+    shutil.rmtree(nolayout_dataset)
+    gone = render_folder(scene.out, plots=False)
+    assert gone.statistics["per_user"] is False and gone.rows == first.rows
+    assert "cannot be loaded here" in caplog.text
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "per-user results left out: dataset" in report
+
+
 def test_an_extra_plugin_trains_its_cells(tiny_scene, cache, fake_registry):
     scene = tiny_scene(encoders=["raw"], classifiers=["added-logreg:max_iter=20"], seeds=[0])
     (row,) = run(scene, registry=fake_registry, progress=False, cache=cache).rows
