@@ -3,7 +3,26 @@
 A *scene* (:class:`Scene`) names a dataset, encoders, classifiers, window lengths L,
 seeds, a split and a profile. :func:`plan` checks it and expands it into *cells*, one
 per (encoder, classifier, L, seed); each cell trains one classifier and writes one result
-row. :func:`run` does the whole thing.
+row. :func:`run` does the whole thing and returns the :class:`Report` it wrote (the
+report of ``tactbench run``); :func:`render_folder` makes a finished folder's report
+again (``tactbench report``). From a notebook (``pandas.DataFrame(report.table())``
+turns the rows into a data frame, where pandas is installed):
+
+.. code-block:: python
+
+    from tactbench.runner import Scene, render_folder, run
+
+    scene = Scene(dataset="synthetic-forearm:users=2,repetitions=1",
+                  encoders=["raw", "frame-diff"], classifiers=["logreg:max_iter=50"],
+                  L=[3], seeds=[0, 1, 2], pixel_mm=10, test_per_class=1, out="runs/demo")
+    report = run(scene, progress=False, plots=False)  # report.md etc. in runs/demo
+    for s in report.summaries:  # one per encoder × classifier × L, over the seeds
+        print(s["encoder"], f"{100 * s['accuracy_mean']:.1f} % over seeds {s['seeds']}")
+    print(len(report.comparisons), "paired comparison(s);", len(report.failed), "failed")
+    table = report.table()  # the rows as a table: one dict per cell, results.csv's columns
+    assert len(table) == 6 and {"encoder", "seed", "accuracy", "train_s"} <= set(table[0])
+    again = render_folder("runs/demo", margin=2, plots=False)  # nothing trained
+    assert again.rows == report.rows and again.statistics["margin"] == 2
 
 Nothing is computed twice:
 
