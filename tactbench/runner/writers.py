@@ -25,7 +25,6 @@ from tactbench.runner.plots import FIGURES, caption, check_reference, write_plot
 from tactbench.runner.results import (
     command_line,
     failed_rows,
-    latest_scene,
     ok_rows,
     row_status,
 )
@@ -275,20 +274,15 @@ def _statistics_text(statistics: dict[str, Any]) -> str:
             f"contrasts {contrasts}")
 
 
-def markdown_report(report: Report, figures: dict[str, Path]) -> str:
-    """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
-    comparisons over runs (with per-class and per-user gains), the variance
-    decomposition, published reference points, failed cells, figures with captions."""
-    summaries, rows, comps = report.summaries, report.rows, report.comparisons
-    reference, variance = report.reference, report.variance
-    labels = run_labels(rows, summaries)
+def _facts(report: Report) -> list[str]:
+    """The lines of report.md that say what the rows are: dataset, split, cells and the
+    runs that computed them, versions, machines, statistics options, how it was rendered."""
+    rows = report.rows
     done = ok_rows(rows)
-    failed = failed_cells_markdown(rows)
     first = done[0] if done else (rows[0] if rows else {})
     n_failed = len(rows) - len(done)
     rendered = report.rendered
-    lines = [
-        REPORT_HEADER, "",
+    return [
         f"- dataset: `{first.get('dataset', '?')}` (content hash "
         f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
         f"- split: `{first.get('split', '?')}`; test window: "
@@ -302,7 +296,22 @@ def markdown_report(report: Report, figures: dict[str, Path]) -> str:
         f"across machines')",
         _statistics_text(report.statistics),
         f"{RENDERED}{rendered['how']} by `{rendered['by']}` at {rendered['at']}",
-        "",
+    ]
+
+
+def markdown_report(report: Report, figures: dict[str, Path]) -> str:
+    """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
+    comparisons over runs (with per-class and per-user gains), the variance
+    decomposition, published reference points, failed cells, figures with captions."""
+    summaries, rows, comps = report.summaries, report.rows, report.comparisons
+    reference, variance = report.reference, report.variance
+    labels = run_labels(rows, summaries)
+    done = ok_rows(rows)
+    failed = failed_cells_markdown(rows)
+    first = done[0] if done else (rows[0] if rows else {})
+    n_failed = len(rows) - len(done)
+    lines = [
+        REPORT_HEADER, "", *_facts(report), "",
         "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
         "mean over seeds (test set: "
         f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "
