@@ -17,7 +17,7 @@ from typing import Any, Callable, Sequence
 
 from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError, MissingFileError, TactbenchError
-from tactbench.paths import check_output_folder, discard
+from tactbench.paths import discard
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
@@ -26,7 +26,13 @@ from tactbench.runner.results import ResultStore, command_line, latest_scene, ok
 from tactbench.runner.scene import Scene
 from tactbench.runner.summaries import check_contrasts
 from tactbench.runner.system import MemoryTracker, git_revision
-from tactbench.runner.writers import Report, is_run_output, make_report, write_report
+from tactbench.runner.writers import (
+    OUT_FILES,
+    Report,
+    is_run_output,
+    make_report,
+    write_report,
+)
 from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner")
@@ -124,7 +130,13 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     if not rows:
         raise InputError(f"every cell row in {store.cells} is damaged (warnings above): "
                          f"nothing to report; `tactbench run --out {out}` computes them again")
-    check_output_folder(out, option="run folder", ours=is_run_output)
+    # files beside a run's own (a benchmark's notes) stay; of a run's names, only
+    # a report.md tactbench did not write is not ours to replace
+    foreign = [p.name for p in (out / name for name in OUT_FILES)
+               if p.exists() and not is_run_output(p)]
+    if foreign:
+        raise InputError(f"run folder {out} holds a {foreign[0]} tactbench did not write; "
+                         f"move it away first (nothing was written)")
     scene = latest_scene(rows)
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin

@@ -15,6 +15,7 @@ import csv
 import io
 import json
 import re
+import shlex
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -198,12 +199,21 @@ def make_report(rows: Sequence[dict[str, Any]], *,
 
 def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """The runs that computed ``rows``: ``{"command", "git", "cells"}`` for each distinct
-    command line and git revision a row records (``run``), the earliest first."""
+    command line and git revision a row records (``run``), the earliest first. A command
+    is shown as :func:`~tactbench.runner.results.command_line` writes it (rows from
+    before it kept the program's path: ``/src/tactbench/__main__.py run`` is
+    ``tactbench run``)."""
     runs: dict[tuple, dict[str, Any]] = {}
     for row in sorted(rows, key=lambda r: (str(r.get("finished", "")), str(r.get("key")))):
         run = row.get("run") if isinstance(row.get("run"), dict) else {}
-        entry = runs.setdefault((str(run.get("command")), str(run.get("git"))), {
-            "command": run.get("command"), "git": run.get("git"), "cells": 0})
+        command = run.get("command")
+        try:
+            command = command_line(shlex.split(command)) if isinstance(command, str) \
+                else command
+        except ValueError:  # unbalanced quotes: shown as recorded
+            pass
+        entry = runs.setdefault((str(command), str(run.get("git"))), {
+            "command": command, "git": run.get("git"), "cells": 0})
         entry["cells"] += 1
     return list(runs.values())
 

@@ -555,3 +555,19 @@ def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():
     # a plain value takes no continuation: a stray item is still a mistake
     with pytest.raises(InputError, match="unknown factor 'winsize'"):
         parse_contrast("encoder=raw,winsize=9..encoder=dis,winsize=9")
+
+
+def test_the_runs_that_computed_the_rows_are_named_one_way():
+    from tactbench.runner.writers import computed_by
+
+    def row(key, command, git, finished):
+        return {"key": key, "finished": finished, "run": {"command": command, "git": git}}
+
+    rows = [row("b", ".venv/bin/tactbench run -L 5", "abc", "2026-01-02"),
+            row("a", "/src/tactbench/__main__.py run -L 5", "abc", "2026-01-01"),
+            row("c", "tactbench run -L 5 --seed 0-9", "def", "2026-01-03"),
+            {"key": "d", "finished": "2025-12-31"}]  # a row from before runs were recorded
+    assert computed_by(rows) == [
+        {"command": None, "git": None, "cells": 1},
+        {"command": "tactbench run -L 5", "git": "abc", "cells": 2},
+        {"command": "tactbench run -L 5 --seed 0-9", "git": "def", "cells": 1}]
