@@ -128,25 +128,27 @@ class Report:
 
 
 def csv_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
-    """The columns of results.csv (and of :meth:`Report.table`) for ``rows``."""
-    classes: list[str] = []
-    for r in rows:
-        for c in r["classes"]:
-            if c not in classes:
-                classes.append(c)
-    return _columns(classes)
+    """The columns of results.csv (and of :meth:`Report.table`) for ``rows``: the cell,
+    its status and accuracy, ``acc_<class>`` for every class of any row, the costs."""
+    classes = list(dict.fromkeys(c for r in rows for c in r.get("classes", ())))
+    return ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
+            "classifier", "profile", "L", "seed", "status", "accuracy",
+            *[f"acc_{c}" for c in classes],
+            "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
+            "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
+            "error"]
 
 
 def flat_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One flat dict per row: the :func:`csv_columns`, per-class accuracies as
-    ``acc_<class>``; a failed cell's has ``status`` ``failed``, its error in ``error``
-    and no accuracy or costs."""
+    """One flat dict per row, of the :func:`csv_columns` (None where a row has no
+    value); a failed cell's has ``status`` ``failed``, its error in ``error`` and no
+    accuracy or costs."""
     columns = csv_columns(rows)
     flat = []
     for r in rows:
         line = {**r, "status": row_status(r)}
-        for c in r["classes"] if row_status(r) == "ok" else ():
-            line[f"acc_{c}"] = r.get("per_class_accuracy", {}).get(c)
+        for c, accuracy in (r.get("per_class_accuracy") or {}).items():
+            line[f"acc_{c}"] = accuracy
         if "error" in r:
             line["error"] = f"{r['error'].get('type')}: {r['error'].get('message')}"
         flat.append({k: line.get(k) for k in columns})
@@ -160,15 +162,6 @@ def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
     writer.writeheader()
     writer.writerows(flat_rows(rows))
     return buf.getvalue()
-
-
-def _columns(classes: Sequence[str]) -> list[str]:
-    return ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
-            "classifier", "profile", "L", "seed", "status", "accuracy",
-            *[f"acc_{c}" for c in classes],
-            "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
-            "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
-            "error"]
 
 
 def make_report(rows: Sequence[dict[str, Any]], *,
