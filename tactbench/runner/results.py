@@ -263,8 +263,9 @@ class ResultStore:
 
         The rule: one out folder holds one grid, and a run may extend it (more seeds,
         L, encoders) but not leave out cells already there: those are another grid's,
-        whose report this run would replace. Two runs at once must plan the same grid;
-        of two different ones, the later is refused, naming the first.
+        whose report this run would replace. Only ``cells/`` counts: results.json is
+        rendered from it and never read. Two runs at once must plan the same grid; of
+        two different ones, the later is refused, naming the first.
         """
         keys = sorted(set(keys))
         planned = set(keys)
