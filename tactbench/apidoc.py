@@ -6,7 +6,10 @@ code. It documents what a plugin touches, by public name only (so moving the cod
 a name changes nothing here): the hooks (:mod:`tactbench.hookspecs`), the component
 contracts (:mod:`tactbench.contracts`), the conformance suites (:mod:`tactbench.testing`)
 and the data types a dataset or sensor builds (:mod:`tactbench.data.recording`,
-:mod:`tactbench.data.normalisation`, :mod:`tactbench.data.dataset`).
+:mod:`tactbench.data.normalisation`, :mod:`tactbench.data.dataset`); and, beside them,
+what a researcher types in a notebook (:data:`NOTEBOOK`: a few names of
+:mod:`tactbench.runner`, with the example of its docstring, which
+``tests/test_doc_examples.py`` runs).
 
 What is documented, per module: its docstring; then each public name (``__all__`` when
 the module has one, else every function and class defined there whose name has no
@@ -14,7 +17,8 @@ leading underscore, and every constant with a ``#:`` comment), in the module's o
 functions and classes with their signature and docstring, a class's own public methods
 and properties, and each :class:`~tactbench.contracts.Contract` as a table of its
 members. Docstrings are reStructuredText-ish; :func:`markdown` turns the parts used here
-(roles, inline literals, ``::`` literal blocks, definition lists) into Markdown. Written
+(roles, inline literals, ``::`` literal blocks, ``.. code-block:: python`` examples,
+definition lists) into Markdown. Written
 with the standard library's :mod:`inspect` only.
 """
 
@@ -41,11 +45,21 @@ MODULES: tuple[tuple[str, str], ...] = (
     ("tactbench.data.dataset", "the labelled set a dataset plugin returns"),
 )
 
+#: The notebook API: the module, what it is for, and the names documented (its
+#: docstring's ``.. code-block:: python`` example is run by tests/test_doc_examples.py).
+NOTEBOOK = ("tactbench.runner", "the notebook API, a benchmark from Python",
+            ("Scene", "run", "Report", "render_folder"))
+
+#: The line before each example fence, by which tests/test_doc_examples.py finds it.
+EXAMPLE_MARK = "<!-- example: a docstring's, run by tests/test_doc_examples.py -->"
+
 HEADER = """# API reference for plugin authors
 
 Generated from the docstrings by `python -m tactbench.apidoc --write`; the test suite
 fails when this file is stale. How to write and package a plugin is in
-[plugins.md](plugins.md); this page is the reference for the names it uses.
+[plugins.md](plugins.md); this page is the reference for the names it uses. The last
+section is for a researcher in a notebook: a benchmark run from Python, its report and
+its rows as a table.
 """
 
 
@@ -53,6 +67,7 @@ fails when this file is stale. How to write and package a plugin is in
 
 _ROLE = re.compile(r":(?:[a-z]+:)?[a-z]+:`~?([^`<]*?)(?:\s*<[^>]*>)?`")
 _BLOCK_START = re.compile(r"^(\s*)(.*?)::\s*$")
+_CODE_BLOCK = re.compile(r"^\s*\.\. code-block:: python\s*$")
 
 
 def _inline(text: str) -> str:
@@ -85,21 +100,17 @@ def markdown(doc: str | None) -> str:
     while i < len(lines):
         line = lines[i]
         m = _BLOCK_START.match(line)
+        if _CODE_BLOCK.match(line):  # an example: Python, marked for the doc tests
+            body, i = _block(lines, i)
+            out += ["", EXAMPLE_MARK, "```python", *body.splitlines(), "```", ""]
+            continue
         if m and not line.lstrip().startswith(".."):
             # "text::" + an indented block: the block is literal
             lead = m.group(2)
             if lead:
                 out.append(_inline(m.group(1) + lead + ":"))
-            j = i + 1
-            block: list[str] = []
-            while j < len(lines) and (not lines[j].strip() or _indent(lines[j]) > _indent(line)):
-                block.append(lines[j])
-                j += 1
-            while block and not block[-1].strip():
-                block.pop()
-            body = inspect.cleandoc("\n".join(block)) if block else ""
+            body, i = _block(lines, i)
             out += ["", "```text", *body.splitlines(), "```", ""]
-            i = j
             continue
         nxt = lines[i + 1] if i + 1 < len(lines) else ""
         if line.strip() and re.fullmatch(r"\s*(-{3,}|={3,})\s*", nxt):
@@ -121,6 +132,18 @@ def markdown(doc: str | None) -> str:
         out.append(_inline(line))
         i += 1
     return re.sub(r"\n{3,}", "\n\n", "\n".join(out)).strip()
+
+
+def _block(lines: list[str], i: int) -> tuple[str, int]:
+    """The indented block under ``lines[i]``, dedented, and the index after it."""
+    j = i + 1
+    block: list[str] = []
+    while j < len(lines) and (not lines[j].strip() or _indent(lines[j]) > _indent(lines[i])):
+        block.append(lines[j])
+        j += 1
+    while block and not block[-1].strip():
+        block.pop()
+    return (inspect.cleandoc("\n".join(block)) if block else ""), j
 
 
 # ------------------------------------------------------------------------- signatures
@@ -298,13 +321,14 @@ def _indent_more(text: str) -> str:
 def render() -> str:
     """The whole reference as Markdown."""
     toc, sections = [], []
-    for name, purpose in MODULES:
+    for name, purpose, only in [(*m, None) for m in MODULES] + [NOTEBOOK]:
         module = importlib.import_module(name)
         title = f"`{name}`: {purpose}"
         toc.append(f"- [{title}](#{_slug(title)})")
         parts = [f"## {title}", "", markdown(module.__doc__), ""]
         for item, obj, comment in public_names(module):
-            parts += _item(name, item, obj, comment)
+            if only is None or item in only:
+                parts += _item(name, item, obj, comment)
         sections.append("\n".join(parts).rstrip() + "\n")
     text = "\n".join([HEADER, "\n".join(toc) + "\n", *sections])
     return re.sub(r"\n{3,}", "\n\n", text)

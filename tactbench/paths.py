@@ -251,18 +251,24 @@ def check_not_in_cache(path: str | Path, option: str = "--out") -> None:
                          f"results elsewhere")
 
 
-def _writable_parent(path: Path, option: str) -> None:
+def _writable_parent(path: Path, option: str, verb: str = "written") -> None:
     folder = path.absolute().parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
     if not folder.is_dir():
-        raise InputError(f"{option} {path} cannot be written: {folder} is a file, not a "
+        raise InputError(f"{option} {path} cannot be {verb}: {folder} is a file, not a "
                          f"folder")
+    _probe(folder, f"{option} {path}")
+
+
+def _probe(folder: Path, what: str) -> None:
+    """Create and remove a file in ``folder``: permissions alone do not tell whether it
+    can be written (root, a read-only mount)."""
     try:
         fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
     except OSError as exc:
-        raise InputError(f"{option} {path} cannot be written: {exc.strerror or exc} "
-                         f"({folder})") from None
+        where = "" if what.endswith(str(folder)) else f" ({folder})"
+        raise InputError(f"{what} cannot be written: {exc.strerror or exc}{where}") from None
     os.close(fd)
     os.unlink(probe)
 
@@ -311,10 +317,19 @@ def check_output_file(path: str | Path, *, option: str = "--out", inputs=(),
     return path
 
 
+#: What file managers leave in any folder they show (tactbench neither reads nor writes it).
+LITTER = (".DS_Store", "Thumbs.db", "desktop.ini")
+
+
 def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
                         ours=None) -> Path:
-    """:func:`check_output_file` for a folder: it may not exist yet, or be empty, or be
-    ``ours(path)``; a folder holding anything else is refused, naming what it holds."""
+    """:func:`check_output_file` for a folder, the one check of every folder a command
+    writes (``tactbench run --out`` included): it may not exist yet (its parent must be
+    writable), or be empty, or hold only what this command writes, ``ours(entry)`` for
+    each entry at its top (a temporary of an entry, ``.NAME.tmp-*``, counts as the
+    entry; :data:`LITTER` is ignored). A folder holding anything else is refused, naming
+    what it holds; a folder kept must be writable, and so must its subfolders.
+    """
     path = Path(path)
     with _usable_path(path, option):
         for src in inputs:
@@ -323,17 +338,34 @@ def check_output_folder(path: str | Path, *, option: str = "--out", inputs=(),
                                  f"never writes over its input, give another folder")
         check_not_in_cache(path, option)
         if path.exists() and not path.is_dir():
-            raise InputError(f"{option} {path} exists and is not a folder")
-        if path.is_dir():
-            held = sorted(p.name for p in path.iterdir())
-            if held and (ours is None or not ours(path)):
-                shown = ", ".join(repr(n) for n in held[:3]) + (", …" if len(held) > 3 else "")
-                what = ("a tactbench dataset" if (path / "manifest.json").is_file()
-                        else f"files ({shown})")
-                raise InputError(f"{option} {path} already holds {what}; "
-                                 f"tactbench does not replace them: give a new or empty "
-                                 f"folder (nothing was written)")
-            _writable_parent(path / ".probe", option)
-        else:
-            _writable_parent(path, option)
+            raise InputError(f"{option} {path} is a file, not a folder; give a folder")
+        if not path.is_dir():
+            _writable_parent(path, option, "made")
+            return path
+        entries = sorted(path.iterdir())
+        foreign = [e.name for e in entries if not _is_ours(e, ours)]
+        if foreign and ours is None:
+            shown = ", ".join(repr(n) for n in foreign[:3]) + (", …" if len(foreign) > 3
+                                                               else "")
+            what = ("a tactbench dataset" if (path / "manifest.json").is_file()
+                    else f"files ({shown})")
+            raise InputError(f"{option} {path} already holds {what}; tactbench does not "
+                             f"replace them: give a new or empty folder (nothing was "
+                             f"written)")
+        if foreign:
+            raise InputError(f"{option} {path} holds files tactbench did not write "
+                             f"({', '.join(repr(n) for n in foreign[:3])}); give a new or "
+                             f"empty folder, or one an earlier run wrote")
+        for folder in [path, *(e for e in entries if e.is_dir() and not e.is_symlink())]:
+            _probe(folder, f"{option} {path}")
     return path
+
+
+def _is_ours(entry: Path, ours) -> bool:
+    """Whether ``entry`` may stay in an output folder (see :func:`check_output_folder`)."""
+    if entry.name in LITTER:
+        return True
+    if ours is None:
+        return False
+    temporary = _TEMP.match(entry.name)
+    return bool(ours(entry.with_name(temporary["target"]) if temporary else entry))

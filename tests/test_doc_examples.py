@@ -1,7 +1,8 @@
 """Every code example in README.md and docs/*.md runs (or parses) as written.
 
-- each ```python block runs in a fresh interpreter in an empty temporary folder (the
-  session's private TACTBENCH_CACHE); a block that truly cannot run here (a SLURM cluster,
+- each ```python block (and each example docs/api.md takes from a docstring) runs in a
+  fresh interpreter in an empty temporary folder (the session's private
+  TACTBENCH_CACHE); a block that truly cannot run here (a SLURM cluster,
   CAN hardware) is marked on the line before it with ``<!-- example: not run (reason) -->``
   and is then only compiled;
 - each ``tactbench ...`` command line of the other blocks is resolved against the click
@@ -78,7 +79,18 @@ def python_examples(found: list[Block]) -> list[Block]:
     return out
 
 
-PYTHON = python_examples(blocks())
+def api_examples() -> list[Block]:
+    """The examples docs/api.md takes from docstrings (``.. code-block:: python``), each
+    marked on the line before its fence (:data:`tactbench.apidoc.EXAMPLE_MARK`); the
+    other Python blocks of the generated reference are signatures, not examples."""
+    from tactbench.apidoc import EXAMPLE_MARK
+
+    api = REPO / "docs" / "api.md"
+    lines = api.read_text().splitlines()
+    return [b for b in blocks([api]) if b.lang == "python" and lines[b.line - 2] == EXAMPLE_MARK]
+
+
+PYTHON = python_examples(blocks()) + api_examples()
 
 
 def command_lines(block: Block) -> list[str]:
@@ -212,6 +224,7 @@ def test_the_examples_are_found():
     reasons = [b for b in blocks() if b.not_run]
     assert len(reasons) <= 3, [b.id for b in reasons]
     assert any(b.doc == "docs/runner.md" and "verify_entry" in b.code for b in PYTHON)
+    assert any(b.doc == "docs/api.md" and "report.table()" in b.code for b in PYTHON)
     assert len(SCRIPTS) >= 4
 
 

@@ -1,7 +1,7 @@
 """Nothing a user made is lost: every command that writes refuses to replace what it did
 not write and never replaces its own input (tactbench.paths.check_output_file /
-check_output_folder), runs sharing an out folder keep one grid (ResultStore.claim), a
-row too large to read back is a failed cell, not a silent gap."""
+check_output_folder, `run --out` included), runs sharing an out folder keep one grid
+(ResultStore.claim), a row too large to read back is a failed cell, not a silent gap."""
 
 from __future__ import annotations
 
@@ -97,12 +97,10 @@ def test_preview_replaces_only_its_own_pictures(dataset, tmp_path):
 
 def test_no_output_inside_the_cache_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
-    from tactbench.runner.planning import check_out_folder
-
-    for check in (check_output_file, check_output_folder, check_out_folder):
+    for check in (check_output_file, check_output_folder):
         with pytest.raises(InputError, match="inside the cache folder"):
             check(tmp_path / "cache" / "results")
-    check_out_folder(tmp_path / "elsewhere")  # beside it is fine
+    check_output_folder(tmp_path / "elsewhere")  # beside it is fine
 
 
 def test_import_refuses_an_out_folder_inside_its_source(dataset):

@@ -1,10 +1,13 @@
 """Every verdict the stored reports state is the one their stored rows give.
 
-docs/reports/*/*/results.json keep every row with its per-sequence predictions, so each
-comparison is recomputed here from the rows (with the contrasts and margin the run was
-made with) and must equal the stored one; every table of comparisons in the reports'
-Markdown must be a row of the recomputed tables. A report that states another verdict,
-interval or p fails.
+A run folder's rows are its cells (docs/reports/*/*/cells/*.json, committed, each verified
+by its key and checksum as it is read), every row with its per-sequence predictions, so
+each comparison is recomputed here from the cells, in the order
+:func:`tactbench.runner.results.scene_order` gives them (with the contrasts and margin
+the report's results.json says it was made with), and must equal the one results.json
+states; every table of comparisons in the reports' Markdown must be a row of the
+recomputed tables. A report that states another verdict, interval or p fails, and so
+does a results.json whose rows are not its folder's cells.
 """
 
 from __future__ import annotations
@@ -22,10 +25,13 @@ FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "
 
 def _recompute(path: Path) -> tuple[dict, list]:
     from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.results import ResultStore
 
     doc = json.loads(path.read_text())
+    rows = ResultStore(path.parent).stored_rows()
+    assert rows == doc["rows"], f"{path}: its rows are not those of {path.parent}/cells"
     stats = doc["statistics"]
-    return doc, comparisons(doc["rows"], contrasts=stats["contrasts"], margin=stats["margin"])
+    return doc, comparisons(rows, contrasts=stats["contrasts"], margin=stats["margin"])
 
 
 @pytest.fixture(scope="module")

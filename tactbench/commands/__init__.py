@@ -29,6 +29,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "layout": ("tactbench.commands.layout:layout_group", "Inspect and generate taxel layouts."),
     "run": ("tactbench.commands.run:run_cmd",
             "Run a benchmark grid and report accuracy beside its cost."),
+    "report": ("tactbench.commands.report:report_cmd",
+               "Render a run folder's report again from its stored cell rows, training "
+               "nothing."),
     "cache": ("tactbench.commands.cache:cache_group",
               "Inspect or clear cached encodings (TACTBENCH_CACHE, default ~/.cache/tactbench)."),
     "encode": ("tactbench.commands.encode:encode_cmd",

@@ -3,20 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
-from pathlib import Path
 from typing import Any, Callable
 
 import click
 
 from tactbench.cli import get_registry, json_text
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
-from tactbench.runner import Scene, load_scene_file, run
+from tactbench.runner import Report, Scene, load_scene_file, run
 from tactbench.runner.scene import parse_lengths, parse_seeds
-from tactbench.runner.summaries import failed_cells, summarise
+from tactbench.runner.summaries import failed_cells
 from tactbench.runner.tables import print_comparisons, print_table
-from tactbench.runner.writers import run_labels, write_reports
+from tactbench.runner.writers import run_labels
 
 
 class SceneOption(click.Option):
@@ -170,37 +168,43 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
     scene = Scene.of(fields, labels=labels)
-    registry = get_registry()
-    result = run(scene, registry=registry, progress=sys.stderr.isatty() or not as_json)
-    meta = {"command": " ".join(["tactbench", *sys.argv[1:]]),
-            "git": result.rows[0]["run"]["git"] if result.rows else None,
-            "computed": result.computed, "skipped": result.skipped,
-            "seconds": result.seconds}
-    users = list(result.plan.dataset.users)
-    paths = write_reports(scene.out, result.rows, meta=meta, plots=not no_plots,
-                          contrasts=scene.contrasts or (), margin=scene.margin, users=users)
-    summaries = summarise(result.rows, users=users)
-    failed = failed_cells(result.rows)
-    labels = run_labels(result.rows)  # variants of one classifier told apart
+    report = run(scene, registry=get_registry(), plots=not no_plots,
+                 progress=sys.stderr.isatty() or not as_json)
+    print_report(report, as_json=as_json,
+                 title=f"{scene.dataset} · split {scene.split} · test window "
+                       f"{scene.test_window} · profile {scene.profile}",
+                 done=f"{report.computed} cell(s) computed, {report.skipped} already done; "
+                      f"{report.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
+                      f"results.csv, results.json, plots)")
+    if report.failed:
+        ctx.exit(1)
+
+
+def print_report(report: Report, *, as_json: bool, title: str, done: str) -> None:
+    """Print ``report``: its tables of summaries and comparisons and the line ``done``,
+    or (``as_json``) one JSON document (``meta``: the runs that computed the rows, how
+    the report was rendered, and what this command did; ``summary``, ``comparisons``,
+    ``failed``, ``files``); then each failed cell, on stderr."""
+    failed = failed_cells(report.rows)
+    labels = run_labels(report.rows)  # variants of one classifier told apart
     if as_json:
-        comps = json.loads(paths["json"].read_text())["comparisons"]
-        click.echo(json_text({"meta": meta, "summary": summaries, "comparisons": comps,
-                               "failed": failed,
-                               "files": {k: str(v) for k, v in paths.items()}}, indent=2))
+        meta = {"runs": report.runs, "rendered": report.rendered,
+                "computed": report.computed, "skipped": report.skipped,
+                "seconds": report.seconds}
+        click.echo(json_text({"meta": meta, "summary": report.summaries,
+                              "comparisons": [c.to_dict() for c in report.comparisons],
+                              "failed": failed,
+                              "files": {k: str(v) for k, v in report.paths.items()}},
+                             indent=2))
     else:
-        print_table(summaries, title=f"{scene.dataset} · split {scene.split} · test window "
-                                     f"{scene.test_window} · profile {scene.profile}",
-                    labels=labels)
-        print_comparisons(json.loads(paths["json"].read_text())["comparisons"],
-                          factors=("encoder", "classifier", "contrast"), labels=labels)
-        click.echo(f"{result.computed} cell(s) computed, {result.skipped} already done; "
-                   f"{result.seconds:.1f} s. Reports in {scene.out}/ (report.md, "
-                   f"results.csv, results.json, plots)")
+        print_table(report.summaries, title=title, labels=labels)
+        print_comparisons(report.comparisons, factors=("encoder", "classifier", "contrast"),
+                          labels=labels)
+        click.echo(done)
     if failed:
-        cells = Path(scene.out) / "cells"
+        cells = report.paths["json"].parent / "cells"
         for f in failed:
             click.echo(f"failed: {f['encoder']} × {f['classifier']} L={f['L']} "
                        f"seed={f['seed']}: {f['error']} ({cells / f['key']}.json)", err=True)
         click.echo(f"{len(failed)} cell(s) failed; their rows are in {cells}/ and running "
                    f"the same command again retries them", err=True)
-        ctx.exit(1)

@@ -3,7 +3,26 @@
 A *scene* (:class:`Scene`) names a dataset, encoders, classifiers, window lengths L,
 seeds, a split and a profile. :func:`plan` checks it and expands it into *cells*, one
 per (encoder, classifier, L, seed); each cell trains one classifier and writes one result
-row. :func:`run` does the whole thing.
+row. :func:`run` does the whole thing and returns the :class:`Report` it wrote (the
+report of ``tactbench run``); :func:`render_folder` makes a finished folder's report
+again (``tactbench report``). From a notebook (``pandas.DataFrame(report.table())``
+turns the rows into a data frame, where pandas is installed):
+
+.. code-block:: python
+
+    from tactbench.runner import Scene, render_folder, run
+
+    scene = Scene(dataset="synthetic-forearm:users=2,repetitions=1",
+                  encoders=["raw", "frame-diff"], classifiers=["logreg:max_iter=50"],
+                  L=[3], seeds=[0, 1, 2], pixel_mm=10, test_per_class=1, out="runs/demo")
+    report = run(scene, progress=False, plots=False)  # report.md etc. in runs/demo
+    for s in report.summaries:  # one per encoder × classifier × L, over the seeds
+        print(s["encoder"], f"{100 * s['accuracy_mean']:.1f} % over seeds {s['seeds']}")
+    print(len(report.comparisons), "paired comparison(s);", len(report.failed), "failed")
+    table = report.table()  # the rows as a table: one dict per cell, results.csv's columns
+    assert len(table) == 6 and {"encoder", "seed", "accuracy", "train_s"} <= set(table[0])
+    again = render_folder("runs/demo", margin=2, plots=False)  # nothing trained
+    assert again.rows == report.rows and again.statistics["margin"] == 2
 
 Nothing is computed twice:
 
@@ -12,8 +31,9 @@ Nothing is computed twice:
   version, so each encoding is computed once across runs;
 - each finished cell is written at once, atomically, to ``OUT/cells/<key>.json``
   (:class:`ResultStore`); running the same scene again skips finished cells, and a
-  run killed mid-cell loses only that cell. An out folder without its ``cells/`` (git
-  ignores it) gets the rows its ``results.json`` keeps put back, verified.
+  run killed mid-cell loses only that cell. ``OUT/cells`` is the one store of a run
+  folder: results.json, results.csv and report.md are rendered from it, never read back
+  (:func:`render_folder` renders them again, training nothing).
 
 A cell that raises is stored as a *failed* row (error type, message, last traceback
 frames) and the rest of the grid goes on; the next run retries it.
@@ -30,12 +50,12 @@ that encodes a dataset is :mod:`tactbench.encoders.encoding`),
 :mod:`~tactbench.runner.cell` (train and test one cell),
 :mod:`~tactbench.runner.executors` (local, processes, dask),
 :mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
-memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`),
+memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`, :func:`render_folder`),
 :mod:`~tactbench.runner.summaries` (aggregation over seeds, cells, contrasts),
 :mod:`~tactbench.runner.comparisons` (paired comparisons of cells, as records),
 :mod:`~tactbench.runner.statistics` (the tests, with the training run as the unit),
 :mod:`~tactbench.runner.tables` (terminal and Markdown tables),
-:mod:`~tactbench.runner.writers` (results.json/csv, report.md),
+:mod:`~tactbench.runner.writers` (the :class:`Report`; results.json/csv, report.md),
 :mod:`~tactbench.runner.plots` (one function per figure).
 """
 
@@ -44,10 +64,11 @@ from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported i
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
 from tactbench.runner.entries import load_encoding
-from tactbench.runner.orchestrate import RunResult, run
+from tactbench.runner.orchestrate import render_folder, run
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
 from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
+from tactbench.runner.writers import Report
 
 __all__ = [
     "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",
@@ -55,5 +76,5 @@ __all__ = [
     "EncodingCache", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row",
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows",
-    "run", "RunResult", "git_revision",
+    "run", "render_folder", "Report", "git_revision",
 ]

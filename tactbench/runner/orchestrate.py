@@ -1,51 +1,42 @@
-"""``run(scene)``: plan, encode what is missing, run the unfinished cells, collect rows.
+"""``run(scene)``: plan, encode what is missing, run the unfinished cells, report;
+``render_folder(out)``: the report of a finished folder again, from its cells alone.
 
 This module only orchestrates; each step lives in its own module (scene, plan, cache,
-cell, executors, store, system).
+cell, executors, store, writers, system). Both functions end the same way: every sound
+row of ``OUT/cells`` (the one store of a run folder) → :func:`make_report` →
+:func:`write_report`, so a run's report and a re-rendered one are the same files.
 """
 
 from __future__ import annotations
 
 import logging
-import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
+from tactbench.datasets.loading import load_dataset
+from tactbench.errors import InputError, MissingFileError, TactbenchError
 from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
+from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
 from tactbench.runner.scene import Scene
-from tactbench.runner.results import REPORT_JSON, ResultStore, failed_rows, ok_rows
+from tactbench.runner.summaries import check_contrasts
 from tactbench.runner.system import MemoryTracker
+from tactbench.runner.writers import (
+    OUT_FILES,
+    Report,
+    is_run_output,
+    make_report,
+    write_report,
+)
 from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner")
-
-
-@dataclass
-class RunResult:
-    """What a run left: every stored row of the plan's cells, ok and failed."""
-
-    plan: Plan
-    rows: list[dict[str, Any]]  # in the plan's cell order
-    computed: int  # cells run now (ok or failed)
-    skipped: int  # cells already finished before this run
-    seconds: float
-
-    @property
-    def ok(self) -> list[dict[str, Any]]:
-        """Rows of the cells that finished."""
-        return ok_rows(self.rows)
-
-    @property
-    def failed(self) -> list[dict[str, Any]]:
-        """Rows of the cells that raised (retried by the next run of the same scene)."""
-        return failed_rows(self.rows)
 
 
 def _model_is_sound(models: Path, p: Plan, cell) -> bool:
@@ -64,9 +55,12 @@ def _model_is_sound(models: Path, p: Plan, cell) -> bool:
 
 
 def run(scene: Scene, *, registry=None, progress: bool = True,
-        cache: EncodingCache | None = None,
-        on_row: Callable[[dict[str, Any]], None] | None = None) -> RunResult:
-    """Run ``scene``: plan, encode what is missing, run unfinished cells, collect rows.
+        cache: EncodingCache | None = None, plots: bool = True,
+        on_row: Callable[[dict[str, Any]], None] | None = None) -> Report:
+    """Run ``scene``: plan, encode what is missing, run unfinished cells, then write the
+    folder's report (results.json, results.csv, report.md and, with ``plots``, the
+    figures) from every row of ``OUT/cells`` and return it, with ``computed``,
+    ``skipped`` and ``seconds`` set.
 
     ``registry`` (default: every installed plugin) is used for planning and by every
     cell, in every executor. A cell that raises is stored as a failed row and the others
@@ -83,12 +77,6 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         store = ResultStore(scene.out)
         store.clean()
         claim = store.claim((c.key for c in p.cells), p.identities)  # one grid per folder
-        if not scene.rerun:  # rows results.json keeps and cells/ lacks (git ignores it)
-            restored = store.restore(p.identities)
-            if restored:
-                log.warning("tactbench: %d cell row(s) put back into %s from %s "
-                            "(verified); not computed again", len(restored), store.cells,
-                            store.out / REPORT_JSON)
         models = Path(scene.out) / "models" if scene.save_models else None
         pending = [c for c in p.cells if scene.rerun
                    or not store.finished(c.key, p.identities[c.key])
@@ -96,7 +84,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         folders = ensure_encodings(p, cache, pending, bars)
         memory.step("encode")
         jobs = make_jobs(p, pending, folders, models)
-        run_meta = {"command": " ".join(sys.argv), "git": git_revision(),
+        run_meta = {"command": command_line(), "git": git_revision(),
                     "scene": asdict(scene)}
 
         def finish(row: dict[str, Any]) -> None:
@@ -107,7 +95,82 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
         if jobs:
             execute(scene, jobs, finish, bars, memory)
-    rows = store.rows(c.key for c in p.cells)
     claim.unlink(missing_ok=True)
-    return RunResult(p, rows, computed=len(pending), skipped=len(p.cells) - len(pending),
-                     seconds=time.perf_counter() - start)
+    report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
+                         margin=scene.margin, users=list(p.dataset.users),
+                         rendered="at the end of the run, from the rows of cells/")
+    write_report(scene.out, report, plots=plots)
+    report.computed, report.skipped = len(pending), len(p.cells) - len(pending)
+    report.seconds = time.perf_counter() - start
+    return report
+
+
+def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
+                  margin: float | None = None, plots: bool = True,
+                  registry=None) -> Report:
+    """The report of the run folder ``out`` again, from the rows of ``OUT/cells`` alone,
+    written over its results.json, results.csv, report.md and figures; nothing is
+    trained, and results.json is not read.
+
+    ``contrasts`` and ``margin`` (statistics options, which change no cell) default to
+    those of the scene that computed the folder's latest row
+    (:func:`~tactbench.runner.results.latest_scene`), so that a report rendered again
+    with no options is the run's own, but for the line saying when and by what. The
+    per-user results need the user of each recording: the dataset is loaded (through
+    ``registry``) and used when its content hash is the rows'; otherwise they are left
+    out and report.md says why.
+    """
+    out = Path(out)
+    if not out.is_dir():
+        raise MissingFileError(f"run folder {out} does not exist (or is not a folder)")
+    store = ResultStore(out)
+    if not store.keys():
+        raise InputError(f"run folder {out} holds no cell rows ({store.cells}/*.json): "
+                         f"nothing to report; `tactbench run --out {out}` makes them")
+    rows = store.stored_rows()
+    if not rows:
+        raise InputError(f"every cell row in {store.cells} is damaged (warnings above): "
+                         f"nothing to report; `tactbench run --out {out}` computes them again")
+    # files beside a run's own (a benchmark's notes) stay; of a run's names, only
+    # a report.md tactbench did not write is not ours to replace
+    foreign = [p.name for p in (out / name for name in OUT_FILES)
+               if p.exists() and not is_run_output(p)]
+    if foreign:
+        raise InputError(f"run folder {out} holds a {foreign[0]} tactbench did not write; "
+                         f"move it away first (nothing was written)")
+    scene = latest_scene(rows)
+    contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
+    margin = scene.get("margin") if margin is None else margin
+    check_contrasts(contrasts, [{"encoder": r["encoder"], "classifier": r["classifier"],
+                                 "L": r["L"]} for r in rows])
+    users, missing = dataset_users(rows, registry)
+    how = "re-rendered from the stored rows of cells/ (nothing trained)"
+    report = make_report(rows, contrasts=contrasts, margin=margin, users=users,
+                         rendered=how + (f"; per-user results left out: {missing}"
+                                         if missing else ""))
+    write_report(out, report, plots=plots)
+    return report
+
+
+def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
+                  ) -> tuple[list[str] | None, str | None]:
+    """``(the user of every sample of the rows' dataset, None)``, loading the dataset
+    the rows' scene names; ``(None, why)`` when it cannot be loaded here or is not the
+    one the rows were computed on (another content hash)."""
+    spec = latest_scene(rows).get("dataset")
+    done = ok_rows(rows) or list(rows)
+    digest = done[0].get("dataset_hash") if done else None
+    if not isinstance(spec, str) or not digest:
+        return None, "the rows do not name their dataset"
+    try:
+        data = load_dataset(spec, registry=registry)
+    except TactbenchError as exc:
+        log.warning("tactbench: warning: dataset %s cannot be loaded here (%s); the report "
+                    "leaves out per-user results", spec, exc)
+        return None, f"dataset `{spec}` cannot be loaded here"
+    if data.content_hash() != digest:
+        log.warning("tactbench: warning: dataset %s is not the one the rows were computed "
+                    "on (content hash %s, the rows' %s); the report leaves out per-user "
+                    "results", spec, data.content_hash()[:16], digest[:16])
+        return None, f"dataset `{spec}` here is not the rows' (another content hash)"
+    return list(data.users), None

@@ -23,11 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import re
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Mapping
 
 from tactbench.contracts import CLASSIFIER, ENCODER
@@ -37,23 +33,14 @@ from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.datasets.loading import check_informative, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import InputError
-from tactbench.paths import check_not_in_cache
+from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import profile_options
 from tactbench.budget import check_budget
 from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import Scene
-from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
-
-#: What tactbench writes at the top of an out folder (see :func:`check_out_folder`).
-OUT_FOLDERS = ("cells", "models")
-_OUT_PATTERNS = (re.compile(r"confusion_.+\.png"),)
-#: What file managers leave in any folder they show (tactbench neither reads nor writes it).
-OUT_LITTER = (".DS_Store", "Thumbs.db", "desktop.ini")
-_TEMPORARY = re.compile(r"^\.(.+)\.(?:tmp|bad)-")  # tactbench.paths.temp_name
-#: report.md begins with this line; a report.md without it is not tactbench's.
-REPORT_HEADER = "# tactbench report"
+from tactbench.runner.writers import is_run_output  # what a run writes, said there
 
 #: Part of every cell's identity: bump it when a row's meaning changes, so that old
 #: rows are not taken for new ones.
@@ -138,84 +125,6 @@ def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dic
     name, options = parse_spec(spec)
     merged = {**(extra or {}), **options}
     return format_spec(name, merged), merged
-
-
-def _is_ours(name: str) -> bool:
-    """Whether ``name`` at the top of an out folder is one tactbench writes (temporary
-    files of an interrupted write included: ``.NAME.tmp-...``, ``.NAME.bad-...``)."""
-    temporary = _TEMPORARY.match(name)
-    if temporary:
-        name = temporary.group(1)
-    return (name in OUT_FOLDERS or name in OUT_FILES or name in OUT_LITTER
-            or any(p.fullmatch(name) for p in _OUT_PATTERNS))
-
-
-def _probe_writable(folder: Path, out: Path) -> None:
-    try:
-        fd, probe = tempfile.mkstemp(prefix=".tactbench-probe-", dir=folder)
-    except OSError as exc:
-        where = "" if folder == out else f" ({folder})"
-        raise InputError(f"out folder {out} cannot be written{where}: "
-                         f"{exc.strerror or exc}") from None
-    os.close(fd)
-    os.unlink(probe)
-
-
-def check_out_folder(out: str | Path, *, models: bool = False) -> None:
-    """Refuse an out folder the run could not write, before any work.
-
-    ``out`` must be a folder (or not exist yet, under a folder), writable (a probe file
-    is created and removed: permissions alone do not tell, e.g. for root or a read-only
-    mount), and, when it exists, *tactbench's*: empty, or holding only what a run writes
-    (:data:`OUT_FOLDERS`, :data:`OUT_FILES`, ``confusion_*.png``, temporary
-    ``.NAME.tmp-*`` / ``.NAME.bad-*`` names of those; and :data:`OUT_LITTER`), with a
-    ``report.md`` that starts with :data:`REPORT_HEADER`. A folder with anything else is
-    refused, never overwritten.
-    """
-    out = Path(out)
-
-    check_not_in_cache(out)  # 'cache clear' would delete the results
-    try:
-        if out.exists():
-            if not out.is_dir():
-                raise InputError(f"out folder {out} is a file, not a folder; give a folder")
-            foreign = []
-            with os.scandir(out) as entries:
-                for entry in entries:
-                    if not _is_ours(entry.name):
-                        foreign.append(entry.name)
-                        if len(foreign) == 3:
-                            break
-                    elif entry.name in OUT_FOLDERS and not entry.is_dir():
-                        foreign.append(entry.name)
-            report = out / "report.md"
-            if report.is_file():
-                with open(report, "rb") as fh:
-                    if not fh.read(len(REPORT_HEADER)).startswith(REPORT_HEADER.encode()):
-                        foreign.append("report.md")
-            if foreign:
-                names = ", ".join(repr(n) for n in foreign[:3])
-                raise InputError(f"out folder {out} holds files tactbench did not write "
-                                 f"({names}); give a new or empty folder, or one an earlier "
-                                 f"run wrote")
-            _probe_writable(out, out)
-            for sub in ("cells", "models") if models else ("cells",):
-                if (out / sub).is_dir():
-                    _probe_writable(out / sub, out)
-            return
-        parent = out.absolute().parent
-        while not parent.exists() and parent != parent.parent:
-            parent = parent.parent
-        if not parent.is_dir():
-            raise InputError(f"out folder {out} cannot be made: {parent} is a file, not a "
-                             f"folder")
-        _probe_writable(parent, out)
-    except ValueError as exc:  # InputError is one too
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"out folder {out!r} is not a usable path: {exc}") from None
-    except OSError as exc:  # a name too long, a loop of links, no permission to look
-        raise InputError(f"out folder {out} cannot be used: {exc.strerror or exc}") from None
 
 
 def _check_statistics(scene: Scene) -> None:
@@ -399,7 +308,7 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     """
     registry = registry or load_registry()
     # The scene checked itself when it was made; here what needs the plugins and the disk.
-    check_out_folder(scene.out, models=scene.save_models)
+    check_output_folder(scene.out, option="out folder", ours=is_run_output)
     _check_statistics(scene)
     # Names and options first (cheap), so a typo fails before a dataset is loaded.
     split, window, *designs = _build_designs(scene, registry)

@@ -18,11 +18,10 @@ reported in one warning line and treated as missing, so the run recomputes the c
 Rows written before checksums existed have none to verify and are checked for shape
 only.
 
-``OUT/results.json`` keeps every row of the report too, as stored (key and checksum
-included). ``OUT/cells`` is what git ignores and what a copy of a report folder often
-leaves behind, so a run puts back the rows of its planned cells that ``cells`` lacks and
-``results.json`` holds (:meth:`ResultStore.restore`), each verified as a cell file is
-(and required to have its checksum), instead of computing them again.
+``OUT/cells`` is the one store of a run folder: results.json, results.csv and report.md
+are rendered from these rows (:func:`tactbench.runner.writers.make_report`) and never read
+back. :meth:`ResultStore.stored_rows` gives every sound row of a folder in the order of
+the scene that computed it (:func:`scene_order`), for a report that the rows alone decide.
 """
 
 from __future__ import annotations
@@ -31,13 +30,15 @@ import json
 import logging
 import math
 import os
+import shlex
 import sys
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import CorruptArtefactError, InputError
 from tactbench.integrity import hash_bytes
+from tactbench.specs import POSITIONAL, parse_spec
 from tactbench.paths import (
     Temporary,
     atomic_write_text,
@@ -56,10 +57,6 @@ COST_FIELDS = ("encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "p
 
 #: A cell file larger than this is not a row tactbench wrote (rows are a few kB).
 ROW_MAX_BYTES = 16 << 20
-
-#: The report document of an out folder that keeps every row (written by
-#: :func:`tactbench.runner.writers.write_reports`, which imports this module).
-REPORT_JSON = "results.json"
 
 #: Identity fields that a cell's identity leaves out at their default (see
 #: :func:`tactbench.runner.planning.cell_identity`), with that default.
@@ -170,8 +167,6 @@ class ResultStore:
     def __init__(self, out: str | Path) -> None:
         self.out = Path(out)
         self.cells = self.out / "cells"
-        #: (mtime_ns, size) of results.json, its read error, its rows: see _report_rows
-        self._report_cache: tuple[tuple[int, int], Exception | None, list] | None = None
 
     def path(self, key: str) -> Path:
         """Where the row of cell ``key`` is (or will be) kept."""
@@ -241,62 +236,6 @@ class ResultStore:
         atomic_write_text(self.path(row["key"]), text)
         return row
 
-    def restore(self, identities: dict[str, dict[str, Any]]) -> list[str]:
-        """Put back the rows of planned cells that ``OUT/cells`` lacks and
-        ``OUT/results.json`` holds; returns their keys.
-
-        ``identities``: planned cell key → identity. A row is put back only when it is a
-        sound ``ok`` row of that cell (:func:`check_row` with the planned identity) and
-        has its checksum (results.json is a document people copy, merge and edit); any
-        other is named in one warning line and its cell is computed again.
-        """
-        missing = {k: v for k, v in identities.items()
-                   if not (self.path(k).exists() or self.path(k).is_symlink())}
-        if not missing:
-            return []
-        report = self.out / REPORT_JSON
-        restored: list[str] = []
-        for row in self._report_rows(warn=True):
-            key = row["key"]
-            if key not in missing or row_status(row) != OK:
-                continue
-            problem = check_row(row, key, missing[key]) if "checksum" in row \
-                else "has no checksum to verify it"
-            if problem is not None:
-                log.warning("tactbench: warning: the row of cell %s in %s %s; the cell is "
-                            "computed again", key, report, problem)
-                continue
-            self.put(row)
-            restored.append(key)
-            del missing[key]
-        return restored
-
-    def _report_rows(self, *, warn: bool = False) -> list[dict[str, Any]]:
-        """The rows (dicts with a string ``key``) of ``OUT/results.json``, unverified;
-        none when it is absent or unreadable (``warn``: said in one warning line). A run
-        asks twice (:meth:`claim`, then :meth:`restore`); the file, a report's every row
-        with its predictions, is parsed once while it stays the same."""
-        report = self.out / REPORT_JSON
-        try:
-            st = report.stat()
-        except OSError:
-            return []
-        stamp = (st.st_mtime_ns, st.st_size)
-        if self._report_cache is None or self._report_cache[0] != stamp:
-            try:
-                doc, error = json.loads(report.read_bytes()), None
-            except (OSError, ValueError, RecursionError) as exc:
-                doc, error = None, exc
-            rows = doc.get("rows") if isinstance(doc, dict) else None
-            self._report_cache = (stamp, error, [
-                row for row in (rows if isinstance(rows, list) else [])
-                if isinstance(row, dict) and isinstance(row.get("key"), str)])
-        _, error, rows = self._report_cache
-        if error is not None and warn:
-            log.warning("tactbench: warning: %s cannot be read (%s); its rows are not "
-                        "reused", report, error)
-        return rows
-
     def clean(self) -> list[Temporary]:
         """Remove temporary row files whose writing process is gone; returns them."""
         return remove_orphans(self.cells)
@@ -304,6 +243,17 @@ class ResultStore:
     def rows(self, keys: Iterable[str]) -> list[dict[str, Any]]:
         """The stored rows of ``keys``, in that order, skipping cells without a sound one."""
         return [row for key in keys if (row := self.get(key)) is not None]
+
+    def keys(self) -> list[str]:
+        """The keys of every cell file in ``OUT/cells`` (sound or not), sorted."""
+        if not self.cells.is_dir():
+            return []
+        return sorted(p.stem for p in self.cells.glob("*.json") if not p.name.startswith("."))
+
+    def stored_rows(self) -> list[dict[str, Any]]:
+        """Every sound row of the folder, ok and failed, in :func:`scene_order`; a damaged
+        one is named in a warning and left out (as :meth:`get` does)."""
+        return scene_order(self.rows(self.keys()))
 
     # ------------------------------------------------------- runs sharing an out folder
 
@@ -318,32 +268,23 @@ class ResultStore:
 
         The rule: one out folder holds one grid, and a run may extend it (more seeds,
         L, encoders) but not leave out cells already there: those are another grid's,
-        whose report this run would replace. Two runs at once must plan the same grid;
-        of two different ones, the later is refused, naming the first.
+        whose report this run would replace. Only ``cells/`` counts: results.json is
+        rendered from it and never read. Two runs at once must plan the same grid; of
+        two different ones, the later is refused, naming the first.
         """
         keys = sorted(set(keys))
         planned = set(keys)
         out = self.out
-        stray = sorted(p.stem for p in self.cells.glob("*.json")
-                       if not p.name.startswith(".") and p.stem not in planned) \
-            if self.cells.is_dir() else []
+        stray = [key for key in self.keys() if key not in planned]
         if stray:
             first = _describe(self.path(stray[0]), identities)
             raise InputError(f"out folder {out} holds {len(stray)} cell(s) of another grid "
                              f"({first}) that this run does not plan, and its report "
                              f"would leave them out; give a new --out, or a grid that "
                              f"includes them")
-        # the rows only results.json keeps (git ignores cells/): the same rule
-        kept = [row for row in self._report_rows()
-                if row["key"] not in planned and not self.path(row["key"]).exists()]
-        if kept:
-            raise InputError(f"out folder {out}: its {REPORT_JSON} holds {len(kept)} row(s) "
-                             f"of another grid ({_describe(kept[0], identities)}) that this "
-                             f"run does not plan, and its report would replace them; give "
-                             f"a new --out, or a grid that includes them")
         self.cells.mkdir(parents=True, exist_ok=True)
         mine = self.cells / temp_name("run")
-        atomic_write_text(mine, json.dumps({"keys": keys, "command": _command()}))
+        atomic_write_text(mine, json.dumps({"keys": keys, "command": command_line()}))
         for claim in sorted(self.cells.glob(".run.tmp-*"), key=_claim_order):
             info = parse_temporary(claim)
             if claim == mine or info is None or info.pid == os.getpid() \
@@ -371,24 +312,33 @@ def _claim_order(path: Path) -> tuple[int, str]:
         return 0, path.name
 
 
-def _command() -> str:
-    return " ".join(["tactbench", *sys.argv[1:]])
+def command_line(argv: Sequence[str] | None = None) -> str:
+    """The command line a row, a claim and a report record, as a user would type it
+    again: ``tactbench ARGS`` however tactbench was started (its script, ``python -m
+    tactbench``), else the program's name and its arguments (a script, a notebook's
+    kernel); quoted where an argument needs it. The one place it is written."""
+    argv = list(sys.argv if argv is None else argv)
+    if not argv:
+        return "python"
+    program = Path(argv[0])
+    if program.name == "tactbench" or (program.name == "__main__.py"
+                                       and program.parent.name == "tactbench"):
+        return shlex.join(["tactbench", *argv[1:]])
+    return shlex.join([program.name, *argv[1:]])
 
 
-def _describe(path: Path | dict[str, Any],
-              identities: dict[str, dict[str, Any]] | None = None) -> str:
-    """``encoder × classifier L=.. seed=.. from `command``` for a stored row (a cell file
-    or a row of results.json), as far as it reads; with the planned ``identities``, also
-    how it differs from the nearest."""
+def _describe(path: Path, identities: dict[str, dict[str, Any]] | None = None) -> str:
+    """``encoder × classifier L=.. seed=.. from `command``` for a stored cell file, as
+    far as it reads; with the planned ``identities``, also how it differs from the
+    nearest."""
     try:
-        row = path if isinstance(path, dict) else json.loads(
-            path.read_bytes()[:ROW_MAX_BYTES])
+        row = json.loads(path.read_bytes()[:ROW_MAX_BYTES])
         label = (f"{row['encoder']} × {str(row['classifier']).split(':')[0]} L={row['L']} "
                  f"seed={row['seed']}")
         command = (row.get("run") or {}).get("command")
         label += f", from `{command}`" if command else ""
     except Exception:  # noqa: BLE001 — only a description; the file is named instead
-        return path.get("key", "a row") if isinstance(path, dict) else path.name
+        return path.name
     differences = min((identity_differences(row, i) for i in (identities or {}).values()),
                       key=len, default=[])
     if differences:
@@ -419,3 +369,73 @@ def identity_differences(row: dict[str, Any], identity: dict[str, Any],
 def _short(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 40 else text[:39] + "…"
+
+
+# ------------------------------------------------------------------ the order of a report
+
+
+def latest_scene(rows: Iterable[dict[str, Any]]) -> dict[str, Any]:
+    """The scene (as its fields, ``run.scene``) recorded by the row finished last, ``{}``
+    when no row records one. One out folder holds one grid and every run plans every cell
+    already there (:meth:`ResultStore.claim`), so this scene covers every row."""
+    stamped = [((str(r.get("finished", "")), str(r.get("key", ""))), scene) for r in rows
+               if isinstance(scene := (r.get("run") or {}).get("scene"), dict)]
+    return max(stamped, key=lambda pair: pair[0])[1] if stamped else {}
+
+
+def scene_order(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` in the order their scene planned them: encoders, classifiers, L, seeds and
+    initialisation seeds as the scene lists them, so that a report made from a folder's
+    cells alone says ``farneback − raw`` where the run listed raw first.
+
+    The scene is :func:`latest_scene`'s. A cell's spec is placed
+    at the scene's spec that names it with the most matching options (a classifier's
+    row spec adds its profile's); what no scene names (rows without one) comes after,
+    in sorted order.
+    """
+    rows = list(rows)
+    scene = latest_scene(rows)
+    lengths = scene.get("L") or scene.get("lengths") or []  # "lengths": older scenes
+
+    def place(value: Any, listed: Sequence[Any] | None) -> int:
+        listed = list(listed or [])
+        return listed.index(value) if value in listed else len(listed)
+
+    def sort_key(row: dict[str, Any]) -> tuple:
+        init = row.get("init_seed")
+        return (_spec_place(row["encoder"], scene.get("encoders")), row["encoder"],
+                _spec_place(row["classifier"], scene.get("classifiers")), row["classifier"],
+                place(row["L"], lengths), row["L"], place(row["seed"], scene.get("seeds")),
+                row["seed"], place(init, scene.get("init_seeds")), -1 if init is None else init)
+
+    return sorted(rows, key=sort_key)
+
+
+def _spec_place(spec: str, listed: Sequence[str] | None) -> int:
+    """The index of the spec in ``listed`` that names ``spec`` with the most matching
+    options (none differing); ``len(listed)`` when none names it."""
+    listed = [s for s in (listed or []) if isinstance(s, str)]
+    try:
+        name, options = parse_spec(spec)
+    except InputError:
+        return len(listed)
+    best, place = -1, len(listed)
+    for i, given in enumerate(listed):
+        try:
+            given_name, given_options = parse_spec(given)
+        except InputError:
+            continue
+        if given_name != name:
+            continue
+        matched = 0
+        for key, value in given_options.items():
+            if key == POSITIONAL:  # "sklearn:SVC" → estimator=SVC
+                if value not in options.values():
+                    break
+            elif key in options and options[key] != value:
+                break
+            matched += 1
+        else:
+            if matched > best:
+                best, place = matched, i
+    return place

@@ -1,7 +1,12 @@
-"""The files of a run's out folder: results.json, results.csv, report.md and the figures.
+"""A run folder's report: computed from its rows, written as results.json, results.csv,
+report.md and the figures.
 
-:data:`OUT_FILES` lists every top-level file a run writes besides ``confusion_*.png``
-(the out-folder check of :mod:`tactbench.runner.planning` reads it from here).
+:func:`make_report` computes a :class:`Report` from rows alone (what the cells of a folder
+hold: :meth:`tactbench.runner.results.ResultStore.stored_rows`); :func:`write_report`
+writes it. Nothing here reads a file back: the same rows always give the same files, but
+for the one line saying when and by which command they were rendered (:data:`RENDERED`).
+:func:`is_run_output` says what a run writes at the top of its folder (the out-folder
+check, :func:`tactbench.paths.check_output_folder`, asks it).
 """
 
 from __future__ import annotations
@@ -9,15 +14,24 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
+import shlex
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
-from tactbench.runner.comparisons import comparisons
+from tactbench.runner.comparisons import Comparison, comparisons
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
-from tactbench.runner.results import ok_rows, row_status
+from tactbench.runner.results import (
+    command_line,
+    failed_rows,
+    ok_rows,
+    row_status,
+)
 from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_section,
@@ -32,90 +46,195 @@ from tactbench.runner.tables import (
 #: Every top-level file a run writes (``confusion_*.png`` besides, one per cell).
 OUT_FILES = ("results.json", "results.csv", "report.md",
              *(f"{name}.png" for name in FIGURES))
+#: The folders a run writes at the top of its out folder.
+OUT_FOLDERS = ("cells", "models")
+#: report.md begins with this line; a report.md without it is not tactbench's.
+REPORT_HEADER = "# tactbench report"
+#: The line of report.md (and the key of results.json) that says when and by which
+#: command the report was rendered: the only part two renders of the same rows differ in.
+RENDERED = "- rendered: "
+_CONFUSION = re.compile(r"confusion_.+\.png")
+
+
+def is_run_output(path: Path) -> bool:
+    """Whether ``path``, at the top of an out folder, is one a run writes (and may write
+    again): ``cells/``, ``models/``, :data:`OUT_FILES`, ``confusion_*.png``; a report.md
+    only when it begins with :data:`REPORT_HEADER`."""
+    name = path.name
+    if name in OUT_FOLDERS:
+        return path.is_dir() or not path.exists()
+    if name == "report.md" and path.is_file():
+        with open(path, "rb") as fh:
+            return fh.read(len(REPORT_HEADER)) == REPORT_HEADER.encode()
+    return name in OUT_FILES or bool(_CONFUSION.fullmatch(name))
+
+
+@dataclass
+class Report:
+    """What a run folder's rows say, as results.json, results.csv and report.md show it.
+
+    ``rows``: every row, ok and failed, in the scene's order; ``summaries`` (one per
+    dataset, split, encoder, classifier and L, over seeds), ``comparisons`` (paired over
+    runs), ``variance`` and ``statistics`` (the options they were made with) are computed
+    from them (:func:`make_report`); ``runs``: the command lines and git revisions that
+    computed the rows; ``rendered``: when and by which command this report was made;
+    ``paths``: the files written (empty until :func:`write_report`). :func:`run` also
+    sets ``computed``, ``skipped`` and ``seconds``.
+    """
+
+    rows: list[dict[str, Any]]
+    summaries: list[dict[str, Any]]
+    comparisons: list[Comparison]
+    variance: list[dict[str, Any]]
+    statistics: dict[str, Any]
+    runs: list[dict[str, Any]]
+    rendered: dict[str, str]
+    reference: list[dict[str, Any]] = field(default_factory=list)
+    paths: dict[str, Path] = field(default_factory=dict)
+    computed: int = 0  # cells run now (ok or failed); set by run()
+    skipped: int = 0  # cells already finished before this run
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> list[dict[str, Any]]:
+        """Rows of the cells that finished."""
+        return ok_rows(self.rows)
+
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        """Rows of the cells that raised (retried by the next run of the same scene)."""
+        return failed_rows(self.rows)
+
+    def table(self) -> list[dict[str, Any]]:
+        """The rows as a flat table, one dict per cell with the columns of results.csv
+        (``pandas.DataFrame(report.table())`` makes a data frame of it)."""
+        return flat_rows(self.rows)
+
+    def document(self) -> dict[str, Any]:
+        """results.json's content: ``runs``, ``rendered``, ``summary``, ``comparisons``
+        (with the contrasts and margin they were made with in ``statistics``),
+        ``variance``, ``rows`` and, when given, ``reference``."""
+        doc = {"runs": self.runs, "rendered": self.rendered, "summary": self.summaries,
+               "comparisons": [c.to_dict() for c in self.comparisons],
+               "statistics": self.statistics,
+               "variance": self.variance, "rows": self.rows}
+        if self.reference:
+            doc["reference"] = self.reference
+        return doc
+
+
+def csv_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """The columns of results.csv (and of :meth:`Report.table`) for ``rows``: the cell,
+    its status and accuracy, ``acc_<class>`` for every class of any row, the costs."""
+    classes = list(dict.fromkeys(c for r in rows for c in r.get("classes", ())))
+    return ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
+            "classifier", "profile", "L", "seed", "status", "accuracy",
+            *[f"acc_{c}" for c in classes],
+            "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
+            "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
+            "error"]
+
+
+def flat_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One flat dict per row, of the :func:`csv_columns` (None where a row has no
+    value); a failed cell's has ``status`` ``failed``, its error in ``error`` and no
+    accuracy or costs."""
+    columns = csv_columns(rows)
+    flat = []
+    for r in rows:
+        line = {**r, "status": row_status(r)}
+        for c, accuracy in (r.get("per_class_accuracy") or {}).items():
+            line[f"acc_{c}"] = accuracy
+        if "error" in r:
+            line["error"] = f"{r['error'].get('type')}: {r['error'].get('message')}"
+        flat.append({k: line.get(k) for k in columns})
+    return flat
 
 
 def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
-    """Flat CSV: one line per cell, per-class accuracies as ``acc_<class>`` columns.
-
-    A failed cell's line has ``status`` ``failed``, its error in ``error`` and no
-    accuracy or costs.
-    """
-    classes: list[str] = []
-    for r in rows:
-        for c in r["classes"]:
-            if c not in classes:
-                classes.append(c)
-    columns = ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
-               "classifier", "profile", "L", "seed", "status", "accuracy",
-               *[f"acc_{c}" for c in classes],
-               "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
-               "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
-               "error"]
+    """Flat CSV: one line per cell (:func:`flat_rows`)."""
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore")
+    writer = csv.DictWriter(buf, fieldnames=csv_columns(rows))
     writer.writeheader()
-    for r in rows:
-        flat = {**r, "status": row_status(r)}
-        for c in classes:
-            flat[f"acc_{c}"] = r.get("per_class_accuracy", {}).get(c)
-        if "error" in r:
-            flat["error"] = f"{r['error'].get('type')}: {r['error'].get('message')}"
-        writer.writerow(flat)
+    writer.writerows(flat_rows(rows))
     return buf.getvalue()
 
 
-def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *,
-                  meta: dict[str, Any] | None = None, plots: bool = True,
-                  reference: Iterable[dict[str, Any]] | None = None,
-                  contrasts: Sequence[str] = (), margin: float | None = None,
-                  users: Sequence[str] | None = None) -> dict[str, Path]:
-    """Write results.json, results.csv, report.md and the plots into ``out``.
+def make_report(rows: Sequence[dict[str, Any]], *,
+                reference: Iterable[dict[str, Any]] | None = None,
+                contrasts: Sequence[str] = (), margin: float | None = None,
+                users: Sequence[str] | None = None, rendered: str | None = None,
+                primary: Sequence[str] = ()) -> Report:
+    """The :class:`Report` of ``rows`` (every row of a folder, ok and failed, in the
+    scene's order: failed cells are listed and left out of summaries and plots).
 
-    ``rows``: every row of the run, ok and failed (failed cells are listed in report.md,
-    kept in the JSON and CSV, and left out of summaries and plots). ``reference``: the
-    published points to set beside ours (:func:`check_reference`): drawn in
-    ``accuracy_vs_L.png``, tabled in report.md and kept in results.json. ``contrasts``
-    and ``margin`` (points): see :func:`tactbench.runner.comparisons.comparisons`;
-    ``users``: the user of each dataset sample (by index), for per-user results.
+    ``reference``: published points to set beside ours (:func:`check_reference`; a
+    mistake is refused here, before any file); ``contrasts``, ``margin`` (points) and
+    ``primary`` (the contrasts of the confirmatory family): see
+    :func:`tactbench.runner.comparisons.comparisons`; ``users``: the user of each
+    dataset sample (by index), for per-user results; ``rendered``: how the report came
+    to be, said in report.md beside the command line and the time.
     """
+    rows = list(rows)
+    reference = check_reference(reference)
+    return Report(
+        rows=rows, summaries=summarise(rows, users=users),
+        comparisons=comparisons(rows, contrasts=contrasts, margin=margin, users=users,
+                                primary=primary),
+        variance=variance_decomposition(rows),
+        statistics={"unit": "run (one split seed)", "contrasts": list(contrasts),
+                    "margin": margin, "per_user": users is not None,
+                    **({"primary": list(primary)} if primary else {})},
+        runs=computed_by(rows), reference=reference,
+        rendered={"by": command_line(), "how": rendered or "from the rows of cells/",
+                  "at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")})
+
+
+def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The runs that computed ``rows``: ``{"command", "git", "cells"}`` for each distinct
+    command line and git revision a row records (``run``), the earliest first. A command
+    is shown as :func:`~tactbench.runner.results.command_line` writes it (rows from
+    before it kept the program's path: ``/src/tactbench/__main__.py run`` is
+    ``tactbench run``)."""
+    runs: dict[tuple, dict[str, Any]] = {}
+    for row in sorted(rows, key=lambda r: (str(r.get("finished", "")), str(r.get("key")))):
+        run = row.get("run") if isinstance(row.get("run"), dict) else {}
+        command = run.get("command")
+        try:
+            command = command_line(shlex.split(command)) if isinstance(command, str) \
+                else command
+        except ValueError:  # unbalanced quotes: shown as recorded
+            pass
+        entry = runs.setdefault((str(command), str(run.get("git"))), {
+            "command": command, "git": run.get("git"), "cells": 0})
+        entry["cells"] += 1
+    return list(runs.values())
+
+
+def write_report(out: str | Path, report: Report, *, plots: bool = True) -> dict[str, Path]:
+    """Write ``report`` into ``out`` as results.json, results.csv, report.md and (with
+    ``plots``) the figures; returns the paths written (also kept in ``report.paths``)."""
     out = Path(out)
-    reference = check_reference(reference)  # a mistake is refused before any file
     out.mkdir(parents=True, exist_ok=True)
-    doc = results_document(rows, meta=meta, reference=reference, contrasts=contrasts,
-                           margin=margin, users=users)
     paths = {"json": out / "results.json", "csv": out / "results.csv",
              "markdown": out / "report.md"}
-    atomic_write_text(paths["json"], json.dumps(doc, indent=2))
-    atomic_write_text(paths["csv"], rows_csv(rows))
+    atomic_write_text(paths["json"], json.dumps(report.document(), indent=2))
+    atomic_write_text(paths["csv"], rows_csv(report.rows))
     figures: dict[str, Path] = {}
-    if plots and doc["summary"]:
-        figures = write_plots(out, doc["summary"], reference=reference,
-                              labels=run_labels(rows, doc["summary"]))
+    if plots and report.summaries:
+        figures = write_plots(out, report.summaries, reference=report.reference,
+                              labels=run_labels(report.rows, report.summaries))
         paths.update(figures)
-    atomic_write_text(paths["markdown"], markdown_report(
-        doc["summary"], rows, meta or {}, figures, doc["comparisons"], reference=reference,
-        variance=doc["variance"]))
+    atomic_write_text(paths["markdown"], markdown_report(report, figures))
+    report.paths = paths
     return paths
 
 
-def results_document(rows: Sequence[dict[str, Any]], *, meta: dict[str, Any] | None = None,
-                     reference: Sequence[dict[str, Any]] = (), contrasts: Sequence[str] = (),
-                     margin: float | None = None, users: Sequence[str] | None = None
-                     ) -> dict[str, Any]:
-    """results.json's content: ``meta``, ``summary``, ``comparisons`` (with the contrasts
-    and margin they were made with in ``statistics``), ``variance``, ``rows`` and, when
-    given, ``reference``. Everything but ``rows`` and ``meta`` is computed from the rows,
-    so a stored document can be recomputed (``benchmarks/reports.py --from-stored``)."""
-    rows = list(rows)
-    doc = {"meta": meta or {}, "summary": summarise(rows, users=users),
-           "comparisons": [c.to_dict() for c in comparisons(
-               rows, contrasts=contrasts, margin=margin, users=users)],
-           "statistics": {"unit": "run (one split seed)", "contrasts": list(contrasts),
-                          "margin": margin, "per_user": users is not None},
-           "variance": variance_decomposition(rows), "rows": rows}
-    if reference:
-        doc["reference"] = list(reference)
-    return doc
+def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *, plots: bool = True,
+                  **options: Any) -> dict[str, Path]:
+    """:func:`make_report` of ``rows`` (with its ``options``), written into ``out`` by
+    :func:`write_report`; returns the paths written."""
+    return write_report(out, make_report(rows, **options), plots=plots)
 
 
 def run_labels(rows: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any]] = ()
@@ -127,18 +246,31 @@ def run_labels(rows: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any
                         *(s["classifier"] for s in summaries)])
 
 
-def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
-                    variance=()) -> str:
-    """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
-    comparisons over runs (with per-class and per-user gains), the variance
-    decomposition, published reference points, failed cells, figures with captions."""
-    labels = run_labels(rows, summaries)
+def _runs_text(runs: Sequence[dict[str, Any]]) -> str:
+    """``computed by `COMMAND` (git `REV`)``; several runs with their counts of cells."""
+    if len(runs) == 1:
+        return f"computed by `{runs[0]['command']}` (git `{runs[0]['git']}`)"
+    return "computed by " + "; ".join(f"`{r['command']}` (git `{r['git']}`, {r['cells']} "
+                                      f"cells)" for r in runs)
+
+
+def _statistics_text(statistics: dict[str, Any]) -> str:
+    margin = statistics.get("margin")
+    contrasts = ", ".join(f"`{c}`" for c in statistics.get("contrasts") or ()) or "none"
+    primary = ", ".join(f"`{c}`" for c in statistics.get("primary") or ())
+    return (f"- statistics: margin {'none' if margin is None else f'{margin:g} points'}; "
+            f"contrasts {contrasts}" + (f"; primary {primary}" if primary else ""))
+
+
+def _facts(report: Report) -> list[str]:
+    """The lines of report.md that say what the rows are: dataset, split, cells and the
+    runs that computed them, versions, machines, statistics options, how it was rendered."""
+    rows = report.rows
     done = ok_rows(rows)
-    failed = failed_cells_markdown(rows)
     first = done[0] if done else (rows[0] if rows else {})
     n_failed = len(rows) - len(done)
-    lines = [
-        "# tactbench report", "",
+    rendered = report.rendered
+    return [
         f"- dataset: `{first.get('dataset', '?')}` (content hash "
         f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
         f"- split: `{first.get('split', '?')}`; test window: "
@@ -146,12 +278,28 @@ def markdown_report(summaries, rows, meta, figures, comps=(), *, reference=(),
         f"classified on); profile: `{first.get('profile', '?')}`; "
         f"device: `{first.get('device', '?')}`",
         f"- cells: {len(rows)}" + (f" ({n_failed} failed, listed below)" if n_failed else "")
-        + f"; command: `{meta.get('command', '')}`",
-        f"- git: `{meta.get('git')}`; versions: "
-        + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
+        + f"; {_runs_text(report.runs)}",
+        "- versions: " + ", ".join(f"{k} {v}" for k, v in first.get("versions", {}).items()),
         f"- machine: {describe_machines(rows)} (see docs/reliability.md, 'Numbers "
         f"across machines')",
-        "",
+        _statistics_text(report.statistics),
+        f"{RENDERED}{rendered['how']} by `{rendered['by']}` at {rendered['at']}",
+    ]
+
+
+def markdown_report(report: Report, figures: dict[str, Path]) -> str:
+    """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
+    comparisons over runs (with per-class and per-user gains), the variance
+    decomposition, published reference points, failed cells, figures with captions."""
+    summaries, rows, comps = report.summaries, report.rows, report.comparisons
+    reference, variance = report.reference, report.variance
+    labels = run_labels(rows, summaries)
+    done = ok_rows(rows)
+    failed = failed_cells_markdown(rows)
+    first = done[0] if done else (rows[0] if rows else {})
+    n_failed = len(rows) - len(done)
+    lines = [
+        REPORT_HEADER, "", *_facts(report), "",
         "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
         "mean over seeds (test set: "
         f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "

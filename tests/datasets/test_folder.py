@@ -326,7 +326,7 @@ def test_import_of_any_readable_source_and_its_errors(tmp_path):
         ([str(tmp_path / "cost.csv"), "--out", str(tmp_path / "cost.csv")],
          "overlaps the input"),
         ([str(tmp_path / "syn"), "--out", str(tmp_path / "cost.csv")],
-         "exists and is not a folder"),
+         "is a file, not a folder"),
     ]:
         res = CliRunner().invoke(cli, ["data", "import", *args])
         assert res.exit_code == 2 and message in res.output, res.output

@@ -78,49 +78,84 @@ def test_a_failing_cell_does_not_end_the_grid_and_a_rerun_retries_only_it(
            [r["finished"] for r in first.ok]
 
 
-def test_a_report_folder_copied_without_its_cells_is_not_computed_again(
-        tmp_path, tiny_scene, cache, caplog):
-    # git ignores OUT/cells: a report folder from a clone, or moved with `git mv` and
-    # checked out elsewhere, has results.json (every row, with its checksum) and no cells
-    import shutil
-
-    from tactbench.runner.writers import write_reports
-
-    scene = tiny_scene(encoders=["raw"], classifiers=[FAST_CLF], seeds=[0, 1],
-                       out=str(tmp_path / "paper"))
-    first = run(scene, progress=False, cache=cache)
-    write_reports(scene.out, first.rows, plots=False)
-    moved = tmp_path / "paper-v1"
-    shutil.copytree(scene.out, moved, ignore=shutil.ignore_patterns("cells"))
-    again = run(replace(scene, out=str(moved)), progress=False, cache=cache)
-    assert (again.computed, again.skipped) == (0, 2)
-    assert again.rows == first.rows  # the rows as computed, put back into cells/
-    assert f"2 cell row(s) put back into {moved / 'cells'}" in caplog.text
-    # --rerun still recomputes every cell
-    shutil.rmtree(moved / "cells")
-    assert run(replace(scene, out=str(moved), rerun=True), progress=False,
-               cache=cache).computed == 2
+def test_run_returns_the_report_it_writes(tiny_scene, cache):
+    scene = tiny_scene(encoders=["raw"], classifiers=[FAST_CLF], seeds=[0, 1])
+    report = run(scene, progress=False, cache=cache, plots=False)
+    doc = json.loads(report.paths["json"].read_text())
+    assert doc["rows"] == report.rows and doc["summary"] == report.summaries
+    assert doc["comparisons"] == report.comparisons and doc["runs"] == report.runs
+    assert [r["cells"] for r in report.runs] == [2] and report.runs[0]["git"]
+    assert report.runs[0]["command"] == report.rows[0]["run"]["command"]
+    assert sorted(report.paths) == ["csv", "json", "markdown"]
+    table = report.table()
+    assert [t["key"] for t in table] == [r["key"] for r in report.rows]
+    assert table[0]["accuracy"] == report.rows[0]["accuracy"] and "acc_Grasp" in table[0]
 
 
-def test_another_grid_is_refused_where_only_results_json_keeps_the_rows(
-        tmp_path, tiny_scene, cache):
-    """A report folder without cells/ (as git leaves it) still holds a grid: a run of
-    another grid into it is refused before any work, and results.json is kept."""
+def test_results_json_edited_or_deleted_changes_nothing_a_run_computes(
+        tiny_scene, cache):
+    """The cells are the one store: a results.json edited (another row, another
+    accuracy) or deleted is neither read nor trusted; the run resumes from cells/ and
+    writes results.json again from them."""
+    scene = tiny_scene(encoders=["raw"], classifiers=[FAST_CLF], seeds=[0, 1])
+    first = run(scene, progress=False, cache=cache, plots=False)
+    path = Path(scene.out) / "results.json"
+    doc = json.loads(path.read_text())
+    doc["rows"][0]["accuracy"] = 0.0
+    doc["rows"].append({**doc["rows"][1], "key": "0123456789abcdef", "seed": 7})
+    path.write_text(json.dumps(doc))
+    again = run(scene, progress=False, cache=cache, plots=False)
+    assert (again.computed, again.skipped) == (0, 2) and again.rows == first.rows
+    assert json.loads(path.read_text())["rows"] == first.rows
+    path.unlink()
+    (Path(scene.out) / "report.md").unlink()
+    again = run(scene, progress=False, cache=cache, plots=False)
+    assert (again.computed, again.skipped) == (0, 2) and again.rows == first.rows
+    assert json.loads(path.read_text())["rows"] == first.rows
+
+
+def test_one_grid_per_folder_is_decided_by_its_cells_alone(tmp_path, tiny_scene, cache):
+    """Cells of another grid refuse a run before any work; a results.json without
+    cells (rows no cell holds) is another run's output to replace, not a grid."""
     import shutil
 
     from tactbench.errors import InputError
-    from tactbench.runner.writers import write_reports
 
     scene = tiny_scene(encoders=["raw"], classifiers=[FAST_CLF], seeds=[0])
-    write_reports(scene.out, run(scene, progress=False, cache=cache).rows, plots=False)
-    shutil.rmtree(Path(scene.out) / "cells")
+    run(scene, progress=False, cache=cache, plots=False)
     report = (Path(scene.out) / "results.json").read_bytes()
-    with pytest.raises(InputError, match=r"results.json holds 1 row\(s\) of another grid "
+    with pytest.raises(InputError, match=r"holds 1 cell\(s\) of another grid "
                                          r"\(raw × logreg L=3 seed=0"):
         run(replace(scene, seeds=[1]), progress=False, cache=cache)
     assert (Path(scene.out) / "results.json").read_bytes() == report
-    # a grid that includes the stored cell extends the folder, as with cells/
-    assert run(replace(scene, seeds=[0, 1]), progress=False, cache=cache).computed == 1
+    # a grid that includes the stored cell extends the folder
+    assert run(replace(scene, seeds=[0, 1]), progress=False, cache=cache,
+               plots=False).computed == 1
+    shutil.rmtree(Path(scene.out) / "cells")
+    other = run(replace(scene, seeds=[2]), progress=False, cache=cache, plots=False)
+    assert other.computed == 1 and [r["seed"] for r in other.rows] == [2]
+    assert [r["seed"] for r in json.loads((Path(scene.out) / "results.json")
+                                          .read_text())["rows"]] == [2]
+
+
+def test_per_user_results_need_the_rows_dataset_and_say_when_it_is_gone(
+        tmp_path, nolayout_dataset, cache, caplog):
+    import shutil
+
+    from tactbench.runner import Scene, render_folder
+
+    scene = Scene(dataset=str(nolayout_dataset), encoders=["raw"], classifiers=[FAST_CLF],
+                  L=[3], seeds=[0], test_per_class=1, threads=1, out=str(tmp_path / "out"))
+    first = run(scene, progress=False, cache=cache, plots=False)
+    assert first.statistics["per_user"] is True
+    again = render_folder(scene.out, plots=False)
+    assert again.summaries == first.summaries  # the dataset is there: per-user results
+    shutil.rmtree(nolayout_dataset)
+    gone = render_folder(scene.out, plots=False)
+    assert gone.statistics["per_user"] is False and gone.rows == first.rows
+    assert "cannot be loaded here" in caplog.text
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "per-user results left out: dataset" in report
 
 
 def test_an_extra_plugin_trains_its_cells(tiny_scene, cache, fake_registry):

@@ -171,12 +171,13 @@ def test_an_out_folder_that_cannot_be_written_is_refused_before_any_work(
 
 
 def test_the_writability_probe_leaves_nothing_behind(tmp_path):
-    from tactbench.runner.planning import check_out_folder
+    from tactbench.paths import check_output_folder
+    from tactbench.runner.writers import is_run_output
 
-    check_out_folder(tmp_path / "new" / "out")
+    check_output_folder(tmp_path / "new" / "out", option="out folder", ours=is_run_output)
     assert list(tmp_path.iterdir()) == []
     (tmp_path / "out").mkdir()
-    check_out_folder(tmp_path / "out")
+    check_output_folder(tmp_path / "out", option="out folder", ours=is_run_output)
     assert list((tmp_path / "out").iterdir()) == []
 
 
@@ -197,30 +198,32 @@ def test_an_out_folder_holding_files_tactbench_did_not_write_is_not_overwritten(
 
 
 def test_a_report_md_tactbench_did_not_write_is_not_overwritten(tmp_path, tiny_scene):
-    from tactbench.runner.planning import check_out_folder
+    from tactbench.paths import check_output_folder
+    from tactbench.runner.writers import is_run_output
 
     out = tmp_path / "out"
     out.mkdir()
     (out / "report.md").write_text("# My thesis notes\n")
     with pytest.raises(InputError, match="holds files tactbench did not write \\('report.md'"):
-        check_out_folder(out)
+        check_output_folder(out, option="out folder", ours=is_run_output)
     (out / "report.md").write_text("# tactbench report\n\n- dataset: x\n")
-    check_out_folder(out)  # an earlier run's
+    check_output_folder(out, option="out folder", ours=is_run_output)  # an earlier run's
 
 
 def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_scene):
-    from tactbench.runner.planning import check_out_folder
+    from tactbench.paths import check_output_folder
+    from tactbench.runner.writers import is_run_output
 
     scene = tiny_scene(encoders=["raw"], classifiers=["logreg:max_iter=20"], seeds=[0])
     run(scene, progress=False, cache=cache)
     from tactbench.runner.writers import write_reports
 
     out = tmp_path / "out"
-    write_reports(out, [], meta={}, plots=False)
+    write_reports(out, [], plots=False)
     (out / "confusion_raw_logreg_L3.png").write_bytes(b"")
     (out / ".results.json.tmp-123-abcdef01-xyz").write_text("")  # an interrupted write
     (out / ".DS_Store").write_bytes(b"")  # a file manager's
-    check_out_folder(out, models=True)
+    check_output_folder(out, option="out folder", ours=is_run_output)
     assert run(scene, progress=False, cache=cache).skipped == 1
 
 

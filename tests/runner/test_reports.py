@@ -19,7 +19,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 def test_reports_are_written(tmp_path, tiny_scene, cache):
     result = run(tiny_scene(seeds=[0]), progress=False, cache=cache)
-    paths = write_reports(tmp_path / "out", result.rows, meta={"command": "test"})
+    paths = write_reports(tmp_path / "out", result.rows)
     for name in ("results.json", "results.csv", "report.md", "cost_vs_accuracy.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0, name
     # one L: no figure against L
@@ -70,7 +70,7 @@ def test_failed_cells_are_listed_and_left_out_of_the_accuracies(
         ("failing", "0", "RuntimeError: deliberate failure in fit"),
         ("failing", "1", "RuntimeError: deliberate failure in fit")]
 
-    paths = write_reports(tmp_path / "out", result.rows, meta={"command": "test"})
+    paths = write_reports(tmp_path / "out", result.rows)
     report = paths["markdown"].read_text()
     assert "cells: 4 (2 failed, listed below)" in report
     failed_part = report.split("## Failed cells", 1)[1]
@@ -412,7 +412,8 @@ def test_pareto_front_by_hand():
 
 
 def test_accuracy_against_l_has_ci_bands_and_the_other_figures_apply(tmp_path, drawn):
-    from tactbench.runner.planning import check_out_folder
+    from tactbench.paths import check_output_folder
+    from tactbench.runner.writers import is_run_output
 
     rows = _grid()
     paths = write_reports(tmp_path / "out", rows)
@@ -447,7 +448,7 @@ def test_accuracy_against_l_has_ci_bands_and_the_other_figures_apply(tmp_path, d
     assert list(far_b.get_ydata()) == pytest.approx([100 - 100 * (2 + 1 / 3) / 10,
                                                      100 - 100 * (1 + 1 / 3) / 10])
     # the next run into the same folder is not refused for the new figures
-    check_out_folder(tmp_path / "out")
+    check_output_folder(tmp_path / "out", option="out folder", ours=is_run_output)
 
 
 def test_cost_against_accuracy_draws_the_pareto_front(tmp_path, drawn):
@@ -613,3 +614,19 @@ def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():
     # a plain value takes no continuation: a stray item is still a mistake
     with pytest.raises(InputError, match="unknown factor 'winsize'"):
         parse_contrast("encoder=raw,winsize=9..encoder=dis,winsize=9")
+
+
+def test_the_runs_that_computed_the_rows_are_named_one_way():
+    from tactbench.runner.writers import computed_by
+
+    def row(key, command, git, finished):
+        return {"key": key, "finished": finished, "run": {"command": command, "git": git}}
+
+    rows = [row("b", ".venv/bin/tactbench run -L 5", "abc", "2026-01-02"),
+            row("a", "/src/tactbench/__main__.py run -L 5", "abc", "2026-01-01"),
+            row("c", "tactbench run -L 5 --seed 0-9", "def", "2026-01-03"),
+            {"key": "d", "finished": "2025-12-31"}]  # a row from before runs were recorded
+    assert computed_by(rows) == [
+        {"command": None, "git": None, "cells": 1},
+        {"command": "tactbench run -L 5", "git": "abc", "cells": 2},
+        {"command": "tactbench run -L 5 --seed 0-9", "git": "def", "cells": 1}]

@@ -113,50 +113,63 @@ def test_temporary_row_files_of_dead_processes_are_removed(tmp_path):
     assert sorted(p.name for p in store.cells.iterdir()) == [alive.name, "a.json"]
 
 
-def _report(tmp_path, rows):
-    """An out folder as git keeps it: results.json with ``rows``, no cells/ folder."""
-    import json
-
-    tmp_path.mkdir(parents=True, exist_ok=True)
-    (tmp_path / "results.json").write_text(json.dumps({"meta": {}, "rows": rows}))
-
-
-def test_rows_kept_in_results_json_are_put_back_when_cells_lacks_them(tmp_path, caplog):
-    import json
-
-    made = ResultStore(tmp_path / "made")  # where the rows were computed
-    identity = {"dataset_hash": "h1", "seed": 0}
-    rows = [made.put({**RESULT, **identity, "key": k, "status": "ok", "accuracy": 0.5})
-            for k in ("a", "b", "c", "d", "e")]
-    rows[1] = {**rows[1], "accuracy": 0.9}  # edited: no longer matches its checksum
-    rows[2] = {k: v for k, v in rows[2].items() if k != "checksum"}  # nothing to verify
-    rows.append(made.put({**CELL, **identity, "key": "f", "status": "failed",
-                          "error": {"type": "RuntimeError"}}))
-    _report(tmp_path / "copy", rows)
-    store = ResultStore(tmp_path / "copy")
-    store.put({**RESULT, **identity, "key": "d", "status": "ok", "accuracy": 0.25})
-    planned = {k: identity for k in ("a", "b", "c", "d", "f", "g")}
-    planned["e"] = {"dataset_hash": "h2", "seed": 0}  # another dataset: not this cell
-
-    assert store.restore(planned) == ["a"]
-    assert store.finished("a", identity) and store.read("a")["accuracy"] == 0.5
-    assert json.loads(store.path("a").read_text()) == rows[0]  # the row as computed
-    assert store.read("d")["accuracy"] == 0.25  # a row cells/ holds is left as it is
-    for key in ("b", "c", "e", "f", "g"):  # computed again
-        assert not store.path(key).exists(), key
-    assert "cell b in" in caplog.text and "does not match its checksum" in caplog.text
-    assert "cell c in" in caplog.text and "has no checksum" in caplog.text
-    assert "records dataset_hash = 'h1'" in caplog.text
-    assert store.restore(planned) == []  # nothing left to put back
+def _scene_row(key, encoder, classifier, L, seed, finished, scene=None, **over):
+    row = {**RESULT, "key": key, "status": "ok", "accuracy": 0.5, "encoder": encoder,
+           "classifier": classifier, "L": L, "seed": seed, "finished": finished, **over}
+    if scene is not None:
+        row["run"] = {"command": "tactbench run", "git": "abc", "scene": scene}
+    return row
 
 
-def test_an_unreadable_results_json_is_not_reused_and_says_so(tmp_path, caplog):
-    (tmp_path / "results.json").write_text('{"rows": [')
+def test_stored_rows_come_from_cells_in_the_order_the_scene_lists_them(tmp_path, caplog):
+    from tactbench.runner.results import scene_order
+
+    scene = {"encoders": ["raw", "farneback:winsize=9"],
+             "classifiers": ["cnn:width=8", "cnn", "sklearn:SVC"],
+             "L": [6, 3], "seeds": [1, 0], "init_seeds": None}
     store = ResultStore(tmp_path)
-    assert store.restore({"a": {}}) == [] and not store.path("a").exists()
-    assert "results.json cannot be read" in caplog.text
-    _report(tmp_path, "not a list")
-    assert store.restore({"a": {}}) == []
+    made = [  # in the plan's order: encoder, classifier, L, seed as the scene lists them
+        ("k1", "raw", "cnn:epochs=4,width=8", 6, 1), ("k2", "raw", "cnn:epochs=4,width=8", 3, 0),
+        ("k3", "raw", "cnn:epochs=4,width=16", 6, 1), ("k4", "raw", "sklearn:C=1,estimator=SVC", 6, 1),
+        ("k5", "farneback:winsize=9", "cnn:epochs=4,width=8", 6, 1)]
+    for i, (key, enc, clf, length, seed) in enumerate(reversed(made)):
+        store.put(_scene_row(key, enc, clf, length, seed, f"2026-01-01T00:00:0{i}",
+                             scene if i == 4 else {"encoders": ["farneback:winsize=9"]}))
+    store.put(_scene_row("k0", "dis", "logreg", 5, 0, "2025-01-01"))  # no scene names it
+    assert [r["key"] for r in store.stored_rows()] == [m[0] for m in made] + ["k0"]
+    assert [r["key"] for r in scene_order([])] == []
+    store.path("k3").write_text(store.path("k3").read_text().replace('"seed": 1', '"seed": 2'))
+    assert "k3" not in [r["key"] for r in store.stored_rows()]  # verified on read
+    assert "does not match its checksum" in caplog.text
+
+
+def test_results_json_is_never_read_to_decide_anything(tmp_path):
+    """The one-grid rule counts cells/ only: a results.json of rows no cell holds (edited,
+    copied, another grid's) neither refuses a grid nor gives a row."""
+    import json
+
+    store = ResultStore(tmp_path)
+    other = {**RESULT, "key": "other", "status": "ok", "accuracy": 0.5}
+    (tmp_path / "results.json").write_text(json.dumps({"rows": [other]}))
+    assert store.stored_rows() == [] and store.get("other") is None
+    store.claim(["mine"]).unlink()  # another grid's row in results.json: not a cell
+    store.put({**RESULT, "key": "mine", "status": "ok", "accuracy": 0.5})
+    from tactbench.errors import InputError
+
+    with pytest.raises(InputError, match=r"holds 1 cell\(s\) of another grid"):
+        store.claim(["new"])
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["/venv/bin/tactbench", "run", "--seed", "0-4"], "tactbench run --seed 0-4"),
+    (["/src/tactbench/__main__.py", "report", "out dir"], "tactbench report 'out dir'"),
+    (["benchmarks/reports.py", "study"], "reports.py study"),
+    ([], "python"),
+])
+def test_the_command_line_is_written_one_way(argv, line):
+    from tactbench.runner.results import command_line
+
+    assert command_line(argv) == line
 
 
 def test_a_refused_grid_is_told_how_the_stored_cells_differ(tmp_path):
