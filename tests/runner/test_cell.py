@@ -219,7 +219,9 @@ def test_a_plugins_split_and_test_window_registered_through_the_hooks_run(
     tp = row["test_predictions"]
     assert all(i % 2 == k and g == ("even", "odd")[k]
                for i, k, g in zip(tp["indices"], tp["folds"], tp["groups"]))
-    identity = result.plan.identities[row["key"]]
+    from tactbench.runner import plan
+
+    identity = plan(scene, fake_registry).identities[row["key"]]
     assert (identity["split"], identity["test_window"]) == ("parity", "last")
 
 
