@@ -64,9 +64,11 @@ def _comparison_lines(text: str, width: int) -> list[str]:
     from tactbench.runner.summaries import FACTORS
 
     kinds = {*FACTORS, "contrast"}
-    return [line for line in text.splitlines()
+    lines = text.splitlines()
+    headers = {lines[i - 1] for i, line in enumerate(lines) if i and line.startswith("|---")}
+    return [line for line in lines
             if line.startswith("| ") and line.count(" | ") == width - 1
-            and line[2:].split(" | ", 1)[0] in kinds]
+            and line[2:].split(" | ", 1)[0] in kinds and line not in headers]
 
 
 def test_every_table_of_comparisons_in_the_reports_is_recomputed(recomputed):
