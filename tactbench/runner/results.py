@@ -36,7 +36,8 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from tactbench.errors import CorruptArtefactError, InputError
-from tactbench.integrity import hash_bytes
+from tactbench.budget import memory_budget_bytes
+from tactbench.integrity import hash_bytes, read_regular_bytes
 from tactbench.paths import (
     Temporary,
     atomic_write_text,
@@ -182,11 +183,13 @@ class ResultStore:
             size = path.stat().st_size
             if size > ROW_MAX_BYTES:
                 raise CorruptArtefactError(path, f"{size} bytes, not a cell row")
-            row = json.loads(path.read_bytes())
+            row = json.loads(read_regular_bytes(path, limit=ROW_MAX_BYTES, what="cell row"))
         except FileNotFoundError:
             return None
         except IsADirectoryError:
             raise CorruptArtefactError(path, "is a folder, not a cell row") from None
+        except InputError as exc:  # a FIFO, a device, a dangling link: never opened
+            raise CorruptArtefactError(path, str(exc).replace(f"{path} ", "", 1)) from None
         except (ValueError, RecursionError) as exc:  # UnicodeDecodeError is a ValueError
             raise CorruptArtefactError(path, f"is not valid JSON ({exc})") from None
         problem = check_row(row, key, identity)
@@ -279,7 +282,8 @@ class ResultStore:
         stamp = (st.st_mtime_ns, st.st_size)
         if self._report_cache is None or self._report_cache[0] != stamp:
             try:
-                doc, error = json.loads(report.read_bytes()), None
+                doc, error = json.loads(read_regular_bytes(
+                    report, limit=memory_budget_bytes(), what="results.json")), None
             except (OSError, ValueError, RecursionError) as exc:
                 doc, error = None, exc
             rows = doc.get("rows") if isinstance(doc, dict) else None
@@ -347,7 +351,7 @@ class ResultStore:
             if _claim_order(claim) > _claim_order(mine):
                 continue  # started after this run: that one is refused, not this one
             try:
-                other = json.loads(claim.read_text())
+                other = json.loads(read_regular_bytes(claim, limit=1 << 20))
             except (OSError, ValueError):
                 continue  # gone meanwhile, or being written
             if isinstance(other, dict) and other.get("keys") != keys:
@@ -377,7 +381,7 @@ def _describe(path: Path | dict[str, Any],
     how it differs from the nearest."""
     try:
         row = path if isinstance(path, dict) else json.loads(
-            path.read_bytes()[:ROW_MAX_BYTES])
+            read_regular_bytes(path, limit=ROW_MAX_BYTES))
         label = (f"{row['encoder']} × {str(row['classifier']).split(':')[0]} L={row['L']} "
                  f"seed={row['seed']}")
         command = (row.get("run") or {}).get("command")

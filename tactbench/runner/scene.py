@@ -32,6 +32,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError, MissingFileError
+from tactbench.integrity import read_regular_bytes
 from tactbench.profiles import get_profile
 
 #: Where cells run: this machine (serially or in ``workers`` processes) or a dask cluster.
@@ -240,8 +241,8 @@ def _check_field(name: str, value: Any, label: str, *, ranges: bool) -> Any:
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise InputError(f"{label} must be a number, got {type(value).__name__} "
                              f"{_show(value)}")
-        if ranges and not (math.isfinite(value) and value > 0):
-            raise InputError(f"{label} must be a finite number > 0, got {value}")
+        if ranges and not (abs(value) < 1e308 and math.isfinite(value) and value > 0):
+            raise InputError(f"{label} must be a finite number > 0, got {_show(value)}")
         return value
     assert kind == "bool", kind
     if not isinstance(value, bool):
@@ -286,7 +287,8 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
         if size > MAX_SCENE_FILE_BYTES:
             raise InputError(f"{path}: a scene file of {size} bytes; scene files are a few "
                              f"lines (at most {MAX_SCENE_FILE_BYTES} bytes)")
-        text = path.read_text(encoding="utf-8")
+        text = read_regular_bytes(path, limit=MAX_SCENE_FILE_BYTES,  # never a FIFO
+                                  what="scene file").decode("utf-8")
     except FileNotFoundError:
         raise MissingFileError(f"scene file not found: {path}") from None
     except UnicodeDecodeError:
