@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
+from tactbench.boundary import VIOLATION_FIELD, BoundaryError, check_labels, check_proba
 from tactbench.classifiers.io import live_metadata, load_model, read_header
 from tactbench.contracts import CLASSIFIER
 from tactbench.data.splits import dataset_groups, describe_splits, make_splits
@@ -190,6 +191,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     cell = job.cell
     with memory.track("load encoding"):
         sequences, meta = load_encoding(job.encoding_dir)
+    if meta.get(VIOLATION_FIELD):  # the encoder's output broke its contract: no score
+        raise BoundaryError(str(meta[VIOLATION_FIELD]))
     scene, data = job.scene, job.data
     labels = np.asarray(data.labels, dtype=np.int64)
     splits = make_splits(scene.split, labels=labels, users=data.users, seed=cell.seed,
@@ -218,7 +221,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
             train_s += time.perf_counter() - t0
         with memory.track("predict"):
             t0 = time.perf_counter()
-            predicted = _predict(clf, test, scene.test_window, len(split.test))
+            predicted = _predict(clf, test, scene.test_window, len(split.test),
+                                 (cell.classifier, job.classifier.plugin, len(data.classes)))
             infer_s += time.perf_counter() - t0
         indices.append(np.asarray(split.test))
         truths.append(labels[split.test])
@@ -285,14 +289,20 @@ def _windows(job: CellJob, sequences: Sequence[Any], labels: "np.ndarray",
     return train, test
 
 
-def _predict(clf: Any, test: Any, mode: str, n_sequences: int) -> "np.ndarray":
+def _predict(clf: Any, test: Any, mode: str, n_sequences: int,
+             who: tuple[str, str, int]) -> "np.ndarray":
     """The predicted class of each test sequence: of its one window, or with ``mode``
-    ``"vote"`` of every window of it (probabilities averaged)."""
+    ``"vote"`` of every window of it (probabilities averaged). ``who``: the classifier's
+    spec, plugin and class count K, for the run-time checks of what it returns
+    (:mod:`tactbench.boundary`: a violation fails the cell)."""
     import numpy as np
 
+    component, plugin, k = who
     if mode != "vote":
-        return np.asarray(clf.predict(test))
-    proba = np.asarray(clf.predict_proba(test), dtype=np.float64)
+        return check_labels(clf.predict(test), len(test), k, component=component,
+                            plugin=plugin)
+    proba = check_proba(clf.predict_proba(test), len(test), k, component=component,
+                        plugin=plugin)
     summed = np.zeros((n_sequences, proba.shape[1]))
     np.add.at(summed, test.seq_index, proba)
     return summed.argmax(axis=1)

@@ -160,6 +160,15 @@ def _check_predictions(tp: Any, k: int) -> str | None:
     return None
 
 
+def _failed(row: dict[str, Any], kind: str, message: str) -> dict[str, Any]:
+    """``row`` as a failed row of error ``kind``: its scores and large fields left out."""
+    row = {k: v for k, v in row.items() if k not in (
+        "checksum", "confusion", "per_class_accuracy", "test_predictions", "accuracy",
+        "classes") and len(json.dumps(v)) < 4096}
+    row.update(status=FAILED, error={"type": kind, "traceback": "", "message": message})
+    return row
+
+
 class ResultStore:
     """One JSON file per cell under ``OUT/cells``, written atomically, verified on read."""
 
@@ -220,20 +229,19 @@ class ResultStore:
         saying so, so that the run reports it and exits 1 instead of dropping it."""
         # the checksum of the row as it will be read back (tuples as lists, ...)
         row = json.loads(json.dumps({k: v for k, v in row.items() if k != "checksum"}))
+        problem = check_row(row, str(row.get("key"))) if row_status(row) == OK else None
+        if problem is not None:  # never stored to be dropped at report time: a failed row
+            row = _failed(row, "UnsoundRowError", f"the cell's result row {problem} (a "
+                          f"plugin's output the checks did not catch?); no score is given")
         row["checksum"] = row_checksum(row)
         text = json.dumps(row, indent=2)
         if len(text) > ROW_MAX_BYTES // 4:  # rows are a few kB: large ones compact
             text = json.dumps(row, separators=(",", ":"))
         if len(text.encode()) > ROW_MAX_BYTES:
             big = len(text.encode())
-            row = {k: v for k, v in row.items() if k not in (
-                "checksum", "confusion", "per_class_accuracy", "test_predictions",
-                "accuracy", "classes") and len(json.dumps(v)) < 4096}
-            row.update(status=FAILED, error={
-                "type": "RowTooLargeError", "traceback": "",
-                "message": f"the cell's result row is {big} bytes, over the "
-                           f"{ROW_MAX_BYTES}-byte limit of a cell row (too many classes "
-                           f"or test sequences to store); nothing was kept"})
+            row = _failed(row, "RowTooLargeError", f"the cell's result row is {big} bytes, "
+                          f"over the {ROW_MAX_BYTES}-byte limit of a cell row (too many "
+                          f"classes or test sequences to store); nothing was kept")
             row["checksum"] = row_checksum(row)
             text = json.dumps(row, indent=2)
         atomic_write_text(self.path(row["key"]), text)
