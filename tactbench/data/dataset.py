@@ -175,10 +175,15 @@ class Dataset:
         return self._norm_params
 
     def normalise(self, values: np.ndarray) -> np.ndarray:
-        """Raw ``(T, N)`` → float32 pressure in [0, 1]; NaN stays NaN."""
+        """Raw ``(T, N)`` → float32 pressure in [0, 1]; NaN stays NaN.
+
+        Computed in float64: readings near the float32 limit (±3.4e38) and a range
+        spanning them (a scale of 6.8e38, beyond float32) would overflow to inf and NaN
+        in float32; the result in [0, 1] is then stored as float32."""
         offset, scale = self.normalisation_params()
-        out = (np.asarray(values, dtype=np.float32) - offset) / np.float32(scale)
-        return np.clip(out, 0.0, 1.0, out=out).astype(np.float32, copy=False)
+        out = np.asarray(values, dtype=np.float64) - np.asarray(offset, dtype=np.float64)
+        out /= float(scale)
+        return np.clip(out, 0.0, 1.0, out=out).astype(np.float32)
 
     def vectors(self, indices: Sequence[int] | None = None) -> list[np.ndarray]:
         """Each sample's normalised taxel values, float32 ``(T, N)`` in [0, 1].

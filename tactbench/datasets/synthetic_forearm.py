@@ -19,6 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, Callable
 
+from tactbench.budget import check_budget
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Sample
 from tactbench.datasets import people
@@ -60,7 +61,23 @@ def check_options(**options: Any) -> dict[str, int]:
     if out.get("version", DEFAULT_VERSION) not in VERSIONS:
         raise InputError(f"synthetic-forearm option version must be one of "
                          f"{', '.join(map(str, VERSIONS))}, got {out['version']}")
+    if {"users", "positions", "repetitions"} <= set(out):
+        check_budget(memory_estimate(out), f"simulating {out['users']} users × "
+                     f"{len(CLASSES)} gestures × {out['positions']} positions × "
+                     f"{out['repetitions']} repetitions")  # from the request, before work
     return out
+
+
+#: Frames of a simulated recording, at most (v1: 26, v2: 35 measured; with a margin).
+FRAMES_PER_SAMPLE = 40
+
+
+def memory_estimate(options: dict[str, int]) -> int:
+    """Bytes the simulated dataset takes, from the request alone: every sample's float32
+    readings (:data:`FRAMES_PER_SAMPLE` frames × ``n_taxels``) and half as much again
+    (timestamps, the copy while it is saved)."""
+    samples = options["users"] * len(CLASSES) * options["positions"] * options["repetitions"]
+    return samples * FRAMES_PER_SAMPLE * options.get("n_taxels", 1558) * 6
 
 
 def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: int = 0,
