@@ -32,7 +32,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError, MissingFileError
-from tactbench.integrity import read_regular_bytes
+from tactbench.integrity import check_regular_file, read_regular_bytes
 from tactbench.profiles import get_profile
 
 #: Where cells run: this machine (serially or in ``workers`` processes) or a dask cluster.
@@ -283,7 +283,7 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     is_json = path.suffix.lower() == ".json"
     try:
-        size = path.stat().st_size
+        size = check_regular_file(path, what="scene file")  # a FIFO, a dangling link
         if size > MAX_SCENE_FILE_BYTES:
             raise InputError(f"{path}: a scene file of {size} bytes; scene files are a few "
                              f"lines (at most {MAX_SCENE_FILE_BYTES} bytes)")
