@@ -16,8 +16,10 @@ plugin's ``register_*`` hooks and gathers what they register into a
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import importlib
+import io
 import os
 import re
 from dataclasses import replace
@@ -176,9 +178,6 @@ def _import_quietly(ep: Any) -> tuple[Any, str | None]:
     """``(plugin object, None)``, or ``(None, problem)`` when importing the entry point
     raised (``SystemExit`` too: a plugin's ``sys.exit`` must not end the command) or
     wrote to stdout (which would break ``--json`` output; what it wrote is dropped)."""
-    import contextlib
-    import io
-
     printed = io.StringIO()
     try:
         with contextlib.redirect_stdout(printed):

@@ -50,8 +50,10 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
 @click.option("--taxels", default=1558, show_default=True, type=click.IntRange(1))
 @click.option("--seed", default=0, show_default=True, type=int)
 def generate_cmd(out: str, taxels: int, seed: int) -> None:
-    """Write the generated CySkin-like forearm layout as CSV (a new file: an existing
-    one is never replaced)."""
+    """Write the generated CySkin-like forearm layout as CSV.
+
+    --out is a new file: an existing one is never replaced.
+    """
     check_output_file(out)  # the one output rule: not a user's file, not in the cache
     layout = cyskin_forearm(taxels, seed=seed)
     write_layout_csv(layout, out)
