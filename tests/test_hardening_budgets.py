@@ -62,3 +62,14 @@ def test_grid_cells_seeds_and_lengths_are_bounded_before_they_are_expanded():
     with pytest.raises(InputError, match="cells"):
         plan(Scene(dataset="no-such-dataset", seeds=list(range(1000)),
                    L=list(range(1, 21))))
+
+
+def test_a_dataset_of_more_classes_than_a_row_can_hold_is_refused_at_planning():
+    from types import SimpleNamespace
+
+    from tactbench.runner import Scene
+    from tactbench.runner.planning import _check_memory
+
+    many = SimpleNamespace(name="many", classes=[f"c{i}" for i in range(3000)])
+    with pytest.raises(BudgetError, match="3000 classes.*at most 2896 classes"):
+        _check_memory(Scene(dataset="x"), many, {}, {}, {})

@@ -30,6 +30,7 @@ from tactbench.data.windows import TEST_WINDOWS
 from tactbench.datasets.loading import check_informative, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import (
+    BudgetError,
     InputError,
     check_choice,
     check_positive_float,
@@ -43,6 +44,7 @@ from tactbench.runner.summaries import check_contrasts, parse_contrast, short_na
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import EXECUTORS, Scene, check_fields
 from tactbench.runner.system import check_scheduler
+from tactbench.runner.results import ROW_MAX_BYTES
 from tactbench.runner.writers import OUT_FILES  # the out folder's files, listed there
 
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
@@ -315,6 +317,12 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
     """
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
+    k = len(dataset.classes)  # a row holds a k × k confusion: ≥ 2 bytes a count as JSON
+    if 2 * k * k > ROW_MAX_BYTES:
+        raise BudgetError(f"dataset '{dataset.name}' has {k} classes: each cell's row "
+                          f"would hold a {k} × {k} confusion, more than the "
+                          f"{ROW_MAX_BYTES >> 20} MiB a row may be; at most "
+                          f"{math.isqrt(ROW_MAX_BYTES // 2)} classes")
     longest = int(dataset.lengths().max())
     length = max(int(n) for n in scene.L)
     frame_shape = {"vectors": (dataset.n_taxels,)}
