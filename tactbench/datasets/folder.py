@@ -327,20 +327,7 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
     frame_shape = first.values.shape[1:]
     if len(frame_shape) == 1 and grid_shape is not None:
         frame_shape = grid_shape
-    if len(frame_shape) == 2:
-        if layout is not None:
-            raise InputError(f"{first.path}: layout= is for (T, N) taxel vectors; a "
-                             f"(T, H, W) grid is its own layout (set pitch_mm)")
-        lay: TaxelLayout | None = TaxelLayout.grid(*frame_shape, pitch)
-        ids = lay.ids
-    elif layout is not None:
-        lay = load_layout(layout)
-        if lay.n_taxels != frame_shape[0]:
-            raise InputError(f"{first.path}: {frame_shape[0]} taxels per frame, but layout "
-                             f"{layout} has {lay.n_taxels}")
-        ids = lay.ids
-    else:
-        lay, ids = None, np.arange(frame_shape[0], dtype=np.int64)
+    lay, ids = _layout_of(first, frame_shape, layout, pitch)
 
     samples: list[Sample] = []
     repetition: dict[tuple[int, str], int] = {}
@@ -368,6 +355,25 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
               else f"{rate_hz:g} Hz{' (assumed)' if rate is None else ''}")
     return Dataset(name or root.resolve().name, samples, class_names, lay, norm,
                    description=f"{len(samples)} recordings ({kind}; {timing}) from {root}")
+
+
+def _layout_of(first: _Read, frame_shape: tuple[int, ...], layout: str | Path | None,
+               pitch: float) -> tuple[TaxelLayout | None, np.ndarray]:
+    """``(layout or None, taxel ids)``: a grid is its own layout; ``(T, N)`` vectors take
+    ``layout=`` (its ``N`` taxels) or none."""
+    if len(frame_shape) == 2:
+        if layout is not None:
+            raise InputError(f"{first.path}: layout= is for (T, N) taxel vectors; a "
+                             f"(T, H, W) grid is its own layout (set pitch_mm)")
+        lay = TaxelLayout.grid(*frame_shape, pitch)
+        return lay, lay.ids
+    if layout is not None:
+        lay = load_layout(layout)
+        if lay.n_taxels != frame_shape[0]:
+            raise InputError(f"{first.path}: {frame_shape[0]} taxels per frame, but layout "
+                             f"{layout} has {lay.n_taxels}")
+        return lay, lay.ids
+    return None, np.arange(frame_shape[0], dtype=np.int64)
 
 
 def _check_total_budget(root: Path, paths: list[Path]) -> None:
