@@ -174,3 +174,28 @@ def test_the_cli_says_a_fifo_scene_file_in_one_line(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "FIFO" in done.stderr
     assert json.dumps(done.stderr).count("\\n") <= 2  # one line (and a progress line)
+
+
+def test_special_files_where_a_writer_looks_for_its_own_output_are_not_opened(tmp_path):
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    seq = tmp_path / "seq.npy"
+    np.save(seq, np.random.default_rng(0).random((3, 6, 6)).astype(np.float32))
+    os.mkfifo(tmp_path / "enc.json")  # where encode -o enc looks for its metadata
+    os.mkfifo(tmp_path / "pic.png")  # where data preview looks for its own PNG
+    os.mkfifo(tmp_path / "in.npy")
+    (tmp_path / "out").mkdir()
+    os.mkfifo(tmp_path / "out" / "report.md")  # where run looks for its own report
+    calls = [["encode", "-i", str(seq), "-o", str(tmp_path / "enc"), "-e", "raw"],
+             ["encode", "-i", str(tmp_path / "in.npy"), "-o", str(tmp_path / "x"),
+              "-e", "raw"],
+             ["data", "preview", "synthetic-forearm:users=1", "--out",
+              str(tmp_path / "pic.png")],
+             ["run", "--dataset", "synthetic-forearm:users=1", "--encoder", "raw",
+              "--classifier", "logreg", "--out", str(tmp_path / "out")]]
+    for args in calls:
+        with deadline():
+            result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 2, (args, result.output)

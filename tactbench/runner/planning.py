@@ -196,6 +196,8 @@ def check_out_folder(out: str | Path, *, models: bool = False) -> None:
                 with open(report, "rb") as fh:
                     if not fh.read(len(REPORT_HEADER)).startswith(REPORT_HEADER.encode()):
                         foreign.append("report.md")
+            elif report.is_symlink() or report.exists():  # a FIFO, a device: not ours
+                foreign.append("report.md")
             if foreign:
                 names = ", ".join(repr(n) for n in foreign[:3])
                 raise InputError(f"out folder {out} holds files tactbench did not write "
