@@ -132,3 +132,30 @@ def test_the_conformance_suites_apply_the_same_rules(hostile):
     for name in ("nan-proba", "negative-proba", "unnormalised-proba"):
         with pytest.raises(AssertionError, match="predict_proba"):
             check_classifier(name, registry=hostile)
+
+
+def test_encode_never_writes_an_encoders_broken_output(tmp_path, plugin_dist):
+    import subprocess
+    import sys
+
+    plugin_dist("tb-nan", "tb_nan", """
+        import numpy as np
+        from tactbench import hookimpl
+
+        class NaN:
+            channels = ("v",)
+
+            def encode(self, seq):
+                return np.full((len(seq), 1, *np.shape(seq)[1:]), np.nan, np.float32)
+
+        @hookimpl
+        def register_encoders(register):
+            register("nan-cli", "tb_nan:NaN", summary="NaN everywhere")
+        """)
+    seq = tmp_path / "seq.npy"
+    np.save(seq, np.random.default_rng(0).random((3, 6, 6)).astype(np.float32))
+    done = subprocess.run([sys.executable, "-m", "tactbench", "encode", "-i", str(seq),
+                           "-o", str(tmp_path / "out"), "-e", "nan-cli"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "NaN or infinite" in done.stderr, done.stderr
+    assert "encoder 'nan-cli'" in done.stderr and not (tmp_path / "out.npy").exists()

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from tactbench.boundary import BoundaryError, encoder_output_problem
 from tactbench.budget import check_budget
 from tactbench.cli import get_registry, json_text
 from tactbench.contracts import ENCODER
@@ -62,6 +63,11 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     except InputError as exc:  # the file's content is refused; any other error is a bug
         raise InputError(f"{src}: {exc}") from exc
     seconds = time.perf_counter() - t0
+    channels = len(tuple(ENCODER.get(encoder, "channels")))
+    problem = encoder_output_problem(out, (len(seq), channels, *np.shape(seq)[1:]),
+                                     tuple(ENCODER.get(encoder, "ranges")))
+    if problem is not None:  # a plugin's output: checked before it is written
+        raise BoundaryError.of("encoder", spec, "", problem)
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(temp_name(dst.name))  # written whole, then renamed over dst
     try:
