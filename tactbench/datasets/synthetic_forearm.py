@@ -30,7 +30,7 @@ from tactbench.datasets.synthetic import (
     make_user,
     simulate_sample,
 )
-from tactbench.errors import InputError, check_positive_int
+from tactbench.errors import BudgetError, InputError, check_positive_int
 from tactbench.machine import usable_cores
 from tactbench.paths import atomic_folder, cache_dir
 
@@ -61,10 +61,6 @@ def check_options(**options: Any) -> dict[str, int]:
     if out.get("version", DEFAULT_VERSION) not in VERSIONS:
         raise InputError(f"synthetic-forearm option version must be one of "
                          f"{', '.join(map(str, VERSIONS))}, got {out['version']}")
-    if {"users", "positions", "repetitions"} <= set(out):
-        check_budget(memory_estimate(out), f"simulating {out['users']} users × "
-                     f"{len(CLASSES)} gestures × {out['positions']} positions × "
-                     f"{out['repetitions']} repetitions")  # from the request, before work
     return out
 
 
@@ -96,6 +92,8 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
                          n_taxels=n_taxels, version=version)
     users, positions, repetitions = opts["users"], opts["positions"], opts["repetitions"]
     version = opts["version"]
+    check_budget(memory_estimate(opts), f"simulating {users} users × {len(CLASSES)} "
+                 f"gestures × {positions} positions × {repetitions} repetitions")  # first
     device = make_device(seed, n_taxels)
     per_user = len(CLASSES) * positions * repetitions
     total = users * per_user
@@ -198,6 +196,8 @@ class SyntheticForearm:
             if (folder / "manifest.json").is_file():
                 try:
                     return Dataset.load(folder)
+                except BudgetError:  # too large for this budget: not a damaged cache
+                    raise
                 except (InputError, OSError):  # a bug elsewhere must not pass for a bad cache
                     shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
             elif folder.exists():  # a leftover without a manifest
