@@ -27,7 +27,7 @@ from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
-from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.errors import InputError, TactbenchError
 from tactbench.integrity import check_regular_file
 
 #: Class name of the samples of a log without label markers.

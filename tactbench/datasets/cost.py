@@ -29,7 +29,7 @@ from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.recording import Recording, Sample
 from tactbench.datasets.array_files import is_number
-from tactbench.errors import InputError, MissingFileError, check_positive_float
+from tactbench.errors import InputError, check_positive_float
 from tactbench.integrity import check_regular_file
 from tactbench.paths import atomic_write_text
 
