@@ -185,10 +185,14 @@ def read_regular_bytes(path: str | Path, *, limit: int, what: str = "file") -> b
     check_regular_file(path, limit=limit, what=what)
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     with os.fdopen(fd, "rb") as fh:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
             raise InputError(f"{path} changed into a special file while it was opened; "
                              f"tactbench reads only regular files")
-        data = fh.read(limit + 1)
+        # its size, not the limit: read(n) allocates n bytes before reading
+        data = fh.read(min(st.st_size, limit) + 1)
+        if len(data) > st.st_size:  # it grew meanwhile: the rest, up to the limit
+            data += fh.read(limit + 1 - len(data))
     if len(data) > limit:
         raise InputError(f"{path} grew beyond the {human_bytes(limit)} a {what} may be "
                          f"while it was read")

@@ -199,3 +199,15 @@ def test_special_files_where_a_writer_looks_for_its_own_output_are_not_opened(tm
         with deadline():
             result = CliRunner().invoke(cli, args)
         assert result.exit_code == 2, (args, result.output)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "zero", "dangling"])
+def test_a_special_file_inside_a_cyskin_text_folder_is_named(tmp_path, kind):
+    from tactbench.datasets.cyskin_text import read_cyskin_folder
+
+    root = tmp_path / "cyskin" / "tap"
+    root.mkdir(parents=True)
+    path = specials(tmp_path / "made", "r1.txt")[kind]
+    os.rename(path, root / "r1.txt")
+    with deadline(), pytest.raises(InputError, match=WORDS[kind]):
+        read_cyskin_folder(tmp_path / "cyskin")
