@@ -8,6 +8,7 @@ components that use them.
 
 from __future__ import annotations
 
+import errno
 import importlib
 import json
 import math
@@ -93,6 +94,10 @@ class TactbenchGroup(click.Group):
             raise UserError(" ".join(str(exc).split())) from exc
         except KeyboardInterrupt:  # Ctrl-C: not a failure, not a bug
             interrupted()
+        except OSError as exc:  # stdout closed or full: the user's pipe or disk, not a bug
+            if exc.errno not in OUTPUT_ERRNOS:
+                raise
+            raise UserError(output_lost(exc)) from exc
 
 
 def registered_commands(pm, commands: dict[str, click.Command] | None = None
@@ -131,6 +136,24 @@ EXIT_OK, EXIT_FAILED, EXIT_USER_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 130
 EXIT_CODES_TEXT = ("Exit status: 0 everything done; 1 a run's cells failed (listed), or a "
                    "bug (with its traceback); 2 a mistake in what was given (one 'Error:' "
                    "line, nothing done); 130 interrupted (Ctrl-C).")
+
+
+#: What writing to a closed pipe (``| head``) or a full disk (``> /dev/full``) raises.
+OUTPUT_ERRNOS = (errno.EPIPE, errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def output_lost(exc: OSError) -> str:
+    """The one line for output that could not be written (stdout closed or on a full
+    disk); stdout is pointed at ``/dev/null`` so that Python's last flush at exit does
+    not raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # no real stdout (a test's capture)
+        pass
+    return (f"the output could not be written ({exc.strerror or exc}): standard output "
+            f"is a closed pipe or a full disk")
 
 
 def json_text(doc: Any, **dumps: Any) -> str:
@@ -255,6 +278,13 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:  # outside a command (plugins loading)
         click.echo("tactbench: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
+    except OSError as exc:
+        if exc.errno not in OUTPUT_ERRNOS:
+            traceback.print_exc()
+            click.echo(BUG_REPORT, err=True)
+            sys.exit(1)
+        click.echo(f"Error: {output_lost(exc)}", err=True)
+        sys.exit(EXIT_USER_ERROR)
     except Exception:  # click has handled every user-facing error already
         traceback.print_exc()
         click.echo(BUG_REPORT, err=True)

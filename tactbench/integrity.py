@@ -9,17 +9,28 @@ The file formats tactbench reads arrays from are checked here too: :func:`read_n
 is the one reader of ``.npy`` headers (with the one limit :data:`NPY_HEADER_MAX`), and
 :func:`zip_read_errors` is what a damaged ``.npz`` can raise. (The memory budget of large
 steps is :mod:`tactbench.budget`.)
+
+Every reader of a file a user or a disk may have put there opens it through
+:func:`check_regular_file` (or :func:`read_regular_bytes`): only regular files are read,
+with their size checked against a limit before a byte is read. A FIFO (opening one
+blocks until a writer comes), a device (``/dev/zero`` reads forever), a socket or a
+dangling link is one line naming the path, decided by ``os.stat`` before any ``open``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import io
+import os
+import stat
 import struct
 import zipfile
 import zlib
 from pathlib import Path
 from typing import Any, Iterable
+
+from tactbench.budget import human_bytes
+from tactbench.errors import InputError, MissingFileError
 
 
 #: Digest algorithm recorded beside every checksum (so it can change later).
@@ -119,3 +130,70 @@ def zip_read_errors() -> tuple[type[BaseException], ...]:
     (``NotImplementedError``), an "encrypted" flag (``RuntimeError``), the file itself."""
     return (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, struct.error, EOFError,
             NotImplementedError, RuntimeError, OSError)
+
+
+# ------------------------------------------------------------------ only regular files
+
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISSOCK, "a socket"))
+
+
+def special_file_problem(path: str | Path) -> str | None:
+    """Why ``path`` is not a regular file tactbench may read, or None when it is one (or
+    does not exist at all: the caller says "no such file" in its own words). Links are
+    followed; a link to nothing is a problem. Only ``os.stat``: nothing is opened."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        if os.path.islink(path):
+            return f"{path} is a dangling link (to {os.readlink(path)}), not a file"
+        return None
+    except OSError as exc:  # a loop of links, a name too long, no permission
+        return f"{path} cannot be read: {exc.strerror or exc}"
+    if stat.S_ISREG(mode):
+        return None
+    kind = next((text for test, text in _KINDS if test(mode)), "not a regular file")
+    via = " (through a link)" if os.path.islink(path) else ""
+    return f"{path} is {kind}{via}, not a regular file; tactbench reads only regular files"
+
+
+def check_regular_file(path: str | Path, *, limit: int | None = None,
+                       what: str = "file") -> int:
+    """The size of ``path``, refused in one line (:class:`InputError`) unless it is a
+    regular file (:func:`special_file_problem`) of at most ``limit`` bytes. Call it before
+    opening: a missing file raises :class:`MissingFileError` (a ``FileNotFoundError``,
+    as ``open`` would) saying "no such ``what``"."""
+    problem = special_file_problem(path)
+    if problem is not None:
+        raise InputError(problem)
+    try:
+        size = os.stat(path).st_size
+    except FileNotFoundError:
+        raise MissingFileError(f"{path}: no such {what}") from None
+    if limit is not None and size > limit:
+        raise InputError(f"{path} is {human_bytes(size)}, more than the "
+                         f"{human_bytes(limit)} a {what} may be; it was not read")
+    return size
+
+
+def read_regular_bytes(path: str | Path, *, limit: int, what: str = "file") -> bytes:
+    """The bytes of the regular file ``path`` of at most ``limit`` bytes
+    (:func:`check_regular_file`). Opened without blocking and checked again on the open
+    descriptor (a FIFO swapped in meanwhile is refused, not waited on); at most
+    ``limit`` bytes are read whatever the file grows to."""
+    check_regular_file(path, limit=limit, what=what)
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as fh:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise InputError(f"{path} changed into a special file while it was opened; "
+                             f"tactbench reads only regular files")
+        # its size, not the limit: read(n) allocates n bytes before reading
+        data = fh.read(min(st.st_size, limit) + 1)
+        if len(data) > st.st_size:  # it grew meanwhile: the rest, up to the limit
+            data += fh.read(limit + 1 - len(data))
+    if len(data) > limit:
+        raise InputError(f"{path} grew beyond the {human_bytes(limit)} a {what} may be "
+                         f"while it was read")
+    return data

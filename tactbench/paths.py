@@ -369,3 +369,37 @@ def _is_ours(entry: Path, ours) -> bool:
         return False
     temporary = _TEMP.match(entry.name)
     return bool(ours(entry.with_name(temporary["target"]) if temporary else entry))
+
+
+@contextmanager
+def publish_folder(folder: str | Path, option: str = "--out") -> Iterator[Path]:
+    """Write a new folder whole or not at all, and refuse a second writer.
+
+    The block writes into a temporary sibling (:func:`temp_name`); when it ends without
+    an error the temporary is renamed to ``folder``. ``folder`` may not exist or be
+    empty (a rename replaces an empty folder); when another process filled it meanwhile
+    (two ``data synth`` runs into one new folder) the rename fails and this writer is
+    refused in one line, its temporary removed: one wins whole, the other is refused.
+    """
+    folder = Path(folder)
+    with _usable_path(folder, option):
+        folder.absolute().parent.mkdir(parents=True, exist_ok=True)
+        tmp = folder.absolute().with_name(temp_name(folder.absolute().name))
+        tmp.mkdir()
+    try:
+        yield tmp
+        try:
+            os.rename(tmp, folder)
+        except OSError as exc:
+            if exc.errno not in _TAKEN and exc.errno != errno.EISDIR:
+                raise
+            raise InputError(f"{option} {folder} was filled by another process while this "
+                             f"one wrote; it was left as that process wrote it (nothing of "
+                             f"this run was kept)") from None
+    except OSError as exc:
+        full = storage_error(exc, folder)
+        if full is not None:
+            raise full from None
+        raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

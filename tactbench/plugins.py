@@ -16,8 +16,10 @@ plugin's ``register_*`` hooks and gathers what they register into a
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import importlib
+import io
 import os
 import re
 from dataclasses import replace
@@ -57,10 +59,11 @@ class PluginManager(pluggy.PluginManager):
         self.infos: dict[str, PluginInfo] = {}
         self.problems: list[PluginProblem] = []
 
-    def report(self, plugin: str, distribution: str, message: str) -> None:
+    def report(self, plugin: str, distribution: str, message: str, *,
+               mark: bool = True) -> None:
         problem = PluginProblem(plugin, distribution, message)
         self.problems.append(problem)
-        info = self.infos.get(plugin)
+        info = self.infos.get(plugin) if mark else None  # mark=False: not this one's info
         if info is not None and info.error is None:
             self.infos[plugin] = replace(info, error=message)
         if self.strict:
@@ -153,20 +156,42 @@ def _load_entry_points(pm: PluginManager) -> None:
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         dist = ep.dist.name if ep.dist is not None else "?"
         version = ep.dist.version if ep.dist is not None else ""
+        if ep.name in pm.infos and pm.infos[ep.name].source == "builtin":
+            pm.report(ep.name, dist, f"entry point '{ep.name}' = '{ep.value}' of "
+                                     f"distribution '{dist}' has the name of a built-in "
+                                     f"plugin and is skipped; rename the entry point",
+                      mark=False)
+            continue
         if ep.name in seen or ep.name in pm.infos:
             # The same distribution found twice on sys.path: the first one wins, as in Python.
             continue
         seen.add(ep.name)
-        try:
-            obj = ep.load()
-        except Exception as exc:
+        obj, problem = _import_quietly(ep)
+        if problem is not None:
             pm.infos[ep.name] = PluginInfo(ep.name, dist, version, "entry point",
-                                           error=f"{type(exc).__name__}: {exc}")
-            pm.report(ep.name, dist, f"failed to import '{ep.value}': "
-                                     f"{type(exc).__name__}: {exc}")
+                                           error=problem)
+            pm.report(ep.name, dist, f"failed to import '{ep.value}': {problem}")
             continue
         pm.add_plugin(obj, name=ep.name, distribution=dist, version=version,
                       source="entry point")
+
+
+def _import_quietly(ep: Any) -> tuple[Any, str | None]:
+    """``(plugin object, None)``, or ``(None, problem)`` when importing the entry point
+    raised (``SystemExit`` too: a plugin's ``sys.exit`` must not end the command) or
+    wrote to stdout (which would break ``--json`` output; what it wrote is dropped)."""
+    printed = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(printed):
+            obj = ep.load()
+    except (Exception, SystemExit) as exc:
+        what = f"exit status {exc.code!r}" if isinstance(exc, SystemExit) else str(exc)
+        return None, f"{type(exc).__name__}: {what}"
+    if printed.getvalue():
+        text = " ".join(printed.getvalue().split())
+        return None, (f"it printed to stdout when imported ({text[:60]!r}), which would "
+                      f"break --json output; skipped")
+    return obj, None
 
 
 def collect_registry(pm: PluginManager) -> Registry:

@@ -90,3 +90,31 @@ def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-2000:]
     assert "interrupted" in text
     assert len(list((out / "cells").glob("*.json"))) < 2, "interrupted after the grid ended"
+
+
+# ----------------------------------------------------------------------- round three
+
+
+def test_a_full_or_closed_stdout_is_one_line_exit_2(tmp_path):
+    full = subprocess.run(f"{sys.executable} -m tactbench list > /dev/full", shell=True,
+                          capture_output=True, text=True, timeout=120)
+    assert full.returncode == 2, full.stderr
+    assert full.stderr.strip().splitlines() == [full.stderr.strip()]
+    assert "could not be written" in full.stderr and "Traceback" not in full.stderr
+    proc = subprocess.Popen([sys.executable, "-m", "tactbench", "list", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # the reader went away (`| head` that exited)
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 2 and "Broken pipe" in err and "Traceback" not in err
+
+
+def test_an_unreachable_dask_scheduler_is_one_line(monkeypatch):
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    from tactbench.errors import InputError
+    from tactbench.runner import executors
+
+    monkeypatch.setattr(executors, "SCHEDULER_TIMEOUT_S", 2)
+    with pytest.raises(InputError, match="the dask scheduler cannot be reached"):
+        executors._connect(Client, "tcp://127.0.0.1:9")

@@ -151,3 +151,49 @@ def test_a_preview_at_a_fine_pixel_is_refused_under_the_budget(monkeypatch, tmp_
     result = CliRunner().invoke(app, ["data", "preview", spec, "--pixel-mm", "nan",
                                       "--out", str(tmp_path / "p.png")])
     assert result.exit_code == 2 and "Invalid value" in result.output
+
+
+# ------------------------------------------------------- round three: numbers at the edge
+
+
+def test_readings_near_the_float32_limit_are_normalised_without_nan(tmp_path):
+    """Readings of ±3e38 (finite float32) span 6e38, beyond float32: the normalisation
+    is computed in float64, so the images are not NaN (a run scoring chance)."""
+    from tactbench.datasets.folder import read_folder
+
+    root = tmp_path / "edge"
+    rng = np.random.default_rng(0)
+    for cls, sign in (("a", 1), ("b", -1)):
+        (root / cls).mkdir(parents=True)
+        for i in range(3):
+            values = rng.uniform(-3e38, 3e38, (5, 3, 3))
+            values[:, 0, 0] = sign * 3.3e38  # the class is in one taxel
+            np.save(root / cls / f"r{i}.npy", values.astype(np.float32))
+    ds = read_folder(root)
+    vectors = ds.vectors()
+    assert all(np.isfinite(v).all() and 0 <= v.min() and v.max() <= 1 for v in vectors)
+    assert len({round(float(v[:, 0].mean()), 3) for v in vectors}) == 2  # classes differ
+    for spec in ("baseline", "fixed:offset=-3.4e38,scale=6.8e38"):
+        ds.normalisation = type(ds.normalisation).parse(spec)
+        ds._norm_params = None
+        with np.errstate(all="raise"):  # not even an overflow on the way
+            out = ds.vectors()
+        assert all(np.isfinite(v).all() and v.max() <= 1 for v in out), spec
+        assert max(float(v.max()) for v in out) > 0.5, spec  # not all zeros
+
+
+@pytest.mark.parametrize("body", ['{"pixel_mm": %s}' % ("1" * 400),
+                                  '{"pixel_mm": -%s}' % ("9" * 400),
+                                  '{"pixel_mm": %s.5}' % ("1" * 400),
+                                  '{"seeds": [%s]}' % ("1" * 400),
+                                  '{"threads": %s}' % ("1" * 400)])
+def test_a_json_scene_number_of_400_digits_is_one_line(tmp_path, body):
+    from tactbench.runner.scene import load_scene_file
+
+    path = tmp_path / "scene.json"
+    path.write_text(body)
+    with pytest.raises(InputError) as err:
+        load_scene_file(path)
+    assert "scene.json" in str(err.value) and "\n" not in str(err.value)
+    result = CliRunner().invoke(cli, ["run", str(path)])
+    assert result.exit_code == 2 and "Traceback" not in result.output

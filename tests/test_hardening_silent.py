@@ -150,3 +150,39 @@ def test_a_one_line_csv_ending_in_a_comma_is_refused_not_guessed(tmp_path):
         read_array_file(path)
     path.write_text("12,\n13,\n")  # every line of several: a trailing comma
     assert read_array_file(path)[0].tolist() == [[12.0], [13.0]]
+
+
+# ----------------------------------------------------------------------- round three
+
+
+def test_an_npz_with_two_members_of_one_name_in_different_folders_is_refused(tmp_path):
+    import zipfile
+
+    path = tmp_path / "rec.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        for folder, value in (("a", 1.0), ("b", 2.0)):
+            with zf.open(f"{folder}/values.npy", "w") as fh:
+                np.lib.format.write_array(fh, np.full((3, 2, 2), value, np.float32))
+    with pytest.raises(InputError, match="'a/values.npy' and 'b/values.npy' have one name"):
+        read_array_file(path)
+
+
+@pytest.mark.parametrize("name", ["a|b", "a*b*", "`x`", "[l](u)", "<b>", "a\\|b", "x~y~"])
+def test_a_class_name_with_markdown_specials_is_escaped_by_the_markdown_writers(name):
+    import re
+
+    from tactbench.runner.tables import failed_cells_markdown, md, per_class_markdown
+
+    summary = {"encoder": "raw", "classifier": "logreg", "L": 3,
+               "classes": [name, "plain"], "per_class_accuracy": {name: 0.5, "plain": 1.0}}
+    table = per_class_markdown([summary], {"logreg": "logreg"})
+    header, rule, row = table.splitlines()
+    cells = lambda line: re.split(r"(?<!\\)\|", line)[1:-1]  # noqa: E731 — GFM's split
+    assert len(cells(header)) == len(cells(rule)) == len(cells(row)) == 5
+    assert md(name) in header
+    unescaped = re.sub(r"\\(.)", r"\1", md(name))
+    assert unescaped == name  # every escape is a backslash before the character itself
+    failed = failed_cells_markdown([{"key": "k", "encoder": "raw", "classifier": "x",
+                                     "L": 3, "seed": 0, "status": "failed",
+                                     "error": {"type": "E", "message": f"class {name}\nbad"}}])
+    assert len(cells(failed.splitlines()[-1])) == 6

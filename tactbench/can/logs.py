@@ -27,7 +27,8 @@ from tactbench.can.codec import SLOTS_PER_MODULE, FrameFormat, TaxelMap
 from tactbench.can.meta import META_PREFIX, MetaAssembler, MetaEvent, is_meta
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
-from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.errors import InputError, TactbenchError
+from tactbench.integrity import check_regular_file
 
 #: Class name of the samples of a log without label markers.
 UNLABELLED = "unlabelled"
@@ -107,8 +108,7 @@ def read_messages(path: str | Path) -> Iterator[Any]:
     import can
 
     path = Path(path)
-    if not path.is_file():
-        raise MissingFileError(f"{path}: no such CAN log")
+    check_regular_file(path, what="CAN log")  # a FIFO or a device: never opened
     check_log_name(path)
     if path.suffix.lower() == ".blf":
         check_blf(path)

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tactbench.boundary import labels_problem, proba_problem
 from tactbench.classifiers.io import load_model
 from tactbench.contracts import CLASSIFIER
 from tactbench.data.windows import test_windows, training_windows
@@ -91,7 +92,12 @@ def check_classifier(spec: str, *, registry: Any = None) -> None:
     proba = np.asarray(proba)
     if proba.shape == (len(test), 4):
         expect(bool(np.allclose(proba.sum(1), 1, atol=1e-4)), "probabilities do not sum to 1")
+        # the rules the runner applies to what a classifier returns (tactbench.boundary)
+        problem = proba_problem(proba, len(test), 4)
+        expect(problem is None, str(problem))
         pred = clf.predict(test)
+        problem = labels_problem(pred, len(test), 4)
+        expect(problem is None, str(problem))
         expect(pred.dtype == np.int64 and pred.shape == (len(test),),
                f"predict gave {pred.dtype} {pred.shape}, expected int64 ({len(test)},)")
         expect(np.array_equal(pred, proba.argmax(1)), "predict is not the argmax of "

@@ -14,7 +14,7 @@ from tactbench.datasets.loading import check_loaded, load_dataset, takes_progres
 from tactbench.datasets.synthetic_forearm import generate
 from tactbench.errors import InputError, MissingFileError
 from tactbench.specs import parse_spec
-from tactbench.paths import check_output_file, check_output_folder
+from tactbench.paths import check_output_file, check_output_folder, publish_folder
 from tactbench.ui import Progress
 
 
@@ -114,7 +114,8 @@ def synth_cmd(out: str, users: int, seed: int, repetitions: int, positions: int,
     with Progress() as bars:
         ds = generate(users=users, positions=positions, repetitions=repetitions, seed=seed,
                       version=version, progress=bars.callback("simulating gestures"))
-    ds.save(out)
+    with publish_folder(out) as tmp:  # whole or not at all; a second writer is refused
+        ds.save(tmp)
     click.echo(f"wrote {len(ds)} samples ({len(ds.classes)} classes, {users} users) to {out}; "
                f"content hash {ds.content_hash()[:16]}", err=True)
 
@@ -136,7 +137,8 @@ def import_cmd(src: str, out: str, fmt: str | None) -> None:
     """
     dest = check_output_folder(out, inputs=[src] if Path(src).exists() else [])
     ds = _load(src) if fmt is None else _load_as(fmt, src)
-    ds.save(dest)
+    with publish_folder(dest) as tmp:  # whole or not at all; a second writer is refused
+        ds.save(tmp)
     back = Dataset.load(dest)  # verifies the stored content hash against the arrays
     if back.content_hash() != ds.content_hash():
         raise RuntimeError(f"{dest}: read back with content hash {back.content_hash()[:16]} "

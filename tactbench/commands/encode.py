@@ -10,11 +10,12 @@ from pathlib import Path
 
 import click
 
+from tactbench.boundary import BoundaryError, encoder_output_problem
 from tactbench.budget import check_budget
 from tactbench.cli import get_registry, json_text
 from tactbench.contracts import ENCODER
-from tactbench.errors import InputError, MissingFileError
-from tactbench.integrity import read_npy_header
+from tactbench.errors import InputError
+from tactbench.integrity import check_regular_file, read_npy_header, read_regular_bytes
 from tactbench.paths import atomic_write_text, check_output_file, temp_name
 
 
@@ -40,8 +41,7 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
 
 
     src = Path(input_path)
-    if not src.is_file():
-        raise MissingFileError(f"{src}: no such file")
+    check_regular_file(src)  # a FIFO or a device: one line, never opened
     dst = output_paths(out_path)
     meta_path = dst.with_suffix(".json")
     for target in (dst, meta_path):
@@ -63,6 +63,11 @@ def encode_cmd(spec: str, input_path: str, out_path: str, as_json: bool) -> None
     except InputError as exc:  # the file's content is refused; any other error is a bug
         raise InputError(f"{src}: {exc}") from exc
     seconds = time.perf_counter() - t0
+    channels = len(tuple(ENCODER.get(encoder, "channels")))
+    problem = encoder_output_problem(out, (len(seq), channels, *np.shape(seq)[1:]),
+                                     tuple(ENCODER.get(encoder, "ranges")))
+    if problem is not None:  # a plugin's output: checked before it is written
+        raise BoundaryError.of("encoder", spec, "", problem)
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(temp_name(dst.name))  # written whole, then renamed over dst
     try:
@@ -99,8 +104,7 @@ def _ours(path: Path) -> bool:
     output: the metadata beside it parses and records that encoding as its output."""
     meta_path = path.with_suffix(".json")
     try:
-        with open(meta_path, "rb") as fh:
-            meta = json.loads(fh.read(1 << 20))
+        meta = json.loads(read_regular_bytes(meta_path, limit=1 << 20))  # never a FIFO
         recorded = Path(meta["output"])
         return (isinstance(meta, dict) and "spec" in meta
                 and recorded.name == path.with_suffix(".npy").name)

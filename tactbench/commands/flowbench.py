@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import platform
 from pathlib import Path
 
@@ -11,6 +12,8 @@ from tactbench.budget import check_budget
 from tactbench.cli import get_registry, json_text
 from tactbench.encoders.evaluation import flowbench as fb
 from tactbench.encoders.parallel import default_workers
+from tactbench.integrity import read_regular_bytes
+from tactbench.paths import check_output_folder, publish_folder
 from tactbench.ui import Progress
 
 
@@ -46,6 +49,8 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     by a smooth flow. Errors are averaged over the tactile scenes; the Pareto
     front (no encoder both faster and more accurate) is marked.
     """
+    if out_dir:  # the one output rule, before any work
+        check_output_folder(out_dir, ours=_ours)
     registry = get_registry(warn=not as_json)
     specs = specs or fb.DEFAULT_ENCODERS
     encoders = [(spec, registry.build("encoder", spec)) for spec in specs]
@@ -61,7 +66,7 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
                        f"python {platform.python_version()}"}
     doc = fb.to_document(results, meta)
     if out_dir:
-        paths = fb.write_outputs(results, Path(out_dir), meta)
+        paths = _write(results, Path(out_dir), meta)
         doc["files"] = {k: str(v) for k, v in paths.items()}
     if as_json:
         click.echo(json_text(doc, indent=2))
@@ -80,6 +85,33 @@ def flowbench_cmd(specs: tuple[str, ...], sizes: tuple[str, ...], repeats: int,
     console.print(table)
     if out_dir:
         console.print(f"wrote {', '.join(doc['files'].values())}")
+
+
+#: The files ``flowbench --out`` writes: a folder holding only these, with a
+#: ``flowbench.json`` that flowbench wrote, is its own earlier output and may be replaced.
+OUTPUTS = ("flowbench.json", "flowbench.csv", "flow_error_vs_time.png")
+
+
+def _ours(folder: Path) -> bool:
+    names = {p.name for p in Path(folder).iterdir()}
+    if not names <= set(OUTPUTS) or "flowbench.json" not in names:
+        return False
+    try:
+        doc = json.loads(read_regular_bytes(Path(folder) / "flowbench.json", limit=1 << 26))
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(doc, dict) and str((doc.get("meta") or {}).get("command", "")) \
+        .startswith("tactbench flowbench")
+
+
+def _write(results, out: Path, meta: dict) -> dict[str, Path]:
+    """A new or empty folder is written whole (:func:`publish_folder`: a second writer is
+    refused); flowbench's own earlier folder is replaced file by file, atomically."""
+    if out.is_dir() and any(out.iterdir()):
+        return fb.write_outputs(results, out, meta)
+    with publish_folder(out) as tmp:
+        written = fb.write_outputs(results, tmp, meta)
+    return {k: out / v.name for k, v in written.items()}
 
 
 def _cores() -> int:

@@ -8,6 +8,7 @@ from tactbench.cli import json_text
 from tactbench.data.imaging import image_shape
 from tactbench.data.layout_io import load_layout, write_layout_csv
 from tactbench.datasets.forearm import cyskin_forearm
+from tactbench.paths import check_output_file
 
 
 @click.group("layout")
@@ -49,7 +50,11 @@ def info_cmd(file: str, pixel_mm: tuple[float, ...], as_json: bool) -> None:
 @click.option("--taxels", default=1558, show_default=True, type=click.IntRange(1))
 @click.option("--seed", default=0, show_default=True, type=int)
 def generate_cmd(out: str, taxels: int, seed: int) -> None:
-    """Write the generated CySkin-like forearm layout as CSV."""
+    """Write the generated CySkin-like forearm layout as CSV.
+
+    --out is a new file: an existing one is never replaced.
+    """
+    check_output_file(out)  # the one output rule: not a user's file, not in the cache
     layout = cyskin_forearm(taxels, seed=seed)
     write_layout_csv(layout, out)
     click.echo(f"wrote {layout.n_taxels} taxels to {out}", err=True)

@@ -32,6 +32,10 @@ from tactbench.data.store import (
 from tactbench.errors import InputError
 
 
+#: Below this, readings, offsets and scales are normalised in float32 without overflow.
+_F32_SAFE = float(np.finfo(np.float32).max) / 4
+
+
 class Dataset:
     """Labelled samples with class names, an optional layout and a normalisation.
 
@@ -175,9 +179,19 @@ class Dataset:
         return self._norm_params
 
     def normalise(self, values: np.ndarray) -> np.ndarray:
-        """Raw ``(T, N)`` → float32 pressure in [0, 1]; NaN stays NaN."""
+        """Raw ``(T, N)`` → float32 pressure in [0, 1]; NaN stays NaN.
+
+        Readings near the float32 limit (±3.4e38), and a range spanning them (a scale of
+        6.8e38, beyond float32), are computed in float64: float32 would overflow into inf
+        and NaN. Other readings are computed in float32, as they always were."""
         offset, scale = self.normalisation_params()
-        out = (np.asarray(values, dtype=np.float32) - offset) / np.float32(scale)
+        values = np.asarray(values, dtype=np.float32)
+        reach = float(np.nanmax(np.abs(values), initial=0.0)) \
+            + float(np.max(np.abs(offset), initial=0.0))
+        if reach < _F32_SAFE and float(scale) < _F32_SAFE:  # the usual case, bit for bit
+            out = (values - offset) / np.float32(scale)
+        else:  # near ±3.4e38: float32 would overflow into inf and NaN
+            out = (values.astype(np.float64) - np.asarray(offset, np.float64)) / float(scale)
         return np.clip(out, 0.0, 1.0, out=out).astype(np.float32, copy=False)
 
     def vectors(self, indices: Sequence[int] | None = None) -> list[np.ndarray]:

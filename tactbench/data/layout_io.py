@@ -30,7 +30,8 @@ import numpy as np
 
 from tactbench.budget import check_budget
 from tactbench.data.layout import TaxelLayout, unroll
-from tactbench.errors import InputError, MissingFileError
+from tactbench.errors import InputError
+from tactbench.integrity import check_regular_file
 from tactbench.paths import atomic_write_text
 
 #: The keys of the dict format: required, then optional.
@@ -268,10 +269,9 @@ def read_layout_json(path: str | Path, *, map_index: int = 0) -> TaxelLayout:
 
 
 def _read_text(path: Path) -> str:
-    if not path.exists():
-        raise MissingFileError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: a folder, not a layout file")
+    check_regular_file(path, what="file")  # a FIFO or a device: one line, never opened
 
     # Parsed JSON of numbers takes several times its text.
     check_budget(16 * path.stat().st_size, f"reading layout file {path}")

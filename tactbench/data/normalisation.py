@@ -96,6 +96,10 @@ class Normalisation:
             for a in range(0, stacked.shape[1], block):  # a copy of a few taxels at a time
                 offset[a:a + block] = percentile(stacked[:, a:a + block], opts["low"], axis=0)
         offset = np.nan_to_num(offset, nan=0.0).astype(np.float32)
+        span = max(float(np.nanmax(np.abs(stacked), initial=0.0)),
+                   float(np.abs(offset).max(initial=0.0)))
+        if 2 * span > float(np.finfo(np.float32).max):  # near ±3.4e38: float32 overflows
+            stacked = stacked.astype(np.float64)
         stacked -= offset  # in place: the readings with each taxel's rest value removed
         rest = stacked[np.isfinite(stacked)] if has_nan else stacked.reshape(-1)
         scale = (float(np.percentile(rest, opts["high"], overwrite_input=True))

@@ -27,6 +27,7 @@ from tactbench.budget import check_budget
 from tactbench.contracts import ENCODER
 from tactbench.data.imaging import image_shape
 from tactbench.errors import InputError, check_positive_int, check_shape
+from tactbench.integrity import special_file_problem
 from tactbench.paths import atomic_write_bytes
 
 #: Colour map for pressure in [0, 1].
@@ -165,6 +166,8 @@ PNG_MARK = "tactbench"
 
 def written_by_tactbench(path: str | Path) -> bool:
     """Whether ``path`` is a PNG file :func:`write_png` wrote (its Software text chunk)."""
+    if special_file_problem(path) is not None:  # a FIFO would block: not ours
+        return False
     try:
         with open(path, "rb") as fh:
             head = fh.read(4096)

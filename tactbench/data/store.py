@@ -39,7 +39,7 @@ from tactbench.budget import check_budget, human_bytes
 from tactbench.data.layout_io import layout_from_dict, layout_to_dict
 from tactbench.data.recording import UINT16_MAX, Recording, Sample
 from tactbench.errors import InputError, MissingFileError, TactbenchError
-from tactbench.integrity import read_npy_header, zip_read_errors
+from tactbench.integrity import read_npy_header, special_file_problem, zip_read_errors
 from tactbench.paths import atomic_write_bytes, atomic_write_text
 
 FORMAT_NAME = "tactbench-dataset"
@@ -139,6 +139,9 @@ def read_dataset_fields(folder: str | Path) -> tuple[dict[str, Any], str]:
     if not folder.is_dir():
         raise MissingFileError(f"{folder}: no such dataset folder")
     mpath, apath = folder / MANIFEST, folder / ARRAYS
+    for special in map(special_file_problem, (mpath, apath)):
+        if special is not None:  # a FIFO or a device: one line, never opened
+            raise InputError(special)
     if not mpath.is_file():
         raise InputError(f"{folder}: not a tactbench dataset folder (no {MANIFEST})")
     # Parsed JSON takes several times its text (the samples' lists of strings).

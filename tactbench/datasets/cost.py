@@ -28,8 +28,9 @@ import numpy as np
 from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.recording import Recording, Sample
-from tactbench.datasets.folder import is_number
-from tactbench.errors import InputError, MissingFileError, check_positive_float
+from tactbench.datasets.array_files import is_number
+from tactbench.errors import InputError, check_positive_float
+from tactbench.integrity import check_regular_file
 from tactbench.paths import atomic_write_text
 
 RATE_HZ = 135.0
@@ -52,8 +53,7 @@ def read_cost_csv(path: str | Path, *, pitch_mm: float = 10.0, name: str | None 
                   ) -> Dataset:
     """Read a CoST CSV file (see the module docstring); errors name the line."""
     path = Path(path)
-    if not path.is_file():
-        raise MissingFileError(f"{path}: no such file")
+    check_regular_file(path)  # a FIFO or a device: one line, never opened
     with path.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     lineno0 = 1

@@ -34,6 +34,7 @@ from tactbench.budget import check_budget, memory_budget_bytes
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Recording, Sample
 from tactbench.errors import InputError, MissingFileError
+from tactbench.integrity import check_regular_file, special_file_problem
 from tactbench.paths import atomic_write_text
 
 SUFFIX = ".txt"
@@ -60,8 +61,7 @@ def _read(path: Path, held: int) -> Recording:
     field count and sizes the arrays (nothing is allocated for a malformed file, and the
     memory budget is asked first); the second parses the numbers into them. ``held``
     bytes of earlier files of the same dataset count against the budget too."""
-    if not path.is_file():
-        raise MissingFileError(f"{path}: no such file")
+    check_regular_file(path)  # a FIFO or a device: one line, never opened
     ids: np.ndarray | None = None
     n_rows = 0
     blank: int | None = None  # first blank line after the last non-blank one
@@ -323,7 +323,11 @@ def read_cyskin_folder(path: str | Path, *, name: str | None = None,
         files = [path]
         root = path.parent
     elif path.is_dir():
-        files = sorted(p for p in path.rglob(f"*{SUFFIX}") if p.is_file())
+        found = sorted(path.rglob(f"*{SUFFIX}"))
+        for p in found:  # a FIFO, a device or a dangling link: named, never left out
+            if (problem := special_file_problem(p)) and "is a folder" not in problem:
+                raise InputError(f"{problem} (inside the dataset folder {path})")
+        files = [p for p in found if p.is_file()]
         root = path
         if not files:
             raise InputError(f"{path}: no CySkin text files (*{SUFFIX}) in this folder")

@@ -59,16 +59,9 @@ from tactbench.data.dataset import Dataset
 from tactbench.data.layout import TaxelLayout
 from tactbench.data.layout_io import load_layout
 from tactbench.data.recording import Recording, Sample
-from tactbench.errors import (
-    InputError,
-    MissingFileError,
-    TactbenchError,
-    check_number,
-    check_positive_float,
-)
-from tactbench.integrity import read_npy_header, zip_read_errors
-
-SUFFIXES = (".npy", ".npz", ".csv")
+from tactbench.datasets.array_files import SUFFIXES, read_array_file
+from tactbench.errors import InputError, MissingFileError, check_number, check_positive_float
+from tactbench.integrity import check_regular_file, read_npy_header, special_file_problem
 #: Grid pitch assumed when none is given: the quick profile's pixel, so one pixel per cell.
 DEFAULT_PITCH_MM = 5.0
 #: Frame rate assumed for files without timestamps (the study's 10 Hz).
@@ -96,201 +89,6 @@ def natural_key(text: str) -> list[Any]:
             for t in re.split(r"(\d+)", text) if t]
 
 
-# --------------------------------------------------------------------------- files
-
-
-def read_array_file(path: Path, *, timestamp_column: str | int | None = None
-                    ) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(values, timestamps or None)`` of one ``.npy``, ``.npz`` or ``.csv`` file."""
-    suffix = path.suffix.lower()
-    try:
-        if suffix == ".npy":
-            with path.open("rb") as fh:
-                return _read_npy(fh, path, path.stat().st_size, "the file"), None
-        if suffix == ".npz":
-            return _read_npz(path)
-        if suffix == ".csv":
-            return _read_csv(path, timestamp_column)
-    except OSError as exc:  # no permission, a FIFO, an I/O error: the file, one line
-        if isinstance(exc, TactbenchError):
-            raise
-        raise InputError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-    raise InputError(f"{path}: unknown suffix {suffix!r}; expected one of {', '.join(SUFFIXES)}")
-
-
-def _read_npy(fh: Any, path: Path, size: int, what: str) -> np.ndarray:
-    """An npy array from ``fh``, its header checked (and its size budgeted) before reading."""
-    try:
-        shape, fortran, dtype = read_npy_header(fh)
-    except ValueError as exc:
-        raise InputError(f"{path}: {what} is not a valid .npy array ({exc})") from None
-    if dtype.hasobject:
-        raise InputError(f"{path}: {what} holds Python objects (a ragged array of "
-                         f"recordings or frames of different sizes?), not numbers")
-    if dtype.kind not in "biuf":
-        raise InputError(f"{path}: {what} holds {dtype} values; expected numbers")
-    count = math.prod(shape)
-    nbytes = count * dtype.itemsize
-    check_budget(nbytes, f"reading {path} ({'×'.join(map(str, shape))} {dtype})")
-    header_end = fh.tell()
-    truncated = InputError(f"{path}: {what} is truncated: its header says "
-                           f"{'×'.join(map(str, shape))} {dtype} ({nbytes} bytes), "
-                           f"{max(size - header_end, 0)} bytes follow")
-    if size - header_end < nbytes:
-        raise truncated
-    arr = np.empty(count, dtype=dtype)
-    view, got = memoryview(arr).cast("B"), 0
-    while got < nbytes:
-        n = fh.readinto(view[got:])
-        if not n:
-            raise truncated
-        got += n
-    return arr.reshape(shape, order="F" if fortran else "C")
-
-
-def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    try:
-        zf = zipfile.ZipFile(path)
-    except (*zip_read_errors(), ValueError) as exc:
-        raise InputError(f"{path}: not a valid .npz file (not a zip archive: {exc})") from None
-    with zf:
-        members = {Path(i.filename).stem: i for i in zf.infolist()
-                   if i.filename.endswith(".npy") and not i.is_dir()}
-        if "values" in members:
-            values_info = members["values"]
-        elif len(members) == 1:
-            values_info = next(iter(members.values()))
-        else:
-            raise InputError(f"{path}: .npz needs a member 'values' (or exactly one array); "
-                             f"found {', '.join(sorted(members)) or 'none'}")
-        values = _read_member(zf, values_info, path)
-        ts = None
-        if "timestamps" in members and members["timestamps"] is not values_info:
-            ts = _read_member(zf, members["timestamps"], path).astype(np.float64)
-            if ts.shape != values.shape[:1]:
-                raise InputError(f"{path}: 'timestamps' has shape {ts.shape}; expected "
-                                 f"({values.shape[0] if values.ndim else '?'},), one per frame")
-    return values, ts
-
-
-def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> np.ndarray:
-    try:
-        with zf.open(info) as fh:
-            return _read_npy(fh, path, info.file_size, f"member {info.filename!r}")
-    except zip_read_errors() as exc:
-        raise InputError(f"{path}: member {info.filename!r} cannot be read "
-                         f"(damaged .npz: {exc})") from None
-
-
-def _read_csv(path: Path, timestamp_column: str | int | None
-              ) -> tuple[np.ndarray, np.ndarray | None]:
-    """One frame per line; parsed a line at a time into one array (never a list of
-    every field as text, which costs ~50 bytes a field)."""
-    size = path.stat().st_size
-    check_budget(2 * size, f"reading {path}")  # its bytes and their text
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text CSV file (not UTF-8; binary data?)") from None
-    if "\x00" in text:
-        raise InputError(f"{path}: not a text CSV file (it holds NUL bytes; binary data?)")
-    lines = [(n, line) for n, line in enumerate(text.splitlines(), 1) if line.strip()]
-    del text
-    if not lines:
-        raise InputError(f"{path}: empty CSV file (expected one frame per row)")
-    first = lines[0][1]
-    delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
-
-    line_of = {id(line): n for n, line in lines}
-
-    def fields(line: str) -> list[str]:
-        try:
-            return [c.strip() for c in next(csv.reader([line], delimiter=delimiter), [])]
-        except csv.Error as exc:  # a field beyond the csv module's limit, a stray quote
-            raise InputError(f"{path}, line {line_of.get(id(line), '?')}: not a CSV row "
-                             f"({exc})") from None
-
-    # a delimiter ending every line is no column; on a file of one line it could as well
-    # be a missing last reading, so it is refused rather than guessed
-    trailing = all(line.rstrip().endswith(delimiter) for _, line in lines)
-    if trailing and len(lines) == 1:
-        raise InputError(f"{path}, line {lines[0][0]}: its one row ends in {delimiter!r}: a "
-                         f"missing last reading or a trailing delimiter? Give the reading, "
-                         f"or remove the {delimiter!r}")
-
-    def row_of(line: str) -> list[str]:
-        row = fields(line)
-        return row[:-1] if trailing and row and row[-1] == "" else row
-
-    header = None
-    start = 0
-    if is_header(row_of(first)):
-        header = row_of(first)
-        start = 1
-        if len(lines) == 1:
-            raise InputError(f"{path}: only a header row, no frames")
-    width = len(header) if header is not None else len(row_of(first))
-    ts_col = _timestamp_index(timestamp_column, header, width, path)
-    check_budget(8 * width * (len(lines) - start) + 2 * size,
-                 f"reading {path} ({len(lines) - start} rows × {width} fields)")
-    out = np.empty((len(lines) - start, width), dtype=np.float64)
-    for k, (lineno, line) in enumerate(lines[start:]):
-        row = row_of(line)
-        if len(row) != width:
-            raise InputError(f"{path}, line {lineno}: {len(row)} fields, expected {width} "
-                             f"({'as the header' if header is not None else 'as the first row'};"
-                             f" rows of different lengths)")
-        try:
-            out[k] = [float(c) for c in row]
-        except ValueError:
-            col = next(i for i, c in enumerate(row) if not is_number(c))
-            name = header[col] if header is not None else f"column {col}"
-            raise InputError(f"{path}, line {lineno}: {name} is {row[col]!r}, not a number"
-                             ) from None
-    if ts_col is None:
-        return out, None
-    ts = out[:, ts_col].copy()
-    return np.delete(out, ts_col, axis=1), ts
-
-
-def _timestamp_index(column: str | int | None, header: list[str] | None, width: int,
-                     path: Path) -> int | None:
-    if column is None:
-        return None
-    if header is not None and str(column) in header:
-        return header.index(str(column))
-    if isinstance(column, int) and not isinstance(column, bool):
-        if 0 <= column < width:
-            return column
-        raise InputError(f"{path}: timestamp_column {column} is out of range "
-                         f"(the file has {width} columns)")
-    where = f"header ({', '.join(header[:6])}{', …' if len(header) > 6 else ''})" \
-        if header is not None else "file (it has no header row)"
-    raise InputError(f"{path}: no column {column!r} in the {where} for timestamp_column")
-
-
-#: Fields that mean "no reading" in a data row, never a column name.
-MISSING_MARKERS = frozenset({"", "-", "--", "?", "na", "n/a", "nan", "null", "none"})
-
-
-def is_header(fields: list[str]) -> bool:
-    """Whether a CSV's first row is a header: every field a name (not blank, not a
-    missing-reading marker such as ``-`` or ``NA``) and at least one not a number.
-    A first row with a blank or ``-`` field is a data row, and is refused like the same
-    field on any other line; it is never dropped as a header."""
-    return (all(f.strip().lower() not in MISSING_MARKERS for f in fields)
-            and any(not is_number(f) for f in fields))
-
-
-def is_number(text: str) -> bool:
-    """Whether ``text`` reads as a float (``nan`` and ``inf`` do)."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 # -------------------------------------------------------------------------- the tree
 
 
@@ -301,6 +99,7 @@ def find_recordings(root: Path, *, users: str | None = None
         raise MissingFileError(f"{root}: no such folder")
     if not root.is_dir():
         raise InputError(f"{root}: not a folder (expected ROOT/<class>/<recording>.npy|.npz|.csv)")
+    _refuse_special_entries(root)
     stray = sorted(p.name for p in root.iterdir()
                    if p.is_file() and p.suffix.lower() in SUFFIXES and p.name != USERS_FILE)
     if stray:
@@ -337,6 +136,21 @@ def find_recordings(root: Path, *, users: str | None = None
         found[folder.name] = sorted(files, key=lambda p: natural_key(p.relative_to(root)
                                                                       .as_posix()))
     return found
+
+
+def _refuse_special_entries(root: Path) -> None:
+    """A FIFO, a device, a socket or a dangling link anywhere in the tree (hidden names
+    aside) is one line naming it: left out, the dataset would silently lose a recording
+    (12 of 13, no word); opened, a FIFO blocks and ``/dev/zero`` never ends."""
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = [d for d in dirnames if not d.startswith(".")]
+        for name in [*dirnames, *filenames]:
+            problem = None if name.startswith(".") else \
+                special_file_problem(Path(dirpath) / name)
+            if problem is not None and "is a folder" not in problem:
+                raise InputError(f"{problem} (inside the dataset folder {root}: a "
+                                 f"recording must be a regular file; remove it or put the "
+                                 f"file there)")
 
 
 def _check_name(path: Path, why: str) -> None:
@@ -399,6 +213,7 @@ def _users_from_csv(path: Path, files: dict[str, list[Path]], root: Path) -> dic
                                    f"'folder' or a CSV file recording,user)")
         path = root / path
     try:
+        check_regular_file(path, what="users file")  # a FIFO would block
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text CSV file") from None
@@ -512,20 +327,7 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
     frame_shape = first.values.shape[1:]
     if len(frame_shape) == 1 and grid_shape is not None:
         frame_shape = grid_shape
-    if len(frame_shape) == 2:
-        if layout is not None:
-            raise InputError(f"{first.path}: layout= is for (T, N) taxel vectors; a "
-                             f"(T, H, W) grid is its own layout (set pitch_mm)")
-        lay: TaxelLayout | None = TaxelLayout.grid(*frame_shape, pitch)
-        ids = lay.ids
-    elif layout is not None:
-        lay = load_layout(layout)
-        if lay.n_taxels != frame_shape[0]:
-            raise InputError(f"{first.path}: {frame_shape[0]} taxels per frame, but layout "
-                             f"{layout} has {lay.n_taxels}")
-        ids = lay.ids
-    else:
-        lay, ids = None, np.arange(frame_shape[0], dtype=np.int64)
+    lay, ids = _layout_of(first, frame_shape, layout, pitch)
 
     samples: list[Sample] = []
     repetition: dict[tuple[int, str], int] = {}
@@ -553,6 +355,25 @@ def read_folder(root: str | Path, *, pitch_mm: float = DEFAULT_PITCH_MM,
               else f"{rate_hz:g} Hz{' (assumed)' if rate is None else ''}")
     return Dataset(name or root.resolve().name, samples, class_names, lay, norm,
                    description=f"{len(samples)} recordings ({kind}; {timing}) from {root}")
+
+
+def _layout_of(first: _Read, frame_shape: tuple[int, ...], layout: str | Path | None,
+               pitch: float) -> tuple[TaxelLayout | None, np.ndarray]:
+    """``(layout or None, taxel ids)``: a grid is its own layout; ``(T, N)`` vectors take
+    ``layout=`` (its ``N`` taxels) or none."""
+    if len(frame_shape) == 2:
+        if layout is not None:
+            raise InputError(f"{first.path}: layout= is for (T, N) taxel vectors; a "
+                             f"(T, H, W) grid is its own layout (set pitch_mm)")
+        lay = TaxelLayout.grid(*frame_shape, pitch)
+        return lay, lay.ids
+    if layout is not None:
+        lay = load_layout(layout)
+        if lay.n_taxels != frame_shape[0]:
+            raise InputError(f"{first.path}: {frame_shape[0]} taxels per frame, but layout "
+                             f"{layout} has {lay.n_taxels}")
+        return lay, lay.ids
+    return None, np.arange(frame_shape[0], dtype=np.int64)
 
 
 def _check_total_budget(root: Path, paths: list[Path]) -> None:

@@ -19,6 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, Callable
 
+from tactbench.budget import check_budget
 from tactbench.data.dataset import Dataset
 from tactbench.data.recording import Sample
 from tactbench.datasets import people
@@ -29,7 +30,7 @@ from tactbench.datasets.synthetic import (
     make_user,
     simulate_sample,
 )
-from tactbench.errors import InputError, check_positive_int
+from tactbench.errors import BudgetError, InputError, check_positive_int
 from tactbench.machine import usable_cores
 from tactbench.paths import atomic_folder, cache_dir
 
@@ -63,6 +64,18 @@ def check_options(**options: Any) -> dict[str, int]:
     return out
 
 
+#: Frames of a simulated recording, at most (v1: 26, v2: 35 measured; with a margin).
+FRAMES_PER_SAMPLE = 40
+
+
+def memory_estimate(options: dict[str, int]) -> int:
+    """Bytes the simulated dataset takes, from the request alone: every sample's float32
+    readings (:data:`FRAMES_PER_SAMPLE` frames × ``n_taxels``) and half as much again
+    (timestamps, the copy while it is saved)."""
+    samples = options["users"] * len(CLASSES) * options["positions"] * options["repetitions"]
+    return samples * FRAMES_PER_SAMPLE * options.get("n_taxels", 1558) * 6
+
+
 def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: int = 0,
              n_taxels: int = 1558, version: int = DEFAULT_VERSION,
              progress: Callable[[int, int], None] | None = None,
@@ -79,6 +92,8 @@ def generate(users: int = 38, positions: int = 2, repetitions: int = 5, seed: in
                          n_taxels=n_taxels, version=version)
     users, positions, repetitions = opts["users"], opts["positions"], opts["repetitions"]
     version = opts["version"]
+    check_budget(memory_estimate(opts), f"simulating {users} users × {len(CLASSES)} "
+                 f"gestures × {positions} positions × {repetitions} repetitions")  # first
     device = make_device(seed, n_taxels)
     per_user = len(CLASSES) * positions * repetitions
     total = users * per_user
@@ -181,6 +196,8 @@ class SyntheticForearm:
             if (folder / "manifest.json").is_file():
                 try:
                     return Dataset.load(folder)
+                except BudgetError:  # too large for this budget: not a damaged cache
+                    raise
                 except (InputError, OSError):  # a bug elsewhere must not pass for a bad cache
                     shutil.rmtree(folder, ignore_errors=True)  # corrupt: make it again
             elif folder.exists():  # a leftover without a manifest

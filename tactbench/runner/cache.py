@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence
 
+from tactbench.boundary import VIOLATION_FIELD as VIOLATION, EncoderGuard
 from tactbench.contracts import ENCODER
 from tactbench.encoders.encoding import (
     CHUNK_BYTES,
@@ -260,7 +261,9 @@ def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:
     for _ in range(3):
         found = signature(cache.path(key))
         try:
-            cache.verify(key)
+            if cache.verify(key).get(VIOLATION):  # a plugin's output broke its contract
+                cache.discard(key)  # last run's cells failed on it: encode it again
+                return False
             return True
         except CorruptArtefactError as exc:
             if signature(cache.path(key)) != found:
@@ -270,6 +273,21 @@ def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:
             cache.discard(key)
             return False
     return False
+
+
+def _guard(plan_: Plan, enc: str, sink: Any, frame_shape: Sequence[int]) -> EncoderGuard:
+    """``sink`` behind the run-time check of ``enc``'s output (:mod:`tactbench.boundary`):
+    images against each channel's declared range, taxel vectors (one channel of ``C·N``)
+    against the span of them all."""
+    try:
+        plugin = plan_.registry.get("encoder", enc.partition(":")[0]).plugin
+    except Exception:  # noqa: BLE001 — only a name for the message
+        plugin = ""
+    ranges = tuple(ENCODER.get(plan_.encoders[enc], "ranges"))
+    if ranges and len(frame_shape) == 1:
+        ranges = ((min(lo for lo, _ in ranges), max(hi for _, hi in ranges)),)
+    return EncoderGuard(sink, plan_.dataset.lengths(), frame_shape, ranges=ranges,
+                        component=enc, plugin=plugin)
 
 
 def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
@@ -290,11 +308,13 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
     for enc, key in keys.items():
         encoder = plan_.encoders[enc]
         t0 = time.perf_counter()
-        with cache.entry(key, dataset.lengths(), (vector_width(encoder, dataset.n_taxels),),
-                         vector_storage(encoder, precision)) as writer:
-            encode_s = encode_vectors(dataset, enc, encoder, writer.append,
-                                      chunk_bytes=chunk_bytes)
+        width = vector_width(encoder, dataset.n_taxels)
+        storage = vector_storage(encoder, precision)
+        with cache.entry(key, dataset.lengths(), (width,), storage) as writer:
+            guard = _guard(plan_, enc, writer.append, (width,))
+            encode_s = encode_vectors(dataset, enc, encoder, guard, chunk_bytes=chunk_bytes)
             writer.meta.update({**_common_meta(plan_, enc, "vectors"),
+                                **({VIOLATION: guard.violation} if guard.violation else {}),
                                 "identity": identities[key],
                                 "encode_seconds": encode_s, "encode_cpu_seconds": encode_s,
                                 "imaging_seconds": 0.0, "workers": 1,
@@ -318,12 +338,14 @@ def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], preci
             shape = (len(tuple(ENCODER.get(encoders[enc], "channels"))), h, w)
             writers[enc] = stack.enter_context(cache.entry(
                 key, dataset.lengths(), shape, image_storage(encoders[enc], precision)))
-        times = encode_images(dataset, encoders, {e: w.append for e, w in writers.items()},
-                              pixel_mm=pixel_mm, method=method, progress=progress,
-                              chunk_bytes=chunk_bytes)
+        guards = {e: _guard(plan_, e, w.append, w.frame_shape)
+                  for e, w in writers.items()}
+        times = encode_images(dataset, encoders, guards, pixel_mm=pixel_mm, method=method,
+                              progress=progress, chunk_bytes=chunk_bytes)
         for enc, writer in writers.items():
             writer.meta.update({
                 **_common_meta(plan_, enc, "images"),
+                **({VIOLATION: guards[enc].violation} if guards[enc].violation else {}),
                 "identity": identities[keys[enc]],
                 "imaging_seconds": times.imaging_seconds,
                 # one core's CPU time over the workers: the wall time the encoding

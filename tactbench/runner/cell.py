@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
+from tactbench.boundary import VIOLATION_FIELD, BoundaryError, check_labels, check_proba
 from tactbench.classifiers.io import live_metadata, load_model, read_header
 from tactbench.contracts import CLASSIFIER, TEST_WINDOW
 from tactbench.data.splits import (
@@ -221,6 +222,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     cell, scene = job.cell, job.scene
     with memory.track("load encoding"):
         sequences, meta = load_encoding(job.encoding_dir)
+    if meta.get(VIOLATION_FIELD):  # the encoder's output broke its contract: no score
+        raise BoundaryError(str(meta[VIOLATION_FIELD]))
     # The planned components, not a fresh plugin lookup: see the module docstring.
     registry = Registry([job.classifier, job.split, job.test_window])
     data = job.data.split_data(scene.test_per_class)
@@ -310,7 +313,9 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
             out["train_s"] += time.perf_counter() - t0
         with memory.track("predict"):
             t0 = time.perf_counter()
-            predicted = np.asarray(window.combine(clf, test, len(split.test)))
+            checked = _Checked(clf, len(job.data.classes), cell.classifier,
+                               job.classifier.plugin)
+            predicted = np.asarray(window.combine(checked, test, len(split.test)))
             out["infer_s"] += time.perf_counter() - t0
         if predicted.shape != (len(split.test),):
             raise ValueError(f"test window {scene.test_window!r} combined {predicted.shape} "
@@ -333,6 +338,23 @@ def _recordings(sequences: Sequence[Any], labels: "np.ndarray", indices: "np.nda
 def _prepared(prepared: Sequence[Any] | None, indices: "np.ndarray") -> list[Any] | None:
     """The test window's prepared values of the recordings ``indices`` (None: none)."""
     return None if prepared is None else [prepared[i] for i in indices]
+
+
+class _Checked:
+    """A fitted classifier as a test window sees it: what ``predict`` and
+    ``predict_proba`` return is checked at the boundary (:mod:`tactbench.boundary`), so
+    a plugin's NaN, negative or wrongly shaped output fails the cell instead of being
+    scored."""
+
+    def __init__(self, clf: Any, k: int, component: str, plugin: str) -> None:
+        self._clf, self._k, self._who = clf, k, {"component": component, "plugin": plugin}
+
+    def predict(self, windows: Any) -> "np.ndarray":
+        return check_labels(self._clf.predict(windows), len(windows), self._k, **self._who)
+
+    def predict_proba(self, windows: Any) -> "np.ndarray":
+        return check_proba(self._clf.predict_proba(windows), len(windows), self._k,
+                           **self._who)
 
 
 def _confusion(classes: Sequence[str], truth: "np.ndarray", predicted: "np.ndarray",

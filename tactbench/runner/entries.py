@@ -37,7 +37,8 @@ from typing import TYPE_CHECKING, Any, Sequence
 from tactbench import __version__
 from tactbench.encoders.encoding import Storage
 from tactbench.errors import CorruptArtefactError, InputError
-from tactbench.integrity import ALGORITHM, hash_bytes, hash_file, new_hasher, read_npy_header
+from tactbench.integrity import (ALGORITHM, hash_bytes, hash_file, new_hasher, read_npy_header,
+                                 read_regular_bytes, special_file_problem)
 from tactbench.runner.planning import digest
 from tactbench.runner.system import now
 
@@ -181,9 +182,8 @@ def forget(folder: str | Path) -> None:
 def readable_meta(folder: Path) -> dict[str, Any]:
     """Whatever of ``meta.json`` can be read, for listing a damaged entry."""
     try:
-        if (folder / "meta.json").stat().st_size <= META_MAX_BYTES:
-            meta = json.loads((folder / "meta.json").read_text())
-            return meta if isinstance(meta, dict) else {}
+        meta = json.loads(read_regular_bytes(folder / "meta.json", limit=META_MAX_BYTES))
+        return meta if isinstance(meta, dict) else {}
     except (OSError, ValueError, RecursionError):
         pass
     return {}
@@ -195,9 +195,11 @@ def _read_meta(folder: Path) -> dict[str, Any]:
         size = path.stat().st_size
         if size > META_MAX_BYTES:
             raise CorruptArtefactError(folder, f"meta.json is {size} bytes, not an entry's")
-        meta = json.loads(path.read_bytes())
+        meta = json.loads(read_regular_bytes(path, limit=META_MAX_BYTES))
     except FileNotFoundError:
         raise CorruptArtefactError(folder, "meta.json is missing") from None
+    except InputError as exc:  # a FIFO or a device: refused before it is opened
+        raise CorruptArtefactError(folder, str(exc)) from None
     except (ValueError, RecursionError) as exc:
         raise CorruptArtefactError(folder, f"meta.json is not valid JSON ({exc})") from None
     if not isinstance(meta, dict):
@@ -269,6 +271,9 @@ def _check_sizes(folder: Path, meta: dict[str, Any]) -> dict[str, Any]:
         and isinstance(files[n].get("checksum"), str) for n in ("frames.npy", "offsets.npy")),
         "meta.json lacks the sizes and checksums of its files")
     for name in ("frames.npy", "offsets.npy"):
+        special = special_file_problem(folder / name)
+        if special is not None:  # a FIFO or a device is never opened
+            raise CorruptArtefactError(folder, special)
         try:
             size = (folder / name).stat().st_size
         except FileNotFoundError:

@@ -13,6 +13,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 import multiprocessing
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
+from tactbench.errors import InputError
 from tactbench.runner.cell import CellJob, failed_row, run_cell
 from tactbench.runner.summaries import spec_labels
 from tactbench.runner.system import BEFORE, MemoryTracker, ignore_interrupts, stop_workers
@@ -78,6 +79,23 @@ def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
     pool.shutdown()
 
 
+#: Seconds to wait for a dask scheduler to answer before saying it cannot be reached.
+SCHEDULER_TIMEOUT_S = 15
+
+
+def _connect(client_class: Any, scheduler: str) -> Any:
+    """A client of the scheduler at ``scheduler``; one line (an :class:`InputError`) when
+    it cannot be reached (nothing listens there, a wrong host, a firewall), not a
+    traceback."""
+    try:
+        return client_class(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:  # distributed raises OSError on a timeout
+        text = " ".join(str(exc).split())[:160]
+        raise InputError(f"--scheduler {scheduler}: the dask scheduler cannot be reached "
+                         f"({type(exc).__name__}: {text}); start it, or check the "
+                         f"address") from None
+
+
 def run_dask(jobs: list[CellJob], finish: Finish, *, workers: int,
              scheduler: str | None) -> None:
     """Cells on a dask cluster: the one at ``scheduler``, else a local one of ``workers``
@@ -86,7 +104,7 @@ def run_dask(jobs: list[CellJob], finish: Finish, *, workers: int,
     from distributed import as_completed as dask_completed
 
     if scheduler:
-        client = Client(scheduler)
+        client = _connect(Client, scheduler)
         cluster = None
     else:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,

@@ -32,11 +32,12 @@ from tactbench.data.splits import SplitData, build_split, check_splits, split_sp
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.datasets.loading import check_informative, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
-from tactbench.errors import InputError
+from tactbench.errors import BudgetError, InputError
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import profile_options
 from tactbench.budget import check_budget
+from tactbench.runner.results import ROW_MAX_BYTES
 from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import Scene
@@ -202,6 +203,12 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
     """
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
+    k = len(dataset.classes)  # a row holds a k × k confusion: ≥ 2 bytes a count as JSON
+    if 2 * k * k > ROW_MAX_BYTES:
+        raise BudgetError(f"dataset '{dataset.name}' has {k} classes: each cell's row "
+                          f"would hold a {k} × {k} confusion, more than the "
+                          f"{ROW_MAX_BYTES >> 20} MiB a row may be; at most "
+                          f"{math.isqrt(ROW_MAX_BYTES // 2)} classes")
     longest = int(dataset.lengths().max())
     length = max(int(n) for n in scene.L)
     frame_shape = {"vectors": (dataset.n_taxels,)}

@@ -37,7 +37,7 @@ from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import CorruptArtefactError, InputError
-from tactbench.integrity import hash_bytes
+from tactbench.integrity import hash_bytes, read_regular_bytes
 from tactbench.specs import POSITIONAL, parse_spec
 from tactbench.paths import (
     Temporary,
@@ -161,6 +161,15 @@ def _check_predictions(tp: Any, k: int) -> str | None:
     return None
 
 
+def _failed(row: dict[str, Any], kind: str, message: str) -> dict[str, Any]:
+    """``row`` as a failed row of error ``kind``: its scores and large fields left out."""
+    row = {k: v for k, v in row.items() if k not in (
+        "checksum", "confusion", "per_class_accuracy", "test_predictions", "accuracy",
+        "classes") and len(json.dumps(v)) < 4096}
+    row.update(status=FAILED, error={"type": kind, "traceback": "", "message": message})
+    return row
+
+
 class ResultStore:
     """One JSON file per cell under ``OUT/cells``, written atomically, verified on read."""
 
@@ -182,11 +191,13 @@ class ResultStore:
             size = path.stat().st_size
             if size > ROW_MAX_BYTES:
                 raise CorruptArtefactError(path, f"{size} bytes, not a cell row")
-            row = json.loads(path.read_bytes())
+            row = json.loads(read_regular_bytes(path, limit=ROW_MAX_BYTES, what="cell row"))
         except FileNotFoundError:
             return None
         except IsADirectoryError:
             raise CorruptArtefactError(path, "is a folder, not a cell row") from None
+        except InputError as exc:  # a FIFO, a device, a dangling link: never opened
+            raise CorruptArtefactError(path, str(exc).replace(f"{path} ", "", 1)) from None
         except (ValueError, RecursionError) as exc:  # UnicodeDecodeError is a ValueError
             raise CorruptArtefactError(path, f"is not valid JSON ({exc})") from None
         problem = check_row(row, key, identity)
@@ -217,20 +228,19 @@ class ResultStore:
         saying so, so that the run reports it and exits 1 instead of dropping it."""
         # the checksum of the row as it will be read back (tuples as lists, ...)
         row = json.loads(json.dumps({k: v for k, v in row.items() if k != "checksum"}))
+        problem = check_row(row, str(row.get("key"))) if row_status(row) == OK else None
+        if problem is not None:  # never stored to be dropped at report time: a failed row
+            row = _failed(row, "UnsoundRowError", f"the cell's result row {problem} (a "
+                          f"plugin's output the checks did not catch?); no score is given")
         row["checksum"] = row_checksum(row)
         text = json.dumps(row, indent=2)
         if len(text) > ROW_MAX_BYTES // 4:  # rows are a few kB: large ones compact
             text = json.dumps(row, separators=(",", ":"))
         if len(text.encode()) > ROW_MAX_BYTES:
             big = len(text.encode())
-            row = {k: v for k, v in row.items() if k not in (
-                "checksum", "confusion", "per_class_accuracy", "test_predictions",
-                "accuracy", "classes") and len(json.dumps(v)) < 4096}
-            row.update(status=FAILED, error={
-                "type": "RowTooLargeError", "traceback": "",
-                "message": f"the cell's result row is {big} bytes, over the "
-                           f"{ROW_MAX_BYTES}-byte limit of a cell row (too many classes "
-                           f"or test sequences to store); nothing was kept"})
+            row = _failed(row, "RowTooLargeError", f"the cell's result row is {big} bytes, "
+                          f"over the {ROW_MAX_BYTES}-byte limit of a cell row (too many "
+                          f"classes or test sequences to store); nothing was kept")
             row["checksum"] = row_checksum(row)
             text = json.dumps(row, indent=2)
         atomic_write_text(self.path(row["key"]), text)
@@ -293,7 +303,7 @@ class ResultStore:
             if _claim_order(claim) > _claim_order(mine):
                 continue  # started after this run: that one is refused, not this one
             try:
-                other = json.loads(claim.read_text())
+                other = json.loads(read_regular_bytes(claim, limit=1 << 20))
             except (OSError, ValueError):
                 continue  # gone meanwhile, or being written
             if isinstance(other, dict) and other.get("keys") != keys:
@@ -332,7 +342,7 @@ def _describe(path: Path, identities: dict[str, dict[str, Any]] | None = None) -
     far as it reads; with the planned ``identities``, also how it differs from the
     nearest."""
     try:
-        row = json.loads(path.read_bytes()[:ROW_MAX_BYTES])
+        row = json.loads(read_regular_bytes(path, limit=ROW_MAX_BYTES))
         label = (f"{row['encoder']} × {str(row['classifier']).split(':')[0]} L={row['L']} "
                  f"seed={row['seed']}")
         command = (row.get("run") or {}).get("command")

@@ -41,6 +41,7 @@ except ModuleNotFoundError:  # Python 3.10
 from tactbench.data.splits import parse_split
 from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError, MissingFileError, check_choice
+from tactbench.integrity import check_regular_file, read_regular_bytes
 from tactbench.profiles import PRECISIONS, get_profile
 from tactbench.runner.system import check_scheduler
 from tactbench.specs import parse_spec
@@ -279,8 +280,8 @@ def _check_field(name: str, value: Any, label: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise InputError(f"{label} must be a number, got {type(value).__name__} "
                              f"{_show(value)}")
-        if not (math.isfinite(value) and value > 0):
-            raise InputError(f"{label} must be a finite number > 0, got {value}")
+        if not (abs(value) < 1e308 and math.isfinite(value) and value > 0):
+            raise InputError(f"{label} must be a finite number > 0, got {_show(value)}")
         return value
     assert kind == "bool", kind
     if not isinstance(value, bool):
@@ -368,11 +369,12 @@ def read_scene_file(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     is_json = path.suffix.lower() == ".json"
     try:
-        size = path.stat().st_size
+        size = check_regular_file(path, what="scene file")  # a FIFO, a dangling link
         if size > MAX_SCENE_FILE_BYTES:
             raise InputError(f"{path}: a scene file of {size} bytes; scene files are a few "
                              f"lines (at most {MAX_SCENE_FILE_BYTES} bytes)")
-        text = path.read_text(encoding="utf-8")
+        text = read_regular_bytes(path, limit=MAX_SCENE_FILE_BYTES,  # never a FIFO
+                                  what="scene file").decode("utf-8")
     except FileNotFoundError:
         raise MissingFileError(f"scene file not found: {path}") from None
     except UnicodeDecodeError:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.comparisons import P_RULE, Comparison, read_comparisons
@@ -19,6 +20,16 @@ Labels = Mapping[str, str]
 #: Comparisons as records, or as results.json stores them (read through
 #: :func:`tactbench.runner.comparisons.read_comparisons`, which verifies them).
 Comparisons = Sequence["Comparison | Mapping[str, Any]"]
+
+
+_MD_SPECIAL = re.compile(r"([\\`*_\[\]<>|~])")
+
+
+def md(text: Any) -> str:
+    """Text a user gave (a class or user name, an error message) as literal Markdown in a
+    table cell: every Markdown special character escaped with a backslash (``|`` would
+    end the cell, ``*`` start emphasis), line breaks as spaces."""
+    return _MD_SPECIAL.sub(r"\\\1", " ".join(str(text).split()))
 
 
 def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
@@ -238,7 +249,7 @@ def per_class_markdown(summaries: Sequence[dict[str, Any]], labels: Labels | Non
         return ""
     labels = summary_labels(summaries) if labels is None else labels
     classes = summaries[0]["classes"]
-    lines = ["| encoder | classifier | L | " + " | ".join(classes) + " |",
+    lines = ["| encoder | classifier | L | " + " | ".join(map(md, classes)) + " |",
              "|" + "---|" * (3 + len(classes))]
     for s in summaries:
         cells = [f"{100 * s['per_class_accuracy'][c]:.1f}"
@@ -256,7 +267,7 @@ def failed_cells_markdown(rows: Iterable[dict[str, Any]]) -> str:
         return ""
     lines = ["| encoder | classifier | L | seed | error | row |", "|---|---|---|---|---|---|"]
     for f in failed:
-        error = f["error"].replace("|", "\\|")
+        error = md(f["error"])
         lines.append(f"| {f['encoder']} | {f['classifier']} | {f['L']} | {f['seed']} | "
                      f"{error} | `cells/{f['key']}.json` |")
     return "\n".join(lines)
@@ -296,7 +307,7 @@ def per_class_gains_markdown(comps: Comparisons, labels: Labels | None = None) -
     if not comps:
         return ""
     classes = list(dict.fromkeys(k for c in comps for k in c.per_class))
-    lines = ["| factor | A | B | where | " + " | ".join(classes) + " |",
+    lines = ["| factor | A | B | where | " + " | ".join(map(md, classes)) + " |",
              "|" + "---|" * (4 + len(classes))]
     for c in comps:
         cells = []
@@ -388,7 +399,7 @@ def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]],
     if not summaries:
         return ""
     users = sorted({u for s in summaries for u in s["per_user_accuracy"]})
-    lines = ["| encoder | classifier | L | " + " | ".join(users) + " |",
+    lines = ["| encoder | classifier | L | " + " | ".join(map(md, users)) + " |",
              "|" + "---|" * (3 + len(users))]
     for s in summaries:
         acc = s["per_user_accuracy"]

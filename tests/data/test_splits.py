@@ -163,7 +163,7 @@ def test_train_on_front_test_on_side():
 
 
 def test_group_folds_leave_each_value_out_once():
-    from tactbench.data.splits import describe_splits, make_splits
+    from tactbench.data.splits import make_splits
 
     folds = make_splits("group:repetition:folds=5", labels=GROUP_LABELS, users=GROUP_USERS,
                         seed=1, groups=GROUPS)

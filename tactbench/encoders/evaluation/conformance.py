@@ -38,6 +38,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from tactbench.boundary import encoder_output_problem
 from tactbench.contracts import ENCODER
 from tactbench.encoders.flow import is_flow_encoder
 from tactbench.errors import InputError
@@ -137,9 +138,9 @@ def check_shape_dtype(encoder: Any) -> None:
     for t, shape in ((1, (32, 32)), (5, (32, 32)), (3, (17, 23))):
         seq = contact_sequence(shape, t, shift=1.0, angle=0.5)
         out = _encode(encoder, seq)
-        assert out.shape == (t, c, *shape), \
-            f"input {seq.shape} gave output {out.shape}, expected {(t, c, *shape)}"
-        assert out.dtype == np.float32, f"output dtype {out.dtype}, expected float32"
+        # the rule the runner applies to every encoded sequence (tactbench.boundary)
+        problem = encoder_output_problem(out, (t, c, *shape))
+        assert problem is None, f"input {seq.shape}: {problem}"
 
 
 def check_finite_in_range(encoder: Any) -> None:
@@ -154,6 +155,8 @@ def check_finite_in_range(encoder: Any) -> None:
                 v = out[:, i]
                 assert v.min() >= lo - RANGE_ATOL and v.max() <= hi + RANGE_ATOL, \
                     f"channel '{name}' spans [{v.min():.6g}, {v.max():.6g}], declared [{lo}, {hi}]"
+        problem = encoder_output_problem(out, out.shape, ranges, rtol=0.0)  # the runner's
+        assert problem is None, f"a moving contact (seed {seed}): {problem}"
 
 
 def check_deterministic(encoder: Any) -> None:
