@@ -278,8 +278,6 @@ MAX_MODULE_LINES = 600
 #: (``path`` or ``path::function``); only shrinks: the lead empties it after merging.
 KNOWN_LONG: set[str] = {
     "tactbench/classifiers/training.py::train_loop",
-    "tactbench/datasets/folder.py",
-    "tactbench/datasets/folder.py::read_folder",
 }
 
 

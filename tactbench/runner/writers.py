@@ -63,7 +63,9 @@ def is_run_output(path: Path) -> bool:
     name = path.name
     if name in OUT_FOLDERS:
         return path.is_dir() or not path.exists()
-    if name == "report.md" and path.is_file():
+    if name == "report.md" and (path.exists() or path.is_symlink()):
+        if not path.is_file():  # a FIFO, a device, a dangling link: not ours, never opened
+            return False
         with open(path, "rb") as fh:
             return fh.read(len(REPORT_HEADER)) == REPORT_HEADER.encode()
     return name in OUT_FILES or bool(_CONFUSION.fullmatch(name))
