@@ -7,6 +7,7 @@ import re
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.comparisons import P_RULE, Comparison, read_comparisons
+from tactbench.runner.statistics import MIN_RUNS
 from tactbench.runner.summaries import (
     FACTORS,
     failed_cells,
@@ -127,10 +128,10 @@ def _power_runs(c: Comparison) -> str:
     """Runs for 80 % power at the observed difference, or why there is no number."""
     if c.ceiling or c.verdict in ("B better", "A better", "equivalent"):
         return "-"
+    if c.runs < MIN_RUNS or c.difference == 0:  # too few runs to judge the spread
+        return "-"
     if c.runs_for_power is not None:
         return str(c.runs_for_power)
-    if c.runs < 2 or c.difference == 0:
-        return "-"
     return "beyond these data"
 
 
