@@ -29,6 +29,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "layout": ("tactbench.commands.layout:layout_group", "Inspect and generate taxel layouts."),
     "run": ("tactbench.commands.run:run_cmd",
             "Run a benchmark grid and report accuracy beside its cost."),
+    "plan": ("tactbench.commands.plan:plan_cmd",
+             "Plan a run before it trains: its cells, time and memory, and the power of "
+             "each primary question."),
     "report": ("tactbench.commands.report:report_cmd",
                "Render a run folder's report again from its stored cell rows, training "
                "nothing."),

@@ -16,10 +16,13 @@ from tactbench.runner import render_folder
 @click.option("--contrast", "contrasts", multiple=True, metavar="A..B",
               help="Compare two cells differing in several factors, repeatable (see "
                    "`tactbench run --contrast`). [default: the run's]")
+@click.option("--primary", multiple=True, metavar="A..B",
+              help="A confirmatory comparison, repeatable (see `tactbench run --primary`). "
+                   "[default: the run's]")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
-def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...], as_json: bool,
-               no_plots: bool) -> None:
+def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...],
+               primary: tuple[str, ...], as_json: bool, no_plots: bool) -> None:
     """Render a run folder's report again from its stored cell rows, training nothing.
 
     FOLDER is the --out of a `tactbench run`. Its results.json, results.csv, report.md
@@ -28,6 +31,7 @@ def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...], as
     them, the run's own. report.md says it was re-rendered, and with which options.
     """
     report = render_folder(folder, margin=margin, contrasts=contrasts or None,
+                           primary=primary or None,
                            plots=not no_plots, registry=get_registry())
     print_report(report, as_json=as_json, title=f"{folder} · re-rendered from its cells",
                  done=f"{len(report.rows)} cell row(s) read, none computed. Reports in "

@@ -10,10 +10,10 @@ import click
 
 from tactbench.cli import get_registry, json_text
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
-from tactbench.runner import Report, Scene, load_scene_file, run
+from tactbench.runner import Report, Scene, load_scene_file, run, run_until
 from tactbench.runner.scene import parse_lengths, parse_seeds
 from tactbench.runner.summaries import failed_cells
-from tactbench.runner.tables import print_comparisons, print_table
+from tactbench.runner.tables import answer_text, print_comparisons, print_table
 from tactbench.runner.writers import run_labels
 
 
@@ -82,69 +82,115 @@ def scene_option(*decls: str, field: str, **kwargs: Any) -> Callable[[Any], Any]
     return click.option(*decls, cls=SceneOption, field=field, **kwargs)
 
 
+#: The options that set a :class:`Scene`, shared by ``run`` and ``plan`` (same arguments).
+SCENE_OPTIONS = [
+    click.argument("scene_file", required=False, type=click.Path(dir_okay=False)),
+    scene_option("--dataset", field="dataset",
+                 help="Registered dataset (with options) or a dataset path."),
+    scene_option("--encoder", "encoders", field="encoders", multiple=True,
+                 help="Encoder, repeatable, with options: farneback:winsize=9."),
+    scene_option("--classifier", "classifiers", field="classifiers", multiple=True,
+                 help="Classifier, repeatable, with options."),
+    scene_option("-L", "L", field="L", multiple=True, convert=parse_lengths,
+                 help="Window length in frames, repeatable or a range: -L 5, -L 1-6."),
+    scene_option("--seed", "seeds", field="seeds", multiple=True, convert=parse_seeds,
+                 help="Seed, repeatable or a range: --seed 0-9."),
+    scene_option("--split", field="split",
+                 help="paper: 30 random test samples per class (the study's); users: "
+                      "leave a random fifth of the users out; users:folds=K: K-fold over "
+                      "users, every user tested once; group:KEY[:folds=K|:test=A] the same "
+                      "over any metadata (position, repetition): group:position:test=side "
+                      "trains on the front, tests on the side; kfold:folds=K: stratified "
+                      "K-fold over recordings, each tested once per seed; or a plugin's "
+                      "split (tactbench list)."),
+    scene_option("--test-window", field="test_window",
+                 help="Which frames a test sequence is classified on: vote (every window, "
+                      "probabilities averaged), onset (L frames from contact onset), first "
+                      "(its first L frames, the study's protocol), or a plugin's."),
+    scene_option("--profile", field="profile", type=click.Choice(PROFILE_NAMES),
+                 help="quick: CPU-sized; paper: the study's settings (a GPU job)."),
+    scene_option("--pixel-mm", field="pixel_mm", type=float, none=_by_profile("pixel_mm"),
+                 help="Tactile-image pixel size in mm."),
+    scene_option("--precision", field="precision", type=click.Choice(PRECISIONS),
+                 none=_by_profile("precision"),
+                 help="How cached encodings are stored: float32 (exact), float16, or uint8 "
+                      "(8 bits per channel value, as the study's images; a quarter of the "
+                      "disk)."),
+    scene_option("--device", field="device", help="cpu, cuda, cuda:N or auto."),
+    scene_option("--threads", field="threads", type=int, none="cores/workers",
+                 help="torch threads per cell."),
+    scene_option("--executor", field="executor", type=click.Choice(["local", "dask"]),
+                 help="Where cells run: this machine, or a dask cluster."),
+    scene_option("--workers", field="workers", type=int, help="Parallel cells (processes)."),
+    scene_option("--scheduler", field="scheduler", none="a local cluster",
+                 help="dask scheduler address tcp://HOST:PORT (with --executor dask)."),
+    scene_option("--out", field="out", help="Output folder."),
+    scene_option("--rerun", field="rerun", is_flag=True, default=None,
+                 help="Recompute finished cells."),
+    scene_option("--save-models", field="save_models", is_flag=True, default=None,
+                 help="Keep each cell's trained model in OUT/models (for `tactbench live`)."),
+    scene_option("--margin", field="margin", type=float, metavar="POINTS",
+                 none="none (no equivalence test)",
+                 help="Equivalence margin in accuracy points: a comparison whose run-level "
+                      "interval lies within ±POINTS (two one-sided tests) is \"equivalent\"."),
+    scene_option("--contrast", "contrasts", field="contrasts", multiple=True, metavar="A..B",
+                 none="none",
+                 help="Also compare two cells differing in several factors, paired over "
+                      "runs, repeatable: --contrast encoder=raw,L=6..encoder=farneback,L=3 "
+                      "(B − A; factors encoder, classifier, L)."),
+    scene_option("--input", "input_kind", field="input", type=click.Choice(["images", "vectors"]),
+                 none="images where the dataset has a layout",
+                 help="What a classifier taking either input is fed (part of its cells' "
+                      "identity)."),
+    scene_option("--init-seed", "init_seeds", field="init_seeds", multiple=True, convert=parse_seeds,
+                 none="the split seed",
+                 help="Initialisation seeds varied apart from the split seeds (--seed), "
+                      "repeatable or a range; report.md then splits the variance."),
+    scene_option("--primary", "primary", field="primary", multiple=True, metavar="A..B",
+                 none="encoder=raw..encoder=farneback where the grid has both",
+                 help="A confirmatory comparison (contrast syntax), repeatable: the primary "
+                      "questions form their own family (Holm) and lead the report; the "
+                      "other comparisons are exploratory."),
+    scene_option("--until", field="until", type=click.Choice(["answered"]),
+                 none="the seeds given, once",
+                 help="answered: run the seeds in batches (the first look after 5 runs) "
+                      "until every primary question is better, worse, equivalent within "
+                      "--margin, or futile, with α spent over the looks."),
+    scene_option("--max-runs", field="max_runs", type=int,
+                 help="With --until: the most runs (seeds) the looks may reach."),
+    scene_option("--look-every", field="look_every", type=int,
+                 help="With --until: runs added between two looks."),
+    scene_option("--budget", field="budget", metavar="DURATION", none="none",
+                 help="With --until: begin no batch that would end past this time "
+                      "(90m, 2h, 1h30m)."),
+]
+
+
+def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``command`` with every option of :data:`SCENE_OPTIONS` (and the scene file)."""
+    for option in reversed(SCENE_OPTIONS):
+        command = option(command)
+    return command
+
+
+def scene_from(ctx: click.Context, scene_file: str | None, options: dict[str, Any]) -> Scene:
+    """The scene of a scene file and the command line's options (which override it), a
+    refused value named as it was given."""
+    fields = load_scene_file(scene_file) if scene_file else {}
+    labels = {}
+    for param in ctx.command.params:  # command-line values override the file
+        if isinstance(param, SceneOption):
+            value = param.field_value(options[param.name])
+            if value is not None:
+                fields[param.field] = value
+                labels[param.field] = max(param.opts, key=len)
+    if fields.get("scheduler") and fields.get("executor", "local") != "dask":
+        raise click.UsageError("--scheduler needs --executor dask")
+    return Scene.of(fields, labels=labels)
+
+
 @click.command("run")
-@click.argument("scene_file", required=False, type=click.Path(dir_okay=False))
-@scene_option("--dataset", field="dataset",
-              help="Registered dataset (with options) or a dataset path.")
-@scene_option("--encoder", "encoders", field="encoders", multiple=True,
-              help="Encoder, repeatable, with options: farneback:winsize=9.")
-@scene_option("--classifier", "classifiers", field="classifiers", multiple=True,
-              help="Classifier, repeatable, with options.")
-@scene_option("-L", "L", field="L", multiple=True, convert=parse_lengths,
-              help="Window length in frames, repeatable or a range: -L 5, -L 1-6.")
-@scene_option("--seed", "seeds", field="seeds", multiple=True, convert=parse_seeds,
-              help="Seed, repeatable or a range: --seed 0-9.")
-@scene_option("--split", field="split",
-              help="paper: 30 random test samples per class (the study's); users: "
-                   "leave a random fifth of the users out; users:folds=K: K-fold over "
-                   "users, every user tested once; group:KEY[:folds=K|:test=A] the same "
-                   "over any metadata (position, repetition): group:position:test=side "
-                   "trains on the front, tests on the side; kfold:folds=K: stratified "
-                   "K-fold over recordings, each tested once per seed; or a plugin's "
-                   "split (tactbench list).")
-@scene_option("--test-window", field="test_window",
-              help="Which frames a test sequence is classified on: vote (every window, "
-                   "probabilities averaged), onset (L frames from contact onset), first "
-                   "(its first L frames, the study's protocol), or a plugin's.")
-@scene_option("--profile", field="profile", type=click.Choice(PROFILE_NAMES),
-              help="quick: CPU-sized; paper: the study's settings (a GPU job).")
-@scene_option("--pixel-mm", field="pixel_mm", type=float, none=_by_profile("pixel_mm"),
-              help="Tactile-image pixel size in mm.")
-@scene_option("--precision", field="precision", type=click.Choice(PRECISIONS),
-              none=_by_profile("precision"),
-              help="How cached encodings are stored: float32 (exact), float16, or uint8 "
-                   "(8 bits per channel value, as the study's images; a quarter of the "
-                   "disk).")
-@scene_option("--device", field="device", help="cpu, cuda, cuda:N or auto.")
-@scene_option("--threads", field="threads", type=int, none="cores/workers",
-              help="torch threads per cell.")
-@scene_option("--executor", field="executor", type=click.Choice(["local", "dask"]),
-              help="Where cells run: this machine, or a dask cluster.")
-@scene_option("--workers", field="workers", type=int, help="Parallel cells (processes).")
-@scene_option("--scheduler", field="scheduler", none="a local cluster",
-              help="dask scheduler address tcp://HOST:PORT (with --executor dask).")
-@scene_option("--out", field="out", help="Output folder.")
-@scene_option("--rerun", field="rerun", is_flag=True, default=None,
-              help="Recompute finished cells.")
-@scene_option("--save-models", field="save_models", is_flag=True, default=None,
-              help="Keep each cell's trained model in OUT/models (for `tactbench live`).")
-@scene_option("--margin", field="margin", type=float, metavar="POINTS",
-              none="none (no equivalence test)",
-              help="Equivalence margin in accuracy points: a comparison whose run-level "
-                   "interval lies within ±POINTS (two one-sided tests) is \"equivalent\".")
-@scene_option("--contrast", "contrasts", field="contrasts", multiple=True, metavar="A..B",
-              none="none",
-              help="Also compare two cells differing in several factors, paired over "
-                   "runs, repeatable: --contrast encoder=raw,L=6..encoder=farneback,L=3 "
-                   "(B − A; factors encoder, classifier, L).")
-@scene_option("--input", "input_kind", field="input", type=click.Choice(["images", "vectors"]),
-              none="images where the dataset has a layout",
-              help="What a classifier taking either input is fed (part of its cells' "
-                   "identity).")
-@scene_option("--init-seed", "init_seeds", field="init_seeds", multiple=True, convert=parse_seeds,
-              none="the split seed",
-              help="Initialisation seeds varied apart from the split seeds (--seed), "
-                   "repeatable or a range; report.md then splits the variance.")
+@scene_options
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.pass_context
@@ -157,19 +203,13 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     others go on; the command then exits with status 1, and running it again retries
     the failed cells.
     """
-    fields = load_scene_file(scene_file) if scene_file else {}
-    labels = {}  # a refused value is named as it was given
-    for param in ctx.command.params:  # command-line values override the file
-        if isinstance(param, SceneOption):
-            value = param.field_value(options[param.name])
-            if value is not None:
-                fields[param.field] = value
-                labels[param.field] = max(param.opts, key=len)
-    if fields.get("scheduler") and fields.get("executor", "local") != "dask":
-        raise click.UsageError("--scheduler needs --executor dask")
-    scene = Scene.of(fields, labels=labels)
-    report = run(scene, registry=get_registry(), plots=not no_plots,
-                 progress=sys.stderr.isatty() or not as_json)
+    scene = scene_from(ctx, scene_file, options)
+    if scene.until:
+        report = run_until(scene, registry=get_registry(), plots=not no_plots,
+                           progress=sys.stderr.isatty() or not as_json)
+    else:
+        report = run(scene, registry=get_registry(), plots=not no_plots,
+                     progress=sys.stderr.isatty() or not as_json)
     print_report(report, as_json=as_json,
                  title=f"{scene.dataset} · split {scene.split} · test window "
                        f"{scene.test_window} · profile {scene.profile}",
@@ -193,10 +233,19 @@ def print_report(report: Report, *, as_json: bool, title: str, done: str) -> Non
                 "seconds": report.seconds}
         click.echo(json_text({"meta": meta, "summary": report.summaries,
                               "comparisons": [c.to_dict() for c in report.comparisons],
-                              "failed": failed,
+                              "looks": report.looks, "failed": failed,
                               "files": {k: str(v) for k, v in report.paths.items()}},
                              indent=2))
     else:
+        answers = [answer_text(c, labels).replace("**", "")
+                   for c in report.comparisons if c.family == "primary"]
+        for line in answers:  # the primary questions lead
+            click.echo(f"primary: {line}")
+        if report.looks:
+            click.echo(f"looks: {len(report.looks['looks'])}; {report.looks['stopped']}"
+                       + (f"; stopped by {report.budget_stop}" if report.budget_stop else "")
+                       + (f"; {report.cpu_seconds:.0f} CPU-s in all"
+                          if report.cpu_seconds else ""))
         print_table(report.summaries, title=title, labels=labels)
         print_comparisons(report.comparisons, factors=("encoder", "classifier", "contrast"),
                           labels=labels)

@@ -64,7 +64,7 @@ from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported i
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
 from tactbench.runner.entries import load_encoding
-from tactbench.runner.orchestrate import render_folder, run
+from tactbench.runner.orchestrate import render_folder, run, run_until
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
 from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
 from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
@@ -76,5 +76,5 @@ __all__ = [
     "EncodingCache", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row",
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows",
-    "run", "render_folder", "Report", "git_revision",
+    "run", "run_until", "render_folder", "Report", "git_revision",
 ]

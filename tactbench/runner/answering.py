@@ -18,11 +18,8 @@ from typing import Any, Sequence
 from tactbench.errors import InputError
 from tactbench.runner.comparisons import Comparison, comparisons
 from tactbench.runner.results import ok_rows
+from tactbench.runner.scene import FIRST_LOOK
 from tactbench.runner.sequential import FamilyState, Look, family_look
-
-#: The first look comes after this many runs (fewer spend α on noise: see
-#: docs/statistics.md) and each later one after ``batch`` more.
-FIRST_LOOK = 5
 
 
 def schedule(max_runs: int, batch: int, first: int = FIRST_LOOK) -> list[int]:
@@ -104,3 +101,19 @@ def replay(rows: Sequence[dict[str, Any]], *, seed_order: Sequence[int],
         if history.answered:
             break
     return history
+
+
+def first_look_to_run(stored_seeds: set[int], seed_order: Sequence[int],
+                      looks: Sequence[int]) -> int:
+    """The index of the first look whose seeds cover every seed already stored: a
+    resumed run plans at least those (one out folder holds one grid)."""
+    if not stored_seeds:
+        return 0
+    unknown = stored_seeds - set(seed_order)
+    if unknown:
+        raise InputError(f"the out folder holds runs of seed(s) {sorted(unknown)[:5]} this "
+                         f"run --until answered does not plan; give a new --out, or --seed "
+                         f"to include them")
+    last = max(seed_order.index(s) for s in stored_seeds) + 1
+    return next(k for k, n in enumerate(looks) if n >= last)
+

@@ -9,7 +9,9 @@ row of ``OUT/cells`` (the one store of a run folder) → :func:`make_report` →
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import resource
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -19,12 +21,13 @@ from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError, MissingFileError, TactbenchError
 from tactbench.machine import git_revision
 from tactbench.paths import discard
+from tactbench.runner.answering import first_look_to_run, schedule
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
-from tactbench.runner.scene import Scene
+from tactbench.runner.scene import Scene, parse_duration
 from tactbench.runner.summaries import check_contrasts
 from tactbench.runner.system import MemoryTracker
 from tactbench.runner.writers import (
@@ -32,6 +35,8 @@ from tactbench.runner.writers import (
     Report,
     is_run_output,
     make_report,
+    primary_of,
+    sequential_design,
     write_report,
 )
 from tactbench.ui import Progress
@@ -98,7 +103,9 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     claim.unlink(missing_ok=True)
     report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
                          margin=scene.margin, users=list(p.dataset.users),
-                         rendered="at the end of the run, from the rows of cells/")
+                         rendered="at the end of the run, from the rows of cells/",
+                         primary=scene.resolved_primary(),
+                         sequential=sequential_design(asdict(scene)))
     write_report(scene.out, report, plots=plots)
     report.computed, report.skipped = len(pending), len(p.cells) - len(pending)
     report.seconds = time.perf_counter() - start
@@ -107,13 +114,13 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
 def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                   margin: float | None = None, plots: bool = True,
-                  registry=None) -> Report:
+                  registry=None, primary: Sequence[str] | None = None) -> Report:
     """The report of the run folder ``out`` again, from the rows of ``OUT/cells`` alone,
     written over its results.json, results.csv, report.md and figures; nothing is
     trained, and results.json is not read.
 
-    ``contrasts`` and ``margin`` (statistics options, which change no cell) default to
-    those of the scene that computed the folder's latest row
+    ``contrasts``, ``margin`` and ``primary`` (statistics options, which change no cell)
+    default to those of the scene that computed the folder's latest row
     (:func:`~tactbench.runner.results.latest_scene`), so that a report rendered again
     with no options is the run's own, but for the line saying when and by what. The
     per-user results need the user of each recording: the dataset is loaded (through
@@ -141,11 +148,13 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     scene = latest_scene(rows)
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin
-    check_contrasts(contrasts, [{"encoder": r["encoder"], "classifier": r["classifier"],
+    primary = primary_of(scene) if primary is None else list(primary)
+    check_contrasts([*contrasts, *primary], [{"encoder": r["encoder"], "classifier": r["classifier"],
                                  "L": r["L"]} for r in rows])
     users, missing = dataset_users(rows, registry)
     how = "re-rendered from the stored rows of cells/ (nothing trained)"
     report = make_report(rows, contrasts=contrasts, margin=margin, users=users,
+                         primary=primary, sequential=sequential_design(scene),
                          rendered=how + (f"; per-user results left out: {missing}"
                                          if missing else ""))
     write_report(out, report, plots=plots)
@@ -174,3 +183,40 @@ def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
                     "results", spec, data.content_hash()[:16], digest[:16])
         return None, f"dataset `{spec}` here is not the rows' (another content hash)"
     return list(data.users), None
+
+
+def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True,
+              on_look=None):
+    """Run ``scene`` (with ``until="answered"``) look by look: the first
+    :data:`FIRST_LOOK` seeds of :meth:`~tactbench.runner.scene.Scene.seed_order`, then
+    ``look_every`` more each time, each batch an ordinary :func:`run` (resumable: cells
+    already stored are reused, any executor), until every primary comparison is decided,
+    ``max_runs`` is reached, or the next batch would start past ``budget``. Returns the
+    last :class:`~tactbench.runner.writers.Report` (its ``looks``: every look, replayed
+    from the rows); ``on_look(report)`` is called after each look. Ctrl-C between cells
+    keeps every finished cell."""
+    order = scene.seed_order()
+    looks = schedule(scene.max_runs, scene.look_every)
+    budget = parse_duration(scene.budget) if scene.budget else None
+    stored = {int(r["seed"]) for r in ResultStore(scene.out).stored_rows()}
+    start = time.perf_counter()
+    report = None
+    for k in range(first_look_to_run(stored, order, looks), len(looks)):
+        t0 = time.perf_counter()
+        report = run(dataclasses.replace(scene, seeds=order[:looks[k]]), registry=registry,
+                     progress=progress, plots=plots)
+        if on_look is not None:
+            on_look(report)
+        if report.failed or (report.looks or {}).get("answered"):
+            break
+        elapsed = time.perf_counter() - start
+        batch = time.perf_counter() - t0
+        if budget is not None and k + 1 < len(looks) and elapsed + batch > budget:
+            report.budget_stop = (f"the budget of {scene.budget}: {elapsed / 60:.1f} min "
+                                  f"spent, the next batch would take about "
+                                  f"{batch / 60:.1f} more")
+            break
+    usage = [resource.getrusage(who) for who in (resource.RUSAGE_SELF,
+                                                 resource.RUSAGE_CHILDREN)]
+    report.cpu_seconds = sum(u.ru_utime + u.ru_stime for u in usage)
+    return report

@@ -130,7 +130,7 @@ def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dic
 
 def _check_statistics(scene: Scene) -> None:
     """The contrasts' syntax (see docs/statistics.md); the scene checked the rest."""
-    for text in scene.contrasts or ():
+    for text in [*(scene.contrasts or ()), *scene.resolved_primary()]:
         parse_contrast(text)
 
 
@@ -355,8 +355,9 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                     cells.append(Cell(enc, clf, int(length), int(seed), key,
                                       None if init is None else int(init)))
                     identities[key] = identity
-    if scene.contrasts:
-        check_contrasts(scene.contrasts, [{"encoder": c.encoder, "classifier": c.classifier,
-                                           "L": c.L} for c in cells])
+    named = [*(scene.contrasts or ()), *scene.resolved_primary()]
+    if named:
+        check_contrasts(named, [{"encoder": c.encoder, "classifier": c.classifier,
+                                 "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 kinds, cells, identities, registry, split, window)

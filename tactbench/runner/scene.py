@@ -53,6 +53,12 @@ INPUT_KINDS = ("images", "vectors")
 #: At most this many cells in one run (encoders × classifiers × L × seeds): each trains a
 #: model, and a larger grid is a typo (its plan alone would grow without bound).
 MAX_CELLS = 10_000
+#: The primary comparison of a grid with both encoders when none is named: the study's
+#: question, Farnebäck flow against pressure images.
+DEFAULT_PRIMARY = "encoder=raw..encoder=farneback"
+#: What ``--until`` takes, and the runs before the first look (docs/statistics.md).
+UNTIL = ("answered",)
+FIRST_LOOK = 5
 
 
 @dataclass(frozen=True)
@@ -91,6 +97,13 @@ class Scene:
     contrasts: list[str] | None = None
     input: str | None = None  # images or vectors; None: images where there is a layout
     init_seeds: list[int] | None = None
+    # the confirmatory comparisons (contrasts "A..B"); None: raw..farneback where the grid
+    # has both (resolved_primary); and runs added until they are answered (docs/runner.md)
+    primary: list[str] | None = None
+    until: str | None = None  # "answered": seeds in batches until the primaries are decided
+    max_runs: int = 20  # with until: the most runs (seeds) planned
+    look_every: int = 5  # with until: the runs added between two looks (the first at 5)
+    budget: str | None = None  # with until: no batch begun past this time ("90m", "2h")
 
     def __post_init__(self) -> None:
         checked = check_fields({f.name: getattr(self, f.name) for f in fields(self)})
@@ -123,6 +136,24 @@ class Scene:
             return str(self.precision)
 
         return get_profile(self.profile).precision
+
+    def resolved_primary(self) -> list[str]:
+        """The primary comparisons: the scene's, else :data:`DEFAULT_PRIMARY` where the
+        grid has both of its encoders (the study's question), else none."""
+        if self.primary is not None:
+            return list(self.primary)
+        return [DEFAULT_PRIMARY] if {"raw", "farneback"} <= set(self.encoders) else []
+
+    def seed_order(self) -> list[int]:
+        """The seeds in the order runs are made: the scene's, and with ``until`` the next
+        unused whole numbers after them up to :attr:`max_runs`."""
+        seeds = list(self.seeds)
+        nxt = max(seeds) + 1
+        while self.until and len(seeds) < self.max_runs:
+            if nxt not in seeds:
+                seeds.append(nxt)
+            nxt += 1
+        return seeds[:self.max_runs] if self.until else seeds
 
     def resolved_threads(self) -> int:
         """torch threads per cell: the scene's, else this machine's cores shared by workers."""
@@ -207,6 +238,8 @@ _KINDS: dict[str, str] = {
     "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
     "out": "text", "rerun": "bool", "save_models": "bool",
     "margin": "number?", "contrasts": "texts?", "input": "text?", "init_seeds": "seeds?",
+    "primary": "texts?", "until": "text?", "max_runs": "count", "look_every": "count",
+    "budget": "text?",
 }
 
 
@@ -333,11 +366,39 @@ def _check_together(scene: Scene) -> None:
         check_choice(scene.input, "--input", INPUT_KINDS)
     parse_split(scene.split)
     parse_spec(scene.test_window)
+    if scene.until is not None:
+        check_choice(scene.until, "--until", UNTIL)
+        if scene.max_runs < FIRST_LOOK:
+            raise InputError(f"--max-runs must be at least {FIRST_LOOK} (the first look), "
+                             f"got {scene.max_runs}")
+        if not scene.resolved_primary():
+            raise InputError("--until answered needs a primary comparison: give --primary "
+                             "A..B (the default, encoder=raw..encoder=farneback, needs both "
+                             "encoders)")
+    if scene.budget is not None:
+        parse_duration(scene.budget)
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers)) * len(set(scene.L))
                * len(set(scene.seeds)) * len(set(scene.init_seeds or [None])))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
+
+
+def parse_duration(text: str) -> float:
+    """Seconds of ``"90s"``, ``"30m"``, ``"2h"``, ``"1h30m"`` (a bare number: seconds);
+    one clear error for anything else."""
+    m = _DURATION.fullmatch(str(text).strip().lower())
+    if not m or not any(m.groups()):
+        raise InputError(f"bad duration {_show(text)}: use e.g. 90s, 30m, 2h or 1h30m")
+    h, mins, secs = (float(g) if g else 0.0 for g in m.groups())
+    seconds = 3600 * h + 60 * mins + secs
+    if not 0 < seconds < 1e9:
+        raise InputError(f"duration {_show(text)} must be more than 0 and finite")
+    return seconds
+
+
+_DURATION = re.compile(r"(?:(\d{1,7}(?:\.\d+)?)h)?(?:(\d{1,7}(?:\.\d+)?)m)?"
+                       r"(?:(\d{1,9}(?:\.\d+)?)s?)?")
 
 
 def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:

@@ -7,6 +7,7 @@ import re
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.comparisons import P_RULE, Comparison, read_comparisons
+from tactbench.runner.statistics import MIN_RUNS
 from tactbench.runner.summaries import (
     FACTORS,
     failed_cells,
@@ -127,10 +128,10 @@ def _power_runs(c: Comparison) -> str:
     """Runs for 80 % power at the observed difference, or why there is no number."""
     if c.ceiling or c.verdict in ("B better", "A better", "equivalent"):
         return "-"
+    if c.runs < MIN_RUNS or c.difference == 0:  # too few runs to judge the spread
+        return "-"
     if c.runs_for_power is not None:
         return str(c.runs_for_power)
-    if c.runs < 2 or c.difference == 0:
-        return "-"
     return "beyond these data"
 
 
@@ -422,3 +423,63 @@ def variance_markdown(parts: Sequence[dict[str, Any]], labels: Labels | None = N
                      + (" (clipped at 0)" if "split" in v["clipped"] else "")
                      + f" | {v['init_sd']:.1f} | {v['test_sd']:.1f} |")
     return "\n".join(lines)
+
+
+def answer_text(c: Comparison, labels: Labels | None = None) -> str:
+    """One primary question's answer in a sentence: the verdict, the difference and its
+    interval, the Holm p of its family, the Bayesian probabilities; where it is
+    unresolved, what would answer it (runs for 80 % power, or "beyond these data")."""
+    [c] = read_comparisons([c])
+    where = _context(c, labels)
+    head = (f"**{_comparison_label(c, 'b', labels)} against {_comparison_label(c, 'a', labels)}**"
+            + (f" ({where})" if where != "-" else ""))
+    if c.ceiling:
+        return f"{head}: a ceiling — both right on every recording of every run."
+    detail = (f"B − A {100 * c.difference:+.1f} points"
+              + (f" [{100 * c.low:+.1f}, {100 * c.high:+.1f}] (95 %, unadjusted)"
+                 if c.df else "")
+              + f", Holm p {_p_value(c.p_holm)} over {c.runs} runs")
+    if c.bayes_b_better is not None:
+        detail += (f"; P(B better by > {c.bayes_margin:g}) = {c.bayes_b_better:.2f}, "
+                   f"P(within ±{c.bayes_margin:g}) = {c.bayes_equivalent:.2f}")
+    answer = verdict_text(c, labels)
+    if c.verdict in ("unresolved", "too few runs"):
+        more = _power_runs(c)
+        answer += (" — these data cannot tell at any number of runs" if more ==
+                   "beyond these data" else f" — about {more} runs would answer it at "
+                   f"80 % power" if more != "-" else "")
+    return f"{head}: {answer}; {detail}."
+
+
+def looks_markdown(looks: Mapping[str, Any]) -> str:
+    """The looks of a run ``--until answered``: runs, each primary's difference, |t|
+    against its boundary and decision, and why the run stopped."""
+    lines = [f"Runs were added in batches until every primary question was decided "
+             f"(at most {looks['max_runs']} runs; α spent over the looks, O'Brien–Fleming "
+             f"type, Holm carried over them): {md(looks['stopped'])}.", "",
+             "| look | runs | comparison | B − A (points) | \\|t\\| | boundary | decision |",
+             "|---|---|---|---|---|---|---|"]
+    for k, look in enumerate(looks["looks"], 1):
+        for name, lk in look["comparisons"].items():
+            bound = "∞" if lk["boundary"] is None else f"{lk['boundary']:.2f}"
+            t = "∞" if lk["t"] is None else f"{abs(lk['t']):.2f}"
+            why = f" ({md(lk['why'])})" if lk.get("why") else ""
+            lines.append(f"| {k} | {look['runs']} | {md(name)} | "
+                         f"{100 * lk['difference']:+.1f} | {t} | {bound} | "
+                         f"{lk['decision']}{why} |")
+    return "\n".join(lines)
+
+
+def primary_section(comps: Comparisons, looks: Mapping[str, Any] | None,
+                    labels: Labels | None = None) -> list[str]:
+    """report.md's first section: each primary question's answer (none without)."""
+    primary = [c for c in read_comparisons(comps) if c.family == "primary"]
+    if not primary:
+        return []
+    lines = ["## Primary questions", "",
+             "The comparisons named before the run (--primary), a family of their own; "
+             "everything below them is exploratory.", ""]
+    lines += [f"- {answer_text(c, labels)}" for c in primary]
+    if looks and looks.get("looks"):
+        lines += ["", looks_markdown(looks)]
+    return [*lines, ""]

@@ -16,7 +16,7 @@ import io
 import json
 import re
 import shlex
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -24,6 +24,7 @@ from typing import Any, Iterable, Sequence
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
+from tactbench.runner.answering import replay, schedule
 from tactbench.runner.comparisons import Comparison, comparisons
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import (
@@ -32,9 +33,11 @@ from tactbench.runner.results import (
     ok_rows,
     row_status,
 )
+from tactbench.runner.scene import DEFAULT_PRIMARY, Scene
 from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_section,
+    primary_section,
     failed_cells_markdown,
     markdown_table,
     per_class_markdown,
@@ -92,8 +95,11 @@ class Report:
     runs: list[dict[str, Any]]
     rendered: dict[str, str]
     reference: list[dict[str, Any]] = field(default_factory=list)
+    looks: dict[str, Any] | None = None  # a run --until answered: every look, replayed
     paths: dict[str, Path] = field(default_factory=dict)
     computed: int = 0  # cells run now (ok or failed); set by run()
+    cpu_seconds: float | None = None  # set by run_until: this process and its workers
+    budget_stop: str | None = None  # set by run_until when --budget ended it
     skipped: int = 0  # cells already finished before this run
     seconds: float = 0.0
 
@@ -122,6 +128,8 @@ class Report:
                "variance": self.variance, "rows": self.rows}
         if self.reference:
             doc["reference"] = self.reference
+        if self.looks is not None:
+            doc["looks"] = self.looks
         return doc
 
 
@@ -166,7 +174,8 @@ def make_report(rows: Sequence[dict[str, Any]], *,
                 reference: Iterable[dict[str, Any]] | None = None,
                 contrasts: Sequence[str] = (), margin: float | None = None,
                 users: Sequence[str] | None = None, rendered: str | None = None,
-                primary: Sequence[str] = ()) -> Report:
+                primary: Sequence[str] = (), sequential: dict[str, Any] | None = None
+                ) -> Report:
     """The :class:`Report` of ``rows`` (every row of a folder, ok and failed, in the
     scene's order: failed cells are listed and left out of summaries and plots).
 
@@ -175,11 +184,18 @@ def make_report(rows: Sequence[dict[str, Any]], *,
     ``primary`` (the contrasts of the confirmatory family): see
     :func:`tactbench.runner.comparisons.comparisons`; ``users``: the user of each
     dataset sample (by index), for per-user results; ``rendered``: how the report came
-    to be, said in report.md beside the command line and the time.
+    to be, said in report.md beside the command line and the time; ``sequential``
+    (``seed_order`` and ``looks``, from :func:`sequential_design`): the looks of a run
+    ``--until answered``, replayed from the rows
+    (:func:`tactbench.runner.answering.replay`).
     """
     rows = list(rows)
     reference = check_reference(reference)
-    return Report(
+    looks = None
+    if sequential and primary:
+        looks = replay(rows, seed_order=sequential["seed_order"], looks=sequential["looks"],
+                       primary=primary, margin=margin).as_dict()
+    return Report(looks=looks,
         rows=rows, summaries=summarise(rows, users=users),
         comparisons=comparisons(rows, contrasts=contrasts, margin=margin, users=users,
                                 primary=primary),
@@ -190,6 +206,25 @@ def make_report(rows: Sequence[dict[str, Any]], *,
         runs=computed_by(rows), reference=reference,
         rendered={"by": command_line(), "how": rendered or "from the rows of cells/",
                   "at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")})
+
+
+def sequential_design(scene: dict[str, Any]) -> dict[str, Any] | None:
+    """``{"seed_order", "looks"}`` of a scene (its fields) run ``--until answered``;
+    None for any other."""
+    if not scene.get("until"):
+        return None
+    known = {f.name for f in fields(Scene)}
+    made = Scene(**{k: v for k, v in scene.items() if k in known})
+    return {"seed_order": made.seed_order(),
+            "looks": schedule(made.max_runs, made.look_every)}
+
+
+def primary_of(scene: dict[str, Any]) -> list[str]:
+    """The primary comparisons of a scene given as its fields (None: the default)."""
+    if scene.get("primary") is not None:
+        return list(scene["primary"])
+    return [DEFAULT_PRIMARY] if {"raw", "farneback"} <= set(scene.get("encoders") or ()) \
+        else []
 
 
 def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -302,6 +337,7 @@ def markdown_report(report: Report, figures: dict[str, Path]) -> str:
     n_failed = len(rows) - len(done)
     lines = [
         REPORT_HEADER, "", *_facts(report), "",
+        *primary_section(comps, report.looks, labels),
         "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
         "mean over seeds (test set: "
         f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "

@@ -1,0 +1,64 @@
+"""``tactbench plan``: a run's cells, time, memory and power, before any training."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from tactbench.cli import get_registry, json_text
+from tactbench.commands.run import scene_from, scene_options
+from tactbench.runner.forecast import forecast
+
+
+@click.command("plan")
+@scene_options
+@click.option("--effect", type=float, default=5.0, show_default=True, metavar="POINTS",
+              help="The true difference (accuracy points) each primary comparison's power "
+                   "is computed for.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+@click.pass_context
+def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json: bool,
+             **options) -> None:
+    """Plan a run before it trains: its cells, time and memory, and the power of each
+    primary question.
+
+    Takes the same arguments as `tactbench run`. Times and memory come from rows already
+    in the out folder (a pilot run of a seed or two), and so does each comparison's
+    per-run spread; without a pilot the spread is test sampling alone (a lower bound).
+    For one data set it also says the floor no number of runs resolves below, and how
+    many recordings would lower it to --effect.
+    """
+    if not 0 < effect <= 100:
+        raise click.BadParameter(f"must be in (0, 100] points, got {effect:g}",
+                                 param_hint="--effect")
+    scene = scene_from(ctx, scene_file, options)
+    f = forecast(scene, get_registry(), effect=effect)
+    if as_json:
+        click.echo(json_text(f.as_dict(), indent=2))
+        return
+    for c in f.cells:
+        shown = "?" if c.seconds is None else f"{c.seconds:.0f} s"
+        click.echo(f"cell {c.label}: {shown} ({c.source})")
+    if f.seconds is None:
+        total = f"unknown (no cell has a timing: run a pilot of one seed into {scene.out})"
+    else:
+        total = f"{f.seconds / 60:.1f} min" + (
+            f" for the {len(f.cells) - f.unknown} cells with a timing, {f.unknown} without"
+            if f.unknown else "")
+    click.echo(f"{len(f.cells)} cells; time on this machine: {total}"
+               + "; peak memory " + ("unknown without a pilot" if f.peak_mb is None
+                                     else f"{f.peak_mb:.0f} MB (the pilot's)"))
+    click.echo(f"split: {f.n_test} test recordings against {f.n_train} training ones "
+               f"per run")
+    for p in f.primaries:
+        click.echo(f"primary {p.name}: at {p.runs} runs, power {p.power:.0%} for "
+                   f"{p.effect:+.1f} points; 80 % power from {p.detectable:.1f} points; "
+                   f"per-run sd {p.sd:.1f} points ({p.sd_source})")
+        more = ("" if p.recordings_for_effect is None or p.recordings_for_effect
+                <= p.recordings else f"; about {p.recordings_for_effect} recordings (now "
+                f"{p.recordings}) would bring it to {p.effect:.1f}")
+        click.echo(f"  floor: no number of runs of these {p.recordings} recordings "
+                   f"resolves less than {p.floor:.1f} points{more}")
+    if not f.primaries:
+        click.echo("no primary comparison (give --primary A..B)", file=sys.stderr)

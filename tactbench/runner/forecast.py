@@ -1,0 +1,164 @@
+"""``tactbench plan``: what a run will cost and what it can answer, before any training.
+
+:func:`forecast` plans the scene (the dataset loaded, the grid checked: no encoding, no
+training) and says, for every cell, its estimated time and where the estimate comes
+from, the peak memory, and for each primary comparison the power at the planned runs
+for a given effect, the smallest effect found at 80 % power, and — for a fixed data set
+— the floor no number of runs goes below and how many recordings would lower it
+(:mod:`tactbench.runner.power`).
+
+Timings and spreads come from a *pilot*: rows already stored in the scene's out folder
+(a run of a seed or two), said so. Without one, a cell's time is unknown (said so, with
+the pilot to run) and a comparison's per-run spread is what test sampling alone gives
+(:func:`tactbench.runner.power.sampling_sd`, models assumed to disagree on
+:data:`ASSUMED_DISCORDANCE` of the recordings) — a lower bound on the real spread, so
+the power it gives is an upper bound, and the forecast says so.
+"""
+
+from __future__ import annotations
+
+import statistics
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from tactbench.data.splits import SplitData
+from tactbench.runner.comparisons import comparisons
+from tactbench.runner.planning import plan
+from tactbench.runner.power import (
+    detectable_effect,
+    effect_floor,
+    power,
+    recordings_for,
+    sampling_sd,
+    seed_mean_ratio,
+)
+from tactbench.runner.results import ResultStore, ok_rows
+from tactbench.runner.scene import Scene
+
+#: The share of test recordings two models are assumed to disagree on without a pilot
+#: (two models near 80 % whose errors are independent disagree on about 32 %).
+ASSUMED_DISCORDANCE = 0.3
+
+
+@dataclass
+class CellForecast:
+    """One cell: its label, estimated seconds (None: unknown) and where that comes from."""
+
+    label: str
+    seconds: float | None
+    source: str
+
+
+@dataclass
+class PrimaryForecast:
+    """What the planned runs can say about one primary comparison (points)."""
+
+    name: str
+    runs: int
+    effect: float
+    sd: float
+    sd_source: str
+    ratio: float
+    power: float
+    detectable: float
+    floor: float
+    recordings: int
+    recordings_for_effect: int | None
+
+
+@dataclass
+class Forecast:
+    """A run's plan: cells with their times, the total, the peak memory, the primaries."""
+
+    cells: list[CellForecast]
+    seconds: float | None
+    unknown: int
+    peak_mb: float | None
+    primaries: list[PrimaryForecast]
+    n_test: int
+    n_train: int
+    alpha: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float = 0.05,
+             progress=None) -> Forecast:
+    """The forecast of ``scene`` (see the module docstring); ``effect`` in points."""
+    p = plan(scene, registry, progress=progress)
+    pilot = ok_rows(ResultStore(scene.out).stored_rows()) if _has_cells(scene) else []
+    runs = scene.max_runs if scene.until else len(scene.seeds)
+    splits = p.split.split(SplitData.of(p.dataset, test_per_class=scene.test_per_class),
+                           seed=scene.seed_order()[0])
+    n_test = sum(len(s.test) for s in splits)
+    n_train = len(splits[0].train)
+    ratio = seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
+    cells = _cells(p, pilot, scene)
+    known = [c.seconds for c in cells if c.seconds is not None]
+    primaries = scene.resolved_primary()
+    level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
+    return Forecast(
+        cells=cells, seconds=sum(known) if known else None,
+        unknown=sum(c.seconds is None for c in cells),
+        peak_mb=max((float(r["peak_rss_mb"]) for r in pilot if r.get("peak_rss_mb")),
+                    default=None),
+        primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
+                            len(p.dataset.labels)) for text in primaries],
+        n_test=n_test, n_train=n_train, alpha=alpha)
+
+
+def _has_cells(scene: Scene) -> bool:
+    return (Path(scene.out) / "cells").is_dir()
+
+
+def _cells(p, pilot: list[dict[str, Any]], scene: Scene) -> list[CellForecast]:
+    """Each planned cell's time: 0 when finished, the pilot's median training and
+    inference time of its encoder × classifier (whose encoding the pilot has cached),
+    else unknown."""
+    done = {r["key"] for r in pilot}
+    by_pair: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in pilot:
+        by_pair.setdefault((r["encoder"], r["classifier"]), []).append(r)
+    out = []
+    for cell in p.cells:
+        label = cell.label()
+        rows = by_pair.get((cell.encoder, cell.classifier))
+        if cell.key in done:
+            out.append(CellForecast(label, 0.0, "finished (stored)"))
+        elif rows:
+            train = statistics.median(float(r.get("train_s") or 0.0) for r in rows)
+            infer = statistics.median(float(r.get("inference_ms_per_sequence") or 0.0)
+                                      * int(r.get("n_test") or 0) / 1e3 for r in rows)
+            out.append(CellForecast(label, train + infer,
+                                    f"pilot: median of {len(rows)} stored row(s)"))
+        else:
+            out.append(CellForecast(label, None, "no stored row of this encoder × "
+                                    "classifier: run a pilot (one seed) for a timing"))
+    return out
+
+
+def _primary(text: str, pilot: list[dict[str, Any]], runs: int, effect: float,
+             ratio: float, n_test: int, level: float, recordings: int) -> PrimaryForecast:
+    """One primary comparison's forecast at ``runs`` runs for a true ``effect``."""
+    found = [c for c in comparisons(pilot, primary=[text]) if c.family == "primary"]
+    if found and found[0].runs >= 2:
+        c = found[0]
+        d = list(c.per_run.values())
+        sd, ratio = statistics.stdev(d), c.run_ratio
+        source = f"pilot: {c.runs} stored runs"
+    else:
+        sd = sampling_sd(n_test, ASSUMED_DISCORDANCE, min(effect, ASSUMED_DISCORDANCE ** 0.5))
+        source = (f"no pilot: test sampling alone of {n_test} test recordings, models "
+                  f"disagreeing on {ASSUMED_DISCORDANCE:.0%} of them (a lower bound on the "
+                  f"spread: the power is an upper bound)")
+    floor = effect_floor(sd, ratio, alpha=level)
+    runs = max(2, runs)
+    return PrimaryForecast(
+        name=text, runs=runs, effect=100 * effect, sd=100 * sd, sd_source=source,
+        ratio=ratio, power=power(effect, sd, ratio, runs, alpha=level),
+        detectable=100 * detectable_effect(sd, ratio, runs, alpha=level),
+        floor=100 * floor, recordings=recordings,
+        recordings_for_effect=recordings_for(effect, floor, recordings)
+        if effect > 0 else None)

@@ -1,0 +1,71 @@
+"""``tactbench run --until answered`` and ``--primary``: looks from the rows, resumable,
+the same looks when the report is rendered again."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from tactbench.cli import cli
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+TINY = ["--dataset", "synthetic-forearm:users=2,repetitions=1", "--encoder", "raw",
+        "--encoder", "frame-diff", "--classifier", "logreg:max_iter=20", "-L", "3",
+        "--pixel-mm", "10", "--threads", "1"]
+PRIMARY = "encoder=raw..encoder=frame-diff"
+
+
+def _invoke(tmp_path, monkeypatch, *args: str):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    scene = tmp_path / "scene.toml"
+    scene.write_text("test_per_class = 1\n")
+    return CliRunner().invoke(cli, [*args, str(scene)], catch_exceptions=False)
+
+
+def test_runs_are_added_until_the_primary_is_answered_and_the_looks_replay(tmp_path,
+                                                                          monkeypatch):
+    out = tmp_path / "out"
+    args = ["run", *TINY, "--seed", "0", "--out", str(out), "--primary", PRIMARY,
+            "--until", "answered", "--max-runs", "7", "--look-every", "1"]
+    first = _invoke(tmp_path, monkeypatch, *args)
+    assert first.exit_code == 0, first.output
+    text = first.output  # the primary question leads, before the tables
+    assert text.index("primary: frame-diff against raw") < text.index("· test window")
+    doc = json.loads((out / "results.json").read_text())
+    looks = doc["looks"]
+    assert [lk["runs"] for lk in looks["looks"]] == [5, 6, 7][:len(looks["looks"])]
+    seeds = {r["seed"] for r in doc["rows"]}
+    assert seeds == set(range(looks["looks"][-1]["runs"]))  # no seed past the last look
+    if not looks["answered"]:
+        assert len(looks["looks"]) == 3 and "7 of 7" in looks["stopped"]
+    report = (out / "report.md").read_text()
+    assert report.index("## Primary questions") < report.index("| encoder | classifier")
+    assert "### Primary questions (confirmatory)" in report
+    [primary] = [c for c in doc["comparisons"] if c["family"] == "primary"]
+    assert (primary["a"], primary["b"]) == ("raw", "frame-diff")
+    # resumed: nothing computed again, the same looks
+    again = _invoke(tmp_path, monkeypatch, *args, "--json")
+    assert again.exit_code == 0, again.output
+    assert json.loads(again.output)["meta"]["computed"] == 0
+    assert json.loads((out / "results.json").read_text())["looks"] == looks
+    # rendered again from the cells: the same looks, replayed from the rows
+    rendered = CliRunner().invoke(cli, ["report", str(out), "--no-plots"],
+                                  catch_exceptions=False)
+    assert rendered.exit_code == 0, rendered.output
+    assert json.loads((out / "results.json").read_text())["looks"] == looks
+
+
+def test_until_needs_a_primary_and_a_readable_budget(tmp_path, monkeypatch):
+    out = str(tmp_path / "out")
+    no_primary = _invoke(tmp_path, monkeypatch, "run", *TINY[:2], "--encoder", "raw",
+                         "--classifier", "logreg", "--until", "answered", "--out", out)
+    assert no_primary.exit_code == 2 and "primary" in no_primary.output
+    bad = _invoke(tmp_path, monkeypatch, "run", *TINY, "--until", "answered",
+                  "--primary", PRIMARY, "--budget", "soon", "--out", out)
+    assert bad.exit_code == 2 and "duration" in bad.output
+    few = _invoke(tmp_path, monkeypatch, "run", *TINY, "--until", "answered",
+                  "--primary", PRIMARY, "--max-runs", "3", "--out", out)
+    assert few.exit_code == 2 and "max-runs" in few.output
