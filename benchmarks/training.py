@@ -685,10 +685,22 @@ def _cpu_seconds(row: dict) -> float | None:
     return float(sum(values)) if values and all(values) else None
 
 
+def stored_rows(run_out: Path) -> list[dict]:
+    """The verified rows of the cells finished so far in ``run_out`` (a run cut short
+    keeps them)."""
+    from tactbench.runner.results import ResultStore
+
+    store = ResultStore(run_out)
+    return [row for path in sorted(store.cells.glob("*.json"))
+            if (row := store.get(path.stem)) is not None]
+
+
 def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
-                    threads: int, run_out: Path, extra: list[str]) -> dict:
+                    threads: int, run_out: Path, extra: list[str],
+                    stored: bool = False) -> dict:
     """One ``tactbench run`` of every recipe and the baseline; per recipe and encoder:
-    accuracy, CPU and wall seconds per cell, and (recipe − baseline) paired over runs."""
+    accuracy, CPU and wall seconds per cell, and (recipe − baseline) paired over runs.
+    ``stored``: run nothing, read the cells ``run_out`` holds."""
     import subprocess
 
     from tactbench.runner.summaries import comparisons
@@ -705,15 +717,16 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
         cmd += ["--seed", str(seed)]
     for enc in encoders:
         cmd += ["--encoder", enc]
-    for spec in [*specs.values(), BASELINE]:
-        cmd += ["--classifier", spec]
+    for spec in [BASELINE, *specs.values()]:  # the cheap baseline first: a run cut short
+        cmd += ["--classifier", spec]         # still pairs what it finished
     cmd += extra
     load_before, t0 = _load(), time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    stored = json.loads((run_out / "results.json").read_text())
-    rows = [r for r in stored["rows"] if r.get("status", "ok") == "ok"]
+    if not stored:
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    rows = [r for r in stored_rows(run_out) if r.get("status", "ok") == "ok"
+            and int(r["seed"]) in seeds]
     compared = [c for c in comparisons(rows) if c["factor"] == "classifier"]
-    out = {"command": " ".join(cmd), "wall_s": time.perf_counter() - t0,
+    out = {"command": " ".join(cmd), "from_stored": stored, "wall_s": time.perf_counter() - t0,
            "load_before": load_before, "load_after": _load(), "recipes": []}
     for spec, label in named.items():
         for enc in encoders:
@@ -787,7 +800,8 @@ def recipes_main(args) -> int:
               "note": "2-core VM shared with other jobs (see load): CPU-seconds are the "
                       "robust cost; wall seconds grow with contention",
               **measure_recipes(labels, args.encoders, args.seeds, threads=args.threads,
-                                run_out=args.run_out, extra=args.run_args)}
+                                run_out=args.run_out, extra=args.run_args,
+                                stored=args.stored)}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     plot_recipes(result, args.out.with_suffix(".png"))
@@ -810,6 +824,8 @@ def main(argv=None) -> int:
     ap.add_argument("--encoders", nargs="+", default=["raw", "farneback"])
     ap.add_argument("--run-out", type=Path, default=Path("tactbench-out/recipes"),
                     help="where the recipes' tactbench run keeps its cells")
+    ap.add_argument("--stored", action="store_true",
+                    help="--recipes: train nothing, report the cells --run-out holds")
     ap.add_argument("--run-args", nargs="*", default=[],
                     help="more tactbench run options (e.g. --init-seed 0-2)")
     ap.add_argument("--threads", type=int, default=2)
