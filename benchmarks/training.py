@@ -662,6 +662,7 @@ _ISSUE = "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=24000"
 RECIPES = {
     "shipped": "small-cnn-lstm",  # 32 px, LSTM, Adam 3e-3 cosine, 4 × 8000 windows
     "issue": _ISSUE,  # 16 px, concat head, 4 × 24 000 windows
+    "issue-160k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=40000",
     "tcn": "small-cnn-lstm:input_size=16,head=tcn,windows_per_epoch=24000",
     "adamw-onecycle": _ISSUE + ",optimizer=adamw,schedule=onecycle,weight_decay=0.01",
     "smoothing": _ISSUE + ",label_smoothing=0.1",
