@@ -31,10 +31,23 @@ size the runner's quick profile images at ~5 mm/px):
 7. ``paper-epoch`` (only with CUDA): one epoch of the paper profile
    (``cnn-lstm``, 224 px, SGD 1e-3, batch 16) on the GPU.
 
+With ``--recipes``, instead: accuracy against training CPU-seconds of ``small-cnn-lstm``
+recipes (:data:`RECIPES`: the shipped one, the one issue 28 measured, and one change
+each from it) on the default data (``tactbench run``'s: the simulated forearm, quick
+profile, L = 5, vote window, paper split), each paired run by run with
+``sklearn:HistGradientBoostingClassifier`` on the same cells through
+:func:`tactbench.runner.summaries.comparisons`. The cells are one ``tactbench run``
+(kept in ``--run-out``, so a rerun adds only what is missing); CPU-seconds are the
+fitting process's ``time.process_time`` (every thread), wall seconds beside them. It
+writes ``--out`` (JSON: machine, date, load, per-recipe accuracy, costs, intervals) and
+a PNG beside it.
+
 Usage::
 
     python benchmarks/training.py [--threads 2] [--out docs/benchmarks/training.json]
                                   [--skip quick] [--sequences 1750]
+    python benchmarks/training.py --recipes [LABEL ...] [--encoders farneback]
+                                  [--seeds 0 1] [--out docs/benchmarks/recipes.json]
 """
 
 from __future__ import annotations
@@ -640,8 +653,182 @@ def measure_paper_step() -> list[dict]:
     return rows
 
 
+# --------------------------------------------------------------------------- recipes
+
+#: The tree every recipe is paired with.
+BASELINE = "sklearn:HistGradientBoostingClassifier"
+_ISSUE = "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=24000"
+#: Recipes of ``--recipes``: label → classifier spec (the quick profile fills the rest).
+RECIPES = {
+    "shipped": "small-cnn-lstm",  # 32 px, LSTM, Adam 3e-3 cosine, 4 × 8000 windows
+    "issue": _ISSUE,  # 16 px, concat head, 4 × 24 000 windows
+    "issue-160k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=40000",
+    "tcn": "small-cnn-lstm:input_size=16,head=tcn,windows_per_epoch=24000",
+    "adamw-onecycle": _ISSUE + ",optimizer=adamw,schedule=onecycle,weight_decay=0.01",
+    "smoothing": _ISSUE + ",label_smoothing=0.1",
+    "augment": _ISSUE + ",shift=1,gain=0.2",
+    "early-stop": "small-cnn-lstm:input_size=16,head=concat,epochs=8,windows_per_epoch=12000,"
+                  "val_fraction=0.1,patience=3",
+}
+
+
+def _load() -> str:
+    try:
+        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        return "unknown"
+
+
+def _cpu_seconds(row: dict) -> float | None:
+    fits = row.get("fit")
+    fits = fits if isinstance(fits, list) else [fits or {}]
+    values = [f.get("train_cpu_seconds") for f in fits]
+    return float(sum(values)) if values and all(values) else None
+
+
+def stored_rows(run_out: Path) -> list[dict]:
+    """The verified rows of the cells finished so far in ``run_out`` (a run cut short
+    keeps them)."""
+    from tactbench.runner.results import ResultStore
+
+    store = ResultStore(run_out)
+    return [row for path in sorted(store.cells.glob("*.json"))
+            if (row := store.get(path.stem)) is not None]
+
+
+def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
+                    threads: int, run_out: Path, extra: list[str],
+                    stored: bool = False) -> dict:
+    """One ``tactbench run`` of every recipe and the baseline; per recipe and encoder:
+    accuracy, CPU and wall seconds per cell, and (recipe − baseline) paired over runs.
+    ``stored``: run nothing, read the cells ``run_out`` holds."""
+    import subprocess
+
+    from tactbench.runner.summaries import comparisons
+
+    from tactbench.plugins import load_registry
+
+    specs = {label: RECIPES[label] for label in labels}
+    registry = load_registry()
+    named = {canonical(spec, registry): label
+             for label, spec in [*specs.items(), ("baseline", BASELINE)]}
+    cmd = [str(Path(sys.executable).with_name("tactbench")), "run", "--out", str(run_out),
+           "--threads", str(threads), "--no-plots"]
+    for seed in seeds:
+        cmd += ["--seed", str(seed)]
+    for enc in encoders:
+        cmd += ["--encoder", enc]
+    for spec in [BASELINE, *specs.values()]:  # the cheap baseline first: a run cut short
+        cmd += ["--classifier", spec]         # still pairs what it finished
+    cmd += extra
+    load_before, t0 = _load(), time.perf_counter()
+    if not stored:
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    rows = [r for r in stored_rows(run_out) if r.get("status", "ok") == "ok"
+            and int(r["seed"]) in seeds]
+    compared = [c for c in comparisons(rows) if c["factor"] == "classifier"]
+    out = {"command": " ".join(cmd), "from_stored": stored, "wall_s": time.perf_counter() - t0,
+           "load_before": load_before, "load_after": _load(), "recipes": []}
+    for spec, label in named.items():
+        for enc in encoders:
+            cells = [r for r in rows if r["encoder"] == enc and r["classifier"] == spec]
+            if not cells:
+                continue
+            acc = [100 * r["accuracy"] for r in cells]
+            cpu = [c for c in map(_cpu_seconds, cells) if c is not None]
+            entry = {"recipe": label, "spec": spec, "encoder": enc, "runs": len(cells),
+                     "accuracy_mean": float(np.mean(acc)), "accuracy": acc,
+                     "cpu_s_mean": float(np.mean(cpu)) if cpu else None,
+                     "wall_s_mean": float(np.mean([r["train_s"] for r in cells]))}
+            for c in compared:
+                if c.get("encoder") != enc or {named.get(c["a"]), named.get(c["b"])} != \
+                        {label, "baseline"} or label == "baseline":
+                    continue
+                sign = 1 if named.get(c["a"]) == "baseline" else -1  # recipe − baseline
+                low, high = sorted((sign * c["low"], sign * c["high"]))
+                entry["vs_baseline"] = {"difference": 100 * sign * c["difference"],
+                                        "low": 100 * low, "high": 100 * high,
+                                        "runs": c["runs"], "method": c["method"]}
+            out["recipes"].append(entry)
+    return out
+
+
+def canonical(spec: str, registry, profile: str = "quick") -> str:
+    """The spec as a run's cells name it: the quick profile's options merged in (as
+    :func:`tactbench.runner.planning.plan` does)."""
+    from tactbench.profiles import profile_options
+    from tactbench.specs import format_spec, parse_spec
+
+    name, options = parse_spec(registry.resolve("classifier", spec))
+    return format_spec(name, {**profile_options(profile, name, registry=registry),
+                              **options})
+
+
+def plot_recipes(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for enc, marker in zip(sorted({e["encoder"] for e in result["recipes"]}), "os^"):
+        for e in (e for e in result["recipes"] if e["encoder"] == enc):
+            x = e["cpu_s_mean"] if e["cpu_s_mean"] is not None else e["wall_s_mean"]
+            ax.scatter(x, e["accuracy_mean"], marker=marker,
+                       color="black" if e["recipe"] == "baseline" else None)
+            ax.annotate(f"{e['recipe']} ({enc})", (x, e["accuracy_mean"]), fontsize=7,
+                        xytext=(3, 3), textcoords="offset points")
+    ax.set_xlabel("training CPU-seconds per cell (process time, all threads)")
+    ax.set_ylabel("test accuracy, % (mean over runs)")
+    ax.set_title("small-cnn-lstm recipes against HistGradientBoosting (default data)")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def recipes_main(args) -> int:
+    import torch
+
+    labels = args.recipes or list(RECIPES)
+    unknown = [x for x in labels if x not in RECIPES]
+    if unknown:
+        raise SystemExit(f"unknown recipes {unknown}; known: {', '.join(RECIPES)}")
+    result = {"command": "python " + " ".join(sys.argv), "threads": args.threads,
+              "machine": platform.platform(), "cpu_count": __import__("os").cpu_count(),
+              "torch": torch.__version__, "date": time.strftime("%Y-%m-%d %H:%M UTC",
+                                                                time.gmtime()),
+              "note": "2-core VM shared with other jobs (see load): CPU-seconds are the "
+                      "robust cost; wall seconds grow with contention",
+              **measure_recipes(labels, args.encoders, args.seeds, threads=args.threads,
+                                run_out=args.run_out, extra=args.run_args,
+                                stored=args.stored)}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    plot_recipes(result, args.out.with_suffix(".png"))
+    for e in result["recipes"]:
+        vs = e.get("vs_baseline")
+        interval = (f"{vs['difference']:+.1f} [{vs['low']:+.1f}, {vs['high']:+.1f}]"
+                    if vs else "")
+        cpu = f"{e['cpu_s_mean']:.0f}" if e["cpu_s_mean"] is not None else "?"
+        print(f"{e['recipe']:15s} {e['encoder']:10s} {e['accuracy_mean']:5.1f} %  "
+              f"{cpu:>5s} CPU-s {e['wall_s_mean']:5.0f} s  {interval}")
+    print(f"wrote {args.out} and {args.out.with_suffix('.png')}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--recipes", nargs="*", metavar="LABEL",
+                    help=f"accuracy against training CPU-s of these recipes (none named: "
+                         f"all of {', '.join(RECIPES)}) instead of the other parts")
+    ap.add_argument("--encoders", nargs="+", default=["raw", "farneback"])
+    ap.add_argument("--run-out", type=Path, default=Path("tactbench-out/recipes"),
+                    help="where the recipes' tactbench run keeps its cells")
+    ap.add_argument("--stored", action="store_true",
+                    help="--recipes: train nothing, report the cells --run-out holds")
+    ap.add_argument("--run-args", nargs="*", default=[],
+                    help="more tactbench run options (e.g. --init-seed 0-2)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--sequences", type=int, default=1750, help="training sequences")
     ap.add_argument("--steps", type=int, default=100,
@@ -657,6 +844,10 @@ def main(argv=None) -> int:
                     help="(internal) one paper-profile cnn-lstm step in this process; "
                          "prints its peak RSS as JSON")
     args = ap.parse_args(argv)
+    if args.recipes is not None:
+        if args.out == Path("docs/benchmarks/training.json"):
+            args.out = Path("docs/benchmarks/recipes.json")
+        return recipes_main(args)
 
     import torch
 

@@ -64,7 +64,7 @@ EVAL_INPUT_BYTES = 64 * 2 ** 20
 NORM_SAMPLE_FRAMES = 4096
 #: The ``optimizer`` and ``schedule`` options :func:`.training.train_loop` accepts.
 OPTIMIZERS = ("adam", "adamw", "sgd")
-SCHEDULES = ("cosine", "constant")
+SCHEDULES = ("cosine", "constant", "onecycle")
 
 
 @dataclass(eq=False, repr=False, kw_only=True)
@@ -315,6 +315,7 @@ class TorchSequenceClassifier(SequenceClassifier):
         forked = [dev.index or 0] if dev.type == "cuda" else []
         with torch.random.fork_rng(devices=forked):
             torch.manual_seed(derive_seed(seed, self.name, "init"))
+            self.L = train.L  # a head over a fixed window length (concat) is built for it
             net = self._build_net(tuple(train.frame_shape), k, pretrained=True)
             with torch.no_grad():
                 self._set_normalization(net, train, seed)
@@ -327,7 +328,6 @@ class TorchSequenceClassifier(SequenceClassifier):
             net.to(dev)
             self.net = net
             self.n_classes, self.frame_shape = k, tuple(train.frame_shape)
-            self.L = train.L
             self._device, self._precision = dev, precision
             try:
                 train_loop(net, get_batch, load_batches=load_batches,
@@ -337,7 +337,7 @@ class TorchSequenceClassifier(SequenceClassifier):
                            lr=self.lr, momentum=self.momentum, weight_decay=self.weight_decay,
                            schedule=self.schedule, device=dev, precision=precision,
                            progress=progress, evaluate=evaluate,
-                           groups=self._runs(train))
+                           groups=self._runs(train), **self._loop_options())
             except TrainingInterrupted as exc:
                 self.fit_report = self._finish_report(exc.report)
                 raise
@@ -377,6 +377,11 @@ class TorchSequenceClassifier(SequenceClassifier):
         return out
 
     def _extra_report(self) -> dict[str, Any]:
+        return {}
+
+    def _loop_options(self) -> dict[str, Any]:
+        """Further keyword arguments of :func:`.training.train_loop` (label smoothing,
+        augmentation, early stopping) that a subclass's options ask for."""
         return {}
 
     def _set_normalization(self, net, train: Windows, seed: int) -> None:
@@ -532,8 +537,7 @@ class TorchSequenceClassifier(SequenceClassifier):
 
         net = self.net
         with torch.inference_mode():
-            out, _ = net.lstm(torch.stack(list(features))[None])
-            logits = net.head(out[:, -1])
+            logits = net.classify(torch.stack(list(features))[None])
             return torch.softmax(logits.float(), dim=1)[0].cpu().numpy()
 
 

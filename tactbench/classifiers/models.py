@@ -12,7 +12,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from tactbench.classifiers.base import TorchSequenceClassifier, n_params
+from tactbench.classifiers.training import TEMPORAL_HEADS, augment_windows, carve_validation
+from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
+from tactbench.seeds import derive_seed
 
 #: From this input size (px) up, ``cnn-lstm`` trains with gradient checkpointing of its
 #: backbone (every stage's inner activations recomputed in the backward pass): at 224 px
@@ -33,7 +36,7 @@ class ImageSequenceClassifier(TorchSequenceClassifier):
         check_positive_int(self.input_size, "input_size (px)", minimum=8)
         check_choice(self.normalisation, "normalisation", ["data", "imagenet", "none"])
 
-    def _wrap(self, encoder, frame_shape, n_classes):
+    def _wrap(self, encoder, frame_shape, n_classes, *, temporal: str = "lstm"):
         import torch
 
         from tactbench.classifiers.nets import IMAGENET_MEAN, IMAGENET_STD, SequenceNet
@@ -42,7 +45,8 @@ class ImageSequenceClassifier(TorchSequenceClassifier):
             raise InputError(f"normalisation=imagenet needs 3 channels; frames have {frame_shape[0]}")
         net = SequenceNet(encoder, frame_shape=frame_shape, n_classes=n_classes,
                           hidden=self.hidden, fc=self.fc, dropout=self.dropout,
-                          input_size=self.input_size)
+                          input_size=self.input_size, temporal=temporal,
+                          L=self.L)
         if self.normalisation == "imagenet":
             net.normalize.set(torch.tensor(IMAGENET_MEAN), torch.tensor(IMAGENET_STD))
         return net
@@ -54,22 +58,79 @@ class ImageSequenceClassifier(TorchSequenceClassifier):
 
 @dataclass(eq=False, repr=False, kw_only=True)
 class SmallCnnLstm(ImageSequenceClassifier):
-    """A CPU-sized CNN-LSTM: ``layers`` conv blocks of ``width`` → LSTM → FC 256 → classes."""
+    """A CPU-sized CNN-LSTM: ``layers`` conv blocks of ``width`` → temporal head → FC 256
+    → classes.
+
+    Recipe options (each at a default that trains as before, so a spec without them
+    names the cells it always did): ``head`` ``lstm`` | ``concat`` | ``tcn`` (see
+    :class:`~tactbench.classifiers.nets.SequenceNet`); ``label_smoothing`` of the
+    cross-entropy targets; ``shift`` (pixels at ``input_size``) and ``gain`` (log
+    amplitude), the augmentation of :func:`~tactbench.classifiers.training.augment_windows`;
+    ``val_fraction`` > 0 carves that fraction of the training recordings off as a
+    validation split (:func:`~tactbench.classifiers.training.carve_validation`), evaluated
+    after every epoch, and the best epoch's weights are kept; ``patience`` > 0 stops
+    after that many epochs without a gain.
+    """
 
     name = "small-cnn-lstm"
     width: int = 16
     layers: int = 4
+    head: str = "lstm"
+    label_smoothing: float = 0.0
+    shift: int = 0
+    gain: float = 0.0
+    val_fraction: float = 0.0
+    patience: int = 0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_positive_int(self.width, "width")
         check_positive_int(self.layers, "layers")
+        check_choice(self.head, "head", list(TEMPORAL_HEADS))
+        if not 0 <= check_positive_float(self.label_smoothing, "label_smoothing",
+                                         allow_zero=True) < 1:
+            raise InputError(f"label_smoothing must lie in [0, 1), got {self.label_smoothing}")
+        check_positive_int(self.shift, "shift (px)", minimum=0, maximum=self.input_size // 4)
+        check_positive_float(self.gain, "gain", allow_zero=True)
+        if not 0 <= check_positive_float(self.val_fraction, "val_fraction",
+                                         allow_zero=True) < 1:
+            raise InputError(f"val_fraction must lie in [0, 1), got {self.val_fraction}")
+        check_positive_int(self.patience, "patience (0: off)", minimum=0)
+        if self.patience and not self.val_fraction:
+            raise InputError("patience needs a validation split: give val_fraction too")
+        if (self.shift or self.gain) and self.shared_features:
+            raise InputError("shift and gain augment whole windows: use shared_features=0")
 
     def _build_net(self, frame_shape, n_classes, *, pretrained):
         from tactbench.classifiers.nets import SmallCNN
 
         return self._wrap(SmallCNN(frame_shape[0], self.width, self.layers), frame_shape,
-                          n_classes)
+                          n_classes, temporal=self.head)
+
+    def fit(self, train, val=None, *, seed, **kwargs):
+        """As the base's; with ``val_fraction`` and no ``val`` given, the validation
+        split is carved from ``train`` by recording (seeded by ``seed``)."""
+        if self.val_fraction and val is None:
+            self._check_windows(train, "train")
+            train, val = carve_validation(train, self.val_fraction,
+                                          derive_seed(seed, self.name, "validation"))
+        return super().fit(train, val, seed=seed, **kwargs)
+
+    def _loop_options(self) -> dict[str, Any]:
+        augment = None
+        if self.shift or self.gain:
+            def augment(x, rng):
+                return augment_windows(x, rng, shift=self.shift, gain=self.gain)
+        return {"label_smoothing": float(self.label_smoothing), "augment": augment,
+                "keep_best": bool(self.val_fraction), "patience": int(self.patience)}
+
+    def _check_input(self, x):
+        x = super()._check_input(x)
+        window = x.L if isinstance(x, Windows) else x.shape[1]
+        if self.head == "concat" and self.L is not None and window != self.L:
+            raise InputError(f"head=concat was trained on windows of L = {self.L} frames; "
+                             f"these have L = {window}")
+        return x
 
 
 @dataclass(eq=False, repr=False, kw_only=True)

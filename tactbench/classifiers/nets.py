@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from tactbench.classifiers.efficientnet import EfficientNetB0
+from tactbench.classifiers.training import TEMPORAL_HEADS
 
 #: ImageNet channel statistics (RGB), for ``normalisation="imagenet"``.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -116,22 +117,42 @@ def as_channels_last(x: torch.Tensor) -> torch.Tensor:
 
 
 class SequenceNet(nn.Module):
-    """Frame encoder on every frame → LSTM → last step → dropout → FC → ReLU → logits.
+    """Frame encoder on every frame → temporal head → dropout → FC → ReLU → logits.
 
     The study: "EfficientNet-B0 → LSTM → dropout 0.3 → fully connected layer of 256 →
     classes". ``input_size`` (images only) is the square size frames are resized to
-    before ``normalize``; ``None`` for taxel vectors.
+    before ``normalize``; ``None`` for taxel vectors. ``temporal`` (the per-window
+    features ``(B, L, F)`` → ``(B, D)``): ``lstm`` (its last step, ``D = hidden``, the
+    study's), ``concat`` (the ``L`` frames' features side by side, ``D = L·F``: needs the
+    window length ``L``) or ``tcn`` (two 1-D convolutions over time, kernel 3, dilation 1
+    then 2, ReLU, averaged over time, ``D = hidden``).
     """
 
     def __init__(self, encoder: nn.Module, *, frame_shape: Sequence[int], n_classes: int,
-                 hidden: int, fc: int, dropout: float, input_size: int | None) -> None:
+                 hidden: int, fc: int, dropout: float, input_size: int | None,
+                 temporal: str = "lstm", L: int | None = None) -> None:
         super().__init__()
+        if temporal not in TEMPORAL_HEADS:
+            raise ValueError(f"temporal must be one of {TEMPORAL_HEADS}, got {temporal!r}")
+        if temporal == "concat" and not L:
+            raise ValueError("the concat head needs the window length L")  # a bug
         self.frame_shape = tuple(int(s) for s in frame_shape)
         self.input_size = input_size
+        self.temporal, self.L = temporal, L
         self.normalize = Normalize(self.frame_shape[0], len(self.frame_shape) - 1)
         self.encoder = encoder
-        self.lstm = nn.LSTM(encoder.out_features, hidden, batch_first=True)
-        self.head = nn.Sequential(nn.Dropout(dropout), nn.Linear(hidden, fc),
+        features = encoder.out_features
+        if temporal == "lstm":  # the names the saved models of before hold
+            self.lstm = nn.LSTM(features, hidden, batch_first=True)
+            width = hidden
+        elif temporal == "tcn":
+            self.tcn = nn.Sequential(
+                nn.Conv1d(features, hidden, 3, padding=1), nn.ReLU(inplace=True),
+                nn.Conv1d(hidden, hidden, 3, padding=2, dilation=2), nn.ReLU(inplace=True))
+            width = hidden
+        else:
+            width = L * features
+        self.head = nn.Sequential(nn.Dropout(dropout), nn.Linear(width, fc),
                                   nn.ReLU(inplace=True), nn.Linear(fc, n_classes))
 
     def prepare(self, frames: torch.Tensor) -> torch.Tensor:
@@ -166,8 +187,19 @@ class SequenceNet(nn.Module):
         else:
             b, length = x.shape[:2]
             feats = self.encode(x.reshape(b * length, *x.shape[2:])).reshape(b, length, -1)
-        out, _ = self.lstm(feats)
-        return self.head(out[:, -1])
+        return self.classify(feats)
+
+    def classify(self, feats: torch.Tensor) -> torch.Tensor:
+        """Logits ``(B, K)`` of windows whose frames have features ``feats`` ``(B, L, F)``."""
+        if self.temporal == "lstm":
+            out, _ = self.lstm(feats)
+            return self.head(out[:, -1])
+        if self.temporal == "tcn":
+            return self.head(self.tcn(feats.transpose(1, 2)).mean(2))
+        if feats.shape[1] != self.L:
+            raise ValueError(f"the concat head takes windows of L = {self.L} frames, "
+                             f"got {feats.shape[1]}")
+        return self.head(feats.reshape(feats.shape[0], -1))
 
 
 class SharedWindows:

@@ -235,7 +235,7 @@ class SklearnClassifier(SequenceClassifier):
         report = FitReport(classifier=self.name, seed=int(seed), device="cpu", amp=False,
                            n_classes=k, options=self.options(), train_windows=len(train),
                            batches="pooled features")
-        start = time.perf_counter()
+        start, cpu0 = time.perf_counter(), time.process_time()
         if progress is not None:
             progress(0, 1, epoch=1, epochs=1)
         feats = self._window_features(train)
@@ -253,6 +253,7 @@ class SklearnClassifier(SequenceClassifier):
         if val is not None and len(val):
             report.val_accuracy = [float((self.predict(val) == val.labels).mean())]
         report.train_seconds = time.perf_counter() - start
+        report.train_cpu_seconds = time.process_time() - cpu0
         report.windows_per_second = len(train) / max(report.train_seconds, 1e-9)
         self.fit_report = report.as_dict()
         if progress is not None:
