@@ -293,7 +293,6 @@ def train_loop(
     validation epoch (:class:`BestWeights`); ``patience`` > 0 stops after that many
     epochs without a gain.
     """
-    import torch
 
     if epochs < 0 or batch_size < 1:
         raise InputError(f"epochs must be ≥ 0 and batch_size ≥ 1 (got {epochs}, {batch_size})")
