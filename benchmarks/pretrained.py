@@ -44,31 +44,50 @@ CONFIGS = {
 
 
 def measure(name: str, spec: str, *, seeds: list[int], threads: int, work: Path) -> dict:
+    """One configuration's cells. A cell's CPU seconds are recorded in ``work/cpu.json``
+    when its row is stored, so a run stopped and started again (the runner keeps the
+    finished rows) reports every cell."""
     from tactbench.runner import EncodingCache, Scene, run
 
     scene = Scene(encoders=["raw"], classifiers=[spec], L=[5], seeds=seeds,
                   threads=threads, out=str(work / name.replace(", ", "-")))
-    rows: list[dict] = []
+    cpu_file = work / "cpu.json"
+    cpu = json.loads(cpu_file.read_text()) if cpu_file.exists() else {}
     last = [time.process_time()]
 
     def on_row(row: dict) -> None:
         now = time.process_time()
+        cpu[row["key"]] = round(now - last[0], 1)
+        last[0] = now
+        cpu_file.write_text(json.dumps(cpu))
+        print(f"{name} seed {row.get('seed')}: {row.get('accuracy')} "
+              f"cpu {cpu[row['key']]} s", flush=True)
+
+    start = time.process_time()
+    result = run(scene, progress=False, cache=EncodingCache(work / "encodings"), on_row=on_row)
+    rows = []
+    for row in result.rows:
         fit = row.get("fit") or {}
         rows.append({"seed": row.get("seed"), "status": row.get("status"),
                      "accuracy": row.get("accuracy"), "train_s": row.get("train_s"),
-                     "cpu_s": round(now - last[0], 1),
+                     "cpu_s": cpu.get(row["key"]),
                      "frozen_features": fit.get("frozen_features"),
                      "weights_loaded": (fit.get("weights") or {}).get("loaded"),
                      "error": row.get("error")})
-        last[0] = now
-        print(f"{name} seed {rows[-1]['seed']}: {rows[-1]['accuracy']} "
-              f"cpu {rows[-1]['cpu_s']} s", flush=True)
-
-    start = time.process_time()
-    run(scene, progress=False, cache=EncodingCache(work / "encodings"), on_row=on_row)
     return {"config": name, "spec": spec, "rows": rows,
             "run_cpu_s": round(time.process_time() - start, 1)}
 
+
+def write(path: Path, out: dict, names: list[str]) -> None:
+    """``out`` to ``path``, keeping the results of other configurations already there."""
+    from tactbench.paths import atomic_write_text
+
+    if path.exists():
+        old = json.loads(path.read_text())
+        done = {r["config"] for r in out["results"]}
+        out = {**out, "results": [r for r in old.get("results", [])
+                                  if r["config"] not in done] + out["results"]}
+    atomic_write_text(path, json.dumps(out, indent=1) + "\n")
 
 
 def main(argv=None) -> int:
@@ -87,15 +106,9 @@ def main(argv=None) -> int:
 
     import torch
 
-    from tactbench.paths import atomic_write_text
-
     names = [n for n in CONFIGS if not args.only or any(w in n for w in args.only)]
     # a first run makes the dataset and its raw encoding, so no configuration pays for them
     warm = measure("warm-up", "logreg", seeds=args.seeds[:1], threads=args.threads, work=work)
-    results = []
-    for name in names:
-        results.append(measure(name, CONFIGS[name], seeds=args.seeds,
-                               threads=args.threads, work=work))
     out = {"benchmark": "pretrained backbone: imagenet vs random, frozen vs fine-tuned",
            "command": "python benchmarks/pretrained.py " + " ".join(argv or sys.argv[1:]),
            "data": "synthetic-forearm (simulator version 2), quick profile, raw encoder, "
@@ -105,15 +118,12 @@ def main(argv=None) -> int:
                        "threads": args.threads,
                        "note": "2 cores shared with other processes (under contention): "
                                "CPU seconds are the comparable measure, wall seconds are not"},
-           "warm_up_cpu_s": warm["run_cpu_s"],
-           "results": results}
-    path = Path(args.out)
-    if path.exists():  # runs of other configurations are kept
-        old = json.loads(path.read_text())
-        kept = [r for r in old.get("results", []) if r["config"] not in names]
-        out["results"] = kept + results
-    atomic_write_text(path, json.dumps(out, indent=1) + "\n")
-    print(f"wrote {path}")
+           "warm_up_cpu_s": warm["run_cpu_s"], "results": []}
+    for name in names:  # written after each configuration
+        out["results"].append(measure(name, CONFIGS[name], seeds=args.seeds,
+                                      threads=args.threads, work=work))
+        write(Path(args.out), out, names)
+    print(f"wrote {args.out}")
     return 0
 
 
