@@ -264,20 +264,32 @@ def feature_identity(net, sequences: Sequence[Any]) -> dict[str, Any]:
 
 def compute_features(net, sequences: Sequence[Any]) -> np.ndarray:
     """``net.encode`` of every frame of ``sequences`` in evaluation mode, then of one blank
-    (zero) frame: float32 ``(ΣT + 1, F)``."""
+    (zero) frame: float32 ``(ΣT + 1, F)``. Frames of consecutive sequences go through
+    the backbone together, in batches of about :data:`FEATURE_BATCH_AT_32PX` frames."""
     import torch
 
     size = net.input_size or 32
     step = max(1, int(FEATURE_BATCH_AT_32PX * (32 / size) ** 2))
     was_training = net.training
     net.eval()
-    out = []
+    out, pending, held = [], [], 0
+
+    def flush() -> None:
+        batch = torch.from_numpy(np.concatenate(pending))
+        out.append(net.encode(batch).float().cpu().numpy())
+        pending.clear()
+
     try:
         with torch.inference_mode():
             for seq in list(sequences) + [np.zeros((1, *sequences[0].shape[1:]), np.float32)]:
                 for a in range(0, seq.shape[0], step):
-                    chunk = np.ascontiguousarray(seq[a:a + step], dtype=np.float32)
-                    out.append(net.encode(torch.from_numpy(chunk)).float().cpu().numpy())
+                    pending.append(np.ascontiguousarray(seq[a:a + step], dtype=np.float32))
+                    held += pending[-1].shape[0]
+                    if held >= step:
+                        flush()
+                        held = 0
+            if pending:
+                flush()
     finally:
         net.train(was_training)
     return np.concatenate(out)
