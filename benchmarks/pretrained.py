@@ -44,15 +44,18 @@ CONFIGS = {
 
 
 def measure(name: str, spec: str, *, seeds: list[int], threads: int, work: Path) -> dict:
-    """One configuration's cells. A cell's CPU seconds are recorded in ``work/cpu.json``
+    """One configuration's cells. A cell's CPU seconds are recorded in ``work/cpu-NAME.json``
     when its row is stored, so a run stopped and started again (the runner keeps the
     finished rows) reports every cell."""
     from tactbench.runner import EncodingCache, Scene, run
 
     scene = Scene(encoders=["raw"], classifiers=[spec], L=[5], seeds=seeds,
                   threads=threads, out=str(work / name.replace(", ", "-")))
-    cpu_file = work / "cpu.json"
-    cpu = json.loads(cpu_file.read_text()) if cpu_file.exists() else {}
+    cpu_file = work / f"cpu-{name.replace(', ', '-')}.json"
+    cpu = {}
+    for path in (work / "cpu.json", cpu_file):  # cpu.json: before it was one per config
+        if path.exists():
+            cpu.update(json.loads(path.read_text()))
     last = [time.process_time()]
 
     def on_row(row: dict) -> None:
@@ -93,7 +96,9 @@ def write(path: Path, out: dict, names: list[str]) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1,
+                    help="torch threads per cell (1: two threads on a loaded 2-core machine "
+                         "spend their time waiting at OpenMP barriers)")
     ap.add_argument("--only", nargs="*", default=None,
                     help="configurations whose name contains one of these words")
     ap.add_argument("--work", default=None, help="folder for the runs (default: a temporary)")
