@@ -218,6 +218,11 @@ class PretrainedBackbone:
         stored = cache.load(key, identity)
         if stored is None:
             stored = cache.store(key, identity, compute_features(net, windows.sequences))
+        if what == "train" and not np.any(stored[:-1].std(axis=0) > 1e-6):
+            warnings.warn(f"cnn-lstm: the frozen {identity['backbone']} features of all "
+                          f"{stored.shape[0] - 1} training frames are the same (its "
+                          f"activations vanish at input_size={net.input_size}): the head "
+                          f"can learn nothing; try a larger input_size", stacklevel=4)
         self.feature_log.append({"for": what, "frames": int(stored.shape[0] - 1),
                                  "cached": bool(cache.hit), "key": key,
                                  "seconds": round(time.perf_counter() - start, 3),

@@ -168,6 +168,7 @@ class _BackboneCalls:
         self.handle.remove()
 
 
+@pytest.mark.filterwarnings("ignore:cnn-lstm. the frozen")  # what is learnt is not the point
 def test_frozen_features_are_computed_once_and_cached(fake_package, monkeypatch):
     from tactbench.integrity import hash_file
 
@@ -192,6 +193,21 @@ def test_frozen_features_are_computed_once_and_cached(fake_package, monkeypatch)
     np.testing.assert_array_equal(runs[0][2], runs[1][2])  # the same seed, the same model
     assert runs[0][2].shape == (len(test), 2)
     assert runs[0][1]["batches"] == "frozen features"
+
+
+def test_constant_frozen_features_are_reported(fake_package, monkeypatch):
+    """At 32 px the real ImageNet head's ReLU6 outputs are all zero on tactile frames (its
+    BatchNorm biases are negative): a head on them learns nothing, and fit says so."""
+    from tactbench.integrity import hash_file
+
+    _, path = fake_package
+    state = torch.load(path, weights_only=True)
+    state["_bn1.bias"] = torch.full((1280,), -1e3)  # every head activation clamped to 0
+    torch.save(state, path)
+    monkeypatch.setattr(pretrained, "IMAGENET_SHA256", hash_file(path))
+    seqs, labels = _data(4)
+    with pytest.warns(UserWarning, match="features of all .* training frames are the same"):
+        _frozen(pretrained="imagenet").fit(training_windows(seqs, labels, 3), None, seed=0)
 
 
 def test_frozen_training_leaves_the_backbone_as_it_was():
