@@ -10,7 +10,9 @@ images (one channel: the stem's RGB filters are summed), seeds 0 1 2:
   budget (Adam 1e-3, cosine, 2 × 1500 windows of batch 32, 32 px), every weight trained;
 - ``imagenet, frozen`` / ``random, frozen``: the backbone frozen (``frozen=true``), its
   features cached once per input, the LSTM and head trained at the small CNN's budget
-  (Adam 3e-3, 4 × 8000 windows of batch 64).
+  (Adam 3e-3, 4 × 8000 windows of batch 64); ``imagenet, frozen, 64 px`` the same at
+  ``input_size=64`` (at 32 px the ImageNet features are all 0; a random frozen backbone's
+  vanish at any size, its BatchNorm statistics being the initial ones).
 
 Each configuration is one ``tactbench.runner.run`` in this process (cells in turn), so
 the CPU seconds of a cell (``time.process_time`` between rows) are its own; the frozen
@@ -18,8 +20,11 @@ rows say which features came from the cache. Writes docs/benchmarks/pretrained.j
 
 Usage::
 
-    python benchmarks/pretrained.py [--seeds 0 1 2] [--threads 2] [--only frozen]
-                                    [--out docs/benchmarks/pretrained.json]
+    python benchmarks/pretrained.py [--seeds 0 1 2] [--threads 1] [--only frozen]
+                                    [--work FOLDER] [--out docs/benchmarks/pretrained.json]
+
+The recorded numbers came from four commands sharing one ``--work`` folder (listed in the
+JSON), run while other jobs loaded the machine.
 """
 
 from __future__ import annotations
