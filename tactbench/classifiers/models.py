@@ -7,11 +7,11 @@ defaults are the ``quick`` profile's (see :mod:`tactbench.classifiers.training`)
 from __future__ import annotations
 
 import importlib.util
-import warnings
 from dataclasses import dataclass
 from typing import Any
 
 from tactbench.classifiers.base import TorchSequenceClassifier, n_params
+from tactbench.classifiers.pretrained import PretrainedBackbone, check_pretrained_options
 from tactbench.classifiers.training import TEMPORAL_HEADS, augment_windows, carve_validation
 from tactbench.data.windows import Windows
 from tactbench.errors import InputError, check_choice, check_positive_float, check_positive_int
@@ -134,14 +134,16 @@ class SmallCnnLstm(ImageSequenceClassifier):
 
 
 @dataclass(eq=False, repr=False, kw_only=True)
-class CnnLstm(ImageSequenceClassifier):
+class CnnLstm(PretrainedBackbone, ImageSequenceClassifier):
     """The study's model: EfficientNet-B0 per frame → LSTM → dropout 0.3 → FC 256 → classes.
 
     ``weights``: a local file of ImageNet EfficientNet-B0 weights (lukemelas,
     torchvision or timm layout; see :mod:`tactbench.classifiers.efficientnet`); without
     it the backbone starts from random initialisation, with a warning.
-    ``backbone``: ``efficientnet-b0`` (built in) or ``timm:<model name>`` when timm
-    is installed.
+    ``backbone``: ``efficientnet-b0``, ``efficientnet-lite0`` (both built in) or
+    ``timm:<model name>`` when timm is installed. ``pretrained=imagenet`` (with
+    ``backbone=efficientnet-lite0``) and ``frozen=true``: see
+    :mod:`tactbench.classifiers.pretrained`.
     """
 
     name = "cnn-lstm"
@@ -157,9 +159,11 @@ class CnnLstm(ImageSequenceClassifier):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.backbone != "efficientnet-b0" and not str(self.backbone).startswith("timm:"):
-            raise InputError(f"unknown backbone '{self.backbone}': use efficientnet-b0 or "
-                             f"timm:<name>")
+        if self.backbone not in ("efficientnet-b0", "efficientnet-lite0") \
+                and not str(self.backbone).startswith("timm:"):
+            raise InputError(f"unknown backbone '{self.backbone}': use efficientnet-b0, "
+                             f"efficientnet-lite0 or timm:<name>")
+        check_pretrained_options(self.backbone, self.pretrained, self.weights, self.frozen)
         check_positive_float(self.drop_path, "drop_path", allow_zero=True)
         self.weights_report: dict[str, Any] | None = None
 
@@ -169,18 +173,12 @@ class CnnLstm(ImageSequenceClassifier):
         channels = frame_shape[0]
         if self.backbone.startswith("timm:"):
             encoder = self._timm_backbone(self.backbone[5:], channels, pretrained)
-        elif self.backbone == "efficientnet-b0":
-            from tactbench.classifiers.efficientnet import EfficientNetB0, load_weights
+        elif self.backbone in ("efficientnet-b0", "efficientnet-lite0"):
+            from tactbench.classifiers.efficientnet import BACKBONES
 
-            encoder = EfficientNetB0(channels, drop_path=self.drop_path)
-            if pretrained:
-                if self.weights:
-                    self.weights_report = load_weights(encoder, self.weights).as_dict()
-                else:
-                    warnings.warn("cnn-lstm: no ImageNet weights given (weights=PATH): the "
-                                  "EfficientNet-B0 backbone starts from random initialisation",
-                                  stacklevel=3)
-                    self.weights_report = {"source": None, "loaded": 0}
+            encoder = BACKBONES[self.backbone](channels, drop_path=self.drop_path)
+            self.weights_report = self._load_backbone(encoder, pretrained) \
+                or self.weights_report
         else:  # __post_init__ refused any other name
             raise AssertionError(f"unchecked backbone {self.backbone!r}")
         net = self._wrap(encoder, frame_shape, n_classes)
@@ -216,7 +214,7 @@ class CnnLstm(ImageSequenceClassifier):
         return _Timm(model)
 
     def _extra_report(self) -> dict[str, Any]:
-        return {"weights": self.weights_report,
+        return {**super()._extra_report(), "weights": self.weights_report,
                 "parameters": n_params(self.net) if self.net is not None else 0}
 
 

@@ -182,7 +182,9 @@ class SequenceNet(nn.Module):
         return self.encoder(frames)
 
     def forward(self, x: "torch.Tensor | SharedWindows") -> torch.Tensor:
-        if isinstance(x, SharedWindows):  # each distinct frame encoded once
+        if isinstance(x, FrameFeatures):  # a frozen encoder's features, computed before
+            feats = x.frames[x.index]
+        elif isinstance(x, SharedWindows):  # each distinct frame encoded once
             feats = self.encode(x.frames)[x.index]
         else:
             b, length = x.shape[:2]
@@ -215,8 +217,14 @@ class SharedWindows:
         return int(self.index.shape[0])
 
     def to(self, device, non_blocking: bool = False) -> "SharedWindows":
-        return SharedWindows(self.frames.to(device, non_blocking=non_blocking),
-                             self.index.to(device, non_blocking=non_blocking))
+        return type(self)(self.frames.to(device, non_blocking=non_blocking),
+                          self.index.to(device, non_blocking=non_blocking))
+
+
+class FrameFeatures(SharedWindows):
+    """A batch of windows as features of the frame encoder computed beforehand (a frozen
+    backbone, :mod:`tactbench.classifiers.pretrained`): ``frames`` ``(U, F)``, ``index``
+    ``(B, L)``; :class:`SequenceNet` runs only its LSTM and head on them."""
 
 
 def segments_of(encoder: nn.Module) -> list[nn.Module]:
