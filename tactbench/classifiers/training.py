@@ -254,27 +254,17 @@ def train_loop(
     model: "torch.nn.Module",
     get_batch: Callable[[np.ndarray], "tuple[torch.Tensor, torch.Tensor]"],
     *,
-    n_windows: int,
-    report: FitReport,
-    epochs: int,
-    batch_size: int,
-    windows_per_epoch: int,
-    optimizer: str,
-    lr: float,
-    momentum: float = 0.0,
-    weight_decay: float = 0.0,
-    schedule: str = "constant",
-    device: "torch.device",
-    precision: Precision,
-    progress: ProgressFn | None = None,
+    n_windows: int, report: FitReport, epochs: int, batch_size: int,
+    windows_per_epoch: int, optimizer: str, lr: float,
+    momentum: float = 0.0, weight_decay: float = 0.0, schedule: str = "constant",
+    device: "torch.device", precision: Precision, progress: ProgressFn | None = None,
     evaluate: Callable[[], float] | None = None,
     load_batches: Callable[[list[np.ndarray]], Iterable[tuple["torch.Tensor", "torch.Tensor"]]]
     | None = None,
     groups: np.ndarray | None = None,
     label_smoothing: float = 0.0,
     augment: Callable[["torch.Tensor", np.random.Generator], "torch.Tensor"] | None = None,
-    keep_best: bool = False,
-    patience: int = 0,
+    keep_best: bool = False, patience: int = 0,
 ) -> FitReport:
     """Train ``model`` with cross-entropy and fill ``report``.
 
@@ -297,16 +287,14 @@ def train_loop(
     if epochs < 0 or batch_size < 1:
         raise InputError(f"epochs must be ≥ 0 and batch_size ≥ 1 (got {epochs}, {batch_size})")
     rng = np.random.default_rng(report.seed)
-    aug_rng = np.random.default_rng([report.seed, 1])  # its own stream: order unchanged
-    per_epoch = windows_per_epoch if windows_per_epoch > 0 else n_windows
-    # A trailing batch of one window breaks BatchNorm in training mode: drop it.
-    steps_per_epoch = per_epoch // batch_size + (1 if per_epoch % batch_size > 1 else 0)
+    steps_per_epoch = _steps_per_epoch(windows_per_epoch if windows_per_epoch > 0
+                                       else n_windows, batch_size)
     total = epochs * steps_per_epoch
     opt = make_optimizer(optimizer, model.parameters(), lr=lr, momentum=momentum,
                          weight_decay=weight_decay)
-    sched = make_schedule(schedule, opt, total=total, lr=lr)
-    step = _Step(model, opt, sched, precision.scaler(device), precision, device,
-                 label_smoothing, augment, aug_rng)
+    step = _Step(model, opt, make_schedule(schedule, opt, total=total, lr=lr),
+                 precision.scaler(device), precision, device, label_smoothing, augment,
+                 np.random.default_rng([report.seed, 1]))  # its own stream: order unchanged
     best = BestWeights(patience) if keep_best and evaluate is not None else None
     report.train_windows = n_windows
     start, cpu0 = time.perf_counter(), time.process_time()
@@ -314,20 +302,12 @@ def train_loop(
         for epoch in range(epochs):
             model.train()
             order = epoch_order(rng, n_windows, windows_per_epoch, groups)
-            loss_sum, count = 0.0, 0
             indices = [order[s * batch_size:(s + 1) * batch_size]
                        for s in range(steps_per_epoch)]
             stream = (load_batches(indices) if load_batches is not None
                       else (get_batch(idx) for idx in indices))
-            for idx, (x, y) in zip(indices, stream):
-                value = step(x, y)
-                loss_sum += value * len(idx)
-                count += len(idx)
-                report.steps += 1
-                report.windows_seen += len(idx)
-                if progress is not None:
-                    progress(report.steps, total, epoch=epoch + 1, epochs=epochs, loss=value)
-            report.epoch_losses.append(loss_sum / max(count, 1))
+            report.epoch_losses.append(_epoch(step, indices, stream, report, progress,
+                                              total, epoch, epochs))
             report.final_loss = report.epoch_losses[-1]
             report.epochs = epoch + 1
             if evaluate is not None and _evaluated(evaluate, report, progress, total, epochs,
@@ -345,6 +325,27 @@ def train_loop(
     model.eval()
     _finish(report, start, cpu0)
     return report
+
+
+def _steps_per_epoch(per_epoch: int, batch_size: int) -> int:
+    """Batches in an epoch of ``per_epoch`` windows: a trailing batch of one window breaks
+    BatchNorm in training mode, so it is dropped."""
+    return per_epoch // batch_size + (1 if per_epoch % batch_size > 1 else 0)
+
+
+def _epoch(step, indices, stream, report: FitReport, progress, total: int, epoch: int,
+           epochs: int) -> float:
+    """One epoch's steps over the batches ``stream`` yields for ``indices``; its mean loss."""
+    loss_sum, count = 0.0, 0
+    for idx, (x, y) in zip(indices, stream):
+        value = step(x, y)
+        loss_sum += value * len(idx)
+        count += len(idx)
+        report.steps += 1
+        report.windows_seen += len(idx)
+        if progress is not None:
+            progress(report.steps, total, epoch=epoch + 1, epochs=epochs, loss=value)
+    return loss_sum / max(count, 1)
 
 
 class _Step:
