@@ -202,13 +202,26 @@ def atomic_folder(folder: str | Path) -> Iterator[Path]:
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = folder.with_name(temp_name(folder.name))
     tmp.mkdir()
-    try:
+
+    def lost_race(exc: OSError) -> None:  # theirs is kept; anything else is raised
+        if exc.errno not in _TAKEN or not folder.is_dir():
+            raise exc
+
+    with _renamed_into_place(tmp, folder, lost_race):
         yield tmp
+
+
+@contextmanager
+def _renamed_into_place(tmp: Path, folder: Path, taken) -> Iterator[None]:
+    """The block fills ``tmp``, then ``tmp`` is renamed to ``folder``; a rename that
+    fails is handed to ``taken(exc)`` (which raises or accepts it); a full disk is one
+    line (:func:`storage_error`); ``tmp`` is removed whatever happens."""
+    try:
+        yield
         try:
             os.rename(tmp, folder)
         except OSError as exc:
-            if exc.errno not in _TAKEN or not folder.is_dir():  # not a lost race
-                raise
+            taken(exc)
     except OSError as exc:  # a full disk while the folder was written: one line
         full = storage_error(exc, folder)
         if full is not None:
@@ -386,20 +399,13 @@ def publish_folder(folder: str | Path, option: str = "--out") -> Iterator[Path]:
         folder.absolute().parent.mkdir(parents=True, exist_ok=True)
         tmp = folder.absolute().with_name(temp_name(folder.absolute().name))
         tmp.mkdir()
-    try:
+
+    def refused(exc: OSError) -> None:  # another writer filled it: this one is refused
+        if exc.errno not in _TAKEN and exc.errno != errno.EISDIR:
+            raise exc
+        raise InputError(f"{option} {folder} was filled by another process while this "
+                         f"one wrote; it was left as that process wrote it (nothing of "
+                         f"this run was kept)") from None
+
+    with _renamed_into_place(tmp, folder, refused):
         yield tmp
-        try:
-            os.rename(tmp, folder)
-        except OSError as exc:
-            if exc.errno not in _TAKEN and exc.errno != errno.EISDIR:
-                raise
-            raise InputError(f"{option} {folder} was filled by another process while this "
-                             f"one wrote; it was left as that process wrote it (nothing of "
-                             f"this run was kept)") from None
-    except OSError as exc:
-        full = storage_error(exc, folder)
-        if full is not None:
-            raise full from None
-        raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)

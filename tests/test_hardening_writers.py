@@ -75,9 +75,24 @@ def writing_options() -> set[tuple[str, str]]:
     return found
 
 
+#: Options named like a writer's that only read: ``plan --out`` reads a pilot's rows from
+#: the folder a run would write (tested below: it writes nothing there).
+READS_ONLY = {("plan", "--out")}
+
+
 def test_every_writing_option_of_the_cli_is_covered():
-    assert writing_options() == set(WRITERS), \
+    assert writing_options() - READS_ONLY == set(WRITERS), \
         "a command writes through an option these tests do not cover: add it to WRITERS"
+
+
+def test_plan_writes_nothing_into_its_out_folder(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's own")
+    result = CliRunner().invoke(cli, ["plan", "--dataset", "synthetic-forearm:users=1",
+                                      "--encoder", "raw", "--classifier", "logreg",
+                                      "--out", str(out)])
+    assert [p.name for p in out.iterdir()] == ["notes.txt"], result.output
 
 
 def hashes(root: Path) -> dict[str, str]:
