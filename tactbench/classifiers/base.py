@@ -319,8 +319,7 @@ class TorchSequenceClassifier(SequenceClassifier):
             net = self._build_net(tuple(train.frame_shape), k, pretrained=True)
             with torch.no_grad():
                 self._set_normalization(net, train, seed)
-            get_batch, load_batches = training_batches(
-                train, net.prepare, dev, report, share=self._sharing(train.L))
+            get_batch, load_batches = self._batches(net, train, dev, report)
             evaluate = None
             if val is not None:
                 def evaluate() -> float:
@@ -359,6 +358,12 @@ class TorchSequenceClassifier(SequenceClassifier):
         if not self._sharing(train.L):
             return None
         return window_runs(train, None if self.shared_features == 1 else self.shared_features)
+
+    def _batches(self, net, train: Windows, dev, report: FitReport):
+        """``(get_batch, load_batches)`` of a fit (:func:`training_batches`): the hook a
+        subclass overrides to train on something else (cached frozen features)."""
+        return training_batches(train, net.prepare, dev, report,
+                                share=self._sharing(train.L))
 
     def _recalibrate_batchnorm(self, net, get_batch, n_windows: int, seed: int) -> None:
         """BatchNorm statistics from the final weights, on seeded training batches
