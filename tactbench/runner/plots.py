@@ -15,7 +15,7 @@ from tactbench.errors import InputError
 from tactbench.runner.summaries import spec_label, spec_labels
 
 #: The top-level figures :func:`write_plots` may write besides ``confusion_*.png``.
-FIGURES = ("accuracy_vs_L", "cost_vs_accuracy", "per_class_vs_L")
+FIGURES = ("accuracy_vs_L", "cost_vs_accuracy", "per_class_vs_L", "per_user_accuracy")
 #: The lowest encode cost drawn on the log axis (a cost of 0 ms is drawn there).
 MIN_PLOTTED_COST_MS = 1e-4
 
@@ -175,6 +175,7 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
     - ``accuracy_vs_L`` (:func:`plot_accuracy_vs_l`) and ``per_class_vs_L``
       (:func:`plot_per_class_vs_l`): only when some line has ≥ 2 values of L;
     - ``cost_vs_accuracy`` (:func:`plot_cost_vs_accuracy`);
+    - ``per_user_accuracy`` (:func:`plot_per_user_accuracy`): on users splits;
     - ``confusion_<encoder>_<classifier>_L<L>`` (:func:`plot_confusion`) for each summary
       (:func:`confusion_names`).
 
@@ -208,6 +209,9 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
     if l_curves_apply(summaries, labels):
         todo.append(("per_class_vs_L",
                      lambda: plot_per_class_vs_l(summaries, colour, labels), 110))
+    if any(s.get("per_user_accuracy") for s in summaries):
+        todo.append(("per_user_accuracy", lambda: plot_per_user_accuracy(summaries, labels),
+                     110))
     for s, name in named:
         todo.append((name, lambda s=s: plot_confusion(s, labels), 110))
     figures: dict[str, Path] = {}
@@ -336,6 +340,30 @@ def plot_per_class_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple,
     return fig
 
 
+def plot_per_user_accuracy(summaries: Sequence[dict[str, Any]],
+                           labels: Mapping[str, str] | None = None):
+    """Each cell's accuracy per test user (a dot per user, mean over the runs testing
+    them) with the median as a bar: how much people differ, at a glance."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    cells = [s for s in summaries if s.get("per_user_accuracy")]
+    fig, ax = plt.subplots(figsize=(max(4.0, 0.9 * len(cells) + 2), 4))
+    rng = np.random.default_rng(0)  # the jitter, the same on every render
+    for i, s in enumerate(cells):
+        acc = 100 * np.array(sorted(s["per_user_accuracy"].values()), dtype=float)
+        ax.scatter(i + rng.uniform(-0.15, 0.15, len(acc)), acc, s=12, alpha=0.7)
+        ax.hlines(np.median(acc), i - 0.3, i + 0.3, colors="black")
+    ax.set_xticks(range(len(cells)))
+    ax.set_xticklabels([f"{s['encoder']}\n{spec_label(s['classifier'], labels)}\nL={s['L']}"
+                        for s in cells], fontsize=8)
+    ax.set_ylabel("accuracy on the user's recordings (%)")
+    ax.set_ylim(-2, 102)
+    ax.set_title("per-user accuracy (a dot per test user; bar: median)")
+    fig.tight_layout()
+    return fig
+
+
 def confusion_names(summaries: Sequence[dict[str, Any]],
                     labels: Mapping[str, str] | None = None) -> list[str]:
     """The name of each summary's confusion figure, ``confusion_<encoder>_<classifier>_L<L>``
@@ -418,6 +446,10 @@ def caption(name: str, summaries: Sequence[dict[str, Any]],
                 f"error bars: {_band_only(drawn)}. Dashed step line and "
                 "rings: the Pareto front, the cells no other cell beats on both accuracy and "
                 f"cost: {members}.")
+    if name == "per_user_accuracy":
+        return ("Accuracy of each cell on each test user's recordings (a dot per user, the "
+                "mean over the runs that test them; the bar is the median over users). "
+                "The values are in results.json, `summary[].per_user_accuracy`.")
     if name == "per_class_vs_L":
         return ("Per-class accuracy against window length L, one panel per class, a line "
                 "per encoder × classifier; means over seeds, no bands.")

@@ -354,7 +354,9 @@ def markdown_report(report: Report, figures: dict[str, Path]) -> str:
     by_user = per_user_accuracy_markdown(summaries, labels)
     if by_user:
         lines += ["## Per-user accuracy (%, mean over the runs testing the user)", "",
-                  by_user, ""]
+                  "How each cell's accuracy spreads over the people tested; every user's "
+                  "value is drawn in per_user_accuracy.png and kept in results.json "
+                  "(`summary[].per_user_accuracy`).", "", by_user, ""]
     if variance:
         lines += ["## Where the variance comes from", "",
                   "Runs vary the split and the initialisation separately; each cell's "

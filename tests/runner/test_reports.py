@@ -301,6 +301,11 @@ def test_per_user_accuracy_and_gains_on_a_users_split(tmp_path):
     assert set(raw["per_user_accuracy"]) == set(u.gains)
     report = write_reports(tmp_path, rows, plots=False, users=users)["markdown"].read_text()
     assert "### Per-user gains" in report and "## Per-user accuracy" in report
+    # a compact spread, not a column per user; every user's value drawn in the figure
+    assert "| encoder | classifier | L | users | median |" in report and "| u0 |" not in report
+    paths = write_reports(tmp_path / "plots", rows, users=users)
+    assert paths["per_user_accuracy"].stat().st_size > 1000
+    assert "per_user_accuracy.png" in paths["markdown"].read_text()
 
 
 def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_path):
