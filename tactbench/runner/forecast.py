@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import statistics
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 from tactbench.data.splits import SplitData
@@ -88,7 +87,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
              progress=None) -> Forecast:
     """The forecast of ``scene`` (see the module docstring); ``effect`` in points."""
     p = plan(scene, registry, progress=progress)
-    pilot = ok_rows(ResultStore(scene.out).stored_rows()) if _has_cells(scene) else []
+    pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
     runs = scene.max_runs if scene.until else len(scene.seeds)
     splits = p.split.split(SplitData.of(p.dataset, test_per_class=scene.test_per_class),
                            seed=scene.seed_order()[0])
@@ -107,10 +106,6 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
                             len(p.dataset.labels)) for text in primaries],
         n_test=n_test, n_train=n_train, alpha=alpha)
-
-
-def _has_cells(scene: Scene) -> bool:
-    return (Path(scene.out) / "cells").is_dir()
 
 
 def _cells(p, pilot: list[dict[str, Any]], scene: Scene) -> list[CellForecast]:

@@ -27,7 +27,7 @@ from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import Plan, plan
 from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
-from tactbench.runner.scene import Scene, parse_duration
+from tactbench.runner.scene import Scene, parse_duration, primary_of
 from tactbench.runner.summaries import check_contrasts
 from tactbench.runner.system import MemoryTracker
 from tactbench.runner.writers import (
@@ -35,7 +35,6 @@ from tactbench.runner.writers import (
     Report,
     is_run_output,
     make_report,
-    primary_of,
     sequential_design,
     write_report,
 )
@@ -148,7 +147,8 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     scene = latest_scene(rows)
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin
-    primary = primary_of(scene) if primary is None else list(primary)
+    primary = (primary_of(scene.get("primary"), scene.get("encoders") or ())
+               if primary is None else list(primary))
     check_contrasts([*contrasts, *primary], [{"encoder": r["encoder"], "classifier": r["classifier"],
                                  "L": r["L"]} for r in rows])
     users, missing = dataset_users(rows, registry)

@@ -31,7 +31,7 @@ import os
 import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 try:
     import tomllib
@@ -140,9 +140,7 @@ class Scene:
     def resolved_primary(self) -> list[str]:
         """The primary comparisons: the scene's, else :data:`DEFAULT_PRIMARY` where the
         grid has both of its encoders (the study's question), else none."""
-        if self.primary is not None:
-            return list(self.primary)
-        return [DEFAULT_PRIMARY] if {"raw", "farneback"} <= set(self.encoders) else []
+        return primary_of(self.primary, self.encoders)
 
     def seed_order(self) -> list[int]:
         """The seeds in the order runs are made: the scene's, and with ``until`` the next
@@ -368,9 +366,10 @@ def _check_together(scene: Scene) -> None:
     parse_spec(scene.test_window)
     if scene.until is not None:
         check_choice(scene.until, "--until", UNTIL)
-        if scene.max_runs < FIRST_LOOK:
-            raise InputError(f"--max-runs must be at least {FIRST_LOOK} (the first look), "
-                             f"got {scene.max_runs}")
+        if not FIRST_LOOK <= scene.max_runs <= MAX_LENGTHS:
+            raise InputError(f"--max-runs must be from {FIRST_LOOK} (the first look) to "
+                             f"{MAX_LENGTHS} (the most seeds a run takes), got "
+                             f"{scene.max_runs}")
         if not scene.resolved_primary():
             raise InputError("--until answered needs a primary comparison: give --primary "
                              "A..B (the default, encoder=raw..encoder=farneback, needs both "
@@ -382,6 +381,14 @@ def _check_together(scene: Scene) -> None:
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
+
+
+def primary_of(primary: Sequence[str] | None, encoders: Iterable[str]) -> list[str]:
+    """The primary comparisons of a scene: ``primary`` as given, else
+    :data:`DEFAULT_PRIMARY` where ``encoders`` has both of its encoders, else none."""
+    if primary is not None:
+        return list(primary)
+    return [DEFAULT_PRIMARY] if {"raw", "farneback"} <= set(encoders) else []
 
 
 def parse_duration(text: str) -> float:

@@ -107,15 +107,24 @@ def _boundaries(looks: tuple[int, ...], max_runs: int, ratio: float, alpha: floa
 
     rng = np.random.default_rng(20261125)
     rho = ratio / (1 + ratio)
-    d = rng.standard_normal((_PATHS, looks[-1])) * math.sqrt(1 - rho) \
-        + rng.standard_normal((_PATHS, 1)) * math.sqrt(rho)
+    # each path: a shared part (the recordings every run draws from) and its runs' own
+    # parts, kept as running sums so that memory stays 3 numbers a path however many runs
+    shared = rng.standard_normal(_PATHS) * math.sqrt(rho)
+    total = np.zeros(_PATHS)
+    squares = np.zeros(_PATHS)
     alive = np.ones(_PATHS, dtype=bool)
     out: list[float] = []
-    stopped = 0
+    stopped, made = 0, 0
     for j, t in zip(looks, fractions(looks, max_runs, ratio)):
+        while made < j:  # the runs up to this look, a block of at most 64 at a time
+            block = rng.standard_normal((_PATHS, min(64, j - made))) * math.sqrt(1 - rho)
+            total += block.sum(axis=1)
+            squares += (block * block).sum(axis=1)
+            made += block.shape[1]
+        variance = np.maximum(squares - total * total / j, 0.0) / (j - 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            stat = np.abs((shared + total / j) / np.sqrt((1 / j + ratio) * variance))
         stops = int(round(spent(t, alpha) * _PATHS)) - stopped
-        x = d[:, :j]
-        stat = np.abs(x.mean(axis=1) / np.sqrt((1 / j + ratio) * x.var(axis=1, ddof=1)))
         if stops <= 0 or not alive.any():
             out.append(math.inf)
             continue

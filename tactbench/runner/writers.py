@@ -33,7 +33,7 @@ from tactbench.runner.results import (
     ok_rows,
     row_status,
 )
-from tactbench.runner.scene import DEFAULT_PRIMARY, Scene
+from tactbench.runner.scene import Scene
 from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_section,
@@ -217,14 +217,6 @@ def sequential_design(scene: dict[str, Any]) -> dict[str, Any] | None:
     made = Scene(**{k: v for k, v in scene.items() if k in known})
     return {"seed_order": made.seed_order(),
             "looks": schedule(made.max_runs, made.look_every)}
-
-
-def primary_of(scene: dict[str, Any]) -> list[str]:
-    """The primary comparisons of a scene given as its fields (None: the default)."""
-    if scene.get("primary") is not None:
-        return list(scene["primary"])
-    return [DEFAULT_PRIMARY] if {"raw", "farneback"} <= set(scene.get("encoders") or ()) \
-        else []
 
 
 def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

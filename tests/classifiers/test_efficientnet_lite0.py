@@ -25,12 +25,7 @@ LITE0 = "cnn-lstm:backbone=efficientnet-lite0"
 SMALL = "epochs=1,windows_per_epoch=16,batch_size=4,input_size=32,hidden=8,fc=8"
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # tests/conftest.py
 
 
 def _lite0(channels=3, seed=0):

@@ -69,3 +69,6 @@ def test_until_needs_a_primary_and_a_readable_budget(tmp_path, monkeypatch):
     few = _invoke(tmp_path, monkeypatch, "run", *TINY, "--until", "answered",
                   "--primary", PRIMARY, "--max-runs", "3", "--out", out)
     assert few.exit_code == 2 and "max-runs" in few.output
+    huge = _invoke(tmp_path, monkeypatch, "run", *TINY, "--until", "answered",
+                   "--primary", PRIMARY, "--max-runs", "1000000", "--out", out)
+    assert huge.exit_code == 2 and "1000" in huge.output  # refused before any work
