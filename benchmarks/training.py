@@ -665,6 +665,8 @@ RECIPES = {
     "issue-160k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=40000",
     "tcn": "small-cnn-lstm:input_size=16,head=tcn,windows_per_epoch=24000",
     "adamw-onecycle": _ISSUE + ",optimizer=adamw,schedule=onecycle,weight_decay=0.01",
+    "adamw-onecycle-160k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=40000,"
+                           "optimizer=adamw,schedule=onecycle,weight_decay=0.01",
     "smoothing": _ISSUE + ",label_smoothing=0.1",
     "augment": _ISSUE + ",shift=1,gain=0.2",
     "early-stop": "small-cnn-lstm:input_size=16,head=concat,epochs=8,windows_per_epoch=12000,"
@@ -704,8 +706,6 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
     ``stored``: run nothing, read the cells ``run_out`` holds."""
     import subprocess
 
-    from tactbench.runner.summaries import comparisons
-
     from tactbench.plugins import load_registry
 
     specs = {label: RECIPES[label] for label in labels}
@@ -726,7 +726,9 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     rows = [r for r in stored_rows(run_out) if r.get("status", "ok") == "ok"
             and int(r["seed"]) in seeds]
-    compared = [c for c in comparisons(rows) if c["factor"] == "classifier"]
+    from tactbench.runner.comparisons import comparisons
+
+    compared = [c.to_dict() for c in comparisons(rows) if c.factor == "classifier"]
     out = {"command": " ".join(cmd), "from_stored": stored, "wall_s": time.perf_counter() - t0,
            "load_before": load_before, "load_after": _load(), "recipes": []}
     for spec, label in named.items():
