@@ -230,7 +230,8 @@ def print_report(report: Report, *, as_json: bool, title: str, done: str) -> Non
     if as_json:
         meta = {"runs": report.runs, "rendered": report.rendered,
                 "computed": report.computed, "skipped": report.skipped,
-                "seconds": report.seconds}
+                "seconds": report.seconds, "cpu_seconds": report.cpu_seconds,
+                "budget_stop": report.budget_stop}
         click.echo(json_text({"meta": meta, "summary": report.summaries,
                               "comparisons": [c.to_dict() for c in report.comparisons],
                               "looks": report.looks, "failed": failed,

@@ -458,9 +458,14 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
 def looks_markdown(looks: Mapping[str, Any]) -> str:
     """The looks of a run ``--until answered``: runs, each primary's difference, |t|
     against its boundary and decision, and why the run stopped."""
+    budget = f", no batch begun past {looks['budget']}" if looks.get("budget") else ""
+    cpu = looks.get("train_cpu_seconds")
+    spent = (f" Training took {cpu / 60:.1f} CPU-minutes over these cells (every thread "
+             f"of each fit; encoding not counted)." if cpu else "")
     lines = [f"Runs were added in batches until every primary question was decided "
-             f"(at most {looks['max_runs']} runs; α spent over the looks, O'Brien–Fleming "
-             f"type, Holm carried over them): {md(looks['stopped'])}.", "",
+             f"(at most {looks['max_runs']} runs{budget}; α spent over the looks, "
+             f"O'Brien–Fleming type, Holm carried over them): {md(looks['stopped'])}."
+             + spent, "",
              "| look | runs | comparison | B − A (points) | \\|t\\| | boundary | decision |",
              "|---|---|---|---|---|---|---|"]
     for k, look in enumerate(looks["looks"], 1):

@@ -195,6 +195,8 @@ def make_report(rows: Sequence[dict[str, Any]], *,
     if sequential and primary:
         looks = replay(rows, seed_order=sequential["seed_order"], looks=sequential["looks"],
                        primary=primary, margin=margin).as_dict()
+        looks["budget"] = sequential.get("budget")
+        looks["train_cpu_seconds"] = training_cpu_seconds(rows)
     return Report(looks=looks,
         rows=rows, summaries=summarise(rows, users=users),
         comparisons=comparisons(rows, contrasts=contrasts, margin=margin, users=users,
@@ -216,7 +218,20 @@ def sequential_design(scene: dict[str, Any]) -> dict[str, Any] | None:
     known = {f.name for f in fields(Scene)}
     made = Scene(**{k: v for k, v in scene.items() if k in known})
     return {"seed_order": made.seed_order(),
-            "looks": schedule(made.max_runs, made.look_every)}
+            "looks": schedule(made.max_runs, made.look_every), "budget": made.budget}
+
+
+def training_cpu_seconds(rows: Iterable[dict[str, Any]]) -> float | None:
+    """The training CPU-seconds (every thread of the fitting process) summed over the
+    ok rows that record it; None when none does (rows from before it was recorded)."""
+    values = []
+    for row in ok_rows(list(rows)):
+        fits = row.get("fit")
+        for fit in fits if isinstance(fits, list) else [fits]:
+            value = fit.get("train_cpu_seconds") if isinstance(fit, dict) else None
+            if isinstance(value, (int, float)) and value >= 0:
+                values.append(float(value))
+    return sum(values) if values else None
 
 
 def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

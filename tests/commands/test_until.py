@@ -72,3 +72,24 @@ def test_until_needs_a_primary_and_a_readable_budget(tmp_path, monkeypatch):
     huge = _invoke(tmp_path, monkeypatch, "run", *TINY, "--until", "answered",
                    "--primary", PRIMARY, "--max-runs", "1000000", "--out", out)
     assert huge.exit_code == 2 and "1000" in huge.output  # refused before any work
+
+
+def test_a_budget_stops_between_looks_and_the_report_says_so(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    args = ["run", *TINY, "--out", str(out), "--primary", PRIMARY, "--until", "answered",
+            "--max-runs", "7", "--look-every", "1", "--budget", "1s", "--json"]
+    done = _invoke(tmp_path, monkeypatch, *args)
+    assert done.exit_code == 0, done.output
+    meta = json.loads(done.output)["meta"]
+    doc = json.loads((out / "results.json").read_text())
+    looks = doc["looks"]
+    assert looks["budget"] == "1s"
+    if looks["answered"]:  # answered at the first look: the budget never had to act
+        assert meta["budget_stop"] is None
+    else:  # the first look took longer than 1 s, so no second batch began
+        assert len(looks["looks"]) == 1 and "the budget of 1s" in meta["budget_stop"]
+    assert meta["cpu_seconds"] > 0
+    fits = [r["fit"] for r in doc["rows"]]
+    assert looks["train_cpu_seconds"] == pytest.approx(
+        sum(f["train_cpu_seconds"] for f in fits))
+    assert "no batch begun past 1s" in (out / "report.md").read_text()
