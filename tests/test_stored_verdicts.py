@@ -24,14 +24,18 @@ FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "
 
 
 def _recompute(path: Path) -> tuple[dict, list]:
-    from tactbench.runner.comparisons import comparisons
-    from tactbench.runner.results import ResultStore
+    from tactbench.runner.results import ResultStore, latest_scene
+    from tactbench.runner.writers import make_report, sequential_design
 
     doc = json.loads(path.read_text())
     rows = ResultStore(path.parent).stored_rows()
     assert rows == doc["rows"], f"{path}: its rows are not those of {path.parent}/cells"
     stats = doc["statistics"]
-    return doc, comparisons(rows, contrasts=stats["contrasts"], margin=stats["margin"])
+    # the primary family and (for a run --until answered) the looks its verdicts rest on
+    primary = stats.get("primary", [])
+    report = make_report(rows, contrasts=stats["contrasts"], margin=stats["margin"],
+                         primary=primary, sequential=sequential_design(latest_scene(rows)))
+    return doc, report.comparisons
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ check, :func:`tactbench.paths.check_output_folder`, asks it).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import re
@@ -24,7 +25,7 @@ from typing import Any, Iterable, Sequence
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
-from tactbench.runner.answering import replay, schedule
+from tactbench.runner.answering import comparison_name, replay, schedule
 from tactbench.runner.comparisons import Comparison, comparisons
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import (
@@ -197,10 +198,11 @@ def make_report(rows: Sequence[dict[str, Any]], *,
                        primary=primary, margin=margin).as_dict()
         looks["budget"] = sequential.get("budget")
         looks["train_cpu_seconds"] = training_cpu_seconds(rows)
+    comps = comparisons(rows, contrasts=contrasts, margin=margin, users=users, primary=primary)
+    if looks is not None:
+        comps = [sequential_verdict(c, looks) if c.family == "primary" else c for c in comps]
     return Report(looks=looks,
-        rows=rows, summaries=summarise(rows, users=users),
-        comparisons=comparisons(rows, contrasts=contrasts, margin=margin, users=users,
-                                primary=primary),
+        rows=rows, summaries=summarise(rows, users=users), comparisons=comps,
         variance=variance_decomposition(rows),
         statistics={"unit": "run (one split seed)", "contrasts": list(contrasts),
                     "margin": margin, "per_user": users is not None,
@@ -208,6 +210,29 @@ def make_report(rows: Sequence[dict[str, Any]], *,
         runs=computed_by(rows), reference=reference,
         rendered={"by": command_line(), "how": rendered or "from the rows of cells/",
                   "at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")})
+
+
+def sequential_verdict(c: Comparison, looks: dict[str, Any]) -> Comparison:
+    """A primary comparison of a run ``--until answered`` with the verdict its looks
+    reached: better, worse or equivalent where a look's boundary decided it, else
+    unresolved with the looks' reason in the note. The fixed-design verdict at the last
+    run count would ignore the looks before it (and overstate the evidence); the
+    interval and p beside it stay the unadjusted ones, labelled so."""
+    name = comparison_name(c)
+    seen = [(lk["runs"], lk["comparisons"][name]) for lk in looks.get("looks", ())
+            if name in lk["comparisons"]]
+    if not seen:
+        return c
+    runs, last = seen[-1]
+    decided = (looks.get("decisions") or {}).get(name)
+    if decided in ("A better", "B better", "equivalent"):
+        return dataclasses.replace(c, verdict=decided, note=(
+            f"group-sequential: decided at the look after {runs} runs, α spent over "
+            f"{len(seen)} look(s)"))
+    why = (f"futile after {runs} runs" + (f" ({last['why']})" if last.get("why") else "")
+           if last["decision"] == "futile"
+           else f"no boundary crossed in {len(seen)} look(s) up to {runs} runs")
+    return dataclasses.replace(c, verdict="unresolved", note=f"group-sequential: {why}")
 
 
 def sequential_design(scene: dict[str, Any]) -> dict[str, Any] | None:

@@ -46,6 +46,14 @@ def test_runs_are_added_until_the_primary_is_answered_and_the_looks_replay(tmp_p
     assert "### Primary questions (confirmatory)" in report
     [primary] = [c for c in doc["comparisons"] if c["family"] == "primary"]
     assert (primary["a"], primary["b"]) == ("raw", "frame-diff")
+    # its verdict is the looks' decision, not a fixed-design test at the last run count
+    [name] = looks["looks"][-1]["comparisons"]
+    decided = looks["decisions"].get(name)
+    if decided in ("A better", "B better", "equivalent"):
+        assert primary["verdict"] == decided
+    else:
+        assert primary["verdict"] == "unresolved"
+    assert primary["note"].startswith("group-sequential: ")
     # resumed: nothing computed again, the same looks
     again = _invoke(tmp_path, monkeypatch, *args, "--json")
     assert again.exit_code == 0, again.output
