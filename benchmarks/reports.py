@@ -996,38 +996,76 @@ def _load(root: Path, name: str, part: str) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-def findings(root: Path) -> list[str]:
-    """The README's "What it finds" bullets, each generated from the stored results."""
+def findings(root: Path) -> tuple[list[str], list[str]]:
+    """The README's "What it finds": (primary answers, exploratory findings), each
+    bullet generated from the stored results."""
+    return primary_findings(root), exploratory_findings(root)
+
+
+def answer_words(c: dict, a: str, b: str) -> str:
+    """A primary comparison's answer: the verdict its looks reached, the difference over
+    runs and why it stopped where it is unresolved."""
+    text = f"**{verdict_words(c, a, b)}**, {b} − {a} {100 * c['difference']:+.1f} points"
+    if c["df"]:
+        text += f" [{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]"
+    text += f" over {c['runs']} runs"
+    note = c.get("note", "")
+    if c["verdict"] not in ("A better", "B better", "equivalent") and note:
+        text += f" ({note.removeprefix('group-sequential: ')})"
+    return text
+
+
+def primary_findings(root: Path) -> list[str]:
     out = []
-    paper, users = _load(root, "study", "paper"), _load(root, "study", "users")
-    if paper and users:
-        parts = []
-        for label, res in (("the study's split", paper), ("leaving users out", users)):
-            c = comp(res, "encoder", "raw", "farneback", L=5)
-            parts.append(f"{label} {100 * c['difference']:+.1f} points "
-                         f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}] "
-                         f"({c['b_better_runs']} of {c['runs']} runs higher; "
-                         f"{verdict_words(c, 'raw', 'flow')})")
-        half = [comp(r, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
-                for r in (paper, users)]
-        text = ("[The study, reproduced](docs/reports/study.md) (simulator version 2, "
-                f"{paper['comparisons'][0]['runs']} runs, a CPU-sized CNN with a quarter of "
-                "the quick profile's training): at L = 5 Farnebäck flow against the pressure "
-                "image is " + " and ".join(parts) + "; leaving users out, "
-                + _unanimous_L(users["comparisons"]) + ".")
-        if all(half):
-            text += (" The study's \"flow at half the L beats pressure\", paired over the "
-                     "same runs: farneback at L = 3 minus raw at L = 6 is " + " and ".join(
-                         f"{100 * h['difference']:+.1f} [{100 * h['low']:+.1f}, "
-                         f"{100 * h['high']:+.1f}] "
-                         f"({verdict_words(h, 'raw L=6', 'farneback L=3')})"
-                         for h in half) + " points (paper, users split)"
-                     + ("; no run supports the claim." if all(
-                         h["a_better_runs"] == h["runs"] for h in half) else "."))
-        text += (f" {_verdict_count([paper, users])} Our absolute accuracies are far below "
-                 "the study's 80.7 % / 89.1 % (its model is an ImageNet-pretrained "
-                 "EfficientNet-B0 trained 100 epochs on a GPU).")
-        out.append(text)
+    designs = [(name, _load(root, "study", name)) for name, *_ in DESIGNS]
+    said = {"paper": "the study's split", "users": "people left out",
+            "people": "independent simulated people"}
+    items = [f"{said[name]}: {answer_words(c, 'raw', 'flow')}" for name, res in designs
+             if res and (c := primary(res))]
+    if items:
+        out.append("[The study's flagship](docs/reports/study.md), Farnebäck flow against "
+                   "the pressure image at L = 5 (simulator, the default CNN): "
+                   + "; ".join(items) + ".")
+    images = _load(root, "which-classifier", "images")
+    if images:
+        prim = [c for c in images["comparisons"] if c.get("family") == "primary"]
+        if prim:
+            out.append("[Which classifier?](docs/reports/which-classifier.md) The CNN against "
+                       "HistGradientBoosting (users left out): " + "; ".join(
+                           f"on {c['encoder']}: " + answer_words(c, "the CNN", "the tree")
+                           for c in prim) + ".")
+    flow = _load(root, "which-flow", "users")
+    if flow:
+        prim = [c for c in flow["comparisons"] if c.get("family") == "primary"]
+        if prim:
+            out.append("[Which flow?](docs/reports/which-flow.md) Farnebäck against the frame "
+                       "difference, the CNN, users left out: "
+                       + "; ".join(answer_words(c, c["a"], c["b"]) for c in prim) + ".")
+    real = [(name, _load(root, "real-data", part)) for name, part in
+            (("CySkin fingers", "cyskin-fingers"), ("iCub grasps", "icub-grasp"))]
+    items = [f"{name}, {short(c['classifier'])}: {answer_words(c, 'raw', 'frame-diff')}"
+             for name, res in real if res for c in res["comparisons"]
+             if c.get("family") == "primary"]
+    if items:
+        out.append("[Real data](docs/reports/real-data.md), the sweep-to-sweep change "
+                   "(frame-diff) against the raw taxel vectors: " + "; ".join(items) + ".")
+    return out
+
+
+def exploratory_findings(root: Path) -> list[str]:
+    """The README's exploratory findings, each generated from the stored results."""
+    out = []
+    lengths = _load(root, "study", "lengths")
+    if lengths:
+        out.append("[The study, window length](docs/reports/study.md) (study's split, "
+                   f"{max(len(s['seeds']) for s in lengths['summary'])} "
+                   "runs): " + _half_l(lengths) + " With flow, accuracy at L = "
+                   + ", ".join(f"{s['L']}: {pct(s['accuracy_mean'])} %" for s in sorted(
+                       (s for s in lengths["summary"] if s["encoder"] == "farneback"),
+                       key=lambda s: s["L"]))
+                   + "; the study's model (an ImageNet-pretrained EfficientNet-B0, 100 "
+                   "epochs on a GPU) reached 89.1 % at L = 5. "
+                   + _verdict_count([lengths]))
     flow = _load(root, "which-flow", "users")
     if flow:
         cnn = [c for c in flow["comparisons"] if c["factor"] == "encoder" and c["a"] == "raw"
@@ -1154,7 +1192,15 @@ def write_findings(root: Path, readme: Path = REPO / "README.md") -> None:
         raise SystemExit(f"{readme}: the findings markers are missing")
     head, rest = text.split(FINDINGS_START, 1)
     _, tail = rest.split(FINDINGS_END, 1)
-    body = "\n".join(_wrap("- " + f) for f in findings(root))
+    primary, exploratory = findings(root)
+    body = "\n".join(
+        ["**Primary questions**, each named before its run and answered by adding runs "
+         "until it was decided or its budget was spent (α = 0.05 per report over its looks; "
+         "[docs/statistics.md](docs/statistics.md)):", "",
+         *(_wrap("- " + f) for f in primary), "",
+         "**Exploratory** (every other comparison of the reports: leads for a next "
+         "question, not answers; their verdicts are Holm-adjusted within their own "
+         "family):", "", *(_wrap("- " + f) for f in exploratory)])
     readme.write_text(f"{head}{FINDINGS_START}\n{body}\n{FINDINGS_END}{tail}")
 
 
