@@ -168,13 +168,13 @@ def difference_components(per_seed: Mapping[tuple, Run], splits: Mapping[int, li
     init seeds every split seed ran (at least 2, in at least 2 split seeds) and, within a
     split seed, the test recordings all its runs paired; test sampling clustered by the
     groups the rows record (the users of a users split). None where the runs do not vary
-    the initialisation that far."""
+    the initialisation that far, or a split seed tests a single group (one user)."""
     inits = set.intersection(*({k[1] for k in keys} for keys in splits.values()))
     inits.discard(None)
     if len(splits) < MIN_SPLIT_SEEDS or len(inits) < MIN_INIT_SEEDS:
         return None
     correct_a, correct_b, groups = [], [], []
-    for split, keys in splits.items():
+    for split in splits:
         runs = [per_seed[(split, i)] for i in sorted(inits)]
         ids = np.array(sorted(set.intersection(*(set(r.ids.tolist()) for r in runs))))
         if not len(ids):
@@ -184,6 +184,8 @@ def difference_components(per_seed: Mapping[tuple, Run], splits: Mapping[int, li
         correct_b.append(np.array([r.cb[m] for r, m in zip(runs, at)]))
         groups.append(None if runs[0].groups is None else runs[0].groups[at[0]])
     use = None if any(g is None for g in groups) else groups
+    if use is not None and any(len(set(g.tolist())) < 2 for g in use):
+        return None  # one test user a split seed: no variance over users to estimate
     return paired_variance_components(correct_a, correct_b, use)
 
 

@@ -363,7 +363,7 @@ def variance_components_markdown(comps: Comparisons, labels: Labels | None = Non
     if not comps:
         return ""
     lines = ["| factor | A | B | where | split × init seeds | split | initialisation | "
-             "test sampling | per-run SD (observed) |", "|---|---|---|---|---|---|---|---|---|"]
+             "test sampling | per-run SD, estimated (observed) |", "|---" * 9 + "|"]
     for c in comps:
         v = c.variance_components
         lines.append("| " + " | ".join(_pair(c, labels)) + f" | {v['split_seeds']} × "

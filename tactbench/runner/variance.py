@@ -97,7 +97,7 @@ def paired_variance_components(correct_a: Sequence[Any], correct_b: Sequence[Any
     j's run (the same J init seeds, and the same recordings across a split's runs);
     ``groups``: one ``(n_s,)`` array of group labels per split seed (the test users), or
     None. Test sampling is clustered by group where some group holds more than one
-    recording. With ``truncate`` a negative init or split estimate is reported as 0 and
+    recording (and then needs at least 2 groups in every split seed). With ``truncate`` a negative init or split estimate is reported as 0 and
     named in ``clipped``; without, the unbiased moments as they come.
 
     Returns ``split_seeds``, ``init_seeds``, ``test_sampling`` (``"clustered by group"``
@@ -109,6 +109,9 @@ def paired_variance_components(correct_a: Sequence[Any], correct_b: Sequence[Any
     """
     splits = _check_splits(correct_a, correct_b, groups)
     clustered = any(g is not None and len(np.unique(g)) < len(g) for _, g in splits)
+    if clustered and any(len(np.unique(g)) < 2 for _, g in splits):
+        raise InputError("clustered test sampling needs at least 2 test groups in every "
+                         "split seed: over one group (one test user) it cannot be estimated")
     per_run_test, shared_test, unshared_test, within, means, runs = [], [], [], [], [], []
     for D, g in splits:
         g = g if clustered else None

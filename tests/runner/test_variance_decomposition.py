@@ -109,6 +109,7 @@ def test_shares_sum_to_one_and_a_negative_estimate_is_clipped():
     (([np.ones((2, 5)), np.ones((3, 5))], [np.ones((2, 5)), np.ones((3, 5))]), "same init"),
     (([np.ones((2, 5))] * 2, [np.ones((2, 4))] * 2), "one shape"),
     (([np.ones((2, 5))] * 2, [np.ones((2, 5))] * 2, [np.arange(4)] * 2), "groups for 5"),
+    (([np.ones((2, 5))] * 2, [np.ones((2, 5))] * 2, [np.zeros(5)] * 2), "2 test groups"),
 ])
 def test_shapes_that_cannot_be_decomposed_are_refused(args, match):
     with pytest.raises(InputError, match=match):
@@ -169,7 +170,8 @@ def test_without_init_seeds_or_with_one_there_is_none(tmp_path):
     from tactbench.runner.comparisons import Comparison, comparisons
     from tactbench.runner.writers import write_reports
 
-    for rows in (_rows([None]), _rows([0]), _rows([0, 1], splits=1)):
+    for rows in (_rows([None]), _rows([0]), _rows([0, 1], splits=1),
+                 _rows([0, 1], users=40)):  # one test user a split seed
         [c] = comparisons(rows)
         assert c.variance_components is None
     entry = c.to_dict()
@@ -188,3 +190,37 @@ def test_a_stored_decomposition_of_the_wrong_kind_is_refused():
     entry["variance_components"] = dict(entry["variance_components"], test_sampling="?")
     with pytest.raises(CorruptArtefactError, match="variance_components"):
         Comparison.from_dict(entry)
+
+
+# ------------------------------------------------------------------ end to end
+
+
+@pytest.mark.parametrize("init_seeds", [["--init-seed", "0-1"], []])
+def test_a_tiny_run_with_init_seeds_decomposes_its_comparison(tmp_path, monkeypatch, init_seeds):
+    """`tactbench run --seed 0-1 --init-seed 0-1`: results.json and report.md carry the
+    decomposition of the difference; the same run without --init-seed does not."""
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    scene = tmp_path / "scene.toml"
+    scene.write_text("test_per_class = 1\n")
+    args = ["run", "--dataset", "synthetic-forearm:users=2,repetitions=1", "--encoder", "raw",
+            "--encoder", "frame-diff", "--classifier", "logreg:max_iter=20", "-L", "2",
+            "--seed", "0-1", *init_seeds, "--threads", "1", "--out", str(out),
+            "--no-plots", str(scene)]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    [c] = json.loads((out / "results.json").read_text())["comparisons"]
+    report = (out / "report.md").read_text()
+    if init_seeds:
+        v = c["variance_components"]
+        assert (v["split_seeds"], v["init_seeds"]) == (2, 2)
+        assert v["test_sampling"] == "per recording"  # paper split: a recording a group
+        assert "### Where the difference's variance comes from" in report
+        assert "| encoder | raw | frame-diff | logreg L=2 | 2 × 2 |" in report
+    else:
+        assert c["variance_components"] is None
+        assert "variance comes from" not in report
