@@ -28,6 +28,7 @@ from tactbench.runner.pairing import (
     ClassGain,
     UserGains,
     aligned,
+    difference_components,
     fold_differences,
     per_class_gains,
     per_user_gains,
@@ -59,6 +60,7 @@ from tactbench.runner.summaries import (
     spec_label,
     spec_labels,
 )
+from tactbench.runner.variance import COMPONENTS, TEST_SAMPLING
 
 #: The one rule for the p a verdict rests on, as report.md and docs/statistics.md state
 #: it: the corrected t's (``p``), Holm-adjusted within its family (``p_holm``). The
@@ -108,7 +110,12 @@ class Comparison:
       ``test_sampling_share`` (the share of the per-run variance of the difference that
       test sampling, ``(π − δ²)/n``, accounts for); ``run_ratio``: the correction of
       a mean over per-run differences (``ratio``, or ``K/(K − 1)`` for seed means of K
-      folds, :func:`tactbench.runner.power.seed_mean_ratio`).
+      folds, :func:`tactbench.runner.power.seed_mean_ratio`);
+    - ``variance_components``: where the runs vary the initialisation too (at least 2
+      init seeds in each of at least 2 split seeds), the variance of the per-run
+      difference split into split, initialisation and test sampling
+      (:func:`tactbench.runner.variance.paired_variance_components`: ``*_var`` in
+      points², ``*_sd`` in points, ``*_share``); None otherwise.
     """
 
     dataset: str
@@ -161,6 +168,7 @@ class Comparison:
     test_sampling_share: float | None = None
     ceiling: bool = False
     run_ratio: float = 0.0
+    variance_components: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON entry of results.json: every field by name, ``where``'s factors
@@ -210,7 +218,8 @@ class Comparison:
 #: the committed reports still read.
 ADDED_FIELDS: frozenset[str] = frozenset({
     "family", "run_ratio", "bayes_margin", "bayes_a_better", "bayes_equivalent", "bayes_b_better",
-    "runs_for_power", "detectable_effect", "test_sampling_share", "ceiling"})
+    "runs_for_power", "detectable_effect", "test_sampling_share", "ceiling",
+    "variance_components"})
 
 
 def _number(v: Any) -> bool:
@@ -246,6 +255,19 @@ def _user_gains(v: Any) -> bool:
         _numbers_by_text(v["gains"])
 
 
+def _variance_components(v: Any) -> bool:
+    """A stored :func:`tactbench.runner.variance.paired_variance_components` result."""
+    parts = [f"{c}_{k}" for c in COMPONENTS for k in ("var", "sd", "share")]
+    keys = {"split_seeds", "init_seeds", "test_sampling", "groups", "total_var",
+            "observed_var", "clipped", *parts}
+    return isinstance(v, Mapping) and set(v) == keys and all(
+        _count(v[k]) for k in ("split_seeds", "init_seeds")) and all(
+        _number(v[k]) for k in ("groups", "total_var", "observed_var")) and all(
+        (_maybe(_number) if k.endswith("_share") else _number)(v[k]) for k in parts) and \
+        v["test_sampling"] in TEST_SAMPLING and isinstance(v["clipped"], list) and \
+        set(v["clipped"]) <= set(COMPONENTS)
+
+
 #: What each stored field of a comparison may hold (:meth:`Comparison.from_dict`).
 _STORED_KIND = {
     **{k: lambda v: isinstance(v, str) for k in ("dataset", "split", "factor", "method",
@@ -268,6 +290,7 @@ _STORED_KIND = {
     "df": _maybe(_count), "runs_needed": _maybe(_count),
     "per_run": _numbers_by_text, "mcnemar_per_seed": _numbers_by_text,
     "per_class": _class_gains, "per_user": _maybe(_user_gains),
+    "variance_components": _maybe(_variance_components),
 }
 
 
@@ -472,6 +495,7 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
                                    confidence),
         test_sampling_share=sampling_share(per_seed, splits, d_run),
         ceiling=all(bool(r.ca.all() and r.cb.all()) for r in per_seed.values()),
+        variance_components=difference_components(per_seed, splits),
         per_user=None if users is None else per_user_gains(per_seed, users))
 
 

@@ -4,8 +4,9 @@ A comparison (:mod:`tactbench.runner.comparisons`) pairs the test recordings bot
 predicted in each run: :func:`aligned` finds them (with the fold that tested each, as the
 rows record it), and the functions here reduce them to what a comparison reports beside
 its run-level tests: the recordings the cells disagree on and McNemar's p per seed, the
-per-fold differences of a K-fold design, per-class and per-user gains, and the share of
-the per-run variance that test sampling explains.
+per-fold differences of a K-fold design, per-class and per-user gains, the share of
+the per-run variance that test sampling explains, and (with init seeds) that variance
+split into split, initialisation and test sampling.
 """
 
 from __future__ import annotations
@@ -17,6 +18,11 @@ from typing import Any, Mapping, NamedTuple, Sequence
 import numpy as np
 
 from tactbench.runner.statistics import corrected_t, mcnemar_p
+from tactbench.runner.variance import (
+    MIN_INIT_SEEDS,
+    MIN_SPLIT_SEEDS,
+    paired_variance_components,
+)
 
 
 @dataclass(frozen=True)
@@ -46,13 +52,15 @@ class UserGains:
 
 class Run(NamedTuple):
     """One run's test recordings both cells predicted with the same label: their ids,
-    true labels, whether A and B were right, and their fold ids (None: not in the rows)."""
+    true labels, whether A and B were right, their fold ids and their groups (the test
+    user on a users split; None: not in the rows)."""
 
     ids: np.ndarray
     y: np.ndarray
     ca: np.ndarray
     cb: np.ndarray
     folds: np.ndarray | None
+    groups: np.ndarray | None = None
 
 
 def _predictions(row: dict[str, Any]) -> dict[int, tuple[int, int]]:
@@ -71,18 +79,31 @@ def _fold_ids(row: dict[str, Any]) -> dict[int, int] | None:
     return {int(i): int(f) for i, f in zip(tp["indices"], tp["folds"])}
 
 
+def _group_ids(row: dict[str, Any]) -> dict[int, str] | None:
+    """Test sequence index → the group it was left out with (its user on a users split),
+    as the row records it (None for a row made before rows kept their groups)."""
+    tp = row["test_predictions"]
+    if tp.get("groups") is None:
+        return None
+    return {int(i): str(g) for i, g in zip(tp["indices"], tp["groups"])}
+
+
 def aligned(row_a: dict[str, Any], row_b: dict[str, Any]) -> Run:
-    """The test sequences both rows predicted with the same label; their fold ids where
-    both rows record the same fold for each (None otherwise)."""
+    """The test sequences both rows predicted with the same label; their fold ids and
+    groups where both rows record the same for each (None otherwise)."""
     ta, tb = _predictions(row_a), _predictions(row_b)
     ids = [i for i in sorted(set(ta) & set(tb)) if ta[i][0] == tb[i][0]]
     fa, fb = _fold_ids(row_a), _fold_ids(row_b)
     folds = None
     if fa is not None and fb is not None and all(fa[i] == fb[i] for i in ids):
         folds = np.array([fa[i] for i in ids], dtype=np.int64)
+    ga, gb = _group_ids(row_a), _group_ids(row_b)
+    groups = None
+    if ga is not None and gb is not None and all(ga[i] == gb[i] for i in ids):
+        groups = np.array([ga[i] for i in ids], dtype=str)
     return Run(np.array(ids, dtype=np.int64), np.array([ta[i][0] for i in ids], dtype=np.int64),
                 np.array([ta[i][1] == ta[i][0] for i in ids], dtype=bool),
-                np.array([tb[i][1] == tb[i][0] for i in ids], dtype=bool), folds)
+                np.array([tb[i][1] == tb[i][0] for i in ids], dtype=bool), folds, groups)
 
 
 def recordings(per_seed: Mapping[tuple, Run]) -> dict[str, Any]:
@@ -138,6 +159,34 @@ def sampling_share(per_seed: Mapping[tuple, Run], splits: Mapping[int, list[tupl
             v.append(max(0.0, pi - delta * delta) / len(r.ids))
         parts.append(float(np.mean(v)) / len(keys))
     return float(np.mean(parts) / d_run.var(ddof=1))
+
+
+def difference_components(per_seed: Mapping[tuple, Run], splits: Mapping[int, list[tuple]]
+                          ) -> dict[str, Any] | None:
+    """The variance of the per-run difference split into split, initialisation and test
+    sampling (:func:`tactbench.runner.variance.paired_variance_components`), over the
+    init seeds every split seed ran (at least 2, in at least 2 split seeds) and, within a
+    split seed, the test recordings all its runs paired; test sampling clustered by the
+    groups the rows record (the users of a users split). None where the runs do not vary
+    the initialisation that far, or a split seed tests a single group (one user)."""
+    inits = set.intersection(*({k[1] for k in keys} for keys in splits.values()))
+    inits.discard(None)
+    if len(splits) < MIN_SPLIT_SEEDS or len(inits) < MIN_INIT_SEEDS:
+        return None
+    correct_a, correct_b, groups = [], [], []
+    for split in splits:
+        runs = [per_seed[(split, i)] for i in sorted(inits)]
+        ids = np.array(sorted(set.intersection(*(set(r.ids.tolist()) for r in runs))))
+        if not len(ids):
+            return None
+        at = [np.searchsorted(r.ids, ids) for r in runs]
+        correct_a.append(np.array([r.ca[m] for r, m in zip(runs, at)]))
+        correct_b.append(np.array([r.cb[m] for r, m in zip(runs, at)]))
+        groups.append(None if runs[0].groups is None else runs[0].groups[at[0]])
+    use = None if any(g is None for g in groups) else groups
+    if use is not None and any(len(set(g.tolist())) < 2 for g in use):
+        return None  # one test user a split seed: no variance over users to estimate
+    return paired_variance_components(correct_a, correct_b, use)
 
 
 def _seed_label(key: tuple) -> str:

@@ -343,6 +343,47 @@ def per_user_gains_markdown(comps: Comparisons, labels: Labels | None = None) ->
     return "\n".join(lines)
 
 
+def _component(v: Mapping[str, Any], name: str) -> str:
+    """``3.0 (15 %)``: a component's SD (points) and share; ``clipped`` where noise made
+    its estimate negative."""
+    share = v[f"{name}_share"]
+    return (f"{v[f'{name}_sd']:.1f} ({'-' if share is None else f'{100 * share:.0f} %'}"
+            + (", clipped at 0" if name in v["clipped"] else "") + ")")
+
+
+def variance_components_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
+    """The variance of each pair's per-run difference split into split, initialisation
+    and test sampling (SD in points, share of the per-run variance), for the primary
+    comparisons that carry it, or every comparison where none is primary ("" when no
+    comparison carries it: the runs vary no init seed)."""
+    comps = read_comparisons(comps)
+    labels = comparison_labels(comps) if labels is None else labels
+    comps = [c for c in comps if c.variance_components]
+    comps = [c for c in comps if c.family == "primary"] or comps
+    if not comps:
+        return ""
+    lines = ["| factor | A | B | where | split × init seeds | split | initialisation | "
+             "test sampling | per-run SD, estimated (observed) |", "|---" * 9 + "|"]
+    for c in comps:
+        v = c.variance_components
+        lines.append("| " + " | ".join(_pair(c, labels)) + f" | {v['split_seeds']} × "
+                     f"{v['init_seeds']} | {_component(v, 'split')} | {_component(v, 'init')}"
+                     f" | {_component(v, 'test')}, {v['test_sampling']} | "
+                     f"{math.sqrt(v['total_var']):.1f} ({math.sqrt(v['observed_var']):.1f}) |")
+    return "\n".join(lines)
+
+
+#: What report.md says above the table of variance components.
+VARIANCE_TEXT = (
+    "The runs vary the split (--seed) and the initialisation (--init-seed) apart, so the "
+    "variance of a run's difference B − A splits into the split's, the initialisation's "
+    "and the test sampling's (each run's test set is a sample: (π − δ²)/n, clustered by "
+    "test group, the users of a users split, where a group holds several recordings). "
+    "Standard deviations in points with their share of the per-run variance; "
+    "method-of-moments estimates, rough with few split seeds (docs/statistics.md, "
+    "\"Where the difference's variance comes from\").")
+
+
 #: What report.md says above its table of comparisons.
 COMPARISONS_TEXT = (
     "Every two cells that differ in one factor (and every contrast asked for), compared "
@@ -384,6 +425,10 @@ def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> lis
     if gains:
         lines += ["### Per-class gains (B − A, points, 95 % interval over runs)", "",
                   gains, ""]
+    components = variance_components_markdown(comps, labels)
+    if components:
+        lines += ["### Where the difference's variance comes from", "", VARIANCE_TEXT, "",
+                  components, ""]
     people = per_user_gains_markdown(comps, labels)
     if people:
         lines += ["### Per-user gains (B − A on each test user's recordings)", "",
@@ -415,7 +460,8 @@ def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]],
 
 
 def variance_markdown(parts: Sequence[dict[str, Any]], labels: Labels | None = None) -> str:
-    """The variance decomposition of each cell's accuracy (standard deviations, points)."""
+    """The variance decomposition of each cell's accuracy (standard deviations, points);
+    a pair's difference is :func:`variance_components_markdown`."""
     if not parts:
         return ""
     labels = summary_labels(parts) if labels is None else labels

@@ -390,10 +390,12 @@ def markdown_report(report: Report, figures: dict[str, Path]) -> str:
                   "value is drawn in per_user_accuracy.png and kept in results.json "
                   "(`summary[].per_user_accuracy`).", "", by_user, ""]
     if variance:
-        lines += ["## Where the variance comes from", "",
+        lines += ["## Where each cell's accuracy variance comes from", "",
                   "Runs vary the split and the initialisation separately; each cell's "
                   "accuracy variance split into split, initialisation and test sampling "
-                  "(p(1 − p)/n_test), as standard deviations in points.", "",
+                  "(p(1 − p)/n_test), as standard deviations in points (`variance` in "
+                  "results.json; a pair's difference is decomposed under the comparisons, "
+                  "`comparisons[].variance_components`).", "",
                   variance_markdown(variance, labels), ""]
     if reference:
         lines += ["## Published reference points", "",

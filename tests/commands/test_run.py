@@ -254,4 +254,9 @@ def test_statistics_options_from_the_command_line_and_a_scene_file(tmp_path, mon
     assert [(c["a"], c["b"]) for c in contrast] == [("encoder=raw,L=2", "encoder=frame-diff,L=3")]
     assert all(c["runs"] == 3 and c["equivalence_margin"] == 5 for c in doc["comparisons"])
     assert doc["statistics"]["margin"] == 5 and doc["variance"]
-    assert "## Where the variance comes from" in (tmp_path / "out" / "report.md").read_text()
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "## Where each cell's accuracy variance comes from" in report
+    # the paired difference decomposed too: 3 split seeds × 2 init seeds
+    assert all((c["variance_components"]["split_seeds"], c["variance_components"]["init_seeds"])
+               == (3, 2) for c in doc["comparisons"])
+    assert "### Where the difference's variance comes from" in report

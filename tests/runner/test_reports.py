@@ -322,7 +322,7 @@ def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_pat
     [c] = comparisons(rows)
     assert c.runs == 3  # a split is the unit; its init seeds are averaged
     report = write_reports(tmp_path, rows, plots=False)["markdown"].read_text()
-    assert "## Where the variance comes from" in report
+    assert "## Where each cell's accuracy variance comes from" in report
 
 
 def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
