@@ -33,6 +33,7 @@ from tactbench.datasets.synthetic import (
 from tactbench.errors import BudgetError, InputError, check_positive_int
 from tactbench.machine import usable_cores
 from tactbench.paths import atomic_folder, cache_dir
+from tactbench.specs import format_spec
 
 #: Bump when the generated data changes: it keys the cache (with the options).
 GENERATOR_VERSION = 3
@@ -205,8 +206,6 @@ class SyntheticForearm:
         ``people=fixed`` (every run re-splits the one data set)."""
         if self.people == "fixed":
             return None
-        from tactbench.specs import format_spec
-
         seed = check_positive_int(seed, "run seed", minimum=0)
         return format_spec("synthetic-forearm", {**self.options, "seed": seed,
                                                  **({} if self.cache else {"cache": False})})

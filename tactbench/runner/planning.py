@@ -20,17 +20,18 @@ which would hide a submodule of the same name.)
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from tactbench.contracts import CLASSIFIER, ENCODER
+from tactbench.contracts import CLASSIFIER, DATASET, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
 from tactbench.data.splits import SplitData, build_split, check_splits, split_spec
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
-from tactbench.datasets.loading import check_informative, load_dataset
+from tactbench.datasets.loading import check_informative, is_path_spec, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import BudgetError, InputError
 from tactbench.paths import check_output_folder
@@ -377,9 +378,6 @@ def run_datasets(scene: Scene, registry) -> dict[int, str] | None:
     """``seed → the spec of that run's data set`` when ``scene.dataset`` draws a new data
     set for every run (its ``run_spec``, :data:`tactbench.contracts.DATASET`); None when
     every run re-splits one data set (a path, or a dataset without ``run_spec``)."""
-    from tactbench.contracts import DATASET
-    from tactbench.datasets.loading import is_path_spec
-
     text = str(scene.dataset)
     name = text.split(":", 1)[0].strip()
     if is_path_spec(text) or name not in registry.names("dataset"):
@@ -400,8 +398,6 @@ def plan_runs(scene: Scene, registry=None, *, progress=None) -> list[Plan]:
     and that run's data set, so each is loaded, encoded and cached on its own. Cells of
     the plans differ by seed; their rows keep the scene's dataset name (runs pair across
     seeds) and record the run's data set (``run_dataset``, ``dataset_hash``)."""
-    import dataclasses
-
     registry = registry or load_registry()
     specs = run_datasets(scene, registry)
     if specs is None:
@@ -418,8 +414,6 @@ def with_dataset(p: Plan, *, progress=None) -> Plan:
     the run's data set (``p.run_dataset``), checked to be the one planned."""
     if p.dataset is not None:
         return p
-    import dataclasses
-
     dataset = load_dataset(p.run_dataset, registry=p.registry, progress=progress)
     if dataset.content_hash() != p.dataset_hash:
         raise InputError(f"dataset {p.run_dataset} changed since it was planned (content "
