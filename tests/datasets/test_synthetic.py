@@ -325,8 +325,8 @@ def test_people_per_run_draws_each_runs_people_with_the_run_seed():
 
 
 def test_people_per_run_is_refused_where_it_makes_no_sense():
-    from tactbench.errors import TactbenchError
     from tactbench.datasets.synthetic_forearm import PerRunPeopleError
+    from tactbench.errors import TactbenchError
 
     with pytest.raises(PerRunPeopleError, match="people=per-run draws each run's people with "
                                                 "the run's seed; seed=3 would fix them"):
