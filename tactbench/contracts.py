@@ -252,6 +252,10 @@ FRAME = Contract("frame", (
 #: Datasets: built with keyword options (``path=...``), loaded on demand.
 DATASET = Contract("dataset", (
     Member("load", True, "load() → tactbench.data.recording.Dataset"),
+    Member("run_spec", True, "run_spec(seed) → the spec of the data set run `seed` trains "
+           "and tests on, for a dataset that draws a new one for every run (independent "
+           "replications, docs/statistics.md); None: one data set for every run",
+           default=None),
 ))
 
 #: Splits: how a dataset's recordings become train/test pairs (docs/plugins.md).

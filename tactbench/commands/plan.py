@@ -27,7 +27,8 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
     in the out folder (a pilot run of a seed or two), and so does each comparison's
     per-run spread; without a pilot the spread is test sampling alone (a lower bound).
     For one data set it also says the floor no number of runs resolves below, and how
-    many recordings would lower it to --effect.
+    many recordings would lower it to --effect; a dataset drawing its own for every run
+    (synthetic-forearm:people=per-run) has none.
     """
     if not 0 < effect <= 100:
         raise click.BadParameter(f"must be in (0, 100] points, got {effect:g}",
@@ -50,11 +51,17 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                + "; peak memory " + ("unknown without a pilot" if f.peak_mb is None
                                      else f"{f.peak_mb:.0f} MB (the pilot's)"))
     click.echo(f"split: {f.n_test} test recordings against {f.n_train} training ones "
-               f"per run")
+               f"per run" + (", each run on a data set of its own (independent "
+                             "replications: no overlap correction)" if f.independent else ""))
     for p in f.primaries:
         click.echo(f"primary {p.name}: at {p.runs} runs, power {p.power:.0%} for "
                    f"{p.effect:+.1f} points; 80 % power from {p.detectable:.1f} points; "
                    f"per-run sd {p.sd:.1f} points ({p.sd_source})")
+        if f.independent:
+            click.echo("  no floor: every run draws its own data set (independent "
+                       "replications of the simulator's population), so more runs resolve "
+                       "ever smaller differences")
+            continue
         more = ("" if p.recordings_for_effect is None or p.recordings_for_effect
                 <= p.recordings else f"; about {p.recordings_for_effect} recordings (now "
                 f"{p.recordings}) would bring it to {p.effect:.1f}")

@@ -13,7 +13,8 @@ from tactbench import hookimpl
 @hookimpl
 def register_datasets(register):
     register("synthetic-forearm", "tactbench.datasets.synthetic_forearm:SyntheticForearm",
-             summary="simulated 5-gesture study on a 1558-taxel forearm (1900 samples)")
+             summary="simulated 5-gesture study on a 1558-taxel forearm (1900 samples); "
+                     "people=per-run: new simulated people every run (docs/simulator.md)")
     register("cyskin-text", "tactbench.datasets.cyskin_text:CySkinText",
              summary="CySkin acquisition text files; path=FOLDER|FILE")
     register("cost", "tactbench.datasets.cost:CoST",

@@ -33,6 +33,7 @@ from tactbench.datasets.synthetic import (
 from tactbench.errors import BudgetError, InputError, check_positive_int
 from tactbench.machine import usable_cores
 from tactbench.paths import atomic_folder, cache_dir
+from tactbench.specs import format_spec
 
 #: Bump when the generated data changes: it keys the cache (with the options).
 GENERATOR_VERSION = 3
@@ -159,24 +160,55 @@ def _user_samples_job(job: tuple) -> list[Sample]:
     return _user_samples(*job)
 
 
+#: Option ``people``: ``fixed`` (one data set, drawn with ``seed``) or ``per-run`` (each
+#: run draws its own people: dataset seed = run seed; docs/simulator.md).
+PEOPLE = ("fixed", "per-run")
+
+
+class PerRunPeopleError(InputError):
+    """``synthetic-forearm:people=per-run`` asked for something only one data set has."""
+
+
 class SyntheticForearm:
     """Registered dataset ``synthetic-forearm``.
 
     Options: ``users`` (38), ``positions`` (2: front, side), ``repetitions``
-    (5), ``seed`` (0), ``n_taxels`` (1558), ``version`` (1: the first simulator, the
-    default; 2: the person model, see docs/simulator.md for why it is not the default
-    yet), ``cache`` (True: keep generated sets under ``cache_dir("datasets")``).
-    ``load()`` returns the
+    (5), ``seed`` (0), ``n_taxels`` (1558), ``version`` (1: the first simulator; 2: the
+    person model, the default, see docs/simulator.md), ``cache`` (True: keep generated
+    sets under ``cache_dir("datasets")``), ``people`` (``fixed``: one data set drawn with
+    ``seed``; ``per-run``: every run of a benchmark draws new people, its dataset seed
+    the run's seed, see :meth:`run_spec`). ``load()`` returns the
     :class:`~tactbench.data.recording.Dataset`.
     """
 
     def __init__(self, users: int = 38, positions: int = 2, repetitions: int = 5,
-                 seed: int = 0, n_taxels: int = 1558, version: int = DEFAULT_VERSION,
-                 cache: bool = True) -> None:
+                 seed: int | None = None, n_taxels: int = 1558,
+                 version: int = DEFAULT_VERSION, cache: bool = True,
+                 people: str = "fixed") -> None:
+        if people not in PEOPLE:
+            raise InputError(f"synthetic-forearm option people must be one of "
+                             f"{', '.join(PEOPLE)}, got {people!r}")
+        if people == "per-run" and seed is not None:
+            raise PerRunPeopleError(
+                f"synthetic-forearm: people=per-run draws each run's people with the run's "
+                f"seed; seed={seed} would fix them (give one or the other)")
+        self.people = people
+        fixed = {} if people == "per-run" else {"seed": 0 if seed is None else seed}
         self.options = check_options(users=users, positions=positions,
-                                     repetitions=repetitions, seed=seed, n_taxels=n_taxels,
-                                     version=version)
+                                     repetitions=repetitions, n_taxels=n_taxels,
+                                     version=version, **fixed)
         self.cache = bool(cache)
+
+    def run_spec(self, seed: int) -> str | None:
+        """The data set of run ``seed``: with ``people=per-run``, the spec of the fixed
+        data set whose dataset seed is the run's seed (the other options as given), so
+        runs are independent draws from the simulator's population; None with
+        ``people=fixed`` (every run re-splits the one data set)."""
+        if self.people == "fixed":
+            return None
+        seed = check_positive_int(seed, "run seed", minimum=0)
+        return format_spec("synthetic-forearm", {**self.options, "seed": seed,
+                                                 **({} if self.cache else {"cache": False})})
 
     def cache_key(self) -> str:
         text = json.dumps({"generator": GENERATOR_VERSION, **self.options}, sort_keys=True)
@@ -191,6 +223,10 @@ class SyntheticForearm:
         ``progress(done, total)`` is called per sample generated (not when the cache
         answers).
         """
+        if self.people == "per-run":
+            raise PerRunPeopleError(
+                "synthetic-forearm:people=per-run is a new data set for every run of a "
+                "benchmark (tactbench run), not one data set to load; give seed=N for one")
         if self.cache:
             folder = self.cache_path()
             if (folder / "manifest.json").is_file():

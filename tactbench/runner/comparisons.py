@@ -24,6 +24,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.runner.results import INDEPENDENT_RUNS
 from tactbench.runner.pairing import (
     ClassGain,
     UserGains,
@@ -436,9 +437,20 @@ def parse_contrast_factors(factor: str, label: Any) -> list[str]:
 # --------------------------------------------------------------------- one pair of cells
 
 
+def independent(rows: Sequence[dict[str, Any]]) -> bool:
+    """Whether every one of these rows' runs trained and tested on a data set of its own,
+    drawn independently of the others' (their row field ``independent_runs``, written by
+    :func:`tactbench.runner.planning.cell_identity`): runs that are independent
+    replications, whose training sets share nothing."""
+    return bool(rows) and all(r.get(INDEPENDENT_RUNS) is True for r in rows)
+
+
 def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
     """The correction of per-fold differences (1/(K − 1)) or of per-run differences
-    (n_test/n_train) of these runs, and the test's name."""
+    (n_test/n_train) of these runs, and the test's name; 0 for independent replications
+    (:func:`independent`), whose t is the plain paired t over runs."""
+    if independent(rows):
+        return 0.0, "paired t over independent runs (each run its own data set)"
     folds = rows[0].get("folds")
     if folds:
         return 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "
@@ -468,14 +480,14 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
     if not per_seed:
         return None
     rows_a = [runs_a[k] for k in per_seed]
-    ratio, method = _ratio(rows_a)
+    ratio, method = _ratio(rows_a + [runs_b[k] for k in per_seed])
     splits: dict[int, list[tuple]] = {}  # the unit: a split seed (its init seeds averaged)
     for key in per_seed:
         splits.setdefault(key[0], []).append(key)
     d_run = np.array([np.mean([(per_seed[k].cb.mean() - per_seed[k].ca.mean()) for k in ks])
                       for ks in splits.values()])
     d_t, run_ratio = d_run, ratio
-    if rows_a[0].get("folds"):  # a run's difference is the mean of its K folds'
+    if rows_a[0].get("folds") and not independent(rows_a):  # a run: the mean of its K folds'
         run_ratio = seed_mean_ratio(int(rows_a[0]["folds"]))
         per_fold = fold_differences(per_seed, splits)
         d_t, ratio = (d_run, run_ratio) if per_fold is None else (per_fold, ratio)

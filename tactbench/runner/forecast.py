@@ -5,7 +5,9 @@ training) and says, for every cell, its estimated time and where the estimate co
 from, the peak memory, and for each primary comparison the power at the planned runs
 for a given effect, the smallest effect found at 80 % power, and — for a fixed data set
 — the floor no number of runs goes below and how many recordings would lower it
-(:mod:`tactbench.runner.power`).
+(:mod:`tactbench.runner.power`); where every run draws its own data set
+(``synthetic-forearm:people=per-run``) the runs are independent replications: ratio 0,
+no floor.
 
 Timings and spreads come from a *pilot*: rows already stored in the scene's out folder
 (a run of a seed or two), said so. Without one, a cell's time is unknown (said so, with
@@ -23,7 +25,7 @@ from typing import Any
 
 from tactbench.data.splits import SplitData
 from tactbench.runner.comparisons import comparisons
-from tactbench.runner.planning import plan
+from tactbench.runner.planning import plan_runs, with_dataset
 from tactbench.runner.power import (
     detectable_effect,
     effect_floor,
@@ -78,6 +80,7 @@ class Forecast:
     n_test: int
     n_train: int
     alpha: float
+    independent: bool = False  # each run draws its own data set: no overlap, no floor
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -86,15 +89,18 @@ class Forecast:
 def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float = 0.05,
              progress=None) -> Forecast:
     """The forecast of ``scene`` (see the module docstring); ``effect`` in points."""
-    p = plan(scene, registry, progress=progress)
+    plans = plan_runs(scene, registry, progress=progress)
+    p = with_dataset(plans[0], progress=progress)
     pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
     runs = scene.max_runs if scene.until else len(scene.seeds)
     splits = p.split.split(SplitData.of(p.dataset, test_per_class=scene.test_per_class),
                            seed=scene.seed_order()[0])
     n_test = sum(len(s.test) for s in splits)
     n_train = len(splits[0].train)
-    ratio = seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
-    cells = _cells(p, pilot, scene)
+    independent = p.run_dataset is not None  # each run its own data set: no overlap
+    ratio = 0.0 if independent else \
+        seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
+    cells = [c for q in plans for c in _cells(q, pilot, scene)]
     known = [c.seconds for c in cells if c.seconds is not None]
     primaries = scene.resolved_primary()
     level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
@@ -105,7 +111,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                     default=None),
         primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
                             len(p.dataset.labels)) for text in primaries],
-        n_test=n_test, n_train=n_train, alpha=alpha)
+        n_test=n_test, n_train=n_train, alpha=alpha, independent=independent)
 
 
 def _cells(p, pilot: list[dict[str, Any]], scene: Scene) -> list[CellForecast]:

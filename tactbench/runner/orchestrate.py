@@ -25,7 +25,7 @@ from tactbench.runner.answering import first_look_to_run, schedule
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.executors import execute
-from tactbench.runner.planning import Plan, plan
+from tactbench.runner.planning import INDEPENDENT_RUNS, Plan, plan_runs, with_dataset
 from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
 from tactbench.runner.scene import Scene, parse_duration, primary_of
 from tactbench.runner.summaries import check_contrasts
@@ -58,6 +58,18 @@ def _model_is_sound(models: Path, p: Plan, cell) -> bool:
     return False
 
 
+def _pending(p: Plan, store: ResultStore, models: Path | None, progress) -> list:
+    """The cells of ``p`` to compute: all with ``rerun``, else those without a sound
+    stored row (or, saving models, without a sound model)."""
+    stored = [c for c in p.cells if not p.scene.rerun
+              and store.finished(c.key, p.identities[c.key])]
+    if models and stored:  # a model's check needs the data set's classes
+        p = with_dataset(p, progress=progress)
+        stored = [c for c in stored if _model_is_sound(models, p, c)]
+    done = {c.key for c in stored}
+    return [c for c in p.cells if c.key not in done]
+
+
 def run(scene: Scene, *, registry=None, progress: bool = True,
         cache: EncodingCache | None = None, plots: bool = True,
         on_row: Callable[[dict[str, Any]], None] | None = None) -> Report:
@@ -75,19 +87,23 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     memory = MemoryTracker()  # which of this process's steps sets its peak memory
     with Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
-        p = plan(scene, registry, progress=bars.callback(f"make dataset {scene.dataset}"))
+        made = bars.callback(f"make dataset {scene.dataset}")
+        plans = plan_runs(scene, registry, progress=made)
         bars.update(task, 1)
         memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
         store.clean()
-        claim = store.claim((c.key for c in p.cells), p.identities)  # one grid per folder
+        identities = {k: v for p in plans for k, v in p.identities.items()}
+        claim = store.claim(identities, identities)  # one grid per folder
         models = Path(scene.out) / "models" if scene.save_models else None
-        pending = [c for c in p.cells if scene.rerun
-                   or not store.finished(c.key, p.identities[c.key])
-                   or (models and not _model_is_sound(models, p, c))]
-        folders = ensure_encodings(p, cache, pending, bars)
+        pending, jobs = [], []
+        for p in plans:  # one plan, or one per run where each run draws its data set
+            todo = _pending(p, store, models, made)
+            if todo or p.dataset is not None:
+                p = with_dataset(p, progress=made)
+                jobs += make_jobs(p, todo, ensure_encodings(p, cache, todo, bars), models)
+            pending += todo
         memory.step("encode")
-        jobs = make_jobs(p, pending, folders, models)
         run_meta = {"command": command_line(), "git": git_revision(),
                     "scene": asdict(scene)}
 
@@ -101,12 +117,13 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
             execute(scene, jobs, finish, bars, memory)
     claim.unlink(missing_ok=True)
     report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
-                         margin=scene.margin, users=list(p.dataset.users),
+                         margin=scene.margin,
+                         users=list(p.dataset.users) if p.run_dataset is None else None,
                          rendered="at the end of the run, from the rows of cells/",
                          primary=scene.resolved_primary(),
                          sequential=sequential_design(asdict(scene)))
     write_report(scene.out, report, plots=plots)
-    report.computed, report.skipped = len(pending), len(p.cells) - len(pending)
+    report.computed, report.skipped = len(pending), len(identities) - len(pending)
     report.seconds = time.perf_counter() - start
     return report
 
@@ -171,6 +188,8 @@ def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
     digest = done[0].get("dataset_hash") if done else None
     if not isinstance(spec, str) or not digest:
         return None, "the rows do not name their dataset"
+    if any(r.get(INDEPENDENT_RUNS) for r in done):
+        return None, "each run drew its own people, so no user is in more than one run"
     try:
         data = load_dataset(spec, registry=registry)
     except TactbenchError as exc:

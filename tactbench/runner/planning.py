@@ -20,24 +20,25 @@ which would hide a submodule of the same name.)
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from tactbench.contracts import CLASSIFIER, ENCODER
+from tactbench.contracts import CLASSIFIER, DATASET, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
 from tactbench.data.splits import SplitData, build_split, check_splits, split_spec
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
-from tactbench.datasets.loading import check_informative, load_dataset
+from tactbench.datasets.loading import check_informative, is_path_spec, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import BudgetError, InputError
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import profile_options
 from tactbench.budget import check_budget
-from tactbench.runner.results import ROW_MAX_BYTES
+from tactbench.runner.results import INDEPENDENT_RUNS, ROW_MAX_BYTES
 from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import Scene
@@ -85,6 +86,7 @@ class Plan:
     registry: Any = None  # the tactbench.plugins.Registry the plan was checked with
     split: Any = None  # the scene's split, built (a strategy: tactbench.contracts.SPLIT)
     test_window: Any = None  # the scene's test window, built (TEST_WINDOW)
+    run_dataset: str | None = None  # the spec of the run's own data set (plan_runs)
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
@@ -276,13 +278,16 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
 def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
                   encoder_version: str, classifier: str, L: int,
                   seed: int, init_seed: int | None = None, *, split: str,
-                  test_window: str, either_input: bool = False) -> dict[str, Any]:
+                  test_window: str, either_input: bool = False,
+                  run_dataset: str | None = None) -> dict[str, Any]:
     """Everything that decides a cell's result; its :func:`digest` is the cell's key.
 
     ``split`` and ``test_window`` are the specs :func:`plan` recorded them by.
     ``init_seed`` (``--init-seed``) and the input kind of a classifier taking either
     (``either_input``, when ``--input`` is given) enter only where asked for, so every
-    other cell keeps its key."""
+    other cell keeps its key. ``run_dataset``: the spec of the run's own data set, where
+    every run draws one (:func:`plan_runs`); such a cell's identity records it and
+    :data:`INDEPENDENT_RUNS`, every other cell's neither."""
     return {
         "schema": ROW_SCHEMA,
         "dataset": dataset.name,
@@ -301,17 +306,21 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
         "seed": int(seed),
         **({} if init_seed is None else {"init_seed": int(init_seed)}),
         **({"input": kind} if scene.input and either_input else {}),
+        **({} if run_dataset is None else {"run_dataset": run_dataset,
+                                           INDEPENDENT_RUNS: True}),
     }
 
 
-def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
+def plan(scene: Scene, registry=None, *, progress=None,
+         run_dataset: str | None = None) -> Plan:
     """Check the whole grid before any work: names, options, L, layout needs, split.
 
     ``registry`` (default: every installed plugin) is the one the cells will use too.
     ``progress(done, total)`` hears from a dataset that takes a while to make (the
     simulator's first run).
     Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
-    computed or written.
+    computed or written. ``run_dataset``: the data set of the scene's one run where each
+    run draws its own (see :func:`plan_runs`), loaded in place of ``scene.dataset``.
     """
     registry = registry or load_registry()
     # The scene checked itself when it was made; here what needs the plugins and the disk.
@@ -323,7 +332,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
     frame_ranks, batch_sizes = _build_classifiers(scene, registry)
     classifier_specs = list(frame_ranks)
 
-    dataset = load_dataset(scene.dataset, registry=registry, progress=progress)
+    dataset = load_dataset(run_dataset or scene.dataset, registry=registry,
+                           progress=progress)
     check_informative(dataset)  # all-NaN or constant: nothing to score
     has_layout = dataset.layout is not None
     if scene.input == "images" and not has_layout:
@@ -350,7 +360,8 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
                     identity = cell_identity(scene, dataset, dataset_hash, kinds[clf], enc,
                                              versions[enc], clf, length, seed, init,
                                              split=designs[0], test_window=designs[1],
-                                             either_input=frame_ranks[clf] is None)
+                                             either_input=frame_ranks[clf] is None,
+                                             run_dataset=run_dataset)
                     key = digest(identity)
                     cells.append(Cell(enc, clf, int(length), int(seed), key,
                                       None if init is None else int(init)))
@@ -360,4 +371,51 @@ def plan(scene: Scene, registry=None, *, progress=None) -> Plan:
         check_contrasts(named, [{"encoder": c.encoder, "classifier": c.classifier,
                                  "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
-                kinds, cells, identities, registry, split, window)
+                kinds, cells, identities, registry, split, window, run_dataset)
+
+
+def run_datasets(scene: Scene, registry) -> dict[int, str] | None:
+    """``seed → the spec of that run's data set`` when ``scene.dataset`` draws a new data
+    set for every run (its ``run_spec``, :data:`tactbench.contracts.DATASET`); None when
+    every run re-splits one data set (a path, or a dataset without ``run_spec``)."""
+    text = str(scene.dataset)
+    name = text.split(":", 1)[0].strip()
+    if is_path_spec(text) or name not in registry.names("dataset"):
+        return None
+    factory = registry.get("dataset", name).load()
+    if isinstance(factory, type) and DATASET.get(factory, "run_spec") is None:
+        return None  # a class without run_spec: nothing built here
+    run_spec = DATASET.get(registry.build("dataset", text), "run_spec")
+    if run_spec is None:
+        return None
+    specs = {int(s): run_spec(int(s)) for s in dict.fromkeys(scene.seeds)}
+    return None if all(v is None for v in specs.values()) else specs
+
+
+def plan_runs(scene: Scene, registry=None, *, progress=None) -> list[Plan]:
+    """The plans of ``scene``: one (:func:`plan`) when its runs share one data set; one per
+    seed when every run draws its own (:func:`run_datasets`), each with that seed alone
+    and that run's data set, so each is loaded, encoded and cached on its own. Cells of
+    the plans differ by seed; their rows keep the scene's dataset name (runs pair across
+    seeds) and record the run's data set (``run_dataset``, ``dataset_hash``)."""
+    registry = registry or load_registry()
+    specs = run_datasets(scene, registry)
+    if specs is None:
+        return [plan(scene, registry, progress=progress)]
+    # each run's data set is let go once planned (a run's may be hundreds of MB): the
+    # step that needs it loads it again from the simulator's cache (with_dataset)
+    return [dataclasses.replace(plan(dataclasses.replace(scene, seeds=[seed]), registry,
+                                     progress=progress, run_dataset=spec), dataset=None)
+            for seed, spec in specs.items()]
+
+
+def with_dataset(p: Plan, *, progress=None) -> Plan:
+    """``p`` with its data set loaded: ``p`` itself when it holds it, else a copy holding
+    the run's data set (``p.run_dataset``), checked to be the one planned."""
+    if p.dataset is not None:
+        return p
+    dataset = load_dataset(p.run_dataset, registry=p.registry, progress=progress)
+    if dataset.content_hash() != p.dataset_hash:
+        raise InputError(f"dataset {p.run_dataset} changed since it was planned (content "
+                         f"hash {dataset.content_hash()[:16]}, planned {p.dataset_hash[:16]})")
+    return dataclasses.replace(p, dataset=dataset)

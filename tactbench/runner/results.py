@@ -47,6 +47,11 @@ from tactbench.paths import (
     temp_name,
 )
 
+#: The row field (and identity field) of a cell whose run trained and tested on a data set
+#: of its own, drawn independently of every other run's (``synthetic-forearm:people=per-run``):
+#: comparisons over such runs need no overlap correction (docs/statistics.md).
+INDEPENDENT_RUNS = "independent_runs"
+
 log = logging.getLogger("tactbench.runner.results")
 
 OK = "ok"

@@ -402,6 +402,15 @@ COMPARISONS_TEXT = (
     "those trained models only. See docs/statistics.md.")
 
 
+#: What report.md adds where the runs drew their own data sets (people=per-run).
+INDEPENDENT_TEXT = (
+    " Here every run drew its own data set (`synthetic-forearm:people=per-run`: new "
+    "simulated people each run), so runs are independent replications: the interval is "
+    "the plain paired t over runs (no overlap correction, ratio 0) and no effect is "
+    "beyond what more runs resolve. The results speak of the simulator's population of "
+    "people, not of one recorded data set.")
+
+
 def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> list[str]:
     """report.md's lines on the paired comparisons (none without comparisons): the
     table of verdicts, the notes, and the table of each further result (per-class and
@@ -409,7 +418,9 @@ def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> lis
     comps = read_comparisons(comps)
     if not comps:
         return []
-    lines = ["## Paired comparisons over runs", "", COMPARISONS_TEXT, ""]
+    independent = any(c.ratio == 0 and "independent" in c.method for c in comps)
+    lines = ["## Paired comparisons over runs", "",
+             COMPARISONS_TEXT + (INDEPENDENT_TEXT if independent else ""), ""]
     primary = [c for c in comps if c.family == "primary"]
     if primary:
         lines += ["### Primary questions (confirmatory)", "",

@@ -29,6 +29,7 @@ from tactbench.runner.answering import comparison_name, replay, schedule
 from tactbench.runner.comparisons import Comparison, comparisons
 from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
 from tactbench.runner.results import (
+    INDEPENDENT_RUNS,
     command_line,
     failed_rows,
     ok_rows,
@@ -340,8 +341,10 @@ def _facts(report: Report) -> list[str]:
     n_failed = len(rows) - len(done)
     rendered = report.rendered
     return [
-        f"- dataset: `{first.get('dataset', '?')}` (content hash "
-        f"`{str(first.get('dataset_hash', '?'))[:16]}`)",
+        f"- dataset: `{first.get('dataset', '?')}` " + (
+            "(a data set of its own for every run, independent replications: each row's "
+            "`run_dataset` and content hash name it)" if first.get(INDEPENDENT_RUNS) else
+            f"(content hash `{str(first.get('dataset_hash', '?'))[:16]}`)"),
         f"- split: `{first.get('split', '?')}`; test window: "
         f"`{first.get('test_window', UNNAMED_TEST_WINDOW)}` (the L frames each test sequence is "
         f"classified on); profile: `{first.get('profile', '?')}`; "

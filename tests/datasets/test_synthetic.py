@@ -304,3 +304,37 @@ def test_data_synth_writes_either_version(tmp_path):
     bad = CliRunner().invoke(cli, ["data", "synth", "--out", str(tmp_path / "x"),
                                    "--version", "3"])
     assert bad.exit_code == 2 and "--version" in bad.output
+
+
+def test_people_per_run_draws_each_runs_people_with_the_run_seed():
+    """people=per-run: run s's data set is the fixed one of dataset seed s (options as
+    given); two seeds, two sets of people; one seed, the same recordings."""
+    from tactbench.datasets.loading import load_dataset
+
+    source = load_registry().build(
+        "dataset", "synthetic-forearm:users=1,repetitions=1,positions=1,people=per-run")
+    assert source.run_spec(4) == \
+        "synthetic-forearm:n_taxels=1558,positions=1,repetitions=1,seed=4,users=1,version=2"
+    first, second = (load_dataset(source.run_spec(s)) for s in (0, 1))
+    assert first.content_hash() != second.content_hash()
+    again = load_dataset(source.run_spec(0))
+    assert again.content_hash() == first.content_hash()
+    assert SyntheticForearm(users=1, repetitions=1, positions=1).run_spec(0) is None
+    # the fixed set's cache key is the one it had before the option existed
+    assert SyntheticForearm(users=2).cache_key() == SyntheticForearm(users=2, seed=0).cache_key()
+
+
+def test_people_per_run_is_refused_where_it_makes_no_sense():
+    from tactbench.datasets.synthetic_forearm import PerRunPeopleError
+    from tactbench.errors import TactbenchError
+
+    with pytest.raises(PerRunPeopleError, match="people=per-run draws each run's people with "
+                                                "the run's seed; seed=3 would fix them"):
+        load_registry().build("dataset", "synthetic-forearm:people=per-run,seed=3")
+    source = SyntheticForearm(users=1, people="per-run")
+    with pytest.raises(PerRunPeopleError, match="not one data set to load; give seed=N"):
+        source.load()
+    with pytest.raises(ValueError, match="option people must be one of fixed, per-run"):
+        SyntheticForearm(people="each")
+    assert issubclass(PerRunPeopleError, TactbenchError)
+    assert "\n" not in str(PerRunPeopleError("x"))
