@@ -28,7 +28,8 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
     per-run spread; without a pilot the spread is test sampling alone (a lower bound).
     For one data set it also says the floor no number of runs resolves below, and how
     many recordings would lower it to --effect; a dataset drawing its own for every run
-    (synthetic-forearm:people=per-run) has none.
+    (synthetic-forearm:people=per-run) has none, and only its first run's data set is
+    made to plan. With --until, the cells are those of every run the looks may reach.
     """
     if not 0 < effect <= 100:
         raise click.BadParameter(f"must be in (0, 100] points, got {effect:g}",
@@ -53,6 +54,11 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
     click.echo(f"split: {f.n_test} test recordings against {f.n_train} training ones "
                f"per run" + (", each run on a data set of its own (independent "
                              "replications: no overlap correction)" if f.independent else ""))
+    if f.runs_not_made:
+        click.echo(f"data sets: the first run's made to plan; the other {f.runs_not_made} "
+                   f"runs' are made when they run (their making and encoding is not in the "
+                   f"time), and a cell of theirs counts as finished where a stored row of "
+                   f"its run's data set has its identity")
     for p in f.primaries:
         click.echo(f"primary {p.name}: at {p.runs} runs, power {p.power:.0%} for "
                    f"{p.effect:+.1f} points; 80 % power from {p.detectable:.1f} points; "

@@ -19,13 +19,22 @@ the power it gives is an upper bound, and the forecast says so.
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 from dataclasses import asdict, dataclass
 from typing import Any
 
 from tactbench.data.splits import SplitData
+from tactbench.plugins import load_registry
 from tactbench.runner.comparisons import comparisons
-from tactbench.runner.planning import plan_runs, with_dataset
+from tactbench.runner.planning import (
+    Cell,
+    Plan,
+    digest,
+    other_run_identity,
+    plan_runs,
+    run_datasets,
+)
 from tactbench.runner.power import (
     detectable_effect,
     effect_floor,
@@ -81,6 +90,7 @@ class Forecast:
     n_train: int
     alpha: float
     independent: bool = False  # each run draws its own data set: no overlap, no floor
+    runs_not_made: int = 0  # runs whose own data set the plan did not make (all but one)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -88,19 +98,27 @@ class Forecast:
 
 def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float = 0.05,
              progress=None) -> Forecast:
-    """The forecast of ``scene`` (see the module docstring); ``effect`` in points."""
-    plans = plan_runs(scene, registry, progress=progress)
-    p = with_dataset(plans[0], progress=progress)
+    """The forecast of ``scene`` (see the module docstring); ``effect`` in points.
+
+    With ``until``, the cells of every seed the looks may reach (the most the run
+    costs). Where every run draws its own data set, only the first run's is made (the
+    split's sizes and every check come from it): the other runs' cells are derived from
+    the first's (:func:`_other_runs`)."""
+    registry = registry or load_registry()
+    if scene.until:
+        scene = dataclasses.replace(scene, seeds=scene.seed_order())
+    [p] = plan_runs(scene, registry, progress=progress, first_only=True)
     pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
-    runs = scene.max_runs if scene.until else len(scene.seeds)
+    runs = len(scene.seeds)
     splits = p.split.split(SplitData.of(p.dataset, test_per_class=scene.test_per_class),
-                           seed=scene.seed_order()[0])
+                           seed=scene.seeds[0])
     n_test = sum(len(s.test) for s in splits)
     n_train = len(splits[0].train)
     independent = p.run_dataset is not None  # each run its own data set: no overlap
     ratio = 0.0 if independent else \
         seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
-    cells = [c for q in plans for c in _cells(q, pilot, scene)]
+    others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
+    cells = _cells(p.cells + others, pilot)
     known = [c.seconds for c in cells if c.seconds is not None]
     primaries = scene.resolved_primary()
     level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
@@ -111,10 +129,35 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                     default=None),
         primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
                             len(p.dataset.labels)) for text in primaries],
-        n_test=n_test, n_train=n_train, alpha=alpha, independent=independent)
+        n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
+        runs_not_made=len({c.seed for c in others}))
 
 
-def _cells(p, pilot: list[dict[str, Any]], scene: Scene) -> list[CellForecast]:
+def _other_runs(first: Plan, specs: dict[int, str], pilot: list[dict[str, Any]]
+                ) -> list[Cell]:
+    """The cells of the runs after ``first`` where every run draws its own data set,
+    without making their data sets: a cell's key hashes its data set's content, unknown
+    until the data set is made, so each cell's key is the one it has with the content
+    hash of a stored row of its run's data set (the row's ``run_dataset``) where that key
+    is a stored row's — the cell is finished, as run will find it unless that data set's
+    content changed since (then run computes it again) — and empty otherwise (not yet
+    computed)."""
+    hashes: dict[str, set[str]] = {}
+    for r in pilot:
+        if r.get("run_dataset") and r.get("dataset_hash"):
+            hashes.setdefault(r["run_dataset"], set()).add(r["dataset_hash"])
+    stored = {r["key"] for r in pilot}
+    out = []
+    for seed, spec in list(specs.items())[1:]:
+        for cell in first.cells:
+            keys = {digest(other_run_identity(first.identities[cell.key], seed, spec, h))
+                    for h in sorted(hashes.get(spec, ()))}
+            out.append(dataclasses.replace(cell, seed=int(seed),
+                                           key=min(keys & stored, default="")))
+    return out
+
+
+def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]:
     """Each planned cell's time: 0 when finished, the pilot's median training and
     inference time of its encoder × classifier (whose encoding the pilot has cached),
     else unknown."""
@@ -123,7 +166,7 @@ def _cells(p, pilot: list[dict[str, Any]], scene: Scene) -> list[CellForecast]:
     for r in pilot:
         by_pair.setdefault((r["encoder"], r["classifier"]), []).append(r)
     out = []
-    for cell in p.cells:
+    for cell in cells:
         label = cell.label()
         rows = by_pair.get((cell.encoder, cell.classifier))
         if cell.key in done:

@@ -392,21 +392,40 @@ def run_datasets(scene: Scene, registry) -> dict[int, str] | None:
     return None if all(v is None for v in specs.values()) else specs
 
 
-def plan_runs(scene: Scene, registry=None, *, progress=None) -> list[Plan]:
+def plan_runs(scene: Scene, registry=None, *, progress=None,
+              first_only: bool = False) -> list[Plan]:
     """The plans of ``scene``: one (:func:`plan`) when its runs share one data set; one per
     seed when every run draws its own (:func:`run_datasets`), each with that seed alone
     and that run's data set, so each is loaded, encoded and cached on its own. Cells of
     the plans differ by seed; their rows keep the scene's dataset name (runs pair across
-    seeds) and record the run's data set (``run_dataset``, ``dataset_hash``)."""
+    seeds) and record the run's data set (``run_dataset``, ``dataset_hash``).
+
+    ``first_only``: of runs that draw their own data sets, plan the first seed's alone,
+    its data set kept (one data set made, not one per seed: ``tactbench plan``, which
+    derives the other runs' cells from it, :func:`other_run_identity`)."""
     registry = registry or load_registry()
     specs = run_datasets(scene, registry)
     if specs is None:
         return [plan(scene, registry, progress=progress)]
+    if first_only:
+        seed, spec = next(iter(specs.items()))
+        return [plan(dataclasses.replace(scene, seeds=[seed]), registry, progress=progress,
+                     run_dataset=spec)]
     # each run's data set is let go once planned (a run's may be hundreds of MB): the
     # step that needs it loads it again from the simulator's cache (with_dataset)
     return [dataclasses.replace(plan(dataclasses.replace(scene, seeds=[seed]), registry,
                                      progress=progress, run_dataset=spec), dataset=None)
             for seed, spec in specs.items()]
+
+
+def other_run_identity(identity: dict[str, Any], seed: int, run_dataset: str,
+                       dataset_hash: str) -> dict[str, Any]:
+    """The identity of a cell of one run (``identity``, made by :func:`plan` with its
+    ``run_dataset``) in run ``seed`` instead, on that run's data set ``run_dataset`` of
+    content hash ``dataset_hash``: what :func:`plan` gives that run, without loading its
+    data set when the hash is known otherwise (a stored row's)."""
+    return {**identity, "seed": int(seed), "run_dataset": run_dataset,
+            "dataset_hash": dataset_hash}
 
 
 def with_dataset(p: Plan, *, progress=None) -> Plan:

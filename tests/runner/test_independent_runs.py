@@ -141,3 +141,46 @@ def test_the_forecast_of_per_run_people_has_no_floor(tiny_scene):
     (p,) = f.primaries
     assert p.ratio == 0.0 and p.floor == 0.0
     assert len(f.cells) == 6
+
+
+def _count_loads(monkeypatch) -> list[str]:
+    """The seeds of every data set of the simulator loaded (made or read from its cache)."""
+    from tactbench.datasets.synthetic_forearm import SyntheticForearm
+
+    loads, load = [], SyntheticForearm.load
+
+    def counted(self, *args, **kwargs):
+        loads.append(self.options["seed"])
+        return load(self, *args, **kwargs)
+
+    monkeypatch.setattr(SyntheticForearm, "load", counted)
+    return loads
+
+
+def test_a_plan_of_many_runs_makes_one_data_set(tiny_scene, monkeypatch):
+    """tactbench plan makes the first run's data set only: the other runs' cells are
+    derived from its plan, none finished without a stored row."""
+    loads = _count_loads(monkeypatch)
+    scene = _scene(tiny_scene, seeds=[0], until="answered", max_runs=20,
+                   primary=["encoder=raw..encoder=frame-diff"])
+    f = forecast(scene)
+    assert loads == [0]
+    assert f.independent and f.runs_not_made == 19
+    assert len(f.cells) == 40 and f.unknown == 40
+    assert [c.label for c in f.cells][-1] == "frame-diff × logreg L=3 seed=19"
+    (p,) = f.primaries
+    assert p.runs == 20 and p.floor == 0.0
+
+
+def test_a_plan_finds_the_stored_cells_of_runs_it_did_not_make(tiny_scene, cache,
+                                                             monkeypatch):
+    """A later run's cell is finished where a stored row of its run's data set has the key
+    the cell has with that row's content hash; the same cell as run computes it."""
+    run(_scene(tiny_scene, seeds=[0, 2]), cache=cache, progress=False, plots=False)
+    loads = _count_loads(monkeypatch)
+    f = forecast(_scene(tiny_scene, seeds=[0, 1, 2, 3]))
+    assert loads == [0] and f.runs_not_made == 3
+    finished = {c.label for c in f.cells if c.source == "finished (stored)"}
+    assert finished == {f"{enc} × logreg L=3 seed={s}" for enc in ("raw", "frame-diff")
+                        for s in (0, 2)}
+    assert all(c.seconds is not None for c in f.cells)  # the stored rows time the rest
