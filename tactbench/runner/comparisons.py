@@ -445,12 +445,23 @@ def independent(rows: Sequence[dict[str, Any]]) -> bool:
     return bool(rows) and all(r.get(INDEPENDENT_RUNS) is True for r in rows)
 
 
+#: The ``method`` of a comparison over independent replications (its start: a note on
+#: split-seed means may follow); every other comparison's t is corrected for overlap.
+INDEPENDENT_METHOD = "paired t over independent runs (each run its own data set)"
+
+
+def plain_t(c: "Comparison") -> bool:
+    """Whether comparison ``c`` is the plain paired t over independent runs (ratio 0,
+    :func:`independent`), not a t corrected for runs that overlap."""
+    return c.method.startswith(INDEPENDENT_METHOD)
+
+
 def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
     """The correction of per-fold differences (1/(K − 1)) or of per-run differences
     (n_test/n_train) of these runs, and the test's name; 0 for independent replications
     (:func:`independent`), whose t is the plain paired t over runs."""
     if independent(rows):
-        return 0.0, "paired t over independent runs (each run its own data set)"
+        return 0.0, INDEPENDENT_METHOD
     folds = rows[0].get("folds")
     if folds:
         return 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "

@@ -6,7 +6,7 @@ import math
 import re
 from typing import Any, Iterable, Mapping, Sequence
 
-from tactbench.runner.comparisons import P_RULE, Comparison, read_comparisons
+from tactbench.runner.comparisons import P_RULE, Comparison, plain_t, read_comparisons
 from tactbench.runner.statistics import MIN_RUNS
 from tactbench.runner.summaries import (
     FACTORS,
@@ -85,6 +85,24 @@ COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
                      "95 % interval over runs (unadjusted)", "runs B>A / A>B / tied",
                      "p (corrected t)", "Holm p (its family)",
                      "P(A better / ≈ / B better)", "runs for 80 % power", "verdict"]
+#: The p column's name where a table's comparisons are all the plain paired t over
+#: independent runs, or some are and some are corrected (:func:`comparison_header`).
+P_COLUMN = {"plain": "p (paired t)", "mixed": "p (t over runs)"}
+
+
+def _t_kind(comps: Sequence[Comparison]) -> str:
+    """``corrected`` (every comparison's t is corrected for overlapping runs), ``plain``
+    (every one is the paired t over independent runs) or ``mixed``."""
+    kinds = {plain_t(c) for c in comps}
+    return "corrected" if True not in kinds else "plain" if kinds == {True} else "mixed"
+
+
+def comparison_header(comps: Comparisons) -> list[str]:
+    """The header of a table of ``comps``: :data:`COMPARISON_HEADER`, its p column named
+    by the t its comparisons were tested with (never "corrected" for the plain t)."""
+    kind = _t_kind(read_comparisons(comps))
+    return [P_COLUMN.get(kind, col) if col == "p (corrected t)" else col
+            for col in COMPARISON_HEADER]
 
 
 def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
@@ -101,8 +119,8 @@ def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None
 
 def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[list[str]]:
     """Table cells: factor, A, B, where (the shared factors), B − A (points), the
-    run-level interval, runs B>A/A>B/tied, p of the corrected t and of the sign-flip
-    test, the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
+    run-level interval, runs B>A/A>B/tied, p of the t over runs (corrected, or plain
+    over independent runs: the comparison's ``method``), the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
     and the verdict. A classifier is named by its label in ``labels`` (by default the
     labels among the classifiers of ``comps``, :func:`comparison_labels`)."""
     comps = read_comparisons(comps)
@@ -144,7 +162,7 @@ def _p_value(p: float | None) -> str:
 def comparisons_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
     if not comps:
         return ""
-    lines = ["| " + " | ".join(COMPARISON_HEADER) + " |",
+    lines = ["| " + " | ".join(comparison_header(comps)) + " |",
              "|" + "---|" * len(COMPARISON_HEADER)]
     lines += ["| " + " | ".join(r) + " |" for r in comparison_rows(comps, labels)]
     return "\n".join(lines)
@@ -175,7 +193,7 @@ def _rich_table(title: str, comps: Sequence[Comparison], labels: Labels):
     from rich.table import Table
 
     table = Table(title=title, title_justify="left")
-    for col in COMPARISON_HEADER:
+    for col in comparison_header(comps):
         table.add_column(col, justify="left" if col in ("factor", "A", "B", "where",
                                                         "verdict") else "right")
     for row in comparison_rows(comps, labels):
@@ -384,14 +402,28 @@ VARIANCE_TEXT = (
     "\"Where the difference's variance comes from\").")
 
 
-#: What report.md says above its table of comparisons.
-COMPARISONS_TEXT = (
+#: The test the interval and p of a table's comparisons come from, by :func:`_t_kind`.
+T_TEXT = {
+    "corrected": "the corrected resampled t over runs (Nadeau–Bengio; for K folds "
+                 "Bouckaert–Frank), which counts the training variability, not only the "
+                 "test set's,",
+    "plain": "the plain paired t over runs (each run drew its own data set, so runs are "
+             "independent replications with no overlap to correct for), which counts the "
+             "training variability, not only the test set's,",
+    "mixed": "the t over runs: corrected resampled (Nadeau–Bengio; for K folds "
+             "Bouckaert–Frank) where runs re-split one data set, the plain paired t where "
+             "each run drew its own (each comparison's `method` in results.json); either "
+             "counts the training variability, not only the test set's,",
+}
+#: What report.md says above its table of comparisons, with the test (:data:`T_TEXT`)
+#: and the rule of p (:data:`~tactbench.runner.comparisons.P_RULE`, "the corrected t's"
+#: said "that t's" where not every t is corrected).
+COMPARISONS_TEMPLATE = (
     "Every two cells that differ in one factor (and every contrast asked for), compared "
     "on the same test sequences run by run: B − A is the mean over runs (a run: one split "
     "seed, its split and initialisation) of the difference of accuracy. The interval is "
-    "the corrected resampled t over runs (Nadeau–Bengio; for K folds Bouckaert–Frank), "
-    "which counts the training variability, not only the test set's, at 95 % for that "
-    f"comparison alone (unadjusted); {P_RULE}. Primary comparisons (named with "
+    "{test} at 95 % for that "
+    "comparison alone (unadjusted); {rule}. Primary comparisons (named with "
     "--primary) are the confirmatory family; the rest are exploratory. Fewer than 3 runs "
     "give no verdict; an interval touching 0 is unresolved. P(A better / ≈ / B better) "
     "is the Bayesian correlated t (Corani & Benavoli 2015) within ±margin points; "
@@ -400,15 +432,26 @@ COMPARISONS_TEXT = (
     "of runs of these recordings would; \"ceiling\" is two models right on every "
     "recording. McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of "
     "those trained models only. See docs/statistics.md.")
+#: The text above the comparisons where every t is corrected (every stored report's).
+COMPARISONS_TEXT = COMPARISONS_TEMPLATE.format(test=T_TEXT["corrected"], rule=P_RULE)
 
 
-#: What report.md adds where the runs drew their own data sets (people=per-run).
+#: What report.md adds where runs drew their own data sets (people=per-run).
 INDEPENDENT_TEXT = (
-    " Here every run drew its own data set (`synthetic-forearm:people=per-run`: new "
-    "simulated people each run), so runs are independent replications: the interval is "
-    "the plain paired t over runs (no overlap correction, ratio 0) and no effect is "
-    "beyond what more runs resolve. The results speak of the simulator's population of "
+    " Where every run drew its own data set (`synthetic-forearm:people=per-run`: new "
+    "simulated people each run), runs are independent replications: no effect is beyond "
+    "what more runs resolve, and the results speak of the simulator's population of "
     "people, not of one recorded data set.")
+
+
+def comparisons_text(comps: Comparisons) -> str:
+    """The text above report.md's tables of ``comps``: :data:`COMPARISONS_TEXT` where every
+    t is corrected, else naming the plain paired t too (and :data:`INDEPENDENT_TEXT`)."""
+    kind = _t_kind(read_comparisons(comps))
+    if kind == "corrected":
+        return COMPARISONS_TEXT
+    rule = P_RULE.replace("the corrected t's", "that t's")
+    return COMPARISONS_TEMPLATE.format(test=T_TEXT[kind], rule=rule) + INDEPENDENT_TEXT
 
 
 def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> list[str]:
@@ -418,9 +461,7 @@ def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> lis
     comps = read_comparisons(comps)
     if not comps:
         return []
-    independent = any(c.ratio == 0 and "independent" in c.method for c in comps)
-    lines = ["## Paired comparisons over runs", "",
-             COMPARISONS_TEXT + (INDEPENDENT_TEXT if independent else ""), ""]
+    lines = ["## Paired comparisons over runs", "", comparisons_text(comps), ""]
     primary = [c for c in comps if c.family == "primary"]
     if primary:
         lines += ["### Primary questions (confirmatory)", "",

@@ -184,3 +184,28 @@ def test_a_plan_finds_the_stored_cells_of_runs_it_did_not_make(tiny_scene, cache
     assert finished == {f"{enc} × logreg L=3 seed={s}" for enc in ("raw", "frame-diff")
                         for s in (0, 2)}
     assert all(c.seconds is not None for c in f.cells)  # the stored rows time the rest
+
+
+def test_the_tables_of_independent_runs_claim_no_correction():
+    """report.md's and the terminal's tables name the p column by the t it is; the text
+    above says the plain paired t, and where every t is corrected nothing changes (the
+    stored reports' header and text)."""
+    from tactbench.runner.tables import (
+        COMPARISON_HEADER,
+        COMPARISONS_TEXT,
+        comparison_header,
+        comparisons_section,
+    )
+
+    plain = comparisons(_rows()[0], primary=PRIMARY)
+    fixed = comparisons(_rows(independent=False)[0], primary=PRIMARY)
+    text = "\n".join(comparisons_section(plain))
+    assert "corrected" not in text and "p (paired t)" in text
+    assert "the plain paired t over runs" in text and "p is that t's" in text
+    assert "p (paired t)" in comparison_header(plain)
+    assert comparison_header(fixed) == COMPARISON_HEADER
+    fixed_text = "\n".join(comparisons_section(fixed))
+    assert COMPARISONS_TEXT in fixed_text and "p (corrected t)" in fixed_text
+    assert "people=per-run" not in fixed_text
+    mixed = comparison_header([*plain, *fixed])
+    assert "p (t over runs)" in mixed and "p (corrected t)" not in mixed
