@@ -101,3 +101,43 @@ def test_a_budget_stops_between_looks_and_the_report_says_so(tmp_path, monkeypat
     assert looks["train_cpu_seconds"] == pytest.approx(
         sum(f["train_cpu_seconds"] for f in fits))
     assert "no batch begun past 1s" in (out / "report.md").read_text()
+
+
+def test_until_answered_over_runs_that_each_draw_their_people(tmp_path, monkeypatch):
+    """people=per-run, two workers: the looks test with ratio 0 (the plain paired t),
+    the runs are the looks' seeds, each on a data set of its own, and the same command
+    again computes nothing."""
+    import math
+    import statistics
+
+    from tactbench.runner.comparisons import INDEPENDENT_METHOD
+
+    out = tmp_path / "out"
+    tiny = ["--dataset", "synthetic-forearm:users=2,repetitions=1,people=per-run",
+            *TINY[2:]]
+    args = ["run", *tiny, "--out", str(out), "--primary", PRIMARY, "--until", "answered",
+            "--max-runs", "6", "--look-every", "1", "--workers", "2", "--json"]
+    first = _invoke(tmp_path, monkeypatch, *args)
+    assert first.exit_code == 0, first.output
+    doc = json.loads((out / "results.json").read_text())
+    looks = doc["looks"]["looks"]
+    assert [lk["runs"] for lk in looks] == [5, 6][:len(looks)]
+    runs = looks[-1]["runs"]
+    hashes = {}
+    for r in doc["rows"]:
+        assert r["independent_runs"] is True and r["status"] == "ok"
+        hashes.setdefault(r["seed"], set()).add(r["dataset_hash"])
+    assert set(hashes) == set(range(runs))  # the looks' seeds, none past the last look
+    assert all(len(h) == 1 for h in hashes.values())  # one data set per run ...
+    assert len(set.union(*hashes.values())) == runs  # ... each its own
+    [primary] = [c for c in doc["comparisons"] if c["family"] == "primary"]
+    assert primary["run_ratio"] == 0 and primary["ratio"] == 0
+    assert primary["method"].startswith(INDEPENDENT_METHOD)
+    # the last look's standard error is the plain one, sqrt(var/J): ratio 0
+    d = list(primary["per_run"].values())
+    [seen] = looks[-1]["comparisons"].values()
+    assert seen["se"] == pytest.approx(math.sqrt(statistics.variance(d) / runs))
+    again = _invoke(tmp_path, monkeypatch, *args)
+    assert again.exit_code == 0, again.output
+    assert json.loads(again.output)["meta"]["computed"] == 0
+    assert json.loads((out / "results.json").read_text())["looks"] == doc["looks"]
