@@ -12,8 +12,9 @@ from tactbench.runner.summaries import failed_cells, spec_labels, summarise
 from tactbench.runner.writers import write_reports
 
 #: Two resolved specs of one classifier (profile defaults merged), as rows store them.
-WIDE = ("small-cnn-lstm:batch_size=64,epochs=4,input_size=32,lr=0.003,optimizer=adam,"
-        "schedule=cosine,width=16,windows_per_epoch=8000")
+WIDE = ("small-cnn-lstm:batch_size=64,epochs=4,head=concat,input_size=16,lr=0.003,"
+        "optimizer=adamw,schedule=onecycle,weight_decay=0.01,width=16,"
+        "windows_per_epoch=24000")
 NARROW = WIDE.replace("width=16", "width=8")
 
 
