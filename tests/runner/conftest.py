@@ -4,6 +4,7 @@ with test classifier plugins (loadable in worker processes), a dataset without l
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,9 @@ import pytest
 from tactbench.runner import EncodingCache, Scene
 
 HERE = Path(__file__).resolve().parent
+# the runner's test helpers (prediction_rows) import by name under --import-mode=importlib
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
 
 # A tiny but real grid: the simulator at 2 users, coarse 10 mm images, a small CNN
 # trained for one short epoch. Seconds per cell, not minutes.

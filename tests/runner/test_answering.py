@@ -7,19 +7,13 @@ import pytest
 
 from tactbench.errors import InputError
 from tactbench.runner.answering import replay, schedule
+from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 PRIMARY = ["encoder=raw..encoder=farneback"]
 
 
 def _row(encoder, seed, truth, predicted):
-    acc = float(np.mean(np.asarray(truth) == np.asarray(predicted)))
-    return {"key": f"{encoder}-{seed}", "dataset": "d", "split": "paper",
-            "encoder": encoder, "classifier": "logreg", "L": 5, "seed": seed,
-            "status": "ok", "classes": ["a", "b"], "accuracy": acc,
-            "per_class_accuracy": {"a": acc, "b": acc}, "confusion": [[1, 0], [0, 1]],
-            "n_train": 4 * len(truth), "n_test": len(truth),
-            "test_predictions": {"indices": list(range(len(truth))), "labels": list(truth),
-                                 "predictions": list(predicted)}}
+    return prediction_row(encoder, seed, truth, predicted, split="paper")
 
 
 def _rows(seeds, gain, n=400, rng_seed=0):

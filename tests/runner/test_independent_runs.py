@@ -17,6 +17,7 @@ from tactbench.runner.forecast import forecast
 from tactbench.runner.planning import plan, plan_runs
 from tactbench.runner.power import detectable_effect, effect_floor, runs_for_power
 from tactbench.runner.results import INDEPENDENT_RUNS
+from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 PER_RUN = "synthetic-forearm:users=2,repetitions=1,positions=1,people=per-run"
 PRIMARY = ["encoder=raw..encoder=farneback"]
@@ -77,15 +78,8 @@ def test_a_run_trains_on_each_seeds_people_and_resumes_without_training(tiny_sce
 
 
 def _row(encoder, seed, truth, predicted, *, independent=True):
-    acc = float(np.mean(np.asarray(truth) == np.asarray(predicted)))
-    return {"key": f"{encoder}-{seed}", "dataset": "d", "split": "users",
-            "encoder": encoder, "classifier": "logreg", "L": 5, "seed": seed,
-            "status": "ok", "classes": ["a", "b"], "accuracy": acc,
-            "per_class_accuracy": {"a": acc, "b": acc}, "confusion": [[1, 0], [0, 1]],
-            "n_train": 4 * len(truth), "n_test": len(truth),
-            **({INDEPENDENT_RUNS: True} if independent else {}),
-            "test_predictions": {"indices": list(range(len(truth))), "labels": list(truth),
-                                 "predictions": list(predicted)}}
+    return prediction_row(encoder, seed, truth, predicted, split="users",
+                          **({INDEPENDENT_RUNS: True} if independent else {}))
 
 
 def _rows(independent=True, seeds=range(6), n=200):

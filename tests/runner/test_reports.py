@@ -13,6 +13,7 @@ import pytest
 from tactbench.runner import run
 from tactbench.runner.summaries import failed_cells, summarise
 from tactbench.runner.writers import write_reports
+from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -99,16 +100,8 @@ def test_only_failed_cells_give_a_report_without_plots(tmp_path):
 
 
 def _row(encoder, seed, truth, predicted, *, L=5, classifier="logreg", indices=None):
-    indices = list(range(len(truth))) if indices is None else indices
-    acc = sum(t == p for t, p in zip(truth, predicted)) / len(truth)
-    return {"key": f"{encoder}-{seed}-{L}", "dataset": "d", "split": "paper",
-            "encoder": encoder, "classifier": classifier, "L": L, "seed": seed,
-            "status": "ok", "classes": ["a", "b"], "accuracy": acc,
-            "per_class_accuracy": {"a": acc, "b": acc}, "confusion": [[1, 0], [0, 1]],
-            "encode_ms_per_frame": 1.0, "train_s": 1.0, "inference_ms_per_sequence": 1.0,
-            "peak_rss_mb": 1.0, "n_train": 3 * len(truth), "n_test": len(truth),
-            "test_predictions": {"indices": indices, "labels": list(truth),
-                                 "predictions": list(predicted)}}
+    return prediction_row(encoder, seed, truth, predicted, L=L, classifier=classifier,
+                          indices=indices, n_train=3 * len(truth))
 
 
 def _clear_win_rows(seeds=range(7), n=40, **kw):

@@ -20,6 +20,7 @@ import pytest
 
 from tactbench.errors import InputError
 from tactbench.runner.variance import mean_variance, paired_variance_components
+from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 
 def _simulate(rng, *, splits=4, inits=4, n=300, sd_split=0.04, sd_init=0.03,
@@ -120,15 +121,7 @@ def test_shapes_that_cannot_be_decomposed_are_refused(args, match):
 
 
 def _row(encoder, seed, truth, predicted):
-    acc = float(np.mean(np.array(truth) == np.array(predicted)))
-    return {"key": f"{encoder}-{seed}", "dataset": "d", "split": "users", "encoder": encoder,
-            "classifier": "logreg", "L": 5, "seed": seed, "status": "ok",
-            "classes": ["a", "b"], "accuracy": acc, "per_class_accuracy": {"a": acc, "b": acc},
-            "confusion": [[1, 0], [0, 1]], "encode_ms_per_frame": 1.0, "train_s": 1.0,
-            "inference_ms_per_sequence": 1.0, "peak_rss_mb": 1.0, "n_train": 120,
-            "n_test": len(truth),
-            "test_predictions": {"indices": list(range(len(truth))), "labels": list(truth),
-                                 "predictions": list(predicted)}}
+    return prediction_row(encoder, seed, truth, predicted, split="users", n_train=120)
 
 
 def _rows(inits, splits=3, users=None):
