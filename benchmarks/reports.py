@@ -1039,6 +1039,13 @@ def primary_findings(root: Path) -> list[str]:
         out.append("[The study's flagship](docs/reports/study.md), Farnebäck flow against "
                    "the pressure image at L = 5 (simulator, the default CNN): "
                    + "; ".join(items) + ".")
+    lengths = _load(root, "study", "lengths")
+    half = lengths and comp(lengths, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
+    if half:
+        out.append("[The study's window length](docs/reports/study.md), its \"flow at half "
+                   "the L beats pressure\" (study's split, a fixed design of "
+                   f"{half['runs']} runs): "
+                   + answer_words(half, "raw at L = 6", "flow at L = 3") + ".")
     images = _load(root, "which-classifier", "images")
     if images:
         prim = [c for c in images["comparisons"] if c.get("family") == "primary"]
@@ -1072,7 +1079,7 @@ def exploratory_findings(root: Path) -> list[str]:
     if lengths:
         out.append("[The study, window length](docs/reports/study.md) (study's split, "
                    f"{max(len(s['seeds']) for s in lengths['summary'])} "
-                   "runs): " + _half_l(lengths) + " With flow, accuracy at L = "
+                   "runs; its primary question is above). With flow, accuracy at L = "
                    + ", ".join(f"{s['L']}: {pct(s['accuracy_mean'])} %" for s in sorted(
                        (s for s in lengths["summary"] if s["encoder"] == "farneback"),
                        key=lambda s: s["L"]))
