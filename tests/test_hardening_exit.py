@@ -68,7 +68,8 @@ def test_a_forced_ascii_terminal_does_not_crash_on_the_times_sign(tmp_path):
 def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
     out = tmp_path / "out"
     env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}
-    clf = "small-cnn-lstm:epochs=50,windows_per_epoch=256,batch_size=16,input_size=16"
+    # long enough that Ctrl-C lands mid-training (the quick profile's 16-px concat head is fast)
+    clf = "small-cnn-lstm:epochs=1000,windows_per_epoch=256,batch_size=16,input_size=16"
     scene = tmp_path / "scene.toml"
     scene.write_text("test_per_class = 1\n")
     proc = subprocess.Popen(
