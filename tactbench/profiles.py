@@ -71,7 +71,7 @@ PROFILES: dict[str, Profile] = {
     "quick": Profile("quick", pixel_mm=5.0, classifiers={
         # 4 epochs × 24 000 sampled windows = 96 000 windows, AdamW with a one-cycle
         # schedule, 16 px input, the frames' pooled features concatenated: the knee of
-        # the measured frontier (docs/classifiers.md, "The quick default"; issue 28).
+        # the measured frontier (docs/classifiers.md, "Recipes measured against the tree").
         "small-cnn-lstm": {
             "epochs": 4, "windows_per_epoch": 24000, "batch_size": 64, "width": 16,
             "optimizer": "adamw", "lr": 3e-3, "weight_decay": 0.01, "schedule": "onecycle",
