@@ -178,11 +178,15 @@ def run_grid(report: str, part: str, args: list[str], root: Path, *,
                   "skipped": doc["meta"]["skipped"], "date": _today(),
                   "cpu_seconds": doc["meta"].get("cpu_seconds"),
                   "budget_stop": doc["meta"].get("budget_stop")}
-        if timing["computed"] == 0 and timing_path.is_file():
-            kept = json.loads(timing_path.read_text())
+        kept = json.loads(timing_path.read_text()) if timing_path.is_file() else None
+        if timing["computed"] == 0 and kept:
             kept["reread_s"] = wall
             timing = kept
         else:
+            if kept and timing["skipped"]:  # resumed: the cells reused cost the earlier run
+                timing["earlier"] = [*kept.get("earlier", []),
+                                     {k: kept.get(k) for k in ("command", "wall_s", "computed",
+                                                               "date", "cpu_seconds")}]
             timing_path.write_text(json.dumps(timing, indent=2) + "\n")
     rows = ResultStore(out).stored_rows()  # the cells: the folder's one store of rows
     contrasts, margin = _statistics_options(args)
@@ -221,8 +225,10 @@ def header(title: str, name: str, what: str, parts: list[dict], m: dict,
     walls = []
     for p in parts:
         t = p["timing"]
-        reused = (f"; {t['skipped']} reused from an earlier run of the same command, "
-                  "whose time is not counted here" if t.get("skipped") else "")
+        earlier = sum(e["wall_s"] for e in t.get("earlier", ()))
+        reused = (f"; {t['skipped']} reused from an earlier run, "
+                  + (f"which took {earlier / 60:.1f} min more" if earlier else
+                     "whose time is not counted here") if t.get("skipped") else "")
         walls.append(f"`{p['part']}` {t['wall_s'] / 60:.1f} min ({t['computed']} cells "
                      f"computed on {t['date']}" + reused
                      + (f"; {t['note']}" if t.get("note") else "") + ")")
@@ -358,7 +364,7 @@ DESIGNS = [
      "recordings re-split every run", ["--split", "users"], "10m"),
     ("people", "independent replications: every run draws 38 new simulated people "
      f"(`{PEOPLE}`) and splits them as the study did", ["--dataset", PEOPLE,
-                                                         "--split", "paper"], "15m"),
+                                                         "--split", "paper"], "30m"),
 ]
 
 

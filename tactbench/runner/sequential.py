@@ -177,6 +177,11 @@ def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: in
         return Look(j, mean, se, z, c, alpha, "equivalent")
     if j >= max_runs:
         return Look(j, mean, se, z, c, alpha, "futile", "the last planned look")
+    if se == 0:  # mean 0 too (else |z| is infinite): every run gave exactly no difference
+        return Look(j, mean, se, z, c, alpha, "futile",
+                    "every run gave the same difference, 0: nothing varies to test (a "
+                    "ceiling, where both are right on every recording), and more runs "
+                    "like these add nothing")
     # futile: even a difference at the near edge of today's 95 % interval (the most
     # favourable one the runs so far allow) would not cross the last look's boundary
     se_last = float(math.sqrt((1 / max_runs + ratio) * d.var(ddof=1)))

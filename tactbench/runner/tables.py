@@ -547,9 +547,17 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
     answer = verdict_text(c, labels)
     if c.verdict in ("unresolved", "too few runs"):
         more = _power_runs(c)
-        answer += (" — these data cannot tell at any number of runs" if more ==
-                   "beyond these data" else f" — about {more} runs would answer it at "
-                   f"80 % power" if more != "-" else "")
+        if more == "beyond these data":
+            answer += " — these data cannot tell at any number of runs"
+        elif more.isdigit() and int(more) <= c.runs and \
+                (c.note or "").startswith("group-sequential"):
+            # enough runs for one fixed test, yet open: an early look's boundary is stricter
+            answer += (f" — {more} runs would give 80 % power in a single test at its "
+                       f"family's level; it has {c.runs}, but an early look's boundary "
+                       "(α spent over the looks) is stricter: the next look would likely "
+                       "answer it")
+        elif more != "-":
+            answer += f" — about {more} runs would answer it at 80 % power"
     return f"{head}: {answer}; {detail}."
 
 

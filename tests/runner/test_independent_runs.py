@@ -203,3 +203,23 @@ def test_the_tables_of_independent_runs_claim_no_correction():
     assert "people=per-run" not in fixed_text
     mixed = comparison_header([*plain, *fixed])
     assert "p (t over runs)" in mixed and "p (corrected t)" not in mixed
+
+
+def test_an_open_answer_says_what_holds_it_back():
+    """A primary question left open by an early look's boundary, with enough runs for a
+    single test already, does not ask for runs it has; a fixed design names its runs."""
+    import dataclasses
+
+    from tactbench.runner.tables import answer_text
+
+    (c,) = comparisons(_rows()[0], primary=PRIMARY)
+    assert c.runs_for_power is not None
+    held = dataclasses.replace(c, verdict="unresolved", runs_for_power=c.runs - 1,
+                               note="group-sequential: no boundary crossed in 1 look(s)")
+    text = answer_text(held)
+    assert f"it has {c.runs}" in text and "early look's boundary" in text
+    assert "would answer it" not in text
+    fixed = dataclasses.replace(c, verdict="unresolved", runs_for_power=c.runs + 4, note="")
+    assert f"about {c.runs + 4} runs would answer it" in answer_text(fixed)
+    floor = dataclasses.replace(c, verdict="unresolved", runs_for_power=None, note="")
+    assert "cannot tell at any number of runs" in answer_text(floor)

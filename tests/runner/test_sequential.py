@@ -105,3 +105,16 @@ def test_a_look_says_why_it_stops():
     assert strong.decision == "B better" and strong.t > strong.boundary
     with pytest.raises(InputError, match="last look"):
         look(d, RATIO, looks=[5], max_runs=8, alpha=0.05)
+
+
+def test_a_ceiling_stops_at_its_first_look_instead_of_running_to_the_budget():
+    # both models right on every recording of every run: the difference is 0 in each run,
+    # nothing varies, and more runs cannot decide it (stopping without a verdict spends no α)
+    res = look(np.zeros(5), RATIO, looks=[5], max_runs=20, alpha=0.05, margin=0.02)
+    assert res.decision == "futile" and "ceiling" in res.why
+    state = FamilyState(0.05, ["ceiling", "open"])
+    seen = family_look(state, {"ceiling": np.zeros(5),
+                               "open": np.array([0.01, -0.02, 0.03, 0.0, 0.01])},
+                       {"ceiling": RATIO, "open": RATIO}, looks=[5], max_runs=20)
+    assert seen["ceiling"].decision == "futile" and "ceiling" in state.closed
+    assert seen["open"].decision == "continue" and "open" not in state.closed
