@@ -68,8 +68,9 @@ def test_a_forced_ascii_terminal_does_not_crash_on_the_times_sign(tmp_path):
 def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
     out = tmp_path / "out"
     env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}
-    # long enough that Ctrl-C lands mid-training (the quick profile's 16-px concat head is fast)
-    clf = "small-cnn-lstm:epochs=150,windows_per_epoch=256,batch_size=16,input_size=16"
+    # long enough that Ctrl-C lands mid-training and no cell could end before the wait
+    # below does (minutes a cell here): the run must stop its workers, not wait for them
+    clf = "small-cnn-lstm:epochs=1000,windows_per_epoch=256,batch_size=16,input_size=16"
     scene = tmp_path / "scene.toml"
     scene.write_text("test_per_class = 1\n")
     proc = subprocess.Popen(
@@ -85,7 +86,12 @@ def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
         time.sleep(0.1)
     time.sleep(8)  # the spawned workers import torch and start their cells
     os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
-    stdout, stderr = proc.communicate(timeout=120)
+    try:
+        stdout, stderr = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError("Ctrl-C did not stop the run within 60 s: it waited for the "
+                             "workers' running cells") from None
     text = stderr.decode(errors="replace")
     assert proc.returncode == 130, text[-2000:]
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-2000:]

@@ -74,7 +74,8 @@ def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
         for fut in as_completed(futures):
             finish(_row(fut, futures[fut]))
     except BaseException:  # Ctrl-C or a failing finish(): do not wait for the queue
-        stop_workers(pool)  # Ctrl-C is the parent's: workers end quietly, not mid-cell
+        stop_workers(pool)  # Ctrl-C is the parent's: it ends the workers, whose running
+        # cells are lost (a resumed run trains them again); finished cells are stored
         raise
     pool.shutdown()
 

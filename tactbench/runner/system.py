@@ -94,8 +94,14 @@ def ignore_interrupts() -> None:
 def stop_workers(pool) -> None:
     """Stop a ``ProcessPoolExecutor`` now: drop its queue and end its workers, so that
     the interpreter does not wait for running cells on its way out."""
+    if hasattr(pool, "terminate_workers"):  # Python ≥ 3.14 says it publicly
+        pool.terminate_workers()
+        return
+    # before shutdown(), which forgets its processes: without them, the interpreter's
+    # exit would join the pool's manager thread, which waits for every running cell
+    processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
-    for process in list((getattr(pool, "_processes", None) or {}).values()):
+    for process in processes:
         if process.is_alive():
             process.terminate()
 
