@@ -571,7 +571,7 @@ def looks_markdown(looks: Mapping[str, Any]) -> str:
     lines = [f"Runs were added in batches until every primary question was decided "
              f"(at most {looks['max_runs']} runs{budget}; α spent over the looks, "
              f"O'Brien–Fleming type, Holm carried over them): {md(looks['stopped'])}."
-             + spent, "",
+             + spent + _beyond_looks(looks), "",
              "| look | runs | comparison | B − A (points) | \\|t\\| | boundary | decision |",
              "|---|---|---|---|---|---|---|"]
     for k, look in enumerate(looks["looks"], 1):
@@ -583,6 +583,19 @@ def looks_markdown(looks: Mapping[str, Any]) -> str:
                          f"{100 * lk['difference']:+.1f} | {t} | {bound} | "
                          f"{lk['decision']}{why} |")
     return "\n".join(lines)
+
+
+def _beyond_looks(looks: Mapping[str, Any]) -> str:
+    """Where more runs are stored than the last look used: the tables use them all, the
+    verdicts only the looks'."""
+    stored, seen = looks.get("runs_stored"), looks.get("looks") or ()
+    used = seen[-1]["runs"] if seen else 0
+    if not stored or stored <= used:
+        return ""
+    return (f" {stored} runs are stored and the tables use them all; the looks, and the "
+            f"verdicts they give, use the first {used} (the {stored - used} beyond: a "
+            "batch not yet complete, or runs made under an earlier stopping rule or by "
+            "hand; a verdict a look reached does not change).")
 
 
 def primary_section(comps: Comparisons, looks: Mapping[str, Any] | None,

@@ -199,6 +199,7 @@ def make_report(rows: Sequence[dict[str, Any]], *,
                        primary=primary, margin=margin).as_dict()
         looks["budget"] = sequential.get("budget")
         looks["train_cpu_seconds"] = training_cpu_seconds(rows)
+        looks["runs_stored"] = len({int(r["seed"]) for r in ok_rows(rows)})
     comps = comparisons(rows, contrasts=contrasts, margin=margin, users=users, primary=primary)
     if looks is not None:
         comps = [sequential_verdict(c, looks) if c.family == "primary" else c for c in comps]

@@ -60,3 +60,20 @@ def test_looks_wait_for_their_runs_and_say_why_they_stopped():
 def test_no_primary_is_a_clear_error():
     with pytest.raises(InputError, match="--primary"):
         replay(_rows(range(5), 0.1), seed_order=list(range(5)), looks=[5], primary=[])
+
+
+def test_runs_stored_beyond_the_last_look_are_said_beside_the_looks():
+    """A report whose folder holds more runs than its looks used (a batch cut short, or
+    runs of an earlier stopping rule) says so: its tables use every run, its verdicts the
+    looks' runs."""
+    from tactbench.runner.tables import looks_markdown
+    from tactbench.runner.writers import make_report
+
+    rows = _rows(range(8), 0.2)
+    sequential = {"seed_order": list(range(20)), "looks": schedule(20, 5), "budget": None}
+    report = make_report(rows, primary=PRIMARY, sequential=sequential)
+    assert report.looks["runs_stored"] == 8 and report.looks["looks"][-1]["runs"] == 5
+    text = looks_markdown(report.looks)
+    assert "8 runs are stored" in text and "use the first 5" in text
+    exact = make_report(_rows(range(5), 0.2), primary=PRIMARY, sequential=sequential)
+    assert "runs are stored" not in looks_markdown(exact.looks)
