@@ -70,7 +70,7 @@ def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
     env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}
     # long enough that Ctrl-C lands mid-training (the quick profile's 16-px concat head is
     # fast); that the workers are ended, not waited for, is test_stop_workers_ends_…
-    clf = "small-cnn-lstm:epochs=150,windows_per_epoch=256,batch_size=16,input_size=16"
+    clf = "small-cnn-lstm:epochs=400,windows_per_epoch=256,batch_size=16,input_size=16"
     scene = tmp_path / "scene.toml"
     scene.write_text("test_per_class = 1\n")
     proc = subprocess.Popen(

@@ -13,7 +13,7 @@ cannot drift from its evidence. The decisions follow :mod:`tactbench.runner.sequ
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 from tactbench.errors import InputError
 from tactbench.runner.comparisons import Comparison, comparisons
@@ -117,3 +117,15 @@ def first_look_to_run(stored_seeds: set[int], seed_order: Sequence[int],
     last = max(seed_order.index(s) for s in stored_seeds) + 1
     return next(k for k, n in enumerate(looks) if n >= last)
 
+
+def beyond_looks(looks: Mapping[str, Any]) -> str:
+    """Where more runs are stored than the last look used: the tables use them all, the
+    verdicts only the looks'."""
+    stored, seen = looks.get("runs_stored"), looks.get("looks") or ()
+    used = seen[-1]["runs"] if seen else 0
+    if not stored or stored <= used:
+        return ""
+    return (f" {stored} runs are stored and the tables use them all; the looks, and the "
+            f"verdicts they give, use the first {used} (the {stored - used} beyond: a "
+            "batch not yet complete, or runs made under an earlier stopping rule or by "
+            "hand; a verdict a look reached does not change).")

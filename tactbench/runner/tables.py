@@ -6,6 +6,7 @@ import math
 import re
 from typing import Any, Iterable, Mapping, Sequence
 
+from tactbench.runner.answering import beyond_looks
 from tactbench.runner.comparisons import P_RULE, Comparison, plain_t, read_comparisons
 from tactbench.runner.statistics import MIN_RUNS
 from tactbench.runner.summaries import (
@@ -551,7 +552,6 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
             answer += " — these data cannot tell at any number of runs"
         elif more.isdigit() and int(more) <= c.runs and \
                 (c.note or "").startswith("group-sequential"):
-            # enough runs for one fixed test, yet open: an early look's boundary is stricter
             answer += (f" — {more} runs would give 80 % power in a single test at its "
                        f"family's level; it has {c.runs}, but an early look's boundary "
                        "(α spent over the looks) is stricter: the next look would likely "
@@ -571,7 +571,7 @@ def looks_markdown(looks: Mapping[str, Any]) -> str:
     lines = [f"Runs were added in batches until every primary question was decided "
              f"(at most {looks['max_runs']} runs{budget}; α spent over the looks, "
              f"O'Brien–Fleming type, Holm carried over them): {md(looks['stopped'])}."
-             + spent + _beyond_looks(looks), "",
+             + spent + beyond_looks(looks), "",
              "| look | runs | comparison | B − A (points) | \\|t\\| | boundary | decision |",
              "|---|---|---|---|---|---|---|"]
     for k, look in enumerate(looks["looks"], 1):
@@ -583,19 +583,6 @@ def looks_markdown(looks: Mapping[str, Any]) -> str:
                          f"{100 * lk['difference']:+.1f} | {t} | {bound} | "
                          f"{lk['decision']}{why} |")
     return "\n".join(lines)
-
-
-def _beyond_looks(looks: Mapping[str, Any]) -> str:
-    """Where more runs are stored than the last look used: the tables use them all, the
-    verdicts only the looks'."""
-    stored, seen = looks.get("runs_stored"), looks.get("looks") or ()
-    used = seen[-1]["runs"] if seen else 0
-    if not stored or stored <= used:
-        return ""
-    return (f" {stored} runs are stored and the tables use them all; the looks, and the "
-            f"verdicts they give, use the first {used} (the {stored - used} beyond: a "
-            "batch not yet complete, or runs made under an earlier stopping rule or by "
-            "hand; a verdict a look reached does not change).")
 
 
 def primary_section(comps: Comparisons, looks: Mapping[str, Any] | None,
