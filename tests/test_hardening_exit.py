@@ -78,7 +78,9 @@ def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
          "synthetic-forearm:users=2,repetitions=1", "--encoder", "raw", "--classifier", clf,
          "-L", "2", "--seed", "0", "--seed", "1", "--pixel-mm", "10", "--threads", "1",
          "--workers", "2", "--out", str(out), "--no-plots", str(scene)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+        # an earlier test may leave SIGINT ignored in pytest, and a child inherits that
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 180
     # wait until the workers train: the encodings are cached and no cell has finished
     while time.time() < deadline and proc.poll() is None and not any(
