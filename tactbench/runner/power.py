@@ -9,7 +9,8 @@ seed means of K folds, see :func:`seed_mean_ratio`). Everything here follows fro
 variance:
 
 - :func:`power`: the power of the two-sided corrected t at J runs for a true difference
-  ``effect`` (noncentral t with J − 1 degrees of freedom);
+  ``effect`` (noncentral t with J − 1 degrees of freedom, :func:`t_power`: one integral
+  over the normal, exact at every number of runs where scipy's ``nct`` is not);
 - :func:`detectable_effect`: the smallest difference found at a given power;
 - :func:`runs_for_power`: the fewest runs reaching a power, or None;
 - :func:`effect_floor`: the limit of :func:`detectable_effect` as J → ∞ — no number of
@@ -26,7 +27,7 @@ variance:
 Hand-written rather than taken from a library: statsmodels' ``TTestPower`` and baycomp's
 ``CorrelatedTTest`` both assume another variance (the plain t, and a correlation fixed at
 ``1/K`` by K folds); the corrected variance with ``ratio = n_test/n_train`` needs only the
-noncentral t and the Student t of scipy. ``tests/runner/test_power.py`` checks each
+noncentral t (computed here, :func:`t_power`) and the Student t of scipy. ``tests/runner/test_power.py`` checks each
 against an independent computation (a simulation, or baycomp where it applies).
 """
 
@@ -74,24 +75,44 @@ def se_factor(runs: int, ratio: float) -> float:
 def power(effect: float, sd: float, ratio: float, runs: int, *, alpha: float = 0.05
           ) -> float:
     """The power of the two-sided corrected t at level ``alpha`` with ``runs`` runs for a
-    true mean difference ``effect`` (same unit as ``sd``, the per-run standard deviation)."""
-    import numpy as np
+    true mean difference ``effect`` (same unit as ``sd``, the per-run standard deviation):
+    :func:`t_power` at noncentrality ``effect / (sd · sqrt(1/J + ratio))``, J − 1 degrees
+    of freedom. Exact at every number of runs (to about 1e-10)."""
     from scipy import stats
 
     alpha = _check(alpha, "alpha", high=1.0, open_low=True)
     sd = _check(sd, "sd")
     effect = abs(_check(effect, "effect", low=-math.inf))
     se = sd * se_factor(runs, ratio)
-    df = runs - 1
-    q = stats.t.ppf(1 - alpha / 2, df)
     if se == 0:
         return 1.0 if effect > 0 else alpha
-    nc = effect / se
-    with np.errstate(all="ignore"):
-        value = float(stats.nct.sf(q, df, nc) + stats.nct.cdf(-q, df, nc))
-    if not math.isfinite(value):  # scipy's noncentral t gives up far in the tail
-        value = float(stats.norm.sf(q - nc) + stats.norm.cdf(-q - nc))
-    return min(1.0, max(0.0, value))
+    df = runs - 1
+    return t_power(effect / se, float(stats.t.isf(alpha / 2, df)), df)
+
+
+def t_power(noncentrality: float, critical: float, df: int) -> float:
+    """``P(|T| > critical)`` for a noncentral t with ``df`` degrees of freedom: with
+    ``T = (Z + λ) / sqrt(V/df)``, ``Z`` standard normal and ``V ~ χ²(df)``,
+    ``|T| > c`` exactly when ``V < (Z + λ)² · df / c²``, so the power is
+    ``E_Z[F_χ²(df)((Z + λ)² · df / c²)]``, one integral over the normal (scipy's
+    ``quad``, split where the integrand's kink and peak lie).
+
+    scipy's ``nct.sf`` is wrong at 1–2 degrees of freedom for a large noncentrality (at
+    df 2 it gives 0.949 where the power is 0.749: docs/statistics.md), which is why this
+    is computed here; ``tests/runner/test_power.py`` checks it against a simulation."""
+    from scipy import integrate, special
+
+    nc = abs(float(noncentrality))
+    c = df / (float(critical) ** 2)
+    edge = 40.0  # the normal's mass beyond ±40 is below 1e-300
+
+    def integrand(z: float) -> float:
+        return float(special.chdtr(df, (z + nc) ** 2 * c)) * math.exp(-0.5 * z * z)
+
+    cuts = sorted({-edge, edge, 0.0, max(-edge, -nc)})
+    total = sum(integrate.quad(integrand, a, b, epsabs=1e-15, epsrel=1e-12, limit=200)[0]
+                for a, b in zip(cuts, cuts[1:]))
+    return min(1.0, max(0.0, total / math.sqrt(2 * math.pi)))
 
 
 def detectable_effect(sd: float, ratio: float, runs: int, *, alpha: float = 0.05,
@@ -153,8 +174,10 @@ def runs_for_power(effect: float, sd: float, ratio: float, *, alpha: float = 0.0
 def sampling_sd(n_test: int, discordance: float, effect: float = 0.0) -> float:
     """The per-run standard deviation of a paired difference of accuracies from test
     sampling alone: ``sqrt((π − δ²) / n_test)``, ``π`` the share of test recordings on
-    which the two models disagree and ``δ`` the true difference (fractions). A lower
-    bound on the real per-run spread (training noise adds to it)."""
+    which the two models disagree and ``δ`` the true difference (fractions). With the
+    true ``π`` it is below the real per-run spread (training noise adds to it); with an
+    assumed ``π`` it is only as good as the assumption (a plan without a pilot says it
+    as one: :mod:`tactbench.runner.forecast`)."""
     if isinstance(n_test, bool) or not isinstance(n_test, int) or n_test < 1:
         raise InputError(f"n_test must be an integer ≥ 1, got {n_test!r}")
     pi = _check(discordance, "discordance", high=1.0)

@@ -17,6 +17,7 @@ from tactbench.runner.power import (
     runs_for_power,
     sampling_sd,
     seed_mean_ratio,
+    t_power,
 )
 from tactbench.runner.statistics import corrected_t, sign_flip_p
 
@@ -39,6 +40,55 @@ def test_power_matches_a_simulation_of_the_corrected_t():
     within = sd * math.sqrt(1 / (1 + ratio))
     simulated = float((corrected_t(d, ratio)["p"] < 0.05).mean())
     assert power(delta, within, ratio, runs) == pytest.approx(simulated, abs=0.03)
+
+
+#: Power of the corrected t at J = 3 runs (df 2), sd 0.0369, ratio 0.2667, α 0.0125,
+#: computed independently (docs/statistics.md, "Reference values"; scipy's nct gave
+#: 0.9490 / 0.9964 / 1.0000 for the last three).
+REFERENCE_POWER = [(0.25, 0.6182), (0.30, 0.7487), (0.33, 0.8114), (0.40, 0.9133)]
+
+
+@pytest.mark.parametrize("effect, expected", REFERENCE_POWER)
+def test_power_at_two_degrees_of_freedom_is_the_reference_value(effect, expected):
+    assert power(effect, 0.0369, 0.2667, 3, alpha=0.0125) == pytest.approx(expected, abs=1e-4)
+
+
+@pytest.mark.parametrize("df, nc, alpha", [(1, 5.0, 0.05), (2, 3.0, 0.05), (2, 6.0, 0.0125),
+                                           (4, 2.5, 0.01), (9, 4.0, 1e-3)])
+def test_t_power_matches_a_large_simulation_at_few_degrees_of_freedom(df, nc, alpha):
+    """A million noncentral t's drawn from their definition (Z + λ) / sqrt(V/df),
+    fixed seed; the simulated share beyond ±c is within 4 of its standard errors."""
+    from scipy import stats
+
+    rng = np.random.default_rng(37)
+    n = 1_000_000
+    c = float(stats.t.isf(alpha / 2, df))
+    t = (rng.standard_normal(n) + nc) / np.sqrt(rng.chisquare(df, n) / df)
+    share = float((np.abs(t) > c).mean())
+    assert t_power(nc, c, df) == pytest.approx(share, abs=4 * math.sqrt(share * (1 - share) / n))
+
+
+@pytest.mark.parametrize("df", [1, 2, 3, 10, 200])
+def test_t_power_under_no_difference_is_alpha(df):
+    from scipy import stats
+
+    for alpha in (0.05, 0.0125, 1e-6):
+        assert t_power(0.0, float(stats.t.isf(alpha / 2, df)), df) == \
+            pytest.approx(alpha, rel=1e-6)
+
+
+def test_runs_for_power_at_three_runs_is_what_a_simulation_of_the_corrected_t_says():
+    """An effect whose exact power at 2 runs is far below 80 % and at 3 runs above it:
+    runs_for_power says 3, and a simulation of the corrected t agrees with both powers."""
+    rng = np.random.default_rng(8)
+    sd, ratio, alpha = 0.02, 0.25, 0.025
+    effect = detectable_effect(sd, ratio, 3, alpha=alpha)
+    assert runs_for_power(effect * 1.001, sd, ratio, alpha=alpha) == 3
+    for runs in (2, 3):
+        d = _correlated_runs(rng, 200_000, runs, effect, sd * math.sqrt(1 + ratio), ratio)
+        share = float((corrected_t(d, ratio)["p"] < alpha).mean())
+        assert power(effect, sd, ratio, runs, alpha=alpha) == \
+            pytest.approx(share, abs=4 * math.sqrt(share * (1 - share) / 200_000))
 
 
 def test_detectable_effect_inverts_power_and_approaches_the_floor():
