@@ -31,7 +31,9 @@ declared better or worse, its α passes in equal shares to those still open, who
 boundaries are computed again at the larger level. Both steps are hand-written (no
 maintained Python library computes spending-function boundaries; statsmodels has none);
 ``tests/runner/test_sequential.py`` checks the family-wise error under no difference and
-the power under a real one by simulation with correlated runs.
+the power under a real one by simulation with correlated runs. :func:`procedure`
+forecasts what the whole procedure will do for a true difference (its power, expected
+runs, chance of ending futile), by the same rule and boundaries (``tactbench plan``).
 """
 
 from __future__ import annotations
@@ -82,10 +84,12 @@ def boundaries(looks: Sequence[int], max_runs: int, ratio: float, alpha: float
     the information fractions; a look whose information does not grow spends nothing
     (boundary ∞).
 
-    Placed by simulating the statistic itself under "no difference", with the
-    correlation between runs the correction assumes (ρ = ratio / (1 + ratio)): at each
-    look the boundary is the quantile of |t| among the paths still going that stops the
-    spent share of them. (Turning each t into a z and using a normal statistic's
+    The first look's is exact: under "no difference", with the correlation between runs
+    the correction assumes (ρ = ratio / (1 + ratio)), the corrected t at J runs is
+    Student's t with J − 1 degrees of freedom, so the boundary is its quantile at the
+    spent α (finite however small that is). The later ones are placed by simulating the
+    statistic itself under that model: at each look the boundary is the quantile of |t|
+    among the paths still going that stops the spent share of them. (Turning each t into a z and using a normal statistic's
     boundaries overspends α by 10–25 % with a handful of runs, since the variance is
     estimated anew at each look.) Deterministic: a fixed seed; remembered per request.
     """
@@ -104,6 +108,7 @@ def boundaries(looks: Sequence[int], max_runs: int, ratio: float, alpha: float
 def _boundaries(looks: tuple[int, ...], max_runs: int, ratio: float, alpha: float
                 ) -> tuple[float, ...]:
     import numpy as np
+    from scipy import stats
 
     rng = np.random.default_rng(20261125)
     rho = ratio / (1 + ratio)
@@ -124,12 +129,16 @@ def _boundaries(looks: tuple[int, ...], max_runs: int, ratio: float, alpha: floa
         variance = np.maximum(squares - total * total / j, 0.0) / (j - 1)
         with np.errstate(divide="ignore", invalid="ignore"):
             stat = np.abs((shared + total / j) / np.sqrt((1 / j + ratio) * variance))
-        stops = int(round(spent(t, alpha) * _PATHS)) - stopped
-        if stops <= 0 or not alive.any():
-            out.append(math.inf)
-            continue
-        going = np.sort(stat[alive])[::-1]
-        b = float(going[min(stops, len(going)) - 1])
+        if not out:  # the first look: the corrected t is exactly t(J − 1) under the model
+            share = spent(t, alpha)
+            b = float(stats.t.isf(share / 2, j - 1)) if share > 0 else math.inf
+        else:
+            stops = int(round(spent(t, alpha) * _PATHS)) - stopped
+            if stops <= 0 or not alive.any():
+                out.append(math.inf)
+                continue
+            going = np.sort(stat[alive])[::-1]
+            b = float(going[min(stops, len(going)) - 1])
         out.append(b)
         stopped += int(np.sum(alive & (stat >= b)))
         alive &= stat < b
@@ -154,46 +163,153 @@ class Look:
                 for k, v in self.__dict__.items()}
 
 
+#: The codes :func:`_decide` gives, by decision (futile has three reasons).
+_B, _A, _EQ, _LAST, _FLAT, _REACH, _GO = range(7)
+
+
+def _bounds(looks: Sequence[int], max_runs: int, ratio: float, alpha: float
+            ) -> tuple[float, float]:
+    """The boundary of the last of ``looks`` and that of the last planned look."""
+    planned = [*looks, max_runs] if max_runs > looks[-1] else list(looks)
+    bounds = boundaries(planned, max(max_runs, looks[-1]), ratio, alpha)
+    return bounds[len(looks) - 1], bounds[-1]
+
+
+def _decide(mean, var, j: int, ratio: float, c: float, c_last: float, max_runs: int,
+            margin: float | None):
+    """The decision codes of a look at ``j`` runs (arrays of means and sample variances
+    of the per-run differences, or scalars): what :func:`look` says, and what
+    :func:`procedure` simulates — one rule for both."""
+    import numpy as np
+
+    mean, var = np.asarray(mean, dtype=float), np.asarray(var, dtype=float)
+    se = np.sqrt((1 / j + ratio) * var)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(se > 0, mean / se, np.where(mean == 0, 0.0, np.sign(mean) * np.inf))
+        eq = (se > 0) & (np.minimum((mean + (margin or 0)) / se,
+                                    ((margin or 0) - mean) / se) >= c) & bool(margin)
+    # futile: even a difference at the near edge of today's 95 % interval (the most
+    # favourable one the runs so far allow) would not cross the last look's boundary,
+    # nor (with a margin) the worst edge fit inside it
+    se_last = np.sqrt((1 / max_runs + ratio) * var)
+    best = np.abs(mean) + FUTILITY_Z * se
+    worst = np.maximum(0.0, np.abs(mean) - FUTILITY_Z * se)
+    hopeless = ~(best >= c_last * se_last) & ~(bool(margin) & (worst + c_last * se_last
+                                                             <= (margin or 0)))
+    return np.select([np.abs(z) >= c, eq, np.full(z.shape, j >= max_runs), se == 0,
+                      hopeless], [np.where(z > 0, _B, _A), _EQ, _LAST, _FLAT, _REACH], _GO)
+
+
 def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: int,
          alpha: float, margin: float | None = None) -> Look:
     """The decision at the last of ``looks`` (run counts of every look so far, the last
     being ``len(d)``) for per-run differences ``d``, with looks planned up to
-    ``max_runs`` and this comparison's level ``alpha``."""
+    ``max_runs`` and this comparison's level ``alpha``. A question no number of runs up
+    to ``max_runs`` can decide (futile) stops at any look, the first included: stopping
+    without a verdict spends no α."""
     import numpy as np
 
     d = np.asarray(d, dtype=np.float64)
     j = len(d)
     if j < 2 or looks[-1] != j:
         raise InputError(f"a look needs ≥ 2 runs and the last look at {j}, got {list(looks)}")
-    planned = [*looks, max_runs] if max_runs > looks[-1] else list(looks)
-    bounds = boundaries(planned, max(max_runs, j), ratio, alpha)
-    c, c_last = bounds[len(looks) - 1], bounds[-1]
-    mean = float(d.mean())
-    se = float(math.sqrt((1 / j + ratio) * d.var(ddof=1)))
+    c, c_last = _bounds(looks, max_runs, ratio, alpha)
+    mean, var = float(d.mean()), float(d.var(ddof=1))
+    se = math.sqrt((1 / j + ratio) * var)
     z = mean / se if se > 0 else (0.0 if mean == 0 else math.copysign(math.inf, mean))
-    if abs(z) >= c:
-        return Look(j, mean, se, z, c, alpha, "B better" if z > 0 else "A better")
-    if margin and se > 0 and min((mean + margin) / se, (margin - mean) / se) >= c:
-        return Look(j, mean, se, z, c, alpha, "equivalent")
-    if j >= max_runs:
-        return Look(j, mean, se, z, c, alpha, "futile", "the last planned look")
-    if se == 0:  # mean 0 too (else |z| is infinite): every run gave exactly no difference
-        return Look(j, mean, se, z, c, alpha, "futile",
-                    "every run gave the same difference, 0: nothing varies to test (a "
-                    "ceiling, where both are right on every recording), and more runs "
-                    "like these add nothing")
-    # futile: even a difference at the near edge of today's 95 % interval (the most
-    # favourable one the runs so far allow) would not cross the last look's boundary
-    se_last = float(math.sqrt((1 / max_runs + ratio) * d.var(ddof=1)))
-    best, worst = abs(mean) + FUTILITY_Z * se, max(0.0, abs(mean) - FUTILITY_Z * se)
-    reach = best >= c_last * se_last
-    fits = bool(margin) and worst + c_last * se_last <= margin
-    if len(looks) >= 2 and not (reach or fits):
-        return Look(j, mean, se, z, c, alpha, "futile",
-                    f"at {max_runs} runs the boundary ±{c_last * se_last * 100:.1f} points "
-                    f"is beyond the reach of {best * 100:.1f}" + (
-                        " and the margin out of reach" if margin else ""))
-    return Look(j, mean, se, z, c, alpha, "continue")
+    code = int(_decide(mean, var, j, ratio, c, c_last, max_runs, margin))
+    if code == _REACH:
+        return Look(j, mean, se, z, c, alpha, "futile", _out_of_reach(
+            mean, se, math.sqrt((1 / max_runs + ratio) * var) * c_last, max_runs, margin))
+    decision = {_B: "B better", _A: "A better", _EQ: "equivalent", _GO: "continue"}
+    why = {_LAST: "the last planned look",
+           _FLAT: "every run gave the same difference, 0: nothing varies to test (a "
+                  "ceiling, where both are right on every recording), and more runs like "
+                  "these add nothing"}
+    return Look(j, mean, se, z, c, alpha, decision.get(code, "futile"), why.get(code, ""))
+
+
+def _out_of_reach(mean: float, se: float, needed: float, max_runs: int,
+                  margin: float | None) -> str:
+    """Why a look is futile before the last, and what data would change that: the
+    per-run spread of a difference is mostly test sampling, which shrinks as
+    1/√recordings, so about (needed / reach)² times the recordings (or people, where they
+    are the unit) would bring the boundary within reach of the interval's edge."""
+    best = abs(mean) + FUTILITY_Z * se
+    more = (f"; more data would, not more runs: about {(needed / best) ** 2:.0f}× the "
+            f"test recordings (people, where they are the unit)"
+            if best > 0 and (needed / best) ** 2 < 1e4 else "")
+    return (f"no number of runs up to {max_runs} can decide it: at {max_runs} runs the "
+            f"boundary ±{needed * 100:.1f} points is beyond the reach of {best * 100:.1f}"
+            + (" and the margin out of reach" if margin else "") + more)
+
+
+#: Paths :func:`procedure` simulates: its shares are off by at most ``0.5/√paths``
+#: (one standard error; 0.0035 at 20 000).
+FORECAST_PATHS = 20_000
+
+
+@dataclass(frozen=True)
+class Procedure:
+    """What a run ``--until answered`` will do for one comparison, simulated: the share
+    of runs ending in each decision, the expected and largest number of runs, and the
+    simulation's standard error on a share (``mc_error``)."""
+
+    power: float  # the true difference found (better, on its side)
+    futile: float  # stopped without a verdict (the last look included)
+    equivalent: float
+    wrong_side: float  # declared better on the other side
+    expected_runs: float
+    max_runs: int
+    paths: int
+    mc_error: float
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def procedure(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
+              alpha: float, margin: float | None = None, paths: int = FORECAST_PATHS,
+              seed: int = 37) -> Procedure:
+    """The whole sequential procedure for a true difference ``effect`` (per-run sd
+    ``sd`` within a data set, both as fractions), looks after ``looks`` runs (the last the
+    maximum), this comparison's level ``alpha`` (a family's: its Holm share at the first
+    look) and ``margin``: each simulated path draws its runs with the overlap the
+    correction assumes (a shared part of variance ``ratio · sd²``, each run its own of
+    ``sd²``, so the fixed-design :func:`tactbench.runner.power.power` is this at one
+    look) and meets the boundaries of :func:`boundaries` and the rule of :func:`look`.
+    Deterministic (a fixed seed)."""
+    import numpy as np
+
+    looks = [int(j) for j in looks]
+    max_runs = looks[-1]
+    rng = np.random.default_rng(seed)
+    shared = effect + rng.standard_normal(paths) * sd * math.sqrt(ratio)
+    total, squares = np.zeros(paths), np.zeros(paths)
+    code = np.full(paths, _GO)
+    stop = np.full(paths, max_runs)
+    made = 0
+    for k, j in enumerate(looks):
+        own = rng.standard_normal((paths, j - made)) * sd
+        total += own.sum(axis=1)
+        squares += (own * own).sum(axis=1)
+        made = j
+        mean = shared + total / j
+        var = np.maximum(squares - total * total / j, 0.0) / (j - 1)
+        c, c_last = _bounds(looks[:k + 1], max_runs, ratio, alpha)
+        going = code == _GO
+        now = _decide(mean, var, j, ratio, c, c_last, max_runs, margin)
+        code = np.where(going, now, code)
+        stop = np.where(going & (now != _GO), j, stop)
+        if not (code == _GO).any():
+            break
+    right = _B if effect >= 0 else _A
+    futile = np.isin(code, (_LAST, _FLAT, _REACH, _GO))
+    return Procedure(power=float(np.mean(code == right)), futile=float(futile.mean()),
+                     equivalent=float(np.mean(code == _EQ)),
+                     wrong_side=float(np.mean(code == (_A if right == _B else _B))),
+                     expected_runs=float(stop.mean()), max_runs=max_runs, paths=paths,
+                     mc_error=0.5 / math.sqrt(paths))
 
 
 @dataclass

@@ -15,6 +15,7 @@ from tactbench.runner.sequential import (
     family_look,
     fractions,
     look,
+    procedure,
     spent,
 )
 
@@ -118,3 +119,52 @@ def test_a_ceiling_stops_at_its_first_look_instead_of_running_to_the_budget():
                        {"ceiling": RATIO, "open": RATIO}, looks=[5], max_runs=20)
     assert seen["ceiling"].decision == "futile" and "ceiling" in state.closed
     assert seen["open"].decision == "continue" and "open" not in state.closed
+
+
+def test_the_first_looks_boundary_is_the_t_quantile_of_its_spent_alpha():
+    """Under no difference the corrected t at the first look is exactly t(J − 1), so its
+    boundary is that quantile — finite at an α a simulation cannot place (it gave ∞)."""
+    from scipy import stats
+
+    for alpha in (0.05, 0.0125, 1e-4):
+        b = boundaries([5, 10], 10, RATIO, alpha)
+        share = spent(fractions([5, 10], 10, RATIO)[0], alpha)
+        assert b[0] == pytest.approx(float(stats.t.isf(share / 2, 4)), rel=1e-12)
+        assert math.isfinite(b[0]) and b[0] > b[1]
+
+
+def test_procedure_at_one_look_is_the_fixed_designs_exact_power():
+    from tactbench.runner.power import detectable_effect, power
+
+    sd = 0.03
+    effect = detectable_effect(sd, RATIO, 10, alpha=0.025)
+    one = procedure(effect, sd, RATIO, [10], alpha=0.025)
+    assert one.power == pytest.approx(power(effect, sd, RATIO, 10, alpha=0.025),
+                                      abs=4 * one.mc_error)
+    assert one.expected_runs == 10 and one.futile == pytest.approx(1 - one.power, abs=1e-3)
+
+
+def test_procedure_says_what_looking_costs_and_keeps_its_level():
+    """At the effect a fixed design of all the runs finds with 80 % power, the sequential
+    procedure finds it less often and stops earlier on average; under no difference it
+    declares a difference in at most α of its paths (plus simulation error)."""
+    from tactbench.runner.power import detectable_effect
+
+    sd = 0.03
+    effect = detectable_effect(sd, RATIO, 20, alpha=0.025)
+    seq = procedure(effect, sd, RATIO, LOOKS, alpha=0.025)
+    assert 0.6 < seq.power < 0.8 + 4 * seq.mc_error
+    assert seq.expected_runs < 20 and seq.max_runs == 20
+    null = procedure(0.0, sd, RATIO, LOOKS, alpha=0.025)
+    assert null.power + null.wrong_side <= 0.025 + 4 * math.sqrt(0.025 / null.paths)
+    inside = procedure(0.005, 0.01, RATIO, LOOKS, alpha=0.05, margin=0.02)
+    assert inside.equivalent > inside.power
+
+
+def test_a_question_no_number_of_runs_can_decide_stops_at_its_first_look():
+    """A difference far below what 10 runs could resolve, on a wide spread: futile at the
+    first look (no α spent), saying what data would help, where it used to run on."""
+    d = np.array([0.004, -0.05, 0.06, -0.03, 0.025])
+    res = look(d, 1.0, looks=[5], max_runs=10, alpha=0.025)
+    assert res.decision == "futile"
+    assert "no number of runs up to 10" in res.why and "recordings" in res.why
