@@ -64,3 +64,22 @@ def register_test_windows(register):
 @hookspec
 def register_commands(cli):
     """Add commands to the ``tactbench`` click group ``cli``."""
+
+
+# ------------------------------------------------------------------ events
+#
+# Called while a benchmark runs, by ``tactbench run`` (with ``--until`` too) and by
+# :func:`tactbench.runner.run`, in the process that stores the rows. A hook that raises is
+# reported as a warning and the run goes on (with ``TACTBENCH_STRICT_PLUGINS=1`` it ends).
+
+
+@hookspec
+def cell_finished(row, out):
+    """A cell's row was stored in ``out/cells`` (verified, ok or failed): ``row`` as stored
+    (a dict, results.json's ``rows[]``), ``out`` the run folder (a ``Path``)."""
+
+
+@hookspec
+def look_finished(report, out):
+    """A look of ``run --until answered`` ended: ``report`` is the folder's
+    :class:`~tactbench.runner.writers.Report` after it, ``out`` the run folder."""

@@ -20,6 +20,7 @@ import contextlib
 import difflib
 import importlib
 import io
+import logging
 import os
 import re
 from dataclasses import replace
@@ -33,7 +34,11 @@ from tactbench.errors import InputError, PluginError
 from tactbench.registry import KIND_HOOKS, Component, PluginInfo, PluginProblem, Registry
 
 ENTRY_POINT_GROUP = "tactbench"
+#: The hooks called while a benchmark runs (:mod:`tactbench.hookspecs`, "events").
+EVENT_HOOKS = ("cell_finished", "look_finished")
 STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
+
+log = logging.getLogger("tactbench.plugins")
 
 #: Modules whose hooks register the built-in components, in load order.
 BUILTIN_PLUGINS: tuple[str, ...] = (
@@ -114,9 +119,18 @@ class PluginManager(pluggy.PluginManager):
             if on_success is not None:
                 on_success(impl.plugin_name, kwargs)
 
+    def notify(self, hook_name: str, **arguments: Any) -> None:
+        """Call the event hook ``hook_name`` on each plugin with ``arguments``; one that
+        raises is warned about on stderr (and skipped) and the others are still called."""
+        before = len(self.problems)
+        self.call_each(hook_name, lambda _plugin, _dist: arguments)
+        for problem in self.problems[before:]:
+            log.warning("tactbench: warning: %s (the run goes on)", problem)
+
 
 def _hook_names() -> list[str]:
-    return sorted(n for n in dir(hookspecs) if n.startswith("register_"))
+    return sorted(n for n in dir(hookspecs) if n.startswith("register_")
+                  or n in EVENT_HOOKS)
 
 
 def strict_from_env() -> bool:
@@ -218,7 +232,7 @@ def collect_registry(pm: PluginManager) -> Registry:
                 accepted[key] = comp
 
         pm.call_each(hook_name, make_kwargs, on_success)
-    return Registry(accepted.values(), pm.infos.values(), pm.problems)
+    return Registry(accepted.values(), pm.infos.values(), pm.problems, events=pm.notify)
 
 
 def _make_register(kind: str, plugin: str, dist: str,

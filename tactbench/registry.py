@@ -13,7 +13,7 @@ import importlib
 import importlib.util
 import inspect
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from tactbench.contracts import check
 from tactbench.errors import ComponentLoadError, InputError, TactbenchError, UnknownComponentError
@@ -108,12 +108,21 @@ class Registry:
         components: Iterable[Component],
         plugins: Iterable[PluginInfo] = (),
         problems: Iterable[PluginProblem] = (),
+        events: Callable[..., None] | None = None,
     ) -> None:
+        self._events = events  # the plugin manager's event caller (PluginManager.notify)
         self._by_kind: dict[str, dict[str, Component]] = {kind: {} for kind in KINDS}
         for comp in components:
             self._by_kind[comp.kind][comp.name] = comp
         self.plugins: list[PluginInfo] = list(plugins)
         self.problems: list[PluginProblem] = list(problems)
+
+    def notify(self, event: str, **arguments: Any) -> None:
+        """Call the event hook ``event`` (``cell_finished``, ``look_finished``: see
+        :mod:`tactbench.hookspecs`) of every plugin implementing it; nothing for a registry
+        made without plugins."""
+        if self._events is not None:
+            self._events(event, **arguments)
 
     def components(self, kind: str | None = None) -> list[Component]:
         kinds = KINDS if kind is None else (_check_kind(kind),)

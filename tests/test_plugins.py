@@ -178,9 +178,51 @@ def test_hook_register_commands(plugin_dist):
     assert "hello" in run_cli("--help").stdout
 
 
+def _events_plugin(seen):
+    return namespace(cell_finished=lambda row, out: seen.append(("cell", row["key"], out)),
+                     look_finished=lambda report, out: seen.append(("look", report, out)))
+
+
+def test_hook_cell_finished(tmp_path):
+    seen = []
+    reg = registry_with(("events", _events_plugin(seen)))
+    reg.notify("cell_finished", row={"key": "k1"}, out=tmp_path)
+    assert seen == [("cell", "k1", tmp_path)]
+
+
+def test_hook_look_finished(tmp_path):
+    seen = []
+    reg = registry_with(("events", _events_plugin(seen)))
+    reg.notify("look_finished", report="R", out=tmp_path)
+    assert seen == [("look", "R", tmp_path)]
+
+
+def test_an_event_hook_that_raises_is_a_warning_and_the_others_still_hear(tmp_path, caplog):
+    seen = []
+
+    def broken(row, out):
+        raise RuntimeError("tracking server down")
+
+    reg = registry_with(("broken", namespace(cell_finished=broken)),
+                        ("events", _events_plugin(seen)))
+    reg.notify("cell_finished", row={"key": "k1"}, out=tmp_path)
+    assert seen == [("cell", "k1", tmp_path)]
+    assert "tracking server down" in caplog.text and "the run goes on" in caplog.text
+    with pytest.raises(PluginError, match="tracking server down"):
+        registry_with(("broken", namespace(cell_finished=broken)),
+                      strict=True).notify("cell_finished", row={}, out=tmp_path)
+
+
+def hook_names():
+    """Every hook of tactbench.hookspecs: the register_* hooks and the events."""
+    return [n for n in dir(hookspecs)
+            if callable(getattr(hookspecs, n)) and hasattr(getattr(hookspecs, n),
+                                                           "tactbench_spec")]
+
+
 def test_every_hook_has_its_own_test():
-    hooks = [n for n in dir(hookspecs) if n.startswith("register_")]
-    assert len(hooks) == 7
+    hooks = hook_names()
+    assert len(hooks) == 9
     missing = [h for h in hooks if f"test_hook_{h}" not in globals()]
     assert not missing, f"hooks without a test: {missing}"
 
@@ -416,7 +458,7 @@ def test_hook_reference_documents_every_hook_with_its_signature():
     REPO = Path(__file__).resolve().parents[1]
 
     doc = (REPO / "docs" / "plugins.md").read_text()
-    for name in (n for n in dir(hookspecs) if n.startswith("register_")):
+    for name in hook_names():
         params = ", ".join(inspect.signature(getattr(hookspecs, name)).parameters)
         assert f"### `{name}({params})`" in doc, f"docs/plugins.md lacks hook {name}"
 

@@ -21,6 +21,7 @@ from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError, MissingFileError, TactbenchError
 from tactbench.machine import git_revision
 from tactbench.paths import discard
+from tactbench.plugins import load_registry
 from tactbench.runner.answering import first_look_to_run, schedule
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
@@ -80,7 +81,8 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
     ``registry`` (default: every installed plugin) is used for planning and by every
     cell, in every executor. A cell that raises is stored as a failed row and the others
-    go on; ``on_row(row)`` is called with each row as it is stored.
+    go on; ``on_row(row)`` is called with each row as it is stored, and so is every
+    plugin's ``cell_finished`` hook (:mod:`tactbench.hookspecs`).
     """
     start = time.perf_counter()
     cache = cache or EncodingCache()  # an unusable cache folder: before any work
@@ -112,6 +114,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
             row = store.put(row)  # as stored: a row too large to keep is a failed one
             if on_row is not None:
                 on_row(row)
+            plans[0].registry.notify("cell_finished", row=row, out=Path(scene.out))
 
         if jobs:
             execute(scene, jobs, finish, bars, memory)
@@ -130,7 +133,8 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
 def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                   margin: float | None = None, plots: bool = True,
-                  registry=None, primary: Sequence[str] | None = None) -> Report:
+                  registry=None, primary: Sequence[str] | None = None,
+                  write: bool = True) -> Report:
     """The report of the run folder ``out`` again, from the rows of ``OUT/cells`` alone,
     written over its results.json, results.csv, report.md and figures; nothing is
     trained, and results.json is not read.
@@ -141,7 +145,8 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     with no options is the run's own, but for the line saying when and by what. The
     per-user results need the user of each recording: the dataset is loaded (through
     ``registry``) and used when its content hash is the rows'; otherwise they are left
-    out and report.md says why.
+    out and report.md says why. With ``write=False`` nothing is written: the report of
+    a folder read as it is (a notebook's, an export's; the folder may be read-only).
     """
     out = Path(out)
     if not out.is_dir():
@@ -157,7 +162,7 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     # files beside a run's own (a benchmark's notes) stay; of a run's names, only
     # a report.md tactbench did not write is not ours to replace
     foreign = [p.name for p in (out / name for name in OUT_FILES)
-               if p.exists() and not is_run_output(p)]
+               if write and p.exists() and not is_run_output(p)]
     if foreign:
         raise InputError(f"run folder {out} holds a {foreign[0]} tactbench did not write; "
                          f"move it away first (nothing was written)")
@@ -174,7 +179,8 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                          primary=primary, sequential=sequential_design(scene),
                          rendered=how + (f"; per-user results left out: {missing}"
                                          if missing else ""))
-    write_report(out, report, plots=plots)
+    if write:
+        write_report(out, report, plots=plots)
     return report
 
 
@@ -205,15 +211,17 @@ def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
 
 
 def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True,
-              on_look=None):
+              on_look=None, on_row=None):
     """Run ``scene`` (with ``until="answered"``) look by look: the first
     :data:`FIRST_LOOK` seeds of :meth:`~tactbench.runner.scene.Scene.seed_order`, then
     ``look_every`` more each time, each batch an ordinary :func:`run` (resumable: cells
     already stored are reused, any executor), until every primary comparison is decided,
     ``max_runs`` is reached, or the next batch would start past ``budget``. Returns the
     last :class:`~tactbench.runner.writers.Report` (its ``looks``: every look, replayed
-    from the rows); ``on_look(report)`` is called after each look. Ctrl-C between cells
+    from the rows); ``on_look(report)`` is called after each look, and so is every
+    plugin's ``look_finished`` hook; ``on_row``: see :func:`run`. Ctrl-C between cells
     keeps every finished cell."""
+    registry = registry or load_registry()
     order = scene.seed_order()
     looks = schedule(scene.max_runs, scene.look_every)
     budget = parse_duration(scene.budget) if scene.budget else None
@@ -223,9 +231,10 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     for k in range(first_look_to_run(stored, order, looks), len(looks)):
         t0 = time.perf_counter()
         report = run(dataclasses.replace(scene, seeds=order[:looks[k]]), registry=registry,
-                     progress=progress, plots=plots)
+                     progress=progress, plots=plots, on_row=on_row)
         if on_look is not None:
             on_look(report)
+        registry.notify("look_finished", report=report, out=Path(scene.out))
         if report.failed or (report.looks or {}).get("answered"):
             break
         elapsed = time.perf_counter() - start
