@@ -50,14 +50,21 @@ class History:
 
     @property
     def answered(self) -> bool:
-        """Whether every primary comparison is decided (or there is none)."""
+        """Whether every primary comparison is closed: decided, or futile (stopped
+        unanswered: no number of runs up to the maximum can decide it), so the run
+        stops; :meth:`stopped_because` tells the two apart."""
         return self.state is not None and len(self.state.closed) == len(self.state.names)
 
     def stopped_because(self) -> str:
         if self.state is None:
             return "no primary comparison has 2 runs yet"
         if self.answered:
-            return "every primary question is answered"
+            futile = [n for n, lk in self.state.closed.items() if lk.decision == "futile"]
+            if not futile:
+                return "every primary question is answered"
+            return (f"{len(futile)} of {len(self.state.names)} primary question(s) stopped "
+                    f"unanswered (futile: more runs of these data would not decide them), "
+                    f"{len(self.state.names) - len(futile)} answered")
         done = self.looks[len(self.seen) - 1] if self.seen else 0
         return f"{done} of {self.max_runs} runs made; questions still open"
 

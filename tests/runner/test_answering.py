@@ -77,3 +77,25 @@ def test_runs_stored_beyond_the_last_look_are_said_beside_the_looks():
     assert "8 runs are stored" in text and "use the first 5" in text
     exact = make_report(_rows(range(5), 0.2), primary=PRIMARY, sequential=sequential)
     assert "runs are stored" not in looks_markdown(exact.looks)
+
+
+def test_questions_no_run_count_can_decide_stop_at_the_first_look_unanswered():
+    """Runs of one data set whose test set is as large as the training set (ratio 1):
+    at 5 runs and no difference, no number of runs up to 10 can decide the question, so
+    the first look stops it (futile, no α spent) and the run says it stopped unanswered,
+    not that every question is answered."""
+    rng = np.random.default_rng(4)
+    truth = [i % 2 for i in range(200)]
+    rows = []
+    for seed in range(5):
+        for enc in ("raw", "farneback"):
+            right = rng.random(200) < 0.7
+            rows.append(prediction_row(enc, seed, truth, [t if ok else 1 - t for t, ok in
+                                                          zip(truth, right)],
+                                       split="paper", n_train=200))
+    h = replay(rows, seed_order=list(range(10)), looks=schedule(10, 5), primary=PRIMARY)
+    [look] = h.seen[0].values()
+    assert look.decision == "futile" and "no number of runs up to 10" in look.why
+    assert h.answered  # the run stops here
+    assert "stopped unanswered" in h.stopped_because()
+    assert "every primary question is answered" not in h.stopped_because()
