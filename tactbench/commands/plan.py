@@ -25,7 +25,11 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
 
     Takes the same arguments as `tactbench run`. Times and memory come from rows already
     in the out folder (a pilot run of a seed or two), and so does each comparison's
-    per-run spread; without a pilot the spread is test sampling alone (a lower bound).
+    per-run spread (with its 95 % interval); without a pilot the spread is an assumption,
+    said with its value (models disagreeing on 30 % of the test recordings, test sampling
+    alone). Power is at the primary family's level; with --until it is also the
+    sequential run's own, simulated. An effect inside --margin, or a design short of
+    80 % power, is said first, a line each.
     For one data set it also says the floor no number of runs resolves below, and how
     many recordings would lower it to --effect; a dataset drawing its own for every run
     (synthetic-forearm:people=per-run) has none, and only its first run's data set is
@@ -59,10 +63,24 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                    f"runs' are made when they run (their making and encoding is not in the "
                    f"time), and a cell of theirs counts as finished where a stored row of "
                    f"its run's data set has its identity")
+    for line in (w for p in f.primaries for w in p.warnings):
+        click.echo(f"warning: {line}")
     for p in f.primaries:
-        click.echo(f"primary {p.name}: at {p.runs} runs, power {p.power:.0%} for "
-                   f"{p.effect:+.1f} points; 80 % power from {p.detectable:.1f} points; "
-                   f"per-run sd {p.sd:.1f} points ({p.sd_source})")
+        high = ("" if p.power_at_sd_high is None else
+                f" ({p.power_at_sd_high:.0%} if the spread is at its interval's upper end, "
+                f"{p.sd_high:.1f} points)")
+        click.echo(f"primary {p.name}: one fixed test of {p.runs} runs at the family's "
+                   f"level α = {p.level:.4g}: power {p.power:.0%} for {p.effect:+.1f} points"
+                   f"{high}; 80 % power from {p.detectable:.1f} points; per-run sd "
+                   f"{p.sd:.1f} points ({p.sd_source})")
+        if p.sequential:
+            s = p.sequential
+            click.echo(f"  run --until answered (looks after {', '.join(map(str, s['looks']))}"
+                       f" runs): power {s['power']:.0%} for {p.effect:+.1f} points, "
+                       f"{s['expected_runs']:.1f} runs expected of at most {s['max_runs']}, "
+                       f"ends futile {s['futile']:.0%}" + (
+                           f", equivalent {s['equivalent']:.0%}" if p.margin else "")
+                       + f" (simulated: {s['paths']} paths, ±{s['mc_error']:.3f})")
         if f.independent:
             click.echo("  no floor: every run draws its own data set (independent "
                        "replications of the simulator's population), so more runs resolve "

@@ -10,11 +10,20 @@ for a given effect, the smallest effect found at 80 % power, and — for a fixed
 no floor.
 
 Timings and spreads come from a *pilot*: rows already stored in the scene's out folder
-(a run of a seed or two), said so. Without one, a cell's time is unknown (said so, with
-the pilot to run) and a comparison's per-run spread is what test sampling alone gives
-(:func:`tactbench.runner.power.sampling_sd`, models assumed to disagree on
-:data:`ASSUMED_DISCORDANCE` of the recordings) — a lower bound on the real spread, so
-the power it gives is an upper bound, and the forecast says so.
+(a run of a seed or two), said so, the spread with its 95 % interval (at 2–3 runs it is
+wide: the power at its upper end is said beside), and never below what test sampling of
+the pilot's own disagreement gives (a pilot of identical differences is not "power
+100 %"). Without one, a cell's time is unknown (said so, with the pilot to run) and a
+comparison's per-run spread is an **assumption**, said with its value: test sampling
+alone with the models disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordings — on
+the stored primaries the observed disagreement was 0–26 %, so it is no bound either way.
+
+Power is at the family's level (Holm's first step, α/m for m primaries) and exact
+(:func:`tactbench.runner.power.power`). For a run ``--until answered`` the forecast is of
+the sequential procedure itself (:func:`tactbench.runner.sequential.procedure`: power,
+expected and largest runs, chance of ending futile, by the simulation and rule the looks
+use, at that level and with the margin). :attr:`PrimaryForecast.warnings` says, a line
+each, an effect inside the margin and a design short of 80 % power at its runs.
 """
 
 from __future__ import annotations
@@ -35,14 +44,18 @@ from tactbench.runner.planning import (
     plan_runs,
     run_datasets,
 )
+from tactbench.runner.answering import schedule
 from tactbench.runner.power import (
+    TARGET_POWER,
     detectable_effect,
     effect_floor,
     power,
     recordings_for,
+    runs_for_power,
     sampling_sd,
     seed_mean_ratio,
 )
+from tactbench.runner.sequential import procedure
 from tactbench.runner.results import ResultStore, ok_rows
 from tactbench.runner.scene import Scene
 
@@ -62,7 +75,8 @@ class CellForecast:
 
 @dataclass
 class PrimaryForecast:
-    """What the planned runs can say about one primary comparison (points)."""
+    """What the planned runs can say about one primary comparison (points; ``level`` the
+    α its power is at: the family's Holm level)."""
 
     name: str
     runs: int
@@ -75,6 +89,13 @@ class PrimaryForecast:
     floor: float
     recordings: int
     recordings_for_effect: int | None
+    level: float = 0.05
+    sd_high: float | None = None  # the upper end of a pilot's spread's 95 % interval
+    power_at_sd_high: float | None = None
+    margin: float | None = None
+    runs_for_effect: int | None = None  # a fixed design's runs for 80 % power at effect
+    sequential: dict[str, Any] | None = None  # with --until: sequential.procedure's forecast
+    warnings: list[str] = dataclasses.field(default_factory=list)
 
 
 @dataclass
@@ -128,7 +149,9 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         peak_mb=max((float(r["peak_rss_mb"]) for r in pilot if r.get("peak_rss_mb")),
                     default=None),
         primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
-                            len(p.dataset.labels)) for text in primaries],
+                            len(p.dataset.labels), margin=scene.margin,
+                            looks=schedule(scene.max_runs, scene.look_every)
+                            if scene.until else None) for text in primaries],
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
         runs_not_made=len({c.seed for c in others}))
 
@@ -183,26 +206,102 @@ def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]
     return out
 
 
-def _primary(text: str, pilot: list[dict[str, Any]], runs: int, effect: float,
-             ratio: float, n_test: int, level: float, recordings: int) -> PrimaryForecast:
-    """One primary comparison's forecast at ``runs`` runs for a true ``effect``."""
+def _spread(text: str, pilot: list[dict[str, Any]], n_test: int, effect: float,
+            ratio: float) -> tuple[float, float | None, float, str]:
+    """The per-run spread a forecast uses: ``(sd, upper end of its 95 % interval or None,
+    ratio, where it comes from)`` (fractions): a pilot's, never below the test sampling
+    of its own disagreement; without one, the assumption, said with its value."""
+    from scipy import stats
+
     found = [c for c in comparisons(pilot, primary=[text]) if c.family == "primary"]
-    if found and found[0].runs >= 2:
-        c = found[0]
-        d = list(c.per_run.values())
-        sd, ratio = statistics.stdev(d), c.run_ratio
-        source = f"pilot: {c.runs} stored runs"
-    else:
-        sd = sampling_sd(n_test, ASSUMED_DISCORDANCE, min(effect, ASSUMED_DISCORDANCE ** 0.5))
-        source = (f"no pilot: test sampling alone of {n_test} test recordings, models "
-                  f"disagreeing on {ASSUMED_DISCORDANCE:.0%} of them (a lower bound on the "
-                  f"spread: the power is an upper bound)")
+    if not (found and found[0].runs >= 2):
+        sd = sampling_sd(n_test, ASSUMED_DISCORDANCE,
+                         min(effect, ASSUMED_DISCORDANCE ** 0.5))
+        return sd, None, ratio, (
+            f"assumed, no pilot: the models disagree on {ASSUMED_DISCORDANCE:.0%} of the "
+            f"{n_test} test recordings and the spread is test sampling alone; training "
+            f"variability adds to it, less disagreement takes from it (on the stored "
+            f"primaries 0–26 %): a pilot of 2–3 runs replaces the assumption")
+    c = found[0]
+    d = list(c.per_run.values())
+    df = c.runs - 1
+    pilot_sd = statistics.stdev(d)
+    pi = min(1.0, (c.a_only + c.b_only) / max(1, c.runs * n_test))
+    least = sampling_sd(n_test, pi, min(abs(c.difference), pi ** 0.5)) if pi > 0 else 0.0
+    if max(pilot_sd, least) == 0:  # both right on every recording: nothing to plan from
+        sd = sampling_sd(n_test, ASSUMED_DISCORDANCE,
+                         min(effect, ASSUMED_DISCORDANCE ** 0.5))
+        return sd, None, c.run_ratio, (
+            f"pilot: {c.runs} stored runs in which the models agree on every recording "
+            f"(no spread to plan from); assumed instead: they disagree on "
+            f"{ASSUMED_DISCORDANCE:.0%} of the test recordings, test sampling alone")
+    sd = max(pilot_sd, least)
+    high = sd * (df / float(stats.chi2.ppf(0.025, df))) ** 0.5
+    low = sd * (df / float(stats.chi2.isf(0.025, df))) ** 0.5
+    said = (f"pilot: {c.runs} stored runs, spread {100 * pilot_sd:.2f} points (95 % "
+            f"interval {100 * low:.2f} to {100 * high:.2f}, from {df} degree(s) of freedom)")
+    if least > pilot_sd:
+        said += (f", raised to {100 * least:.2f}: the test sampling of the pilot's own "
+                 f"disagreement ({pi:.0%} of the recordings), which no real spread is below")
+    return sd, high, c.run_ratio, said
+
+
+def _primary(text: str, pilot: list[dict[str, Any]], runs: int, effect: float,
+             ratio: float, n_test: int, level: float, recordings: int, *,
+             margin: float | None = None, looks: list[int] | None = None
+             ) -> PrimaryForecast:
+    """One primary comparison's forecast at ``runs`` runs for a true ``effect``; with
+    ``looks`` (a run ``--until answered``), the sequential procedure's too."""
+    sd, high, ratio, source = _spread(text, pilot, n_test, effect, ratio)
     floor = effect_floor(sd, ratio, alpha=level)
     runs = max(2, runs)
-    return PrimaryForecast(
+    f = PrimaryForecast(
         name=text, runs=runs, effect=100 * effect, sd=100 * sd, sd_source=source,
         ratio=ratio, power=power(effect, sd, ratio, runs, alpha=level),
         detectable=100 * detectable_effect(sd, ratio, runs, alpha=level),
         floor=100 * floor, recordings=recordings,
         recordings_for_effect=recordings_for(effect, floor, recordings)
-        if effect > 0 else None)
+        if effect > 0 else None, level=level, margin=margin,
+        sd_high=None if high is None else 100 * high,
+        power_at_sd_high=None if high is None else power(effect, high, ratio, runs,
+                                                          alpha=level),
+        runs_for_effect=runs_for_power(effect, sd, ratio, alpha=level))
+    if looks:
+        proc = procedure(effect, sd, ratio, looks, alpha=level,
+                         margin=None if margin is None else margin / 100)
+        f.sequential = {"looks": list(looks), **proc.as_dict()}
+    f.warnings = warnings(f)
+    return f
+
+
+def warnings(f: PrimaryForecast) -> list[str]:
+    """What a plan must say before any work, a line each: an effect (or the effect found
+    at 80 % power) inside the margin, and a design short of 80 % power at its runs."""
+    out = []
+    m = f.margin
+    if m and f.effect <= m:
+        out.append(f"{f.name}: +{f.effect:.1f} points lies inside the ±{m:g} margin: the "
+                   f"runs would end \"equivalent\", not \"better\"")
+    elif m and f.detectable <= m:
+        out.append(f"{f.name}: the effect found with 80 % power at {f.runs} runs, "
+                   f"{f.detectable:.2f} points, lies inside the ±{m:g} margin: such a "
+                   f"difference would end \"equivalent\"")
+    seq = f.sequential
+    if seq is not None and seq["power"] < TARGET_POWER:
+        out.append(f"{f.name}: the sequential run finds +{f.effect:.1f} points with "
+                   f"{seq['power']:.0%} power at most {f.runs} runs (a fixed design of "
+                   f"{f.runs}: {f.power:.0%}); " + _needs(f))
+    elif seq is None and f.power < TARGET_POWER:
+        out.append(f"{f.name}: at {f.runs} runs, power {f.power:.0%} for "
+                   f"+{f.effect:.1f} points, short of 80 %; " + _needs(f))
+    return out
+
+
+def _needs(f: PrimaryForecast) -> str:
+    if f.runs_for_effect is not None:
+        return f"a fixed design needs {f.runs_for_effect} runs"
+    more = "" if not f.recordings_for_effect else \
+        f"; about {f.recordings_for_effect} recordings (now {f.recordings}) would bring " \
+        f"the floor to it"
+    return (f"no number of runs of these recordings reaches it (floor "
+            f"{f.floor:.1f} points){more}")

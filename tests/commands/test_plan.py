@@ -48,6 +48,36 @@ def test_a_pilots_rows_give_times_and_the_spread(tmp_path, monkeypatch):
     assert all(s.startswith("pilot: median of 3") for s in sources if "finished" not in s)
     assert doc["unknown"] == 0 and doc["seconds"] > 0 and doc["peak_mb"] > 0
     [p] = doc["primaries"]
-    assert p["sd_source"] == "pilot: 3 stored runs" and p["effect"] == 10
+    assert p["sd_source"].startswith("pilot: 3 stored runs") and p["effect"] == 10
+    # this tiny pilot's models agree on every recording: that is no spread of 0
+    assert p["power"] < 1 and p["sd"] > 0
     text = _invoke(tmp_path, monkeypatch, "plan", *TINY, "--seed", "0-5", "--out", str(out))
     assert "floor: no number of runs of these" in text.output
+
+
+def test_without_a_pilot_the_spread_is_an_assumption_and_warnings_come_first(tmp_path,
+                                                                            monkeypatch):
+    out = tmp_path / "out"
+    res = _invoke(tmp_path, monkeypatch, "plan", *TINY, "--seed", "0-3", "--out", str(out),
+                  "--margin", "2", "--effect", "1")
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert "lower bound" not in res.output and "upper bound" not in res.output
+    assert "assumed, no pilot: the models disagree on 30% of the" in res.output
+    warned = [i for i, line in enumerate(lines) if line.startswith("warning: ")]
+    first = next(i for i, line in enumerate(lines) if line.startswith("primary "))
+    assert warned and max(warned) < first  # said before the forecast, a line each
+    assert any("inside the ±2 margin" in lines[i] for i in warned)
+    assert any("short of 80 %" in lines[i] for i in warned)
+
+
+def test_a_sequential_run_is_forecast_by_its_own_procedure(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    res = _invoke(tmp_path, monkeypatch, "plan", *TINY, "--until", "answered",
+                  "--max-runs", "10", "--out", str(out), "--json")
+    assert res.exit_code == 0, res.output
+    [p] = json.loads(res.output)["primaries"]
+    seq = p["sequential"]
+    assert seq["looks"] == [5, 10] and seq["max_runs"] == 10
+    assert 5 <= seq["expected_runs"] <= 10 and 0 <= seq["futile"] <= 1
+    assert seq["power"] <= p["power"] + 4 * seq["mc_error"]  # looking costs power
