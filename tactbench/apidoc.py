@@ -48,7 +48,8 @@ MODULES: tuple[tuple[str, str], ...] = (
 #: The notebook API: the module, what it is for, and the names documented (its
 #: docstring's ``.. code-block:: python`` example is run by tests/test_doc_examples.py).
 NOTEBOOK = ("tactbench.runner", "the notebook API, a benchmark from Python",
-            ("Scene", "run", "Report", "render_folder"))
+            ("Scene", "run", "Report", "render_folder", "cells_frame", "comparisons_frame",
+             "write_parquet"))
 
 #: The line before each example fence, by which tests/test_doc_examples.py finds it.
 EXAMPLE_MARK = "<!-- example: a docstring's, run by tests/test_doc_examples.py -->"

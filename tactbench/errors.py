@@ -10,6 +10,7 @@ a Python caller would expect (``ValueError``, ``FileNotFoundError``, ``LookupErr
 from __future__ import annotations
 
 import difflib
+import importlib
 import math
 import numbers
 from typing import Any
@@ -184,3 +185,19 @@ def storage_error(exc: OSError, path: Any) -> StorageError | None:
 
 class BudgetError(InputError):
     """A step would need more memory than the budget allows (see tactbench.integrity)."""
+
+
+class MissingExtraError(TactbenchError, ImportError):
+    """A library of an optional extra is not installed (pandas for a data frame): one line
+    naming it and the ``pip install`` that brings it."""
+
+
+def require(module: str, extra: str) -> Any:
+    """The module ``module``, imported; :class:`MissingExtraError` naming the extra
+    ``tactbench[extra]`` (or the plugin) that installs it when it is missing."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        what = extra if " " in extra or "/" in extra else f'"tactbench[{extra}]"'
+        raise MissingExtraError(f"{module} is not installed ({exc}); pip install "
+                                f"{what}") from None

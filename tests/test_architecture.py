@@ -65,7 +65,7 @@ FACES = {"cli", "clidoc", "testing", "fuzzing", "__main__"}
 #: off the start-up path (numpy too, for the modules ``tactbench --help`` imports).
 LAZY = {"torch", "torchvision", "kornia", "cv2", "can", "matplotlib", "dask", "distributed",
         "scipy", "sklearn", "skimage", "safetensors", "timm", "threadpoolctl", "rich",
-        "pytest", "hypothesis", "numpy", "tomli", "psutil"}
+        "pytest", "hypothesis", "numpy", "tomli", "psutil", "pandas", "pyarrow", "mlflow"}
 #: tactbench's own modules that import torch at module level (the networks): importing one
 #: is importing torch, so they too are imported inside the functions that use them, and
 #: the classifiers that do not train a network never load torch.

@@ -14,7 +14,8 @@ import tactbench
 from tactbench.cli import cli
 from tactbench.commands import COMMANDS
 
-HEAVY = ("torch", "kornia", "cv2", "can", "skimage", "matplotlib", "dask")
+HEAVY = ("torch", "kornia", "cv2", "can", "skimage", "matplotlib", "dask", "pandas", "pyarrow",
+         "mlflow")
 
 
 def run(*args):
@@ -75,7 +76,8 @@ def test_help_imports_no_command_and_no_numpy():
     code = ("import sys; from tactbench.cli import main\n"
             "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
             "bad = sorted(m for m in sys.modules if m.startswith('tactbench.commands.') "
-            "or m.split('.')[0] in ('numpy', 'torch', 'cv2', 'kornia', 'can', 'matplotlib'))\n"
+            "or m.split('.')[0] in ('numpy', 'torch', 'cv2', 'kornia', 'can', 'matplotlib', "
+            "'pandas', 'pyarrow', 'mlflow'))\n"
             "print('imported:', bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert "imported: []" in out.stdout, out.stdout + out.stderr

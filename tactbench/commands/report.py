@@ -6,7 +6,9 @@ import click
 
 from tactbench.cli import get_registry
 from tactbench.commands.run import print_report
-from tactbench.runner import render_folder
+from tactbench.errors import require
+from tactbench.runner import render_folder, write_parquet
+from tactbench.runner.frames import EXTRA
 
 
 @click.command("report")
@@ -21,18 +23,30 @@ from tactbench.runner import render_folder
                    "[default: the run's]")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@click.option("--parquet", is_flag=True,
+              help="Also write cells.parquet (one row per cell) and comparisons.parquet "
+                   "(one per comparison), typed tables for pandas and pyarrow "
+                   "(pip install \"tactbench[export]\").")
 def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...],
-               primary: tuple[str, ...], as_json: bool, no_plots: bool) -> None:
+               primary: tuple[str, ...], as_json: bool, no_plots: bool,
+               parquet: bool) -> None:
     """Render a run folder's report again from its stored cell rows, training nothing.
 
     FOLDER is the --out of a `tactbench run`. Its results.json, results.csv, report.md
     and plots are written again from the rows in FOLDER/cells alone (results.json is
     never read), with the statistics options given here, which change no cell; without
     them, the run's own. report.md says it was re-rendered, and with which options.
+    With --parquet, the tables are also written as Parquet files.
     """
+    if parquet:  # before any file is written: a missing library is one line
+        require("pandas", EXTRA)
+        require("pyarrow", EXTRA)
     report = render_folder(folder, margin=margin, contrasts=contrasts or None,
                            primary=primary or None,
                            plots=not no_plots, registry=get_registry())
+    if parquet:
+        report.paths.update(write_parquet(report, folder))
     print_report(report, as_json=as_json, title=f"{folder} · re-rendered from its cells",
                  done=f"{len(report.rows)} cell row(s) read, none computed. Reports in "
-                      f"{folder}/ (report.md, results.csv, results.json, plots)")
+                      f"{folder}/ (report.md, results.csv, results.json, plots"
+                      + (", cells.parquet, comparisons.parquet" if parquet else "") + ")")

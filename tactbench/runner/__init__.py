@@ -5,8 +5,10 @@ seeds, a split and a profile. :func:`plan` checks it and expands it into *cells*
 per (encoder, classifier, L, seed); each cell trains one classifier and writes one result
 row. :func:`run` does the whole thing and returns the :class:`Report` it wrote (the
 report of ``tactbench run``); :func:`render_folder` makes a finished folder's report
-again (``tactbench report``). From a notebook (``pandas.DataFrame(report.table())``
-turns the rows into a data frame, where pandas is installed):
+again (``tactbench report``), or with ``write=False`` reads it as it is. In a notebook,
+:func:`cells_frame` and :func:`comparisons_frame` make pandas data frames of a report
+(one row per cell; one per paired comparison) and :func:`write_parquet` writes both as
+Parquet (the extra ``tactbench[export]``):
 
 .. code-block:: python
 
@@ -23,6 +25,17 @@ turns the rows into a data frame, where pandas is installed):
     assert len(table) == 6 and {"encoder", "seed", "accuracy", "train_s"} <= set(table[0])
     again = render_folder("runs/demo", margin=2, plots=False)  # nothing trained
     assert again.rows == report.rows and again.statistics["margin"] == 2
+
+    # later, in a notebook: load the folder (nothing written), tables, a figure
+    from tactbench.runner import cells_frame, comparisons_frame
+
+    folder = render_folder("runs/demo", write=False)
+    cells = cells_frame(folder)  # pandas: one row per cell, typed columns
+    pairs = comparisons_frame(folder)  # one row per comparison: B − A, interval, p, verdict
+    print(pairs[["a", "b", "difference", "low", "high", "p_holm", "verdict", "runs"]])
+    by_encoder = cells.groupby("encoder")["accuracy"].agg(["mean", "std"])
+    ax = by_encoder.plot.bar(y="mean", yerr="std", legend=False, ylabel="accuracy")
+    ax.figure.savefig("accuracy.png")
 
 Nothing is computed twice:
 
@@ -64,6 +77,7 @@ from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported i
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
 from tactbench.runner.entries import load_encoding
+from tactbench.runner.frames import cells_frame, comparisons_frame, write_parquet
 from tactbench.runner.orchestrate import render_folder, run, run_until
 from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
 from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
@@ -77,4 +91,5 @@ __all__ = [
     "CellJob", "make_jobs", "run_cell", "failed_row",
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows",
     "run", "run_until", "render_folder", "Report", "git_revision",
+    "cells_frame", "comparisons_frame", "write_parquet",
 ]

@@ -48,9 +48,10 @@ from tactbench.runner.tables import (
     variance_markdown,
 )
 
-#: Every top-level file a run writes (``confusion_*.png`` besides, one per cell).
-OUT_FILES = ("results.json", "results.csv", "report.md",
-             *(f"{name}.png" for name in FIGURES))
+#: Every top-level file a run writes (``confusion_*.png`` besides, one per cell; the
+#: Parquet tables of ``tactbench report --parquet``, :mod:`tactbench.runner.frames`).
+OUT_FILES = ("results.json", "results.csv", "report.md", "cells.parquet",
+             "comparisons.parquet", *(f"{name}.png" for name in FIGURES))
 #: The folders a run writes at the top of its out folder.
 OUT_FOLDERS = ("cells", "models")
 #: report.md begins with this line; a report.md without it is not tactbench's.
@@ -117,7 +118,7 @@ class Report:
 
     def table(self) -> list[dict[str, Any]]:
         """The rows as a flat table, one dict per cell with the columns of results.csv
-        (``pandas.DataFrame(report.table())`` makes a data frame of it)."""
+        (:func:`tactbench.runner.frames.cells_frame` makes a typed data frame of it)."""
         return flat_rows(self.rows)
 
     def document(self) -> dict[str, Any]:

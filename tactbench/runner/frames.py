@@ -1,0 +1,158 @@
+"""A run's results where researchers already look: pandas data frames and Parquet files.
+
+:func:`cells_frame` is one row per cell (its spec, status, accuracy, costs, machine, git
+revision), :func:`comparisons_frame` one row per paired comparison (A, B, the difference
+B − A with its interval, p and Holm p, verdict, runs, family, and the keys of the cells
+compared); both have typed columns (text as pandas ``string``, counts as nullable
+``Int64``, measures as ``float64``, the finishing time as UTC timestamps).
+:func:`write_parquet` writes both into a run folder as ``cells.parquet`` and
+``comparisons.parquet`` (``tactbench report OUT --parquet``), readable by pandas and by
+pyarrow alone. pandas and pyarrow are imported here only, on first use: the extra
+``tactbench[export]`` installs them, and a missing one is one line
+(:class:`~tactbench.errors.MissingExtraError`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Sequence
+
+from tactbench.errors import require
+from tactbench.machine import describe_machines
+from tactbench.paths import atomic_write_bytes
+from tactbench.runner.comparisons import Comparison
+from tactbench.runner.results import ok_rows
+from tactbench.runner.summaries import FACTORS, parse_contrast, spec_label
+from tactbench.runner.writers import csv_columns, flat_rows
+
+if TYPE_CHECKING:
+    import pandas
+
+    from tactbench.runner.writers import Report
+
+#: The extra that installs pandas and pyarrow.
+EXTRA = "export"
+#: The Parquet files :func:`write_parquet` writes into a run folder.
+PARQUET_FILES = {"cells": "cells.parquet", "comparisons": "comparisons.parquet"}
+#: kind of a column → its pandas dtype.
+DTYPES = {"text": "string", "int": "Int64", "float": "float64"}
+#: The columns of :func:`cells_frame` that are not text (``acc_<class>`` are floats;
+#: ``finished`` a UTC timestamp).
+CELL_KINDS = {"split_seed": "int", "L": "int", "seed": "int", "accuracy": "float",
+              "encode_ms_per_frame": "float", "train_s": "float",
+              "inference_ms_per_sequence": "float", "peak_rss_mb": "float",
+              "n_train_windows": "int", "n_test": "int", "threads": "int"}
+#: The columns of :func:`comparisons_frame`, in order, with their kinds (``cells_a`` and
+#: ``cells_b``: lists of cell keys).
+COMPARISON_KINDS = {
+    "family": "text", "dataset": "text", "split": "text", "factor": "text", "a": "text",
+    "b": "text", "encoder": "text", "classifier": "text", "L": "int",
+    "difference": "float", "low": "float", "high": "float", "confidence": "float",
+    "p": "float", "p_holm": "float", "verdict": "text", "runs": "int",
+    "accuracy_a": "float", "accuracy_b": "float", "equivalence_margin": "float",
+    "equivalence_p": "float", "equivalence_p_holm": "float", "family_size": "int",
+    "method": "text", "note": "text", "cells_a": "keys", "cells_b": "keys"}
+
+
+def cells_frame(report: "Report") -> "pandas.DataFrame":
+    """One row per cell of ``report`` (ok and failed, in the scene's order): the columns
+    of results.csv (:func:`~tactbench.runner.writers.csv_columns`: spec, status,
+    accuracy, ``acc_<class>``, costs, ``key``, ``error``) with ``test_window`` after the
+    split and ``machine`` (the CPU and its torch kernels) and ``git`` (the revision that
+    computed it) at the end; a failed cell has no accuracy or costs (missing values)."""
+    pd = require("pandas", EXTRA)
+    columns = csv_columns(report.rows)
+    columns.insert(columns.index("encoder"), "test_window")
+    columns += ["machine", "git"]
+    records = []
+    for row, flat in zip(report.rows, flat_rows(report.rows)):
+        run = row.get("run") if isinstance(row.get("run"), dict) else {}
+        records.append({**flat, "test_window": row.get("test_window"),
+                        "machine": describe_machines([row]), "git": run.get("git")})
+    data = {}
+    for name in columns:
+        values = [r.get(name) for r in records]
+        if name == "finished":
+            data[name] = pd.to_datetime(pd.Series(values, dtype="string"), utc=True,
+                                        format="ISO8601")
+            continue
+        kind = "float" if name.startswith("acc_") else CELL_KINDS.get(name, "text")
+        data[name] = _column(pd, values, kind)
+    return pd.DataFrame(data, columns=columns)
+
+
+def comparisons_frame(report: "Report") -> "pandas.DataFrame":
+    """One row per paired comparison of ``report`` (:data:`COMPARISON_KINDS`): ``a`` and
+    ``b`` the values compared (of ``factor``, or a contrast's sides), ``encoder``,
+    ``classifier`` and ``L`` where both cells share them, ``difference`` = B − A with
+    its interval ``low``–``high`` at ``confidence`` (accuracy fractions), ``p`` and
+    ``p_holm`` (Holm within ``family``), ``verdict``, ``runs``, and ``cells_a`` /
+    ``cells_b``: the keys of the cells (one per run) on each side."""
+    pd = require("pandas", EXTRA)
+    records = [comparison_record(c, report.rows) for c in report.comparisons]
+    data = {name: _column(pd, [r[name] for r in records], kind)
+            for name, kind in COMPARISON_KINDS.items()}
+    return pd.DataFrame(data, columns=list(COMPARISON_KINDS))
+
+
+def comparison_record(c: Comparison, rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The fields of :data:`COMPARISON_KINDS` of ``c`` as plain values (``cells_a`` and
+    ``cells_b`` found among ``rows``): a row of :func:`comparisons_frame`, and what the
+    MLflow plugin logs for a comparison."""
+    record = {name: getattr(c, name, None) for name in COMPARISON_KINDS}
+    record.update({f: c.where.get(f) for f in FACTORS})
+    record["cells_a"], record["cells_b"] = compared_cells(c, rows)
+    return record
+
+
+def compared_cells(c: Comparison, rows: Sequence[dict[str, Any]]
+                   ) -> tuple[list[str], list[str]]:
+    """The keys of the ok cells (one per run) on side A and on side B of ``c``."""
+    if c.factor == "contrast":
+        sides = parse_contrast(f"{c.a}..{c.b}")
+    else:
+        sides = ({c.factor: c.a}, {c.factor: c.b})
+
+    def keys(side: dict[str, Any]) -> list[str]:
+        spec = {**c.where, **side}
+        return sorted(str(r["key"]) for r in ok_rows(rows)
+                      if r.get("split") == c.split and all(_same(f, r.get(f), v)
+                                                           for f, v in spec.items()))
+
+    return keys(sides[0]), keys(sides[1])
+
+
+def _same(factor: str, value: Any, wanted: Any) -> bool:
+    """Whether a row's ``factor`` is ``wanted`` (a classifier also by its short label)."""
+    return str(value) == str(wanted) or (factor == "classifier"
+                                         and spec_label(str(value)) == str(wanted))
+
+
+def _column(pd: Any, values: list[Any], kind: str) -> Any:
+    """``values`` as a pandas array of ``kind`` (:data:`DTYPES`; ``keys``: lists of text)."""
+    if kind == "keys":
+        return pd.Series([list(v) for v in values], dtype=object)
+    if kind == "text":
+        values = [None if v is None else str(v) for v in values]
+    elif kind == "float":
+        values = [float("nan") if v is None else float(v) for v in values]
+    return pd.array(values, dtype=DTYPES[kind])
+
+
+def write_parquet(report: "Report", out: str | Path) -> dict[str, Path]:
+    """Write :func:`cells_frame` and :func:`comparisons_frame` of ``report`` into the
+    folder ``out`` as :data:`PARQUET_FILES`; returns their paths. Both tables are made
+    before either file is written, and each is written to a temporary file renamed into
+    place: a failure leaves the old files (or none), never half of one."""
+    pa = require("pyarrow", EXTRA)
+    parquet = require("pyarrow.parquet", EXTRA)
+    tables = {"cells": cells_frame(report), "comparisons": comparisons_frame(report)}
+    payloads = {}
+    for name, frame in tables.items():
+        sink = pa.BufferOutputStream()
+        parquet.write_table(pa.Table.from_pandas(frame, preserve_index=False), sink)
+        payloads[name] = sink.getvalue().to_pybytes()
+    paths = {name: Path(out) / PARQUET_FILES[name] for name in tables}
+    for name, data in payloads.items():
+        atomic_write_bytes(paths[name], data)
+    return paths
