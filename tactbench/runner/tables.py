@@ -84,8 +84,8 @@ def _pair(c: Comparison, labels: Labels | None) -> list[str]:
 
 COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
                      "95 % interval over runs (unadjusted)", "runs B>A / A>B / tied",
-                     "p (corrected t)", "Holm p (its family)",
-                     "P(A better / ≈ / B better)", "runs for 80 % power", "verdict"]
+                     "p (corrected t)", "Holm p (its family)", "P(A better / ≈ / B better)",
+                     "runs for 80 % power (one fixed test)", "verdict"]
 #: The p column's name where a table's comparisons are all the plain paired t over
 #: independent runs, or some are and some are corrected (:func:`comparison_header`).
 P_COLUMN = {"plain": "p (paired t)", "mixed": "p (t over runs)"}
@@ -119,10 +119,8 @@ def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None
 
 
 def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[list[str]]:
-    """Table cells: factor, A, B, where (the shared factors), B − A (points), the
-    run-level interval, runs B>A/A>B/tied, p of the t over runs (corrected, or plain
-    over independent runs: the comparison's ``method``), the family's Holm-adjusted p, the runs a ±2-point (or ±margin) interval needs,
-    and the verdict. A classifier is named by its label in ``labels`` (by default the
+    """Table cells, :data:`COMPARISON_HEADER`'s columns (the p: the comparison's
+    ``method``'s t). A classifier is named by its label in ``labels`` (by default the
     labels among the classifiers of ``comps``, :func:`comparison_labels`)."""
     comps = read_comparisons(comps)
     labels = comparison_labels(comps) if labels is None else labels
@@ -428,10 +426,12 @@ COMPARISONS_TEMPLATE = (
     "--primary) are the confirmatory family; the rest are exploratory. Fewer than 3 runs "
     "give no verdict; an interval touching 0 is unresolved. P(A better / ≈ / B better) "
     "is the Bayesian correlated t (Corani & Benavoli 2015) within ±margin points; "
-    "\"runs for 80 % power\" is how many runs would find the observed difference with "
-    "80 % power at the family's Bonferroni level, \"beyond these data\" where no number "
-    "of runs of these recordings would; \"ceiling\" is two models right on every "
-    "recording. McNemar's test per seed (results.json, `mcnemar_per_seed`) speaks of "
+    "\"runs for 80 % power (one fixed test)\" is the runs one test at the end needs to find "
+    "the observed difference with 80 % power at the family's Bonferroni level (a run --until "
+    "answered looks from 5 runs on, and has less power at that number: `tactbench plan` "
+    "forecasts it), \"beyond these data\" where no number of runs of these recordings would; "
+    "\"ceiling\" is two models right on every recording. McNemar's test per seed "
+    "(results.json, `mcnemar_per_seed`) speaks of "
     "those trained models only. See docs/statistics.md.")
 #: The text above the comparisons where every t is corrected (every stored report's).
 COMPARISONS_TEXT = COMPARISONS_TEMPLATE.format(test=T_TEXT["corrected"], rule=P_RULE)
@@ -549,7 +549,7 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
     if c.verdict in ("unresolved", "too few runs"):
         more = _power_runs(c)
         if more == "beyond these data":
-            answer += " — these data cannot tell at any number of runs"
+            answer += " — at this difference no number of runs of these data gives 80 % power"
         elif more.isdigit() and int(more) <= c.runs and \
                 (c.note or "").startswith("group-sequential"):
             answer += (f" — {more} runs would give 80 % power in a single test at its "
