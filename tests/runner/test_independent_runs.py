@@ -222,4 +222,4 @@ def test_an_open_answer_says_what_holds_it_back():
     fixed = dataclasses.replace(c, verdict="unresolved", runs_for_power=c.runs + 4, note="")
     assert f"about {c.runs + 4} runs would answer it" in answer_text(fixed)
     floor = dataclasses.replace(c, verdict="unresolved", runs_for_power=None, note="")
-    assert "cannot tell at any number of runs" in answer_text(floor)
+    assert "no number of runs of these data gives 80 % power" in answer_text(floor)
