@@ -21,7 +21,7 @@ import click
 
 from tactbench import __version__
 from tactbench.errors import InputError, PluginError, TactbenchError, check_number
-from tactbench.machine import pin_cpu_kernels
+from tactbench.kernels import pin_cpu_kernels
 from tactbench.plugins import collect_registry, make_plugin_manager
 
 DEBUG_ENV = "TACTBENCH_DEBUG"

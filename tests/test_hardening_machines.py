@@ -11,13 +11,14 @@ import sys
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.machine import (
+from tactbench.kernels import (
+    KERNEL_LEVELS,
+    KERNEL_VARIABLES,
     KERNELS_ENV,
     _cpu_flags,
-    describe_machines,
-    machine,
     pin_cpu_kernels,
 )
+from tactbench.machine import describe_machines, machine
 
 
 def test_machine_facts_name_the_cpu_and_the_kernels():
@@ -35,18 +36,20 @@ def test_pinning_the_kernels_sets_what_torch_honours():
     assert pin_cpu_kernels(env) == "default"
     assert env["ATEN_CPU_CAPABILITY"] == "default" and env["MKL_CBWR"] == "COMPATIBLE"
     assert env["ONEDNN_MAX_CPU_ISA"] == "AVX2"  # a variable already set is kept
-    code = ("from tactbench.machine import machine, pin_cpu_kernels; "
+    code = ("from tactbench.machine import machine; "
+            "from tactbench.kernels import pin_cpu_kernels; "
             "pin_cpu_kernels(); import torch, json; torch.ones(1); "
             "print(json.dumps(machine()))")
-    child = {k: v for k, v in os.environ.items() if k not in (
-        "ATEN_CPU_CAPABILITY", "ONEDNN_MAX_CPU_ISA", "MKL_CBWR")}
+    child = {k: v for k, v in os.environ.items() if k not in KERNEL_VARIABLES}
     child[KERNELS_ENV] = "default"
     done = subprocess.run([sys.executable, "-c", code], env=child, capture_output=True,
                           text=True, timeout=120)
     facts = json.loads(done.stdout)
     assert facts["cpu_kernels"] == "DEFAULT"  # torch took the pin
     assert facts["pinned"] == {KERNELS_ENV: "default", "ATEN_CPU_CAPABILITY": "default",
-                               "ONEDNN_MAX_CPU_ISA": "SSE41", "MKL_CBWR": "COMPATIBLE"}
+                               "ONEDNN_MAX_CPU_ISA": "SSE41", "MKL_CBWR": "COMPATIBLE",
+                               "NPY_DISABLE_CPU_FEATURES": KERNEL_LEVELS["default"][3],
+                               "OPENCV_CPU_DISABLE": KERNEL_LEVELS["default"][4]}
 
 
 def test_a_kernel_level_the_cpu_lacks_is_refused():

@@ -117,11 +117,13 @@ SCENE_OPTIONS = [
                       "(8 bits per channel value, as the study's images; a quarter of the "
                       "disk)."),
     scene_option("--device", field="device", help="cpu, cuda, cuda:N or auto."),
-    scene_option("--threads", field="threads", type=int, none="cores/workers",
-                 help="torch threads per cell."),
+    scene_option("--threads", field="threads", type=int,
+                 help="torch threads per cell (part of a cell's identity: another count "
+                      "gives other numbers)."),
     scene_option("--executor", field="executor", type=click.Choice(["local", "dask"]),
                  help="Where cells run: this machine, or a dask cluster."),
-    scene_option("--workers", field="workers", type=int, help="Parallel cells (processes)."),
+    scene_option("--workers", field="workers", type=int, none="this machine's cores / --threads",
+                 help="Cells at once (processes)."),
     scene_option("--scheduler", field="scheduler", none="a local cluster",
                  help="dask scheduler address tcp://HOST:PORT (with --executor dask)."),
     scene_option("--out", field="out", help="Output folder."),

@@ -47,6 +47,7 @@ from tactbench.runner.entries import load_encoding
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
+from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNELS_ENV, torch_kernels
 from tactbench.machine import host, machine, versions
 from tactbench.runner.system import MemoryTracker, now
 from tactbench.seeds import derive_seed
@@ -120,7 +121,7 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
                     classifier=p.classifier_component(c.classifier),
                     split=split, test_window=window,
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
-                    scene=scene, data=data, threads=scene.resolved_threads(),
+                    scene=scene, data=data, threads=scene.threads,
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
                     model_meta=model_metadata(p, c) if models else None)
             for c in cells]
@@ -218,6 +219,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     import torch
 
     memory = memory if memory is not None else MemoryTracker()
+    check_kernels(job.identity)
     torch.set_num_threads(job.threads)
     cell, scene = job.cell, job.scene
     with memory.track("load encoding"):
@@ -271,6 +273,19 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "machine": machine(),
         "finished": now(),
     }
+
+
+def check_kernels(identity: dict[str, Any]) -> None:
+    """Refuse to train a cell whose identity names CPU kernels this process does not
+    compute with (a dask worker started without the pin, torch imported before it): its
+    numbers would be stored under a key that promises others."""
+    wanted = identity.get("cpu_kernels", DEFAULT_KERNELS)
+    level = KERNEL_LEVELS.get(wanted)
+    here = torch_kernels()
+    if level is not None and here is not None and here != level[0].upper():
+        raise RuntimeError(f"this worker's torch computes with {here} kernels, the cell's "
+                           f"identity says {wanted}: start the worker with "
+                           f"{KERNELS_ENV}={wanted} in its environment (docs/reliability.md)")
 
 
 #: The lists of a row's ``test_predictions``, one entry per test recording in the same

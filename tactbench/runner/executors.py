@@ -1,5 +1,11 @@
 """Where cells run: in turn in this process, in local worker processes, or on dask.
 
+By default as many cells run side by side as the machine has cores, one torch thread
+each (:meth:`~tactbench.runner.scene.Scene.resolved_workers`): the thread count is part
+of a cell's identity, so parallelism comes from cells, not threads. Spawned workers
+inherit the pinned CPU kernels (:func:`~tactbench.machine.pin_cpu_kernels`) from this
+process's environment.
+
 Each executor calls ``finish(row)`` in this process as soon as a cell's row is back, in
 the order cells finish. A cell never raises here (:func:`~tactbench.runner.cell.run_cell`
 returns a failed row instead); when a worker itself dies (killed for memory, a crashed
@@ -38,12 +44,13 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         done += 1
         bars.update(overall, done)
 
-    if scene.executor == "local" and scene.workers == 1:
+    workers = scene.resolved_workers()
+    if scene.executor == "dask":
+        run_dask(jobs, finished, workers=workers, scheduler=scene.scheduler)
+    elif min(workers, len(jobs)) == 1:
         run_serial(jobs, finished, bars, memory)
-    elif scene.executor == "local":
-        run_processes(jobs, finished, workers=scene.workers)
     else:
-        run_dask(jobs, finished, workers=scene.workers, scheduler=scene.scheduler)
+        run_processes(jobs, finished, workers=min(workers, len(jobs)))
 
 
 def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",

@@ -8,11 +8,13 @@ large steps, the split drawn once for the first seed, the out folder.
 
 A cell is one point of the grid (encoder × classifier × L × seed). Its *identity* is
 everything that decides its result (dataset content hash, split, imaging, encoder and
-version, storage precision, classifier with all options, profile, L, seed); the hash of
+version, storage precision, classifier with all options, profile, L, seed, and the torch
+threads and CPU kernels it computes with); the hash of
 the identity is the cell's key, which names its result file, so a changed setting is a
 new cell. The precision is written into the identity only when it is not ``float32``, and the
-test window only when it is not the study's ``first``, so cells keep the keys they had
-before either existed.
+test window only when it is not the study's ``first``, the threads only when not 1 and the
+kernels only when not pinned to AVX2 (:func:`compute_identity`), so cells keep the keys
+they had before either existed.
 
 (Named ``planning``, not ``plan``: the package re-exports the function :func:`plan`,
 which would hide a submodule of the same name.)
@@ -34,6 +36,7 @@ from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.datasets.loading import check_informative, is_path_spec, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import BudgetError, InputError
+from tactbench.kernels import DEFAULT_KERNELS, kernels_identity, pin_cpu_kernels
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import profile_options
@@ -308,7 +311,18 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
         **({"input": kind} if scene.input and either_input else {}),
         **({} if run_dataset is None else {"run_dataset": run_dataset,
                                            INDEPENDENT_RUNS: True}),
+        **compute_identity(scene.threads),
     }
+
+
+def compute_identity(threads: int) -> dict[str, Any]:
+    """What the computation adds to a cell's identity: the torch threads and the CPU
+    kernels (:func:`~tactbench.machine.kernels_identity`), each only when it is not the
+    default (1 thread, kernels pinned to AVX2), so that cells trained so keep their keys;
+    both change the numbers a cell gives (docs/reliability.md, "Numbers across machines")."""
+    kernels = kernels_identity()
+    return {**({} if threads == 1 else {"threads": int(threads)}),
+            **({} if kernels == DEFAULT_KERNELS else {"cpu_kernels": kernels})}
 
 
 def plan(scene: Scene, registry=None, *, progress=None,
@@ -323,6 +337,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
     run draws its own (see :func:`plan_runs`), loaded in place of ``scene.dataset``.
     """
     registry = registry or load_registry()
+    pin_cpu_kernels()  # the kernels every cell of the plan computes with (in its identity)
     # The scene checked itself when it was made; here what needs the plugins and the disk.
     check_output_folder(scene.out, option="out folder", ours=is_run_output)
     _check_statistics(scene)

@@ -66,7 +66,7 @@ ROW_MAX_BYTES = 16 << 20
 #: Identity fields that a cell's identity leaves out at their default (see
 #: :func:`tactbench.runner.planning.cell_identity`), with that default.
 IDENTITY_DEFAULTS = {"test_window": UNNAMED_TEST_WINDOW, "precision": "float32",
-                     "init_seed": None, "input": None}
+                     "init_seed": None, "input": None, "threads": 1, "cpu_kernels": "avx2"}
 
 
 def row_status(row: dict[str, Any]) -> str:
@@ -137,9 +137,13 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
             return "is a failed row without its error"
     else:
         return f"has an unknown status {str(status)[:40]!r}"
-    for field, value in json.loads(json.dumps(identity or {})).items():
+    planned = json.loads(json.dumps(identity or {}))
+    for field, value in planned.items():
         if row.get(field) != value:
             return f"records {field} = {str(row.get(field))[:40]!r}, the cell has {value!r}"
+    for field, default in IDENTITY_DEFAULTS.items() if identity is not None else ():
+        if field not in planned and row.get(field, default) != default:  # left out: default
+            return f"records {field} = {str(row.get(field))[:40]!r}, the cell has {default!r}"
     return None
 
 

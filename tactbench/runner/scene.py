@@ -42,6 +42,7 @@ from tactbench.data.splits import parse_split
 from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError, MissingFileError, check_choice
 from tactbench.integrity import check_regular_file, read_regular_bytes
+from tactbench.machine import usable_cores
 from tactbench.profiles import PRECISIONS, get_profile
 from tactbench.runner.system import check_scheduler
 from tactbench.specs import parse_spec
@@ -83,9 +84,11 @@ class Scene:
     imaging: str = "linear"
     precision: str | None = None  # storage of cached encodings (PRECISIONS); None: the profile's
     device: str = "cpu"
-    threads: int | None = None  # torch threads per cell; None: cores / workers
+    # torch threads per cell: fixed, since the thread count changes a cell's numbers (it is
+    # in the cell's identity when not 1); a machine's cores are used by cells side by side
+    threads: int = 1
     executor: str = "local"
-    workers: int = 1
+    workers: int | None = None  # cells at once; None: this machine's usable cores
     scheduler: str | None = None
     out: str = "tactbench-out"
     rerun: bool = False
@@ -153,11 +156,12 @@ class Scene:
             nxt += 1
         return seeds[:self.max_runs] if self.until else seeds
 
-    def resolved_threads(self) -> int:
-        """torch threads per cell: the scene's, else this machine's cores shared by workers."""
-        if self.threads is not None:
-            return int(self.threads)
-        return max(1, (os.cpu_count() or 1) // max(1, self.workers))
+    def resolved_workers(self) -> int:
+        """Cells at once: the scene's, else this machine's usable cores (one thread each
+        at the default :attr:`threads`, their product at most the cores)."""
+        if self.workers is not None:
+            return int(self.workers)
+        return max(1, usable_cores() // max(1, int(self.threads)))
 
 
 #: At most this many window lengths, or seeds, in one run: a range of more
@@ -233,7 +237,7 @@ _KINDS: dict[str, str] = {
     "dataset": "text", "encoders": "texts", "classifiers": "texts", "L": "lengths",
     "seeds": "seeds", "split": "text", "test_window": "text", "test_per_class": "count", "profile": "text",
     "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
-    "threads": "workers?", "executor": "text", "workers": "workers", "scheduler": "text?",
+    "threads": "workers", "executor": "text", "workers": "workers?", "scheduler": "text?",
     "out": "text", "rerun": "bool", "save_models": "bool",
     "margin": "number?", "contrasts": "texts?", "input": "text?", "init_seeds": "seeds?",
     "primary": "texts?", "until": "text?", "max_runs": "count", "look_every": "count",

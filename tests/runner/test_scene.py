@@ -50,13 +50,15 @@ def test_pixel_size_comes_from_the_profile_unless_given():
     assert Scene(profile="paper", pixel_mm=2.5).resolved_pixel_mm() == 2.5
 
 
-def test_threads_share_the_cores_between_workers(monkeypatch):
-    import os
+def test_cells_share_the_cores_one_thread_each(monkeypatch):
+    """The thread count is fixed (1, in no identity); the cores go to cells side by side."""
+    import tactbench.runner.scene as scene_module
 
-    monkeypatch.setattr(os, "cpu_count", lambda: 8)
-    assert Scene(workers=2).resolved_threads() == 4
-    assert Scene(workers=16).resolved_threads() == 1
-    assert Scene(threads=3, workers=2).resolved_threads() == 3
+    monkeypatch.setattr(scene_module, "usable_cores", lambda: 8)
+    assert Scene().threads == 1 and Scene().resolved_workers() == 8
+    assert Scene(threads=2).resolved_workers() == 4  # never more threads than cores
+    assert Scene(workers=3).resolved_workers() == 3
+    assert Scene(threads=16).resolved_workers() == 1
 
 
 def test_precision_comes_from_the_profile_unless_given(tmp_path):
@@ -134,9 +136,9 @@ def test_every_scene_file_field_has_its_type_checked(tmp_path, body, match):
 def test_a_json_scene_file_is_read_and_checked_like_toml(tmp_path):
     path = tmp_path / "scene.json"
     path.write_text('{"dataset": "x", "encoder": "raw", "L": ["1-3"], "seeds": [4], '
-                    '"pixel_mm": 2.5, "threads": null, "rerun": true}')
+                    '"pixel_mm": 2.5, "workers": null, "rerun": true}')
     assert load_scene_file(path) == {"dataset": "x", "encoders": ["raw"], "L": [1, 2, 3],
-                                     "seeds": [4], "pixel_mm": 2.5, "threads": None,
+                                     "seeds": [4], "pixel_mm": 2.5, "workers": None,
                                      "rerun": True}
     for body, match in [('{"seeds": [1], "seeds": [2]}', "key 'seeds' is given twice"),
                         ('[1, 2]', "holds a table of fields, got list"),
