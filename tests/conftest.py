@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+import tactbench  # noqa: F401 — first: it pins the CPU kernels before numpy or torch load
+
 REPO = Path(__file__).resolve().parents[1]
 #: Third-party data kept beside the project (never inside it); see its README.
 SHARED_DATA = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))

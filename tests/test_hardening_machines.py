@@ -100,3 +100,39 @@ def test_one_cell_gives_identical_predictions_in_fresh_processes_under_load(tmp_
     assert quiet["confusion"] == loaded["confusion"]
     assert quiet["accuracy"] == loaded["accuracy"]
     assert quiet["machine"]["cpu"] and quiet["machine"] == loaded["machine"]
+
+
+def _child(code: str, **env: str) -> str:
+    clean = {k: v for k, v in os.environ.items() if k not in (*KERNEL_VARIABLES, KERNELS_ENV)}
+    done = subprocess.run([sys.executable, "-c", code], env={**clean, **env},
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
+def test_importing_tactbench_pins_the_kernels_before_numpy_and_says_when_it_came_late():
+    flags = _cpu_flags()
+    if flags is None or "avx2" not in flags:
+        pytest.skip("this CPU has no AVX2 (or does not say): the default is native here")
+    code = ("import os, tactbench; from tactbench.kernels import kernels_identity; "
+            "print(kernels_identity(), os.environ['ATEN_CPU_CAPABILITY'], "
+            "os.environ['MKL_CBWR'])")
+    assert _child(code) == "avx2 avx2 COMPATIBLE"
+    late = _child("import numpy; " + code)
+    assert late.startswith("unpinned ") and "numpy imported before tactbench" in late
+    native = _child(code.replace("os.environ['ATEN_CPU_CAPABILITY'], "
+                                 "os.environ['MKL_CBWR']", "'-'"),
+                    TACTBENCH_CPU_KERNELS="native")
+    assert native.startswith("native ") and native.endswith(" -")
+
+
+def test_a_cell_keyed_to_other_kernels_is_refused_by_a_worker_computing_with_these():
+    from tactbench.runner.cell import check_kernels
+
+    import torch  # noqa: F401 — what the worker computes with is torch's capability
+
+    here = torch.backends.cpu.get_cpu_capability().lower()
+    check_kernels({"cpu_kernels": here})  # the same: nothing to say
+    other = "default" if here != "default" else "avx2"
+    with pytest.raises(RuntimeError, match=f"identity says {other}"):
+        check_kernels({"cpu_kernels": other})

@@ -5,7 +5,7 @@ An entry (:mod:`tactbench.runner.entries`: its format, verification and reading)
 by the dataset's content hash, the imaging identity (vectors, or images at a pixel size
 and method), the encoder's canonical spec and version, and the storage precision (left
 out of the key for ``float32``, so entries made before precisions existed keep their
-keys). The cache root is ``$TACTBENCH_CACHE/encodings`` (see
+keys), and the CPU kernels numpy and OpenCV computed with (:func:`~tactbench.kernels.kernels_identity`). The cache root is ``$TACTBENCH_CACHE/encodings`` (see
 :func:`tactbench.paths.cache_dir`).
 
 :func:`ensure_encodings` encodes what is missing in one streaming pass over the dataset
@@ -58,6 +58,7 @@ from tactbench.runner.entries import (
     signature,
     verify_entry,
 )
+from tactbench.kernels import kernels_identity
 from tactbench.runner.planning import Cell, Plan, digest, imaging_identity, storage_identity
 
 if TYPE_CHECKING:
@@ -88,7 +89,8 @@ class EncodingCache:
         """What decides an entry's content; its digest is the entry's key, and
         ``meta.json`` records it so that a reader can check the key against it."""
         return {"dataset": dataset_hash, "imaging": imaging, "encoder": encoder,
-                "version": version, **storage_identity(precision)}
+                "version": version, **storage_identity(precision),
+                "cpu_kernels": kernels_identity()}  # numpy's and OpenCV's SIMD loops
 
     def key(self, dataset_hash: str, imaging: dict[str, Any], encoder: str,
             version: str, precision: str = "float32") -> str:

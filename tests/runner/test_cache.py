@@ -59,14 +59,17 @@ def test_keys_change_with_imaging_encoder_version_and_precision():
     assert len(others) == 2 and base not in others
 
 
-def test_float32_keys_are_the_keys_made_before_precisions_existed():
-    # values computed by the cache before storage precisions were added
-    assert EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1") == \
-        EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1", "float32") == \
-        "cc1cbaef06a00073f7131b24"
-    assert EncodingCache.key(None, "h", {"kind": "images", "pixel_mm": 5.0,
-                                         "method": "linear"}, "farneback", "1") == \
-        "c89ed45ea1faad1876b4577d"
+def test_keys_change_with_the_cpu_kernels_and_float32_is_the_unmarked_precision(monkeypatch):
+    """An encoding computed by numpy's and OpenCV's AVX-512 loops is not the pinned AVX2
+    one: the kernels are in the key (issue 36); float32 adds nothing to it."""
+    from tactbench.kernels import KERNEL_VARIABLES, KERNELS_ENV
+
+    pinned = EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1")
+    assert pinned == EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1", "float32")
+    monkeypatch.setenv(KERNELS_ENV, "native")
+    for name in KERNEL_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert EncodingCache.key(None, "h", {"kind": "vectors"}, "raw", "1") != pinned
 
 
 # --------------------------------------------------------------------- precision

@@ -187,3 +187,18 @@ def test_a_refused_grid_is_told_how_the_stored_cells_differ(tmp_path):
         store.claim(planned, planned)
     with pytest.raises(InputError, match=r"its dataset_hash is 'h1', this run's 'h2'"):
         store.claim(["x"], {"x": {**stored, "dataset_hash": "h2"}})
+
+
+def test_a_row_trained_with_other_threads_or_kernels_is_not_the_default_cell():
+    """Rows record their threads; a cell's identity leaves 1 thread and avx2 kernels out:
+    a 2-thread row must not pass for the 1-thread cell of the same other fields."""
+    from tactbench.runner.results import check_row
+
+    row = {"key": "k", "encoder": "raw", "classifier": "c", "L": 1, "seed": 0,
+           "status": "failed", "error": {"type": "E", "message": "m"}}
+    identity = {"encoder": "raw"}
+    assert check_row({**row, "threads": 1}, "k", identity) is None
+    assert "threads = '2', the cell has 1" in check_row({**row, "threads": 2}, "k", identity)
+    assert "cpu_kernels" in check_row({**row, "cpu_kernels": "native X (avx512)"}, "k",
+                                      identity)
+    assert check_row({**row, "threads": 2}, "k", {**identity, "threads": 2}) is None
