@@ -1,21 +1,21 @@
-"""The runner's goals, measured: the study's comparison on the quick profile, twice.
+"""The README's main job, measured and committed: the study's question, answered.
 
-    python benchmarks/runner.py [--out docs/results/study-quick] [--workers-too]
-                                [--repeats N] [--extra ARGS...]
+    python benchmarks/runner.py [--out docs/results/study-quick] [--readme] [--workers-too]
+                                [--repeats N] [ARGS...]
 
-1. From an empty cache: `tactbench run` with its defaults — the study's comparison
-   (raw vs farneback, small-cnn-lstm, L = 5, seeds 0 1 2, paper split, test window
-   vote, quick profile, the built-in synthetic-forearm dataset: version 2 since
-   2026-11-24, whose recordings are about twice version 1's length). Goal: ≤ 180 s on 2 CPU cores (issue 21; it was
-   ≤ 10 minutes before).
+1. From an empty cache: ``tactbench run --until answered --max-runs 10`` (or ARGS) — the
+   study's comparison (raw vs farneback, small-cnn-lstm, L = 5, paper split, test window
+   vote, quick profile, the built-in synthetic-forearm dataset), runs added until its
+   primary question is answered, cells side by side at one thread each, kernels pinned.
 2. The identical command again. Goal: ≤ 5 % of the first (nothing is recomputed).
 3. With ``--workers-too``: the same grid into two fresh output folders on the now warm
-   encoding cache, one cell at a time with 2 torch threads (the default) and two cells at
-   once with 1 thread each (``--workers 2``): which serves a grid better on this machine
-   (``--repeats N``: N interleaved pairs, so that the machine's drift hits both alike).
+   encoding cache, one cell at a time with 2 torch threads and two cells at once with 1
+   thread each (``--repeats N``: N interleaved pairs, so that the machine's drift hits
+   both alike). The two give other numbers (the thread count is in a cell's identity).
 
 The run's reports (report.md, results.csv/json, plots) land in --out; the timings go to
-OUT/timing.json. Extra arguments are passed to `tactbench run` (e.g. `-L 1-6`).
+OUT/timing.json; ``--readme`` rewrites the README's paragraph on the main job from them
+(:func:`write_main_job`). The comparison with the code before is benchmarks/first_run.py.
 """
 
 from __future__ import annotations
@@ -32,6 +32,8 @@ import time
 from pathlib import Path
 
 GOAL_FIRST_S = 180.0
+#: The README's main job: the study's question, runs added until it is answered.
+MAIN_JOB = ["--until", "answered", "--max-runs", "10"]
 GOAL_SECOND_FRACTION = 0.05
 
 
@@ -51,7 +53,11 @@ def main() -> None:
                         help="also time the cells alone: 1 worker x 2 threads and 2 x 1")
     parser.add_argument("--repeats", type=int, default=1,
                         help="with --workers-too: interleaved repeats of the two")
-    parser.add_argument("extra", nargs="*", help="more arguments for tactbench run")
+    parser.add_argument("--readme", action="store_true",
+                        help="rewrite the README's main-job paragraph from this run")
+    parser.add_argument("extra", nargs="*", default=MAIN_JOB,
+                        help="the arguments of tactbench run (default: the README's main "
+                             "job, " + " ".join(MAIN_JOB) + ")")
     args = parser.parse_args()
 
     out = Path(args.out)
@@ -89,12 +95,56 @@ def main() -> None:
         "python": sys.version.split()[0], "date": time.strftime("%Y-%m-%d"),
     }
     (out / "timing.json").write_text(json.dumps(doc, indent=2))
+    if args.readme:
+        write_main_job(out)
     print(first_out)
     print(f"first run  {first_s:7.1f} s  (goal ≤ {GOAL_FIRST_S:.0f} s: "
           f"{'ok' if doc['first_ok'] else 'MISSED'})")
     print(f"second run {second_s:7.1f} s  = {100 * doc['second_over_first']:.1f} % of the "
           f"first (goal ≤ {100 * GOAL_SECOND_FRACTION:.0f} %: "
           f"{'ok' if doc['second_ok'] else 'MISSED'})")
+
+
+#: The README's paragraph on the main job's committed run lies between these markers and
+#: is written by :func:`write_main_job` (tests/test_readme.py checks it is current).
+MAIN_START = "<!-- main job: written by benchmarks/runner.py from docs/results/study-quick -->"
+MAIN_END = "<!-- /main job -->"
+
+
+def main_job_text(folder: Path) -> str:
+    """The README's sentences on the committed main job in ``folder``: its primary
+    answer first (the package's own words), the runs it took, each encoding's accuracy,
+    the wall time, machine and date."""
+    from tactbench.machine import describe_machines
+    from tactbench.runner import render_folder
+    from tactbench.runner.tables import answer_text
+
+    report = render_folder(folder, write=False, plots=False)
+    [primary] = [c for c in report.comparisons if c.family == "primary"]
+    accuracy = {s["encoder"]: s for s in report.summaries}
+    timing = json.loads((folder / "timing.json").read_text())
+    runs = len({r["seed"] for r in report.ok})
+    looks = (report.looks or {}).get("looks") or []
+    return (f"On the committed run ([{folder.as_posix()}]({folder.as_posix()}/report.md)): "
+            + answer_text(primary).replace("**", "") + " "
+            + f"It stopped after {runs} runs" + (f" at look {len(looks)}" if looks else "")
+            + "; " + ", ".join(f"`{e}` {100 * s['mean']:.1f} ± {100 * s['std']:.1f} %"
+                               for e, s in sorted(accuracy.items()))
+            + f". Wall time {timing['first_run_s']:.0f} s from an empty cache on "
+            + f"{describe_machines(report.ok[:1])}, {timing['cpus']} cores, "
+            + f"{timing['date']}.")
+
+
+def write_main_job(folder: Path, readme: Path = Path(__file__).resolve().parents[1]
+                   / "README.md") -> None:
+    """Rewrite the README's main-job paragraph from the committed run in ``folder``."""
+    import textwrap
+
+    text = readme.read_text()
+    head, rest = text.split(MAIN_START, 1)
+    _, tail = rest.split(MAIN_END, 1)
+    body = textwrap.fill(main_job_text(folder), width=90)
+    readme.write_text(f"{head}{MAIN_START}\n{body}\n{MAIN_END}{tail}")
 
 
 if __name__ == "__main__":

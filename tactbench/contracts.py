@@ -211,6 +211,10 @@ CLASSIFIER = Contract("classifier", (
            "problem when the classifier could not run here on device (one this machine "
            "lacks; a bad setting in the environment): called when a run is planned, "
            "before any work (None: nothing to check)", default=None),
+    Member("estimate_seconds", True, "estimate_seconds(*, frame_shape, L, n_classes, "
+           "n_train_windows, n_frames, n_test_windows) → the seconds one cell takes on "
+           "one thread, for `tactbench plan` before any pilot (None: unknown until a "
+           "pilot row exists)", default=None),
     Member("export", True, "export() → (config, tensors): its JSON-ready configuration and "
            "named tensors, for checking a saved model (None: nothing to export)",
            default=None),

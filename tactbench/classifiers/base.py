@@ -39,6 +39,7 @@ from tactbench.classifiers.batching import (
     training_batches,
     window_runs,
 )
+from tactbench.classifiers.costs import estimate_seconds
 from tactbench.classifiers.io import save_model
 from tactbench.classifiers.training import (
     FitReport,
@@ -348,6 +349,11 @@ class TorchSequenceClassifier(SequenceClassifier):
                 self._recalibrate_batchnorm(net, get_batch, len(train), seed)
         self.fit_report = self._finish_report(report)
         return dict(self.fit_report)
+
+    def estimate_seconds(self, **shapes: Any) -> float:
+        """Seconds one cell takes on one thread, timed here on a few steps
+        (:func:`tactbench.classifiers.costs.estimate_seconds`: its keyword arguments)."""
+        return estimate_seconds(self, **shapes)
 
     def _sharing(self, L: int) -> bool:
         """Whether training shares frames between windows (only overlapping ones can)."""

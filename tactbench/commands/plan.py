@@ -43,18 +43,7 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
     if as_json:
         click.echo(json_text(f.as_dict(), indent=2))
         return
-    for c in f.cells:
-        shown = "?" if c.seconds is None else f"{c.seconds:.0f} s"
-        click.echo(f"cell {c.label}: {shown} ({c.source})")
-    if f.seconds is None:
-        total = f"unknown (no cell has a timing: run a pilot of one seed into {scene.out})"
-    else:
-        total = f"{f.seconds / 60:.1f} min" + (
-            f" for the {len(f.cells) - f.unknown} cells with a timing, {f.unknown} without"
-            if f.unknown else "")
-    click.echo(f"{len(f.cells)} cells; time on this machine: {total}"
-               + "; peak memory " + ("unknown without a pilot" if f.peak_mb is None
-                                     else f"{f.peak_mb:.0f} MB (the pilot's)"))
+    _print_time(f, scene.out)
     click.echo(f"split: {f.n_test} test recordings against {f.n_train} training ones "
                f"per run" + (", each run on a data set of its own (independent "
                              "replications: no overlap correction)" if f.independent else ""))
@@ -93,3 +82,25 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                    f"resolves less than {p.floor:.1f} points{more}")
     if not f.primaries:
         click.echo("no primary comparison (give --primary A..B)", file=sys.stderr)
+
+
+def _print_time(f, out: str) -> None:
+    """Each cell's time and where it comes from, the total, and the run's wall time."""
+    for c in f.cells:
+        shown = "?" if c.seconds is None else f"{c.seconds:.0f} s"
+        click.echo(f"cell {c.label}: {shown} ({c.source})")
+    if f.seconds is None:
+        total = f"unknown (no cell has a timing: run a pilot of one seed into {out})"
+    else:
+        total = f"{f.seconds / 60:.1f} min" + (
+            f" for the {len(f.cells) - f.unknown} cells with a timing, {f.unknown} without"
+            if f.unknown else "")
+    click.echo(f"{len(f.cells)} cells; time on this machine: {total}"
+               + "; peak memory " + ("unknown without a pilot" if f.peak_mb is None
+                                     else f"{f.peak_mb:.0f} MB (the pilot's)"))
+    if f.wall_s:
+        at = (f"{f.wall_s[0] / 60:.1f} min to the first look ({f.looks[0]} runs), "
+              f"{f.wall_s[-1] / 60:.1f} min if it runs to {f.looks[-1]}" if f.looks
+              else f"{f.wall_s[0] / 60:.1f} min")
+        click.echo(f"wall time of the run: about {at} ({f.workers} cell(s) at once, one "
+                   f"thread each; encoding what the cache lacks included)")

@@ -236,11 +236,9 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
         log.info("removed the temporary folder %s left by process %s", orphan.path,
                  orphan.pid)
     for enc, kind in sorted(needed):
-        imaging = imaging_identity(scene, kind)
-        key = cache.key(plan_.dataset_hash, imaging, enc, plan_.encoder_versions[enc],
-                        precision)
-        identities[key] = cache.identity(plan_.dataset_hash, imaging, enc,
-                                         plan_.encoder_versions[enc], precision)
+        key = entry_key(plan_, cache, enc, kind)
+        identities[key] = cache.identity(plan_.dataset_hash, imaging_identity(scene, kind),
+                                         enc, plan_.encoder_versions[enc], precision)
         folders[(enc, kind)] = str(cache.path(key))
         if (enc, kind) not in pending_pairs:
             continue
@@ -254,6 +252,12 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
         _store_images(plan_, cache, missing["images"], precision, progress, chunk_bytes,
                        identities)
     return folders
+
+
+def entry_key(plan_: Plan, cache: EncodingCache, enc: str, kind: str) -> str:
+    """The cache key of encoder ``enc``'s entry for the input ``kind`` of ``plan_``."""
+    return cache.key(plan_.dataset_hash, imaging_identity(plan_.scene, kind), enc,
+                     plan_.encoder_versions[enc], plan_.scene.resolved_precision())
 
 
 def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:

@@ -55,6 +55,8 @@ from tactbench.runner.power import (
     sampling_sd,
     seed_mean_ratio,
 )
+from tactbench.runner.cache import EncodingCache
+from tactbench.runner.estimate import estimate_run, missing_entries
 from tactbench.runner.sequential import procedure
 from tactbench.runner.results import ResultStore, ok_rows
 from tactbench.runner.scene import Scene
@@ -112,6 +114,11 @@ class Forecast:
     alpha: float
     independent: bool = False  # each run draws its own data set: no overlap, no floor
     runs_not_made: int = 0  # runs whose own data set the plan did not make (all but one)
+    # the run's wall time on this machine (runner.estimate), at each look with --until
+    # (cumulative; one entry without): encoding, cells side by side, the run around them
+    wall_s: list[float] | None = None
+    looks: list[int] | None = None  # runs at each look (with --until)
+    workers: int = 1
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -140,6 +147,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
     others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
     cells = _cells(p.cells + others, pilot)
+    looks = schedule(scene.max_runs, scene.look_every) if scene.until else None
+    wall = _walls(p, p.cells + others, cells, looks)
     known = [c.seconds for c in cells if c.seconds is not None]
     primaries = scene.resolved_primary()
     level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
@@ -153,7 +162,38 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                             looks=schedule(scene.max_runs, scene.look_every)
                             if scene.until else None) for text in primaries],
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
-        runs_not_made=len({c.seed for c in others}))
+        runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
+        workers=scene.resolved_workers())
+
+
+def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
+           looks: list[int] | None) -> list[float] | None:
+    """The run's wall time (:func:`~tactbench.runner.estimate.estimate_run`), cumulative
+    at each look (one number without looks); cells without a pilot timing get the
+    classifier's own estimate (``cells`` updated in place). None when a cell has
+    neither."""
+    order = list(dict.fromkeys(c.seed for c in planned))
+    ends = looks or [len(order)]
+    known = {c.key: f.seconds for c, f in zip(planned, cells)
+             if f.seconds is not None and c.key}
+    memo: dict[Any, Any] = {}
+    missing = missing_entries(p, planned, EncodingCache())
+    total, out, start = 0.0, [], 0
+    for i, end in enumerate(ends):
+        seeds = set(order[start:end])
+        batch = [c for c, f in zip(planned, cells) if c.seed in seeds
+                 and not f.source.startswith("finished")]
+        est = estimate_run(p, batch, missing if i == 0 else [], known=known, memo=memo)
+        if est.unknown:
+            return None
+        total += est.seconds if batch or i == 0 else 0.0
+        out.append(total)
+        start = end
+    for c, f in zip(planned, cells):
+        if f.seconds is None:
+            f.seconds = memo.get((c.encoder, c.classifier, c.L))
+            f.source = "estimated here: a few of its training steps timed"
+    return out
 
 
 def _other_runs(first: Plan, specs: dict[int, str], pilot: list[dict[str, Any]]

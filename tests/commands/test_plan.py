@@ -81,3 +81,31 @@ def test_a_sequential_run_is_forecast_by_its_own_procedure(tmp_path, monkeypatch
     assert seq["looks"] == [5, 10] and seq["max_runs"] == 10
     assert 5 <= seq["expected_runs"] <= 10 and 0 <= seq["futile"] <= 1
     assert seq["power"] <= p["power"] + 4 * seq["mc_error"]  # looking costs power
+
+
+def test_without_a_pilot_a_torch_cell_is_timed_here_and_the_wall_time_forecast(tmp_path,
+                                                                              monkeypatch):
+    """No stored row: the CNN's cells are estimated from a few of its own training steps,
+    the encoding from a sample, and the run's wall time is forecast at every look."""
+    cnn = "small-cnn-lstm:epochs=1,windows_per_epoch=64,batch_size=16,input_size=16"
+    args = [a if a != "logreg:max_iter=20" else cnn for a in TINY]
+    res = _invoke(tmp_path, monkeypatch, "plan", *args, "--out", str(tmp_path / "out"),
+                  "--until", "answered", "--max-runs", "10", "--json")
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["unknown"] == 0 and len(doc["cells"]) == 20
+    assert all(c["source"].startswith("estimated here") and c["seconds"] > 0
+               for c in doc["cells"])
+    first, last = doc["wall_s"]
+    assert doc["looks"] == [5, 10] and 0 < first < last
+    text = _invoke(tmp_path, monkeypatch, "plan", *args, "--out", str(tmp_path / "out"),
+                   "--until", "answered", "--max-runs", "10")
+    assert "min to the first look (5 runs)" in text.output
+
+
+def test_cells_are_packed_onto_the_workers_longest_first():
+    from tactbench.runner.estimate import packed
+
+    assert packed([3, 2, 2, 1], 2) == 4
+    assert packed([5, 1, 1, 1], 2) == 5
+    assert packed([1, 1, 1], 1) == 3 and packed([], 3) == 0
