@@ -11,10 +11,14 @@ import click
 from tactbench.cli import get_registry, json_text
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
 from tactbench.runner import Report, Scene, load_scene_file, run, run_until
-from tactbench.runner.scene import parse_lengths, parse_seeds
+from tactbench.runner.scene import parse_duration, parse_lengths, parse_seeds, show_duration
 from tactbench.runner.summaries import failed_cells
 from tactbench.runner.tables import answer_text, print_comparisons, print_table
 from tactbench.runner.writers import run_labels
+
+
+#: Scene fields that only mean something with ``--until``.
+UNTIL_ONLY = ("max_runs", "look_every", "budget")
 
 
 class SceneOption(click.Option):
@@ -188,6 +192,11 @@ def scene_from(ctx: click.Context, scene_file: str | None, options: dict[str, An
                 labels[param.field] = max(param.opts, key=len)
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
+    if not fields.get("until"):  # options that only mean something with another
+        lone = [labels.get(f, f"scene field '{f}'") for f in UNTIL_ONLY if f in fields]
+        if lone:
+            raise click.UsageError(f"{', '.join(lone)} only mean(s) something with "
+                                   f"--until answered")
     return Scene.of(fields, labels=labels)
 
 
@@ -206,6 +215,9 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     the failed cells.
     """
     scene = scene_from(ctx, scene_file, options)
+    if scene.budget:  # echoed back as read: "1h30m" is 1 h 30 min
+        click.echo(f"budget: {show_duration(parse_duration(scene.budget))} (no batch of "
+                   f"runs begun that would end past it)", err=True)
     if scene.until:
         report = run_until(scene, registry=get_registry(), plots=not no_plots,
                            progress=sys.stderr.isatty() or not as_json)

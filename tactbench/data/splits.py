@@ -72,6 +72,11 @@ class Split:
             if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
                 raise ContractError(f"a split's {name} indices must be integers (n,), got "
                                     f"{idx.dtype} {idx.shape}")
+            if idx.size and (idx.min() < 0 or idx.max() > np.iinfo(np.int64).max):
+                # a negative index (or an unsigned one at the top of its type, which
+                # wraps to one) would point at a recording from the end: a test one
+                raise ContractError(f"a split's {name} indices must be ≥ 0, got "
+                                    f"{int(idx.min()) if idx.min() < 0 else int(idx.max())}")
             object.__setattr__(self, name, np.sort(idx.astype(np.int64)))
         object.__setattr__(self, "groups", tuple(str(g) for g in self.groups))
         object.__setattr__(self, "left_out", tuple(str(v) for v in self.left_out))
@@ -347,6 +352,8 @@ def check_splits(splits: Sequence[Split], n: int, name: str = "split") -> list[S
         problem = f"numbered its folds {[s.fold for s in splits]}, not 0, 1, ... in order"
     elif any(len(s.train) == 0 or len(s.test) == 0 for s in splits):
         problem = "returned a fold without training or test recordings"
+    elif min(int(min(s.train.min(), s.test.min())) for s in splits) < 0:
+        problem = "names a negative recording index"
     elif max(int(max(s.train.max(), s.test.max())) for s in splits) >= n:
         problem = f"names a recording beyond the dataset's {n}"
     elif len(np.unique(np.concatenate([s.test for s in splits]))) != \
@@ -355,6 +362,27 @@ def check_splits(splits: Sequence[Split], n: int, name: str = "split") -> list[S
     if problem:
         raise ContractError(f"{name} {problem}")
     return splits
+
+
+def draw_splits(strategy: Any, data: "SplitData", seed: int, name: str) -> list[Split]:
+    """What ``strategy.split(data, seed=seed)`` returns, checked as a classifier's output
+    is (:func:`check_splits`) and for what a paired comparison needs of it: the same
+    splits when drawn twice for one seed, and ``data`` left as it was given (a split that
+    changed the labels would score every cell against other classes). Raises
+    :class:`~tactbench.errors.ContractError` naming the split and the rule."""
+    labels, groups = data.labels.copy(), {k: tuple(v) for k, v in data.groups.items()}
+    first = check_splits(strategy.split(data, seed=seed), len(labels), name)
+    if not np.array_equal(data.labels, labels) or \
+            {k: tuple(v) for k, v in data.groups.items()} != groups:
+        raise ContractError(f"{name} changed the labels or metadata it was given")
+    again = check_splits(strategy.split(data, seed=seed), len(labels), name)
+    if len(again) != len(first) or any(
+            not (np.array_equal(a.train, b.train) and np.array_equal(a.test, b.test))
+            for a, b in zip(first, again)):
+        raise ContractError(f"{name} gave other recordings when drawn twice with seed "
+                            f"{seed}: a split must be a function of its seed, or the cells "
+                            f"compared as paired would not share their test recordings")
+    return first
 
 
 def make_splits(spec: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
@@ -368,7 +396,7 @@ def make_splits(spec: str, *, labels: Sequence[int], users: Sequence[str], seed:
     merged.setdefault("user", [str(u) for u in users])
     strategy = build_split(spec, registry or load_registry())
     data = SplitData(np.asarray(labels), merged, test_per_class)
-    return check_splits(strategy.split(data, seed=seed), len(data), f"split {spec!r}")
+    return draw_splits(strategy, data, seed, f"split {spec!r}")
 
 
 def describe_splits(spec: str, seed: int, splits: Sequence[Split]) -> dict:

@@ -45,7 +45,7 @@ from typing import Sequence
 import numpy as np
 
 from tactbench.budget import check_budget
-from tactbench.errors import InputError, check_positive_int
+from tactbench.errors import ContractError, InputError, check_positive_int
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,26 @@ def _check(sequences: Sequence[np.ndarray], labels: Sequence[int]) -> np.ndarray
         if seq.ndim < 2 or seq.shape[0] == 0:
             raise InputError(f"sequence {i} has shape {seq.shape}; expected (T, ...) with T ≥ 1")
     return np.asarray(labels, dtype=np.int64)
+
+
+def check_windows(windows: "Windows", name: str, *, every: bool = False) -> "Windows":
+    """``windows`` if each starts inside its recording (``0 ≤ start < T``: a window
+    starting past the end would score padding) and, with ``every``, every recording has
+    at least one (a test recording without a window would be predicted as nothing, and
+    scored as class 0). Raises :class:`~tactbench.errors.ContractError` naming ``name``."""
+    n = len(windows.sequences)
+    si, st = np.asarray(windows.seq_index), np.asarray(windows.starts)
+    if si.size and (si.min() < 0 or si.max() >= n):
+        raise ContractError(f"{name} names a recording outside the {n} it was given")
+    lengths = np.array([s.shape[0] for s in windows.sequences], dtype=np.int64)
+    if si.size and ((st < 0) | (st >= lengths[si])).any():
+        bad = int(np.flatnonzero((st < 0) | (st >= lengths[si]))[0])
+        raise ContractError(f"{name} starts a window at frame {int(st[bad])} of a "
+                            f"recording of {int(lengths[si[bad]])} frames")
+    if every and len(np.unique(si)) != n:
+        raise ContractError(f"{name} gives {n - len(np.unique(si))} of its {n} test "
+                            f"recordings no window: each must be classified")
+    return windows
 
 
 def training_windows(sequences: Sequence[np.ndarray], labels: Sequence[int],

@@ -38,6 +38,9 @@ if TYPE_CHECKING:
 #: are alive at once (one being imaged, one being encoded, one being stored).
 CHUNK_BYTES = 16 * 2 ** 20
 
+#: The largest finite float16; larger values would be stored as infinite.
+F16_MAX = 65504.0
+
 #: Where an encoded sequence goes: called once per sample, in sample order.
 Sink = Callable[["np.ndarray"], None]
 
@@ -98,6 +101,11 @@ class Storage:
         if self.precision == "float32":
             return np.ascontiguousarray(frames, dtype=np.float32)
         if self.precision == "float16":
+            finite = np.isfinite(frames)
+            if (np.abs(frames, where=finite, out=np.zeros(frames.shape)) > F16_MAX).any():
+                raise InputError(f"a value of {float(np.abs(frames[finite]).max()):.4g} is "
+                                 f"beyond float16's {F16_MAX:g}: it would be stored as "
+                                 f"infinite; store with --precision float32")
             return np.ascontiguousarray(frames, dtype=np.float16)
         q = np.subtract(frames, self._per_channel(self.offset, frames.ndim),
                         dtype=np.float32)

@@ -51,9 +51,13 @@ Nothing is computed twice:
 A cell that raises is stored as a *failed* row (error type, message, last traceback
 frames) and the rest of the grid goes on; the next run retries it.
 
-Cells run in turn (``executor="local"``), in worker processes (``workers > 1``), or on
-a ``dask.distributed`` cluster (``executor="dask"``); a cell's result depends only on
-its identity and seed, never on where it ran.
+Cells run side by side in worker processes, one per core at one torch thread each (the
+default), in turn (``workers=1``), or on a ``dask.distributed`` cluster
+(``executor="dask"``). A cell's identity holds everything that changes its result,
+the torch threads and the CPU kernels included (pinned to AVX2 by default, see
+:mod:`tactbench.kernels`): the same identity gives the same predictions, bit for bit, on
+any x86-64 machine with AVX2, in any executor, whatever runs beside it
+(docs/reliability.md, "Numbers across machines").
 
 Modules, one job each: :mod:`~tactbench.runner.scene` (run configuration, scene files),
 :mod:`~tactbench.runner.planning` (grid checks, cells, identities),

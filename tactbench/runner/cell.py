@@ -7,7 +7,7 @@ so a cell builds them from the plugins the run was planned with, not from whatev
 installed where it runs.
 
 A cell draws its split (one train/test pair, or one per fold), checks what the split
-returned (:func:`~tactbench.data.splits.check_splits`), and per fold makes the test
+returned (:func:`~tactbench.data.splits.draw_splits`: in range, deterministic, the data left as given) and what its test window gives (:func:`~tactbench.data.windows.check_windows`), and per fold makes the test
 window's training and test windows, fits a model and lets the test window combine the
 predictions of each test recording's windows. The row keeps, for every test recording,
 its index, true and predicted class, the fold that tested it and the group it was left
@@ -35,12 +35,12 @@ from tactbench.data.splits import (
     Split,
     SplitData,
     build_split,
-    check_splits,
     dataset_groups,
+    draw_splits,
     describe_splits,
     parse_split,
 )
-from tactbench.data.windows import UNNAMED_TEST_WINDOW
+from tactbench.data.windows import UNNAMED_TEST_WINDOW, check_windows
 from tactbench.errors import TactbenchError
 from tactbench.plugins import Registry
 from tactbench.runner.entries import load_encoding
@@ -229,8 +229,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     # The planned components, not a fresh plugin lookup: see the module docstring.
     registry = Registry([job.classifier, job.split, job.test_window])
     data = job.data.split_data(scene.test_per_class)
-    splits = check_splits(build_split(scene.split, registry).split(data, seed=cell.seed),
-                          len(data), f"split {scene.split!r}")
+    splits = draw_splits(build_split(scene.split, registry), data, cell.seed,
+                         f"split {scene.split!r}")
     tested = _train_and_predict(job, registry, sequences, data.labels, splits, progress,
                                 memory)
     truth, predicted = tested["labels"], tested["predictions"]
@@ -310,10 +310,13 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
     out.update(fits=[], train_s=0.0, infer_s=0.0, n_train_windows=0, rss0=0.0)
     for split in splits:
         with memory.track("windows"):
-            train = window.training(*_recordings(sequences, labels, split.train),
-                                    cell.L, prepared=_prepared(prepared, split.train))
-            test = window.test(*_recordings(sequences, labels, split.test),
-                               cell.L, prepared=_prepared(prepared, split.test))
+            train = check_windows(window.training(
+                *_recordings(sequences, labels, split.train), cell.L,
+                prepared=_prepared(prepared, split.train)),
+                f"test window {scene.test_window!r} (its training windows)")
+            test = check_windows(window.test(*_recordings(sequences, labels, split.test),
+                                             cell.L, prepared=_prepared(prepared, split.test)),
+                                 f"test window {scene.test_window!r}", every=True)
             clf = registry.build("classifier", cell.classifier, classes=len(job.data.classes))
         if split.fold == 0:
             out["rss0"] = memory.peak_mb

@@ -25,6 +25,7 @@ from tactbench.plugins import load_registry
 from tactbench.runner.answering import first_look_to_run, schedule
 from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
+from tactbench.runner.estimate import packed
 from tactbench.runner.executors import execute
 from tactbench.runner.planning import INDEPENDENT_RUNS, Plan, plan_runs, with_dataset
 from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
@@ -210,6 +211,19 @@ def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
     return list(data.users), None
 
 
+def next_batch_seconds(rows: Sequence[dict[str, Any]], seeds: int, workers: int) -> float:
+    """Seconds the next ``seeds`` runs' cells take, from the stored ``rows`` (each cell's
+    training and prediction time), packed onto ``workers``: a resumed run's look, whose
+    cells were all stored, took no time and says nothing of the next."""
+    per_seed = len({(r["encoder"], r["classifier"], r["L"]) for r in rows})
+    times = sorted(float(r.get("train_s") or 0.0) + float(r.get("inference_ms_per_sequence")
+                                                          or 0.0) * int(r.get("n_test") or 0)
+                   / 1e3 for r in rows)
+    if not times:
+        return 0.0
+    return packed([times[len(times) // 2]] * (per_seed * seeds), workers)
+
+
 def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True,
               on_look=None, on_row=None):
     """Run ``scene`` (with ``until="answered"``) look by look: the first
@@ -239,6 +253,9 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
             break
         elapsed = time.perf_counter() - start
         batch = time.perf_counter() - t0
+        if k + 1 < len(looks):  # a look of stored cells took ~0 s: what the next costs
+            batch = max(batch, next_batch_seconds(report.ok, looks[k + 1] - looks[k],
+                                                  scene.resolved_workers()))
         if budget is not None and k + 1 < len(looks) and elapsed + batch > budget:
             report.budget_stop = (f"the budget of {scene.budget}: {elapsed / 60:.1f} min "
                                   f"spent, the next batch would take about "

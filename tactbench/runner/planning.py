@@ -31,7 +31,7 @@ from typing import Any, Mapping
 
 from tactbench.contracts import CLASSIFIER, DATASET, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
-from tactbench.data.splits import SplitData, build_split, check_splits, split_spec
+from tactbench.data.splits import SplitData, build_split, draw_splits, split_spec
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.datasets.loading import check_informative, is_path_spec, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
@@ -154,8 +154,7 @@ def _check_split(scene: Scene, split: Any, dataset) -> None:
     breaks its contract, fails before any work; and refuse saving models of a split that
     trains one per fold."""
     data = SplitData.of(dataset, test_per_class=scene.test_per_class)
-    splits = check_splits(split.split(data, seed=scene.seeds[0]), len(data),
-                          f"split {scene.split!r}")
+    splits = draw_splits(split, data, scene.seeds[0], f"split {scene.split!r}")
     if len(splits) > 1 and scene.save_models:
         raise InputError(f"--save-models keeps one model per cell, and split "
                          f"{scene.split!r} trains one per fold; save models with "

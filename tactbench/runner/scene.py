@@ -380,11 +380,33 @@ def _check_together(scene: Scene) -> None:
                              "encoders)")
     if scene.budget is not None:
         parse_duration(scene.budget)
+    if scene.primary is not None:
+        _check_distinct_questions(scene.primary)
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers)) * len(set(scene.L))
                * len(set(scene.seeds)) * len(set(scene.init_seeds or [None])))
     if n_cells > MAX_CELLS:
         raise InputError(f"the grid has {n_cells} cells (encoders × classifiers × L × "
                          f"seeds); a run takes at most {MAX_CELLS}")
+
+
+def _question(text: str) -> frozenset:
+    """A contrast ``A..B`` as the question it asks: its two sides, each a set of
+    ``factor=value`` (spaces and order aside), in no order (``B..A`` asks it too)."""
+    sides = str(text).split("..")
+    return frozenset(frozenset(part.strip().replace(" ", "") for part in side.split(",")
+                               if part.strip()) for side in sides)
+
+
+def _check_distinct_questions(primary: Sequence[str]) -> None:
+    """Refuse a primary family that names one question twice (``A..B`` twice, or with
+    ``B..A``): it would count twice in the family (Holm and the looks' α)."""
+    seen: dict[frozenset, str] = {}
+    for text in primary:
+        q = _question(text)
+        if q in seen:
+            raise InputError(f"--primary names one question twice: {seen[q]!r} and "
+                             f"{text!r}; give each question once")
+        seen[q] = text
 
 
 def primary_of(primary: Sequence[str] | None, encoders: Iterable[str]) -> list[str]:
@@ -396,16 +418,28 @@ def primary_of(primary: Sequence[str] | None, encoders: Iterable[str]) -> list[s
 
 
 def parse_duration(text: str) -> float:
-    """Seconds of ``"90s"``, ``"30m"``, ``"2h"``, ``"1h30m"`` (a bare number: seconds);
-    one clear error for anything else."""
-    m = _DURATION.fullmatch(str(text).strip().lower())
-    if not m or not any(m.groups()):
-        raise InputError(f"bad duration {_show(text)}: use e.g. 90s, 30m, 2h or 1h30m")
+    """Seconds of ``"90s"``, ``"30m"``, ``"2h"``, ``"1h30m"`` (a bare number alone:
+    seconds); one clear error for anything else — ``"1h30"`` is refused, not read as
+    1 h 0 min 30 s: every part after the first names its unit."""
+    clean = str(text).strip().lower()
+    m = _DURATION.fullmatch(clean)
+    if not m or not any(m.groups()) or \
+            (m.group(3) and (m.group(1) or m.group(2)) and not clean.endswith("s")):
+        raise InputError(f"bad duration {_show(text)}: use e.g. 90s, 30m, 2h or 1h30m "
+                         f"(every part with its unit)")
     h, mins, secs = (float(g) if g else 0.0 for g in m.groups())
     seconds = 3600 * h + 60 * mins + secs
     if not 0 < seconds < 1e9:
         raise InputError(f"duration {_show(text)} must be more than 0 and finite")
     return seconds
+
+
+def show_duration(seconds: float) -> str:
+    """``5400`` → ``"1 h 30 min"``: a duration as it is echoed back to the user."""
+    h, rest = divmod(int(round(seconds)), 3600)
+    mins, secs = divmod(rest, 60)
+    return " ".join(f"{v} {unit}" for v, unit in ((h, "h"), (mins, "min"), (secs, "s"))
+                    if v) or "0 s"
 
 
 _DURATION = re.compile(r"(?:(\d{1,7}(?:\.\d+)?)h)?(?:(\d{1,7}(?:\.\d+)?)m)?"
