@@ -139,6 +139,21 @@ _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
           (stat.S_ISSOCK, "a socket"))
 
 
+def path_kind(path: str | Path) -> str | None:
+    """What ``path`` is, as a message says it: ``"a regular file"``, ``"a folder"``,
+    ``"a FIFO (named pipe)"``, ... or ``"a dangling link (to X)"``; None when nothing is
+    there. Links are followed; only ``os.stat``: nothing is opened."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return f"a dangling link (to {os.readlink(path)})" if os.path.islink(path) else None
+    except OSError as exc:
+        return f"unreadable ({exc.strerror or exc})"
+    if stat.S_ISREG(mode):
+        return "a regular file"
+    return next((text for test, text in _KINDS if test(mode)), "not a regular file")
+
+
 def special_file_problem(path: str | Path) -> str | None:
     """Why ``path`` is not a regular file tactbench may read, or None when it is one (or
     does not exist at all: the caller says "no such file" in its own words). Links are

@@ -50,6 +50,7 @@ import torch
 from torch import nn
 
 from tactbench.errors import InputError
+from tactbench.integrity import special_file_problem
 
 #: (expand ratio, kernel, stride, output channels, repeats) per stage of B0.
 B0_STAGES: tuple[tuple[int, int, int, int, int], ...] = (
@@ -311,7 +312,10 @@ def read_state_dict(path: str | Path) -> dict[str, torch.Tensor]:
     A checkpoint dict holding the weights under ``state_dict`` or ``model`` is unwrapped.
     """
     p = Path(path)
-    if not p.is_file():
+    problem = special_file_problem(p)  # a folder, a FIFO, a dangling link: said as such
+    if problem is not None:
+        raise InputError(f"weights file {problem}")
+    if not p.exists():
         raise InputError(f"weights file {p} does not exist")
     try:
         if p.suffix == ".safetensors":

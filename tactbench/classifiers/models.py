@@ -167,6 +167,13 @@ class CnnLstm(PretrainedBackbone, ImageSequenceClassifier):
         check_positive_float(self.drop_path, "drop_path", allow_zero=True)
         self.weights_report: dict[str, Any] | None = None
 
+    def preflight(self, device: str) -> None:
+        super().preflight(device)
+        if self.weights:  # read once at planning: a file every cell would fail on
+            from tactbench.classifiers.efficientnet import read_state_dict
+
+            read_state_dict(self.weights)
+
     def _build_net(self, frame_shape, n_classes, *, pretrained):
         from tactbench.classifiers.nets import segments_of
 

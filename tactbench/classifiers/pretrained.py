@@ -39,7 +39,7 @@ import numpy as np
 
 from tactbench.data.windows import Windows
 from tactbench.errors import CorruptArtefactError, InputError, check_choice
-from tactbench.integrity import hash_file, new_hasher
+from tactbench.integrity import check_regular_file, hash_file, new_hasher
 from tactbench.paths import atomic_folder, cache_dir, discard
 
 #: The package (import name and distribution) that ships the ImageNet Lite0 weights.
@@ -68,7 +68,7 @@ def imagenet_weights_file(package: str | None = None) -> Path:
         raise InputError(f"pretrained=imagenet needs the ImageNet EfficientNet-Lite0 "
                          f"weights, which are not installed: {INSTALL_HINT}")
     path = Path(list(spec.submodule_search_locations)[0]).joinpath(*WEIGHTS_FILE)
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):  # a folder or a FIFO: said by its check
         raise InputError(f"the package {DISTRIBUTION} has no {'/'.join(WEIGHTS_FILE)}; "
                          f"reinstall it: {INSTALL_HINT}")
     return path
@@ -82,14 +82,27 @@ def imagenet_weights(path: str | Path | None = None, sha256: str | None = None) 
     :class:`~tactbench.errors.CorruptArtefactError` before anything is unpickled."""
     from tactbench.classifiers.efficientnet import read_state_dict
 
+    path = check_imagenet_weights(path, sha256)
+    return read_state_dict(path)  # torch.load(..., weights_only=True)
+
+
+def check_imagenet_weights(path: str | Path | None = None, sha256: str | None = None
+                           ) -> Path:
+    """The ImageNet Lite0 weights file (``path``, default :func:`imagenet_weights_file`)
+    after checking it is a regular file of SHA-256 ``sha256`` (default
+    :data:`IMAGENET_SHA256`): a missing, special or damaged file refused in one line
+    (:class:`InputError`, :class:`~tactbench.errors.CorruptArtefactError`). Planning
+    calls it (``preflight``), so a run that would fail every cell is refused before any
+    work."""
     path = Path(path) if path is not None else imagenet_weights_file()
+    check_regular_file(path, what="ImageNet weights file")
     expected = sha256 or IMAGENET_SHA256
     found = hash_file(path)
     if found != expected:
         raise CorruptArtefactError(path, f"SHA-256 {found[:16]}… is not the "
                                          f"{expected[:16]}… of the ImageNet Lite0 weights; "
                                          f"reinstall: {INSTALL_HINT}")
-    return read_state_dict(path)  # torch.load(..., weights_only=True)
+    return path
 
 
 def check_pretrained_options(backbone: str, pretrained: str, weights: str | None,
@@ -131,7 +144,7 @@ class PretrainedBackbone:
     def preflight(self, device: str) -> None:
         super().preflight(device)
         if self.pretrained == "imagenet":  # before any data is made or encoded
-            imagenet_weights_file()
+            check_imagenet_weights()
 
     def _load_backbone(self, encoder, pretrained: bool) -> dict[str, Any] | None:
         """Load the ImageNet or ``weights`` file into ``encoder`` (when ``pretrained``:

@@ -8,7 +8,7 @@ import click
 
 from tactbench.cli import get_registry, json_text
 from tactbench.commands.run import scene_from, scene_options
-from tactbench.runner.forecast import forecast
+from tactbench.runner.forecast import forecast, points
 
 
 @click.command("plan")
@@ -59,13 +59,13 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                 f" ({p.power_at_sd_high:.0%} if the spread is at its interval's upper end, "
                 f"{p.sd_high:.1f} points)")
         click.echo(f"primary {p.name}: one fixed test of {p.runs} runs at the family's "
-                   f"level α = {p.level:.4g}: power {p.power:.0%} for {p.effect:+.1f} points"
+                   f"level α = {p.level:.4g}: power {p.power:.0%} for {points(p.effect)} points"
                    f"{high}; 80 % power from {p.detectable:.1f} points; per-run sd "
                    f"{p.sd:.1f} points ({p.sd_source})")
         if p.sequential:
             s = p.sequential
             click.echo(f"  run --until answered (looks after {', '.join(map(str, s['looks']))}"
-                       f" runs): power {s['power']:.0%} for {p.effect:+.1f} points, "
+                       f" runs): power {s['power']:.0%} for {points(p.effect)} points, "
                        f"{s['expected_runs']:.1f} runs expected of at most {s['max_runs']}, "
                        f"ends futile {s['futile']:.0%}" + (
                            f", equivalent {s['equivalent']:.0%}" if p.margin else "")
@@ -77,7 +77,7 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
             continue
         more = ("" if p.recordings_for_effect is None or p.recordings_for_effect
                 <= p.recordings else f"; about {p.recordings_for_effect} recordings (now "
-                f"{p.recordings}) would bring it to {p.effect:.1f}")
+                f"{p.recordings}) would bring it to {points(p.effect)[1:]}")
         click.echo(f"  floor: no number of runs of these {p.recordings} recordings "
                    f"resolves less than {p.floor:.1f} points{more}")
     if not f.primaries:

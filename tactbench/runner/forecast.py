@@ -146,6 +146,9 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     ratio = 0.0 if independent else \
         seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
     others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
+    # what run's claim refuses, refused here in its words (nothing written)
+    ResultStore(scene.out).check_grid([c.key for c in p.cells + others if c.key],
+                                      p.identities)
     cells = _cells(p.cells + others, pilot)
     looks = schedule(scene.max_runs, scene.look_every) if scene.until else None
     wall = _walls(p, p.cells + others, cells, looks)
@@ -268,13 +271,16 @@ def _spread(text: str, pilot: list[dict[str, Any]], n_test: int, effect: float,
     pilot_sd = statistics.stdev(d)
     pi = min(1.0, (c.a_only + c.b_only) / max(1, c.runs * n_test))
     least = sampling_sd(n_test, pi, min(abs(c.difference), pi ** 0.5)) if pi > 0 else 0.0
-    if max(pilot_sd, least) == 0:  # both right on every recording: nothing to plan from
+    if max(pilot_sd, least) == 0:  # one difference in every run: nothing to plan from
         sd = sampling_sd(n_test, ASSUMED_DISCORDANCE,
                          min(effect, ASSUMED_DISCORDANCE ** 0.5))
+        seen = ("the models agree on every recording" if pi == 0 else
+                f"one model is right on every recording and the other wrong ("
+                f"{100 * c.difference:+.1f} points in every run)")
         return sd, None, c.run_ratio, (
-            f"pilot: {c.runs} stored runs in which the models agree on every recording "
-            f"(no spread to plan from); assumed instead: they disagree on "
-            f"{ASSUMED_DISCORDANCE:.0%} of the test recordings, test sampling alone")
+            f"pilot: {c.runs} stored runs in which {seen}: no spread to plan from; "
+            f"assumed instead: they disagree on {ASSUMED_DISCORDANCE:.0%} of the test "
+            f"recordings, test sampling alone")
     sd = max(pilot_sd, least)
     high = sd * (df / float(stats.chi2.ppf(0.025, df))) ** 0.5
     low = sd * (df / float(stats.chi2.isf(0.025, df))) ** 0.5
@@ -314,13 +320,19 @@ def _primary(text: str, pilot: list[dict[str, Any]], runs: int, effect: float,
     return f
 
 
+def points(value: float) -> str:
+    """An effect in points as a plan says it, signed: one decimal, and two significant
+    digits where one decimal would say 0.0 (``--effect 1e-9``: ``+1e-09``)."""
+    return f"{value:+.1f}" if value == 0 or abs(value) >= 0.05 else f"{value:+.2g}"
+
+
 def warnings(f: PrimaryForecast) -> list[str]:
     """What a plan must say before any work, a line each: an effect (or the effect found
     at 80 % power) inside the margin, and a design short of 80 % power at its runs."""
     out = []
     m = f.margin
     if m and f.effect <= m:
-        out.append(f"{f.name}: +{f.effect:.1f} points lies inside the ±{m:g} margin: the "
+        out.append(f"{f.name}: {points(f.effect)} points lies inside the ±{m:g} margin: the "
                    f"runs would end \"equivalent\", not \"better\"")
     elif m and f.detectable <= m:
         out.append(f"{f.name}: the effect found with 80 % power at {f.runs} runs, "
@@ -328,12 +340,12 @@ def warnings(f: PrimaryForecast) -> list[str]:
                    f"difference would end \"equivalent\"")
     seq = f.sequential
     if seq is not None and seq["power"] < TARGET_POWER:
-        out.append(f"{f.name}: the sequential run finds +{f.effect:.1f} points with "
+        out.append(f"{f.name}: the sequential run finds {points(f.effect)} points with "
                    f"{seq['power']:.0%} power at most {f.runs} runs (a fixed design of "
                    f"{f.runs}: {f.power:.0%}); " + _needs(f))
     elif seq is None and f.power < TARGET_POWER:
         out.append(f"{f.name}: at {f.runs} runs, power {f.power:.0%} for "
-                   f"+{f.effect:.1f} points, short of 80 %; " + _needs(f))
+                   f"{points(f.effect)} points, short of 80 %; " + _needs(f))
     return out
 
 

@@ -19,6 +19,7 @@ from typing import Any, Callable, Sequence
 
 from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.integrity import path_kind
 from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.plugins import load_registry
@@ -150,8 +151,12 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     a folder read as it is (a notebook's, an export's; the folder may be read-only).
     """
     out = Path(out)
-    if not out.is_dir():
-        raise MissingFileError(f"run folder {out} does not exist (or is not a folder)")
+    if not out.is_dir():  # a file, a FIFO, a dangling link: said as what it is
+        kind = path_kind(out)
+        if kind is None:
+            raise MissingFileError(f"run folder {out} does not exist")
+        raise InputError(f"run folder {out} is {kind}, not a folder (give the --out of "
+                         f"a `tactbench run`)")
     store = ResultStore(out)
     if not store.keys():
         raise InputError(f"run folder {out} holds no cell rows ({store.cells}/*.json): "

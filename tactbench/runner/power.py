@@ -41,6 +41,9 @@ from tactbench.errors import InputError
 TARGET_POWER = 0.8
 #: Runs beyond this are not searched (the answer is "more than this").
 MAX_RUNS = 1000
+#: More recordings than this are no plan a data set can follow: :func:`recordings_for`
+#: says none (a vanishing effect needs ever more, without bound).
+MAX_RECORDINGS = 10 ** 9
 
 
 def _check(value: float, name: str, *, low: float = 0.0, high: float = math.inf,
@@ -192,13 +195,17 @@ def recordings_for(target_floor: float, floor: float, recordings: int) -> int | 
     """How many recordings, split in the same proportions, bring the floor from ``floor``
     (at ``recordings``) down to ``target_floor``: the floor scales as
     ``1/sqrt(recordings)`` when the per-run spread is test sampling. None when the target
-    is not above 0."""
+    is not above 0, or when more than :data:`MAX_RECORDINGS` would be needed (a tiny
+    target: the ratio may overflow a float)."""
     target_floor = _check(target_floor, "target floor")
     floor = _check(floor, "floor")
     if target_floor <= 0:
         return None
     if floor <= target_floor:
         return int(recordings)
+    scale = 2 * (math.log(floor) - math.log(target_floor))  # in logs: 1e-300 overflows
+    if math.log(recordings) + scale > math.log(MAX_RECORDINGS):
+        return None
     return int(math.ceil(recordings * (floor / target_floor) ** 2))
 
 

@@ -276,6 +276,21 @@ class ResultStore:
 
     # ------------------------------------------------------- runs sharing an out folder
 
+    def check_grid(self, keys: Iterable[str],
+                   identities: dict[str, dict[str, Any]] | None = None) -> None:
+        """Refuse (:class:`InputError`) a grid of cells ``keys`` that leaves out cells
+        stored in this out folder (another grid's): the first half of :meth:`claim`,
+        which writes nothing, so that ``tactbench plan`` refuses what ``run`` would, in
+        the same line."""
+        planned = set(keys)
+        stray = [key for key in self.keys() if key not in planned]
+        if stray:
+            first = _describe(self.path(stray[0]), identities)
+            raise InputError(f"out folder {self.out} holds {len(stray)} cell(s) of another "
+                             f"grid ({first}) that this run does not plan, and its report "
+                             f"would leave them out; give a new --out, or a grid that "
+                             f"includes them")
+
     def claim(self, keys: Iterable[str],
               identities: dict[str, dict[str, Any]] | None = None) -> Path:
         """Refuse a grid that would drop another grid's cells from the report of this out
@@ -292,15 +307,8 @@ class ResultStore:
         two different ones, the later is refused, naming the first.
         """
         keys = sorted(set(keys))
-        planned = set(keys)
         out = self.out
-        stray = [key for key in self.keys() if key not in planned]
-        if stray:
-            first = _describe(self.path(stray[0]), identities)
-            raise InputError(f"out folder {out} holds {len(stray)} cell(s) of another grid "
-                             f"({first}) that this run does not plan, and its report "
-                             f"would leave them out; give a new --out, or a grid that "
-                             f"includes them")
+        self.check_grid(keys, identities)
         self.cells.mkdir(parents=True, exist_ok=True)
         mine = self.cells / temp_name("run")
         atomic_write_text(mine, json.dumps({"keys": keys, "command": command_line()}))
