@@ -2,7 +2,8 @@
 
 ``tactbench run --until answered`` runs the grid's seeds in batches (a *look* after each)
 and stops when every primary comparison (``--primary``) is decided — better, worse,
-equivalent within ``--margin``, or futile — or when ``--max-runs`` or ``--budget`` is
+equivalent within ``--margin``, futile, or not learned (a run of one of its cells did not
+learn: no verdict rests on it, :mod:`tactbench.runner.learning`) — or when ``--max-runs`` or ``--budget`` is
 reached. What each look saw is never stored apart from the cells: :func:`replay`
 recomputes every look from the rows (the first ``n_k`` seeds of the run's seed order at
 look k), so a resumed or re-rendered report shows the same looks, and a look's decision
@@ -20,6 +21,7 @@ from tactbench.runner.comparisons import Comparison, comparisons
 from tactbench.runner.results import ok_rows
 from tactbench.runner.scene import FIRST_LOOK
 from tactbench.runner.sequential import FamilyState, Look, family_look
+from tactbench.runner.statistics import NOT_LEARNED
 
 
 def schedule(max_runs: int, batch: int, first: int = FIRST_LOOK) -> list[int]:
@@ -59,12 +61,16 @@ class History:
         if self.state is None:
             return "no primary comparison has 2 runs yet"
         if self.answered:
-            futile = [n for n, lk in self.state.closed.items() if lk.decision == "futile"]
-            if not futile:
+            closed = [lk.decision for lk in self.state.closed.values()]
+            futile, unlearned = closed.count("futile"), closed.count(NOT_LEARNED)
+            if not futile and not unlearned:
                 return "every primary question is answered"
-            return (f"{len(futile)} of {len(self.state.names)} primary question(s) stopped "
-                    f"unanswered (futile: more runs of these data would not decide them), "
-                    f"{len(self.state.names) - len(futile)} answered")
+            return ", ".join(
+                [f"{n} of {len(closed)} primary question(s) stopped unanswered ({why})"
+                 for n, why in ((futile, "futile: more runs of these data would not decide "
+                                 "them"), (unlearned, "a model did not learn: no verdict "
+                                           "rests on it")) if n]
+                + [f"{len(closed) - futile - unlearned} answered"])
         done = self.looks[len(self.seen) - 1] if self.seen else 0
         return f"{done} of {self.max_runs} runs made; questions still open"
 
@@ -103,7 +109,9 @@ def replay(rows: Sequence[dict[str, Any]], *, seed_order: Sequence[int],
         ratios = {comparison_name(c): c.run_ratio for c in prim}
         seen = family_look(history.state, {n_: diffs[n_] for n_ in open_now},
                            {n_: ratios[n_] for n_ in open_now}, looks=looks[:k + 1],
-                           max_runs=looks[-1], margin=None if margin is None else margin / 100)
+                           max_runs=looks[-1], margin=None if margin is None else margin / 100,
+                           not_learned={comparison_name(c): c.note for c in prim
+                                        if c.verdict == NOT_LEARNED})
         history.seen.append(seen)
         if history.answered:
             break

@@ -11,7 +11,9 @@ returned (:func:`~tactbench.data.splits.draw_splits`: in range, deterministic, t
 window's training and test windows, fits a model and lets the test window combine the
 predictions of each test recording's windows. The row keeps, for every test recording,
 its index, true and predicted class, the fold that tested it and the group it was left
-out with (:data:`PREDICTION_LISTS`).
+out with (:data:`PREDICTION_LISTS`), and beside its test accuracy its accuracy on a sample
+of its training windows and what guessing gives (:mod:`tactbench.runner.learning`): a
+cell whose model did not learn or did not transfer says so, and no verdict rests on it.
 
 A cell that raises (a bug in a plugin, a classifier that fails in ``fit``, out of memory)
 returns a *failed* row instead (see :mod:`tactbench.runner.results`): no exception object
@@ -40,10 +42,11 @@ from tactbench.data.splits import (
     describe_splits,
     parse_split,
 )
-from tactbench.data.windows import UNNAMED_TEST_WINDOW, check_windows
+from tactbench.data.windows import UNNAMED_TEST_WINDOW, Windows, check_windows
 from tactbench.errors import TactbenchError
 from tactbench.plugins import Registry
 from tactbench.runner.entries import load_encoding
+from tactbench.runner.learning import TRAIN_SAMPLE, chance_level, learning_fields
 from tactbench.runner.planning import Cell, Plan
 from tactbench.runner.results import FAILED, OK
 from tactbench.runner.scene import Scene
@@ -265,6 +268,12 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "rss_before_fit_mb": tested["rss0"],
         "n_train_windows": tested["n_train_windows"],
         "n_test": len(truth),
+        # beside the test accuracy: the training windows' and what guessing gives
+        **learning_fields(train_right=tested["train_right"],
+                          train_scored=tested["train_scored"],
+                          train_chance=tested["train_chance"] / max(1, tested["train_scored"]),
+                          train_recordings=min(len(s.train) for s in splits),
+                          truth=truth, predicted=predicted, k=len(job.data.classes)),
         "fit": _jsonable(tested["fits"][0] if len(splits) == 1 else tested["fits"]),
         "device": scene.device,
         "threads": job.threads,
@@ -307,7 +316,8 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
     window = registry.build("test-window", scene.test_window)
     prepared = job.data.prepared
     out: dict[str, Any] = {k: [] for k in PREDICTION_LISTS}
-    out.update(fits=[], train_s=0.0, infer_s=0.0, n_train_windows=0, rss0=0.0)
+    out.update(fits=[], train_s=0.0, infer_s=0.0, n_train_windows=0, rss0=0.0,
+               train_right=0, train_scored=0, train_chance=0.0)
     for split in splits:
         with memory.track("windows"):
             train = check_windows(window.training(
@@ -335,6 +345,7 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
                                job.classifier.plugin)
             predicted = np.asarray(window.combine(checked, test, len(split.test)))
             out["infer_s"] += time.perf_counter() - t0
+            _score_training(out, checked, train, seed, len(job.data.classes))
         if predicted.shape != (len(split.test),):
             raise ValueError(f"test window {scene.test_window!r} combined {predicted.shape} "
                              f"predictions for {len(split.test)} test recordings")
@@ -345,6 +356,23 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
         out["n_train_windows"] += len(train)
     out.update({k: np.concatenate(out[k]) for k in PREDICTION_LISTS}, model=clf)
     return out
+
+
+def _score_training(out: dict[str, Any], checked: "_Checked", train: Windows, seed: int,
+                    k: int) -> None:
+    """Add to ``out`` the right answers on a seeded sample of at most
+    :data:`~tactbench.runner.learning.TRAIN_SAMPLE` of a fold's training windows, their
+    count and what guessing gives on them (weighted by the windows scored)."""
+    import numpy as np
+
+    rng = np.random.default_rng(derive_seed(seed, "training accuracy"))
+    n = min(TRAIN_SAMPLE, len(train))
+    pick = np.sort(rng.choice(len(train), size=n, replace=False))
+    sample = Windows(train.sequences, train.seq_index[pick], train.starts[pick],
+                     train.labels[pick], train.L)
+    out["train_right"] += int((checked.predict(sample) == sample.labels).sum()) if n else 0
+    out["train_chance"] += chance_level(sample.labels, k) * n
+    out["train_scored"] += n
 
 
 def _recordings(sequences: Sequence[Any], labels: "np.ndarray", indices: "np.ndarray",

@@ -42,7 +42,9 @@ from tactbench.runner.power import (
     runs_for_power,
     seed_mean_ratio,
 )
+from tactbench.runner.learning import describe
 from tactbench.runner.statistics import (
+    NOT_LEARNED,
     TARGET_HALF_WIDTH,
     corrected_t,
     holm,
@@ -101,7 +103,9 @@ class Comparison:
     - the family (``family``: ``primary``, the comparisons the run names with
       ``--primary``, or ``exploratory``, all the others; each is Holm-adjusted apart):
       ``p_holm``, ``equivalence_p_holm``, ``family_size``, ``verdict`` and ``note``
-      (:func:`tactbench.runner.statistics.verdict`); ``ceiling`` when both cells are
+      (:func:`tactbench.runner.statistics.verdict`; ``not learned``, with the cells and
+      runs named in the note, where a run of either did not learn or did not transfer,
+      :mod:`tactbench.runner.learning`); ``ceiling`` when both cells are
       right on every paired recording of every run (a ceiling, not a precise zero);
     - for a reader (:mod:`tactbench.runner.power`): the Bayesian correlated t's
       ``bayes_a_better``/``bayes_equivalent``/``bayes_b_better`` within ±``bayes_margin``
@@ -400,6 +404,8 @@ def _family(comps: list[Comparison], confidence: float) -> list[Comparison]:
                              equivalence_p_adjusted=eq_holm)
         if c.ceiling:
             note = "a ceiling: both cells right on every recording of every run"
+        if c.verdict == NOT_LEARNED:  # set by compare_cells; its p stays in the family
+            said, note = c.verdict, c.note
         out.append(replace(c, p_holm=p_holm, equivalence_p_holm=eq_holm, family_size=size,
                            verdict=said, note=note, **_planning(c, alpha / max(1, size))))
     return out
@@ -519,7 +525,23 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
         test_sampling_share=sampling_share(per_seed, splits, d_run),
         ceiling=all(bool(r.ca.all() and r.cb.all()) for r in per_seed.values()),
         variance_components=difference_components(per_seed, splits),
-        per_user=None if users is None else per_user_gains(per_seed, users))
+        per_user=None if users is None else per_user_gains(per_seed, users),
+        **_not_learned(names, [runs_a[k] for k in per_seed], [runs_b[k] for k in per_seed]))
+
+
+def _not_learned(names: Mapping[str, Any], rows_a: Sequence[dict[str, Any]],
+                 rows_b: Sequence[dict[str, Any]]) -> dict[str, str]:
+    """``verdict`` :data:`~tactbench.runner.statistics.NOT_LEARNED` and the ``note``
+    naming the cells and runs, where a run of either cell did not learn or did not
+    transfer (:mod:`tactbench.runner.learning`); nothing otherwise (rows made before
+    they recorded it count as learned)."""
+    label = spec_label if names["factor"] == "classifier" else str
+    said = [describe(label(names[side]), rows) for side, rows in (("a", rows_a), ("b", rows_b))]
+    said = [s for s in said if s]
+    if not said:
+        return {}
+    return {"verdict": NOT_LEARNED,
+            "note": "no verdict rests on a model at chance: " + "; ".join(said)}
 
 
 def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio: float,

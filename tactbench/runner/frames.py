@@ -39,6 +39,7 @@ DTYPES = {"text": "string", "int": "Int64", "float": "float64"}
 #: The columns of :func:`cells_frame` that are not text (``acc_<class>`` are floats;
 #: ``finished`` a UTC timestamp).
 CELL_KINDS = {"split_seed": "int", "L": "int", "seed": "int", "accuracy": "float",
+              "train_accuracy": "float", "chance_accuracy": "float",
               "encode_ms_per_frame": "float", "train_s": "float",
               "inference_ms_per_sequence": "float", "peak_rss_mb": "float",
               "n_train_windows": "int", "n_test": "int", "threads": "int"}

@@ -40,13 +40,14 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
-from typing import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Mapping, Sequence
 
 from tactbench.errors import InputError
+from tactbench.runner.statistics import NOT_LEARNED
 
-#: What :func:`look` may decide.
-DECISIONS = ("B better", "A better", "equivalent", "futile", "continue")
+#: What :func:`look` may decide, and :data:`NOT_LEARNED` (:func:`family_look`).
+DECISIONS = ("B better", "A better", "equivalent", "futile", "continue", NOT_LEARNED)
 #: The interval a futility check gives the benefit of the doubt (two-sided 95 %).
 FUTILITY_Z = 1.959964
 
@@ -327,12 +328,17 @@ class FamilyState:
 
 
 def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: dict[str, float],
-                *, looks: Sequence[int], max_runs: int, margin: float | None = None
-                ) -> dict[str, Look]:
+                *, looks: Sequence[int], max_runs: int, margin: float | None = None,
+                not_learned: Mapping[str, str] | None = None) -> dict[str, Look]:
     """One look at every open comparison of a family; decided ones close, and the α of
     one declared better or worse passes in equal shares to those still open (which are
-    looked at again at their new level). Returns the look of each comparison open before."""
+    looked at again at their new level). Returns the look of each comparison open before.
+
+    ``not_learned`` (name → why): comparisons a run of whose cells did not learn; they
+    close as :data:`NOT_LEARNED`, a stop without a verdict, whatever their t: no α passes
+    from them, so the family's error stays bounded as for a futile stop."""
     out: dict[str, Look] = {}
+    not_learned = not_learned or {}
     changed = True
     while changed:
         changed = False
@@ -340,6 +346,8 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
         for name in open_now:
             res = look(diffs[name], ratios[name], looks=looks, max_runs=max_runs,
                        alpha=state.shares[name], margin=margin)
+            if name in not_learned:
+                res = replace(res, decision=NOT_LEARNED, why=not_learned[name])
             out[name] = res
             if res.decision in ("B better", "A better"):
                 state.closed[name] = res
@@ -349,6 +357,6 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
                 changed = bool(rest)
                 break
     for name, res in out.items():
-        if name not in state.closed and res.decision in ("equivalent", "futile"):
+        if name not in state.closed and res.decision in ("equivalent", "futile", NOT_LEARNED):
             state.closed[name] = res
     return out

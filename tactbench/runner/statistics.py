@@ -263,8 +263,11 @@ def runs_needed(sd: float | None, ratio: float, half_width: float, *,
     return int(j[ok[0]]) if ok.size else None
 
 
-#: What :func:`verdict` may return.
-VERDICTS = ("B better", "A better", "equivalent", "unresolved", "too few runs")
+#: The verdict of a comparison a run of either cell did not learn or transfer in
+#: (:mod:`tactbench.runner.learning`): no verdict rests on a model at chance.
+NOT_LEARNED = "not learned"
+#: What :func:`verdict` may return, and :data:`NOT_LEARNED`.
+VERDICTS = ("B better", "A better", "equivalent", "unresolved", "too few runs", NOT_LEARNED)
 
 
 def verdict(low: float, high: float, p_adjusted: float, runs: int, *,
@@ -389,7 +392,7 @@ def pairs_differing_in_one_factor(cells: Sequence[Mapping[str, Any]]) -> list[Fa
     return [p for *_, p in sorted(found, key=lambda t: t[:3])]
 
 
-__all__ = ["FactorPair", "MIN_DISCORDANT_RECORDINGS", "MIN_RUNS", "SeedSummary",
-           "TARGET_HALF_WIDTH", "VERDICTS", "ZERO_TOLERANCE", "corrected_t", "holm",
+__all__ = ["FactorPair", "MIN_DISCORDANT_RECORDINGS", "MIN_RUNS", "NOT_LEARNED",
+           "SeedSummary", "TARGET_HALF_WIDTH", "VERDICTS", "ZERO_TOLERANCE", "corrected_t", "holm",
            "mcnemar_p", "pairs_differing_in_one_factor", "runs_needed", "seed_summary",
            "sign_flip_p", "tost_p", "variance_components", "verdict"]

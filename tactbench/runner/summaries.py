@@ -15,6 +15,7 @@ from collections import Counter
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.errors import InputError
+from tactbench.runner.learning import LEARNING_FIELD, flagged_runs
 from tactbench.runner.results import failed_rows, ok_rows
 from tactbench.runner.statistics import seed_summary, variance_components
 
@@ -99,7 +100,9 @@ def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = N
     means; the confusion matrix row-normalised per seed, then averaged; ``input``: what
     the classifier was fed (images or vectors). With ``users`` (the user of each dataset
     sample, by index), ``per_user_accuracy``: user → accuracy on that user's test
-    sequences. Failed cells are left out (:func:`failed_cells` lists them).
+    sequences. Failed cells are left out (:func:`failed_cells` lists them). ``learning``
+    (only where a run's model did not learn or transfer, :mod:`tactbench.runner.learning`):
+    status → seeds.
     """
     rows = list(rows)
     by_user = per_user_accuracy(rows, users) if users is not None else {}
@@ -137,6 +140,12 @@ def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = N
             summary[cost + "_mean"], summary[cost + "_std"] = _mean_std(
                 [r.get(cost) for r in members])
         summary["peak_step"] = peak_step(members)
+        trained = [r["train_accuracy"] for r in members if "train_accuracy" in r]
+        if trained:  # rows made before recorded none
+            summary["train_accuracy_mean"] = statistics.fmean(trained)
+        flagged = flagged_runs(members)  # status → seeds that did not learn
+        if flagged:
+            summary[LEARNING_FIELD] = flagged
         if users is not None:
             summary["per_user_accuracy"] = by_user.get(key, {})
         out.append(summary)

@@ -8,7 +8,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.answering import beyond_looks
 from tactbench.runner.comparisons import P_RULE, Comparison, plain_t, read_comparisons
-from tactbench.runner.statistics import MIN_RUNS
+from tactbench.runner.learning import accuracy_mark, legend
+from tactbench.runner.statistics import MIN_RUNS, NOT_LEARNED
 from tactbench.runner.summaries import (
     FACTORS,
     failed_cells,
@@ -41,13 +42,9 @@ def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
 
 def comparison_labels(comps: Comparisons) -> dict[str, str]:
     """The labels of the classifiers ``comps`` compare or share."""
-    specs = []
-    for c in read_comparisons(comps):
-        if c.factor == "classifier":
-            specs += [c.a, c.b]
-        if "classifier" in c.where:
-            specs.append(c.where["classifier"])
-    return spec_labels(specs)
+    comps = read_comparisons(comps)
+    return spec_labels([v for c in comps if c.factor == "classifier" for v in (c.a, c.b)]
+                       + [c.where["classifier"] for c in comps if "classifier" in c.where])
 
 
 def _comparison_label(c: Comparison, side: str, labels: Labels | None = None) -> str:
@@ -57,11 +54,8 @@ def _comparison_label(c: Comparison, side: str, labels: Labels | None = None) ->
     if c.factor == "L":
         return f"L={value}"
     if c.factor == "contrast":  # "encoder=raw,L=6" → "raw L=6"
-        parts = []
-        for item in str(value).split(","):
-            k, _, v = item.partition("=")
-            parts.append(f"L={v}" if k == "L" else v)
-        return " ".join(parts)
+        items = [item.partition("=") for item in str(value).split(",")]
+        return " ".join(f"L={v}" if k == "L" else v for k, _, v in items)
     return str(value)
 
 
@@ -143,7 +137,7 @@ def _bayes(c: Comparison) -> str:
 
 def _power_runs(c: Comparison) -> str:
     """Runs for 80 % power at the observed difference, or why there is no number."""
-    if c.ceiling or c.verdict in ("B better", "A better", "equivalent"):
+    if c.ceiling or c.verdict in ("B better", "A better", "equivalent", NOT_LEARNED):
         return "-"
     if c.runs < MIN_RUNS or c.difference == 0:  # too few runs to judge the spread
         return "-"
@@ -226,7 +220,8 @@ def table_rows(summaries: Sequence[dict[str, Any]], labels: Labels | None = None
     for s in summaries:
         rows.append([
             s["encoder"], spec_label(s["classifier"], labels), s.get("input", "-"), str(s["L"]),
-            _pct(s["accuracy_mean"], s["accuracy_std"]), _interval(s.get("accuracy_ci95")),
+            _pct(s["accuracy_mean"], s["accuracy_std"]) + accuracy_mark(s),
+            _interval(s.get("accuracy_ci95")),
             str(len(s["seeds"])),
             f"{s['encode_ms_per_frame_mean']:.3f}",
             f"{s['train_s_mean']:.1f}",
@@ -252,13 +247,22 @@ def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "",
     if not console.is_terminal:  # logs and pipes: no wrapping at 80 columns
         console = Console(width=160)
     console.print(table)
+    for line in _legend(summaries, labels):
+        console.print(line, markup=False, highlight=False)
+
+
+def _legend(summaries: Sequence[dict[str, Any]], labels: Labels | None) -> list[str]:
+    """The lines under the accuracy table on cells that did not learn (none without)."""
+    labels = summary_labels(summaries) if labels is None else labels
+    return legend(summaries, lambda s: f"{s['encoder']} / {spec_label(s['classifier'], labels)}"
+                  f" L={s['L']}")
 
 
 def markdown_table(summaries: Sequence[dict[str, Any]], labels: Labels | None = None) -> str:
     lines = ["| " + " | ".join(TABLE_HEADER) + " |",
              "|" + "---|" * len(TABLE_HEADER)]
     lines += ["| " + " | ".join(r) + " |" for r in table_rows(summaries, labels)]
-    return "\n".join(lines)
+    return "\n".join(lines + [f"\n{md(line)}" for line in _legend(summaries, labels)])
 
 
 def per_class_markdown(summaries: Sequence[dict[str, Any]], labels: Labels | None = None
@@ -328,16 +332,10 @@ def per_class_gains_markdown(comps: Comparisons, labels: Labels | None = None) -
     lines = ["| factor | A | B | where | " + " | ".join(map(md, classes)) + " |",
              "|" + "---|" * (4 + len(classes))]
     for c in comps:
-        cells = []
-        for k in classes:
-            g = c.per_class.get(k)
-            if g is None:
-                cells.append("-")
-            elif g.low is None:
-                cells.append(f"{100 * g.difference:+.1f}")
-            else:
-                cells.append(f"{100 * g.difference:+.1f} [{100 * g.low:+.1f}, "
-                             f"{100 * g.high:+.1f}]")
+        gains = [c.per_class.get(k) for k in classes]
+        cells = ["-" if g is None else f"{100 * g.difference:+.1f}" + (
+            "" if g.low is None else f" [{100 * g.low:+.1f}, {100 * g.high:+.1f}]")
+            for g in gains]
         lines.append("| " + " | ".join(_pair(c, labels) + cells) + " |")
     return "\n".join(lines)
 
@@ -545,7 +543,7 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
     if c.bayes_b_better is not None:
         detail += (f"; P(B better by > {c.bayes_margin:g}) = {c.bayes_b_better:.2f}, "
                    f"P(within ±{c.bayes_margin:g}) = {c.bayes_equivalent:.2f}")
-    answer = verdict_text(c, labels)
+    answer = verdict_text(c, labels) + (f" — {c.note}" if c.verdict == NOT_LEARNED else "")
     if c.verdict in ("unresolved", "too few runs"):
         more = _power_runs(c)
         if more == "beyond these data":

@@ -36,6 +36,7 @@ from tactbench.runner.results import (
     row_status,
 )
 from tactbench.runner.scene import Scene
+from tactbench.runner.statistics import NOT_LEARNED
 from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
 from tactbench.runner.tables import (
     comparisons_section,
@@ -136,12 +137,19 @@ class Report:
         return doc
 
 
+#: The columns on whether a cell's model learned (:mod:`tactbench.runner.learning`),
+#: beside its accuracy in results.csv; rows made before have none.
+LEARNING_COLUMNS = ("train_accuracy", "chance_accuracy", "learning")
+
+
 def csv_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
     """The columns of results.csv (and of :meth:`Report.table`) for ``rows``: the cell,
-    its status and accuracy, ``acc_<class>`` for every class of any row, the costs."""
+    its status and accuracy (and, where a row records them, :data:`LEARNING_COLUMNS`),
+    ``acc_<class>`` for every class of any row, the costs."""
     classes = list(dict.fromkeys(c for r in rows for c in r.get("classes", ())))
+    learning = [c for c in LEARNING_COLUMNS if any(c in r for r in rows)]
     return ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
-            "classifier", "profile", "L", "seed", "status", "accuracy",
+            "classifier", "profile", "L", "seed", "status", "accuracy", *learning,
             *[f"acc_{c}" for c in classes],
             "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
             "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
@@ -224,7 +232,7 @@ def sequential_verdict(c: Comparison, looks: dict[str, Any]) -> Comparison:
     name = comparison_name(c)
     seen = [(lk["runs"], lk["comparisons"][name]) for lk in looks.get("looks", ())
             if name in lk["comparisons"]]
-    if not seen:
+    if not seen or c.verdict == NOT_LEARNED:  # a run of its cells did not learn: no verdict
         return c
     runs, last = seen[-1]
     decided = (looks.get("decisions") or {}).get(name)

@@ -48,10 +48,24 @@ class InterruptedLogReg(PooledLogReg):
         raise KeyboardInterrupt
 
 
+class ConstantClassifier(PooledLogReg):
+    """logreg that fits, then always answers class 0 (a model that learned nothing)."""
+
+    name = "constant"
+
+    def predict_proba(self, windows):
+        proba = np.zeros((len(windows), self.n_classes), dtype=np.float32)
+        proba[:, 0] = 1.0
+        return proba
+
+    def predict(self, windows):
+        return np.zeros(len(windows), dtype=np.int64)
+
+
 @hookimpl
 def register_classifiers(register):
     for name, cls in (("added-logreg", "AddedLogReg"), ("failing", "FailingLogReg"),
-                      ("interrupted", "InterruptedLogReg")):
+                      ("interrupted", "InterruptedLogReg"), ("constant", "ConstantClassifier")):
         register(name, f"fake_components:{cls}", summary=f"test classifier ({name})")
 
 
