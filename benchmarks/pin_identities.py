@@ -21,25 +21,16 @@ import json
 import sys
 from pathlib import Path
 
-from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNEL_VARIABLES, KERNELS_ENV
 from tactbench.paths import discard
-from tactbench.runner.planning import digest
+from tactbench.runner.planning import digest, row_identity
 from tactbench.runner.results import ResultStore
-
-#: The fields of a cell identity before issue 36 (tactbench.runner.planning.cell_identity).
-IDENTITY_FIELDS = ("schema", "dataset", "dataset_hash", "split", "test_window",
-                   "test_per_class", "imaging", "encoder", "encoder_version", "precision",
-                   "classifier", "profile", "L", "seed", "init_seed", "input", "run_dataset",
-                   "independent_runs")
 
 
 def old_identity(row: dict) -> dict:
-    """The identity a row was keyed by before threads and kernels entered it."""
-    identity = {k: row[k] for k in IDENTITY_FIELDS if k in row}
-    if identity.get("test_window") == UNNAMED_TEST_WINDOW:
-        identity.pop("test_window")
-    return identity
+    """The identity a row was keyed by before threads and kernels entered it
+    (:func:`~tactbench.runner.planning.row_identity` without them)."""
+    return row_identity(row, compute=False)
 
 
 def recorded_kernels(row: dict) -> str:

@@ -28,7 +28,14 @@ from tactbench.runner.cache import EncodingCache, ensure_encodings
 from tactbench.runner.cell import make_jobs, model_problem
 from tactbench.runner.estimate import packed
 from tactbench.runner.executors import execute
-from tactbench.runner.planning import INDEPENDENT_RUNS, Plan, plan_runs, with_dataset
+from tactbench.runner.planning import (
+    INDEPENDENT_RUNS,
+    Plan,
+    mixed_grids,
+    plan_runs,
+    row_key_problem,
+    with_dataset,
+)
 from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
 from tactbench.runner.scene import Scene, parse_duration, primary_of
 from tactbench.runner.summaries import check_contrasts
@@ -161,10 +168,15 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     if not store.keys():
         raise InputError(f"run folder {out} holds no cell rows ({store.cells}/*.json): "
                          f"nothing to report; `tactbench run --out {out}` makes them")
-    rows = store.stored_rows()
+    rows = _keyed_rows(store)
     if not rows:
         raise InputError(f"every cell row in {store.cells} is damaged (warnings above): "
                          f"nothing to report; `tactbench run --out {out}` computes them again")
+    mixed = mixed_grids(rows)
+    if mixed is not None:  # a run refuses such a folder (claim); its report would merge
+        raise InputError(f"run folder {out} holds cells of two grids ({mixed}): a report "
+                         f"would merge them as one; give each grid its own folder "
+                         f"(nothing was written)")
     # files beside a run's own (a benchmark's notes) stay; of a run's names, only
     # a report.md tactbench did not write is not ours to replace
     foreign = [p.name for p in (out / name for name in OUT_FILES)
@@ -188,6 +200,21 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     if write:
         write_report(out, report, plots=plots)
     return report
+
+
+def _keyed_rows(store: ResultStore) -> list[dict[str, Any]]:
+    """The sound rows of ``store`` whose identity hashes to their key; a row copied
+    under another name (its checksum re-sealed) is named in one warning line and left
+    out, as a damaged row is, so that no cell counts twice."""
+    rows = []
+    for row in store.stored_rows():
+        problem = row_key_problem(row)
+        if problem is None:
+            rows.append(row)
+        else:
+            log.warning("tactbench: warning: cell row %s %s; the report leaves it out",
+                        store.path(str(row.get("key"))), problem)
+    return rows
 
 
 def dataset_users(rows: Sequence[dict[str, Any]], registry=None,

@@ -41,7 +41,7 @@ from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import profile_options
 from tactbench.budget import check_budget
-from tactbench.runner.results import INDEPENDENT_RUNS, ROW_MAX_BYTES
+from tactbench.runner.results import IDENTITY_DEFAULTS, INDEPENDENT_RUNS, ROW_MAX_BYTES
 from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.scene import Scene
@@ -322,6 +322,91 @@ def compute_identity(threads: int) -> dict[str, Any]:
     kernels = kernels_identity()
     return {**({} if threads == 1 else {"threads": int(threads)}),
             **({} if kernels == DEFAULT_KERNELS else {"cpu_kernels": kernels})}
+
+
+#: The fields of a cell identity (:func:`cell_identity`): those a stored row holds that
+#: its key hashes. ``threads`` and ``cpu_kernels`` (:func:`compute_identity`) came last
+#: (issue 36); a row keyed before them is keyed by the rest (``compute=False``).
+IDENTITY_FIELDS = ("schema", "dataset", "dataset_hash", "split", "test_window",
+                   "test_per_class", "imaging", "encoder", "encoder_version", "precision",
+                   "classifier", "profile", "L", "seed", "init_seed", "input", "run_dataset",
+                   INDEPENDENT_RUNS)
+COMPUTE_FIELDS = ("threads", "cpu_kernels")
+
+
+def row_identity(row: Mapping[str, Any], *, compute: bool = True) -> dict[str, Any]:
+    """The identity a stored ``row`` holds, as :func:`cell_identity` made it: its
+    :data:`IDENTITY_FIELDS` (and, with ``compute``, :data:`COMPUTE_FIELDS`), each left
+    out where ``cell_identity`` leaves it out (at its default: the study's test window,
+    float32, 1 thread, AVX2 kernels, no init seed or input). ``digest`` of it is the row's
+    key unless the row was copied under another name or edited and re-sealed."""
+    fields = IDENTITY_FIELDS + (COMPUTE_FIELDS if compute else ())
+    identity = {k: row[k] for k in fields if k in row}
+    for field, default in (("test_window", UNNAMED_TEST_WINDOW), ("precision", "float32"),
+                           ("threads", 1), ("cpu_kernels", DEFAULT_KERNELS),
+                           ("init_seed", None), ("input", None)):
+        if field in identity and identity[field] == default:
+            del identity[field]
+    return identity
+
+
+def row_key_problem(row: Mapping[str, Any]) -> str | None:
+    """Why ``row`` is not the row of the cell its ``key`` names (its identity hashes to
+    another key: a row copied under another name, or edited and re-sealed), or None.
+    A row keyed before threads and kernels entered identities (``compute=False``) is
+    its cell's."""
+    key = row.get("key")
+    found = digest(row_identity(row))
+    if key == found or key == digest(row_identity(row, compute=False)):
+        return None
+    return (f"is keyed {str(key)[:40]!r}, and the identity it holds is cell {found}'s "
+            f"(copied under another name, or edited and re-sealed)")
+
+
+#: The cell's place in the grid: the axes along which one grid's cells differ.
+GRID_AXES = ("encoder", "classifier", "L", "seed", "init_seed")
+
+
+def _scope(field: str, row: Mapping[str, Any]) -> Any:
+    """Among which rows ``field`` must have one value in one grid: all of them (None),
+    or those of one encoder, one classifier, one imaging kind, or one run (a run that
+    draws its own data set)."""
+    if field == "encoder_version":
+        return row.get("encoder")
+    if field == "input":
+        return row.get("classifier")
+    if field == "imaging":
+        return str((row.get("imaging") or {}).get("kind") if isinstance(
+            row.get("imaging"), dict) else row.get("imaging"))
+    if field in ("dataset_hash", "run_dataset") and row.get(INDEPENDENT_RUNS):
+        return row.get("seed")
+    return None
+
+
+def mixed_grids(rows: list[Mapping[str, Any]]) -> str | None:
+    """How the stored ``rows`` of one folder hold cells of more than one grid (two
+    identities that no run plans together: another pixel size, split, profile, thread
+    count, data set ...), said as the first field found with two values; None when
+    they are one grid. Every run of a folder plans every cell already there
+    (:meth:`~tactbench.runner.results.ResultStore.claim`), so only cells copied in
+    from elsewhere mix grids; a report would merge them."""
+    fields = [f for f in IDENTITY_FIELDS + COMPUTE_FIELDS if f not in GRID_AXES]
+    seen: dict[tuple[str, str], tuple[Any, Mapping[str, Any]]] = {}
+    for row in rows:
+        identity = row_identity(row)
+        for field in fields:
+            value = identity.get(field, IDENTITY_DEFAULTS.get(field))
+            scope = (field, json.dumps(_scope(field, row), sort_keys=True, default=str))
+            first = seen.setdefault(scope, (value, row))
+            if first[0] != value:
+                return (f"{_row_label(first[1])} has {field} {first[0]!r}, "
+                        f"{_row_label(row)} {value!r}")
+    return None
+
+
+def _row_label(row: Mapping[str, Any]) -> str:
+    return (f"{row.get('encoder')} × {str(row.get('classifier')).split(':')[0]} "
+            f"L={row.get('L')} seed={row.get('seed')}")
 
 
 def plan(scene: Scene, registry=None, *, progress=None,

@@ -110,11 +110,13 @@ def test_a_folder_without_cells_is_one_line(tmp_path):
 def test_a_report_md_tactbench_did_not_write_is_not_replaced(tmp_path):
     from tactbench.runner import ResultStore
 
-    ResultStore(tmp_path).put({"key": "k", "status": "ok", "encoder": "raw", "dataset": "d",
-                               "split": "paper", "dataset_hash": "h",
-                               "classifier": "logreg", "L": 3, "seed": 0, "accuracy": 0.5,
-                               "classes": ["a", "b"], "confusion": [[1, 0], [1, 0]],
-                               "per_class_accuracy": {"a": 1.0, "b": 0.0}})
+    from tactbench.runner.planning import digest, row_identity
+
+    row = {"status": "ok", "encoder": "raw", "dataset": "d", "split": "paper",
+           "dataset_hash": "h", "classifier": "logreg", "L": 3, "seed": 0, "accuracy": 0.5,
+           "classes": ["a", "b"], "confusion": [[1, 0], [1, 0]],
+           "per_class_accuracy": {"a": 1.0, "b": 0.0}}
+    ResultStore(tmp_path).put({**row, "key": digest(row_identity(row))})  # a real key
     (tmp_path / "report.md").write_text("# My notes\n")
     (tmp_path / "timing.json").write_text("{}")  # a benchmark's, beside the run's files
     result = CliRunner().invoke(cli, ["report", str(tmp_path), "--no-plots"])
