@@ -59,7 +59,8 @@ class History:
 
     def stopped_because(self) -> str:
         if self.state is None:
-            return "no primary comparison has 2 runs yet"
+            return (f"no look made yet: the first is after {self.looks[0]} runs with "
+                    f"every primary cell")
         if self.answered:
             closed = [lk.decision for lk in self.state.closed.values()]
             futile, unlearned = closed.count("futile"), closed.count(NOT_LEARNED)
