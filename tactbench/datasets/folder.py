@@ -35,6 +35,8 @@ folder names (natural order) or ``classes=a;b;c`` (that order; every name must b
 folder and every folder a name). Normalisation: ``vmin``/``vmax`` (the sensor's range),
 ``normalisation=SPEC`` (e.g. ``baseline``), or by default the data's own range (0, or the
 minimum when negative, to the maximum), stored in the manifest so it is reproducible.
+Negative readings (baseline-subtracted, shear, signed sensors) are read as signed by
+default, and one line says so and how to clip them at 0 instead (``vmin=0``).
 
 Every mistake is one :class:`~tactbench.errors.InputError` naming the file (and line).
 See ``docs/own-data.md``.
@@ -44,6 +46,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import math
 import os
 import re
@@ -452,6 +455,8 @@ def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None
             lo = min(0.0, float(values.min()))
         if hi is None:
             hi = float(values.max())
+        if vmin is None and lo < 0 < hi:
+            _say_signed(float(np.mean(values < 0)), lo, hi)
     for v, what in ((lo, "vmin"), (hi, "vmax")):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise InputError(f"{what} must be a finite number, got {v!r}")
@@ -465,6 +470,17 @@ def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None
             raise InputError(given)
         hi = lo + 1.0  # constant data: any scale maps it to one value
     return f"fixed:offset={float(lo)!r},scale={float(hi - lo)!r}"
+
+
+def _say_signed(share: float, lo: float, hi: float) -> None:
+    """One line on what was done to signed readings (baseline-subtracted, shear) and how
+    to choose otherwise: read as signed, the range ``[lo, hi]`` mapped onto [0, 1], so a
+    reading of 0 (rest, for baseline-subtracted data) is not 0 in the images."""
+    logging.getLogger("tactbench.datasets").warning(
+        "tactbench: note: %.0f %% of the readings are negative (down to %.4g): read as "
+        "signed, [%.4g, %.4g] mapped onto [0, 1], so a reading of 0 is %.2f; give vmin=0 to "
+        "clip them at 0 (pressure above a baseline), or vmin=/vmax= for the sensor's range "
+        "(docs/own-data.md)", 100 * share, lo, lo, hi, -lo / (hi - lo))
 
 
 class FolderDataset:
