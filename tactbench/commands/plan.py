@@ -35,9 +35,9 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
     (synthetic-forearm:people=per-run) has none, and only its first run's data set is
     made to plan. With --until, the cells are those of every run the looks may reach.
     """
-    if not 0 < effect <= 100:
-        raise click.BadParameter(f"must be in (0, 100] points, got {effect:g}",
-                                 param_hint="--effect")
+    if not 0 < effect <= 100 or effect / 100 == 0:  # 5e-324 points: 0 as a fraction
+        raise click.BadParameter(f"must be in (0, 100] points and not vanish as a "
+                                 f"fraction, got {effect:g}", param_hint="--effect")
     scene = scene_from(ctx, scene_file, options)
     f = forecast(scene, get_registry(), effect=effect)
     if as_json:

@@ -13,7 +13,10 @@ Storage precision (:data:`~tactbench.profiles.PRECISIONS`, :class:`Storage`):
 ≤ 2⁻¹¹ ≈ 4.9e-4); ``uint8`` maps each channel linearly from the range its encoder
 declares (``ENCODER.get(enc, "ranges")``, (0, 1) when it declares none) onto 0..255
 with rounding, clipping values outside the range: the error is at most half a quantum,
-``(high - low) / 510``, inside the range.
+``(high - low) / 510``, inside the range. A value further outside is clipped to the
+range's end (a negative reading of an encoder declaring no range, stored as 0): the
+storage counts them (:attr:`Storage.clipped`), and the cache says how many, once per
+encoder, in one warning line naming the encoder and the precision that keeps them.
 """
 
 from __future__ import annotations
@@ -60,6 +63,9 @@ class Storage:
         self.dtype = np.dtype(precision)
         self.scale = np.asarray(scale, dtype=np.float32)
         self.offset = np.asarray(offset, dtype=np.float32)
+        #: uint8: values stored so far, and those clipped by more than half a quantum
+        #: (below the range, above it)
+        self.values, self.clipped = 0, [0, 0]
 
     @classmethod
     def for_channels(cls, precision: str, n_channels: int,
@@ -111,9 +117,26 @@ class Storage:
                         dtype=np.float32)
         q /= self._per_channel(self.scale, frames.ndim)
         np.rint(q, out=q)
+        self.values += q.size
+        self.clipped[0] += int(np.count_nonzero(q < 0.0))
+        self.clipped[1] += int(np.count_nonzero(q > 255.0))
         np.clip(q, 0.0, 255.0, out=q)
         np.nan_to_num(q, copy=False, nan=0.0)
         return q.astype(np.uint8)
+
+    def clipping(self, name: str) -> str | None:
+        """One line saying how many of the values stored so far ``name`` (an encoder)
+        gave outside the uint8 range and were clipped, or None when none were."""
+        low, high = self.clipped
+        if not low + high:
+            return None
+        span = ", ".join(f"[{o:g}, {o + 255 * c:g}]" for o, c in
+                         zip(self.offset.ravel(), self.scale.ravel()))
+        return (f"encoder '{name}': {low + high} of {self.values} values lay outside the "
+                f"range uint8 storage maps onto 0..255 ({span}; the encoder's declared "
+                f"ranges, or (0, 1) where it declares none) and were clipped to its ends "
+                f"({low} below, {high} above); store with --precision float16 or float32 "
+                f"to keep them")
 
     def decode(self, stored: "np.ndarray") -> "np.ndarray":
         """Stored ``(T, ...)`` → float32 ``(T, ...)`` (the array itself for float32)."""

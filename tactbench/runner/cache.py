@@ -296,6 +296,14 @@ def _guard(plan_: Plan, enc: str, sink: Any, frame_shape: Sequence[int]) -> Enco
                         component=enc, plugin=plugin)
 
 
+def _say_clipping(enc: str, storage: Storage, guard: EncoderGuard) -> None:
+    """Warn, once per encoder and entry, of values uint8 storage clipped (an output
+    outside its declared ranges is the guard's to refuse: its cells fail instead)."""
+    line = None if guard.violation else storage.clipping(enc)
+    if line is not None:
+        log.warning("tactbench: warning: %s", line)
+
+
 def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
     return {"encoder": enc, "encoder_version": plan_.encoder_versions[enc],
             "channels": list(ENCODER.get(plan_.encoders[enc], "channels")),
@@ -319,6 +327,7 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
         with cache.entry(key, dataset.lengths(), (width,), storage) as writer:
             guard = _guard(plan_, enc, writer.append, (width,))
             encode_s = encode_vectors(dataset, enc, encoder, guard, chunk_bytes=chunk_bytes)
+            _say_clipping(enc, storage, guard)
             writer.meta.update({**_common_meta(plan_, enc, "vectors"),
                                 **({VIOLATION: guard.violation} if guard.violation else {}),
                                 "identity": identities[key],
@@ -349,6 +358,7 @@ def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], preci
         times = encode_images(dataset, encoders, guards, pixel_mm=pixel_mm, method=method,
                               progress=progress, chunk_bytes=chunk_bytes)
         for enc, writer in writers.items():
+            _say_clipping(enc, writer.storage, guards[enc])
             writer.meta.update({
                 **_common_meta(plan_, enc, "images"),
                 **({VIOLATION: guards[enc].violation} if guards[enc].violation else {}),
