@@ -43,11 +43,12 @@ GOALS = {"main_over_baseline": 1.0, "grid_over_baseline": 0.6, "load_over_main":
          "plan_error": 0.25}
 
 
-def timed(argv: list[str], env: dict[str, str], log: Path) -> float:
-    """Seconds ``argv`` took; its output goes to ``log``; exits when it fails."""
+def timed(argv: list[str], env: dict[str, str], log: Path, cwd: Path = REPO) -> float:
+    """Seconds ``argv`` took (in ``cwd``, whose ``tactbench`` ``python -m`` runs); its
+    output goes to ``log``; exits when it fails."""
     start = time.perf_counter()
     with log.open("w") as out:
-        proc = subprocess.run(argv, env=env, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.run(argv, env=env, stdout=out, stderr=subprocess.STDOUT, cwd=cwd)
     seconds = time.perf_counter() - start
     if proc.returncode != 0:
         sys.exit(f"{' '.join(argv)} failed ({proc.returncode}); see {log}")
@@ -68,7 +69,7 @@ def tactbench(*args: str) -> list[str]:
 def planned(argv: list[str], env: dict[str, str], log: Path) -> float:
     """The wall time ``tactbench plan`` forecasts for ``argv`` (a run's arguments)."""
     proc = subprocess.run(tactbench("plan", *argv, "--json"), env=env, capture_output=True,
-                          text=True)
+                          text=True, cwd=REPO)
     log.write_text(proc.stdout + proc.stderr)
     if proc.returncode != 0:
         sys.exit(f"tactbench plan failed; see {log}")
@@ -83,9 +84,8 @@ def baseline(rev: str, scratch: Path) -> float:
     try:
         env = {k: v for k, v in fresh_env(scratch, "baseline").items()
                if k not in PIN_VARIABLES}
-        env["PYTHONPATH"] = str(tree)
         return timed(tactbench("run", "--out", str(scratch / "out-baseline")), env,
-                     scratch / "baseline.log")
+                     scratch / "baseline.log", cwd=tree)  # python -m: the tree's package
     finally:
         subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)],
                        capture_output=True)

@@ -73,16 +73,16 @@ def estimate_run(p: Plan, pending: Sequence[Cell], missing: Sequence[tuple[str, 
     """The forecast of running ``pending`` cells of ``p`` after encoding the ``missing``
     (encoder, input kind) entries; ``known`` (cell key → seconds, from a pilot) is taken
     as given for those cells. ``memo`` keeps what was measured for the next call (the
-    next look's batch of the same run)."""
+    next look's batch of the same run); its ``"load"``, when given, is the seconds the
+    run's planning takes (the dataset loaded and hashed), else timed here."""
     memo = {} if memo is None else memo
-    if "load" not in memo:
+    if "load" not in memo:  # the caller did not time the plan's own load: time one
         t0 = time.perf_counter()
         load_dataset(p.scene.dataset if p.run_dataset is None else p.run_dataset,
                      registry=p.registry)
         memo["load"] = time.perf_counter() - t0
+    if "counts" not in memo:
         memo["counts"] = _window_counts(p)
-    overhead = memo["load"] + REPORT_S
-    encode = encode_seconds(p, missing)
     cells: dict[str, float | None] = {}
     for cell in pending:
         cells[cell.key] = (known or {}).get(cell.key)
@@ -91,6 +91,9 @@ def estimate_run(p: Plan, pending: Sequence[Cell], missing: Sequence[tuple[str, 
             if combo not in memo:
                 memo[combo] = cell_seconds(p, cell, memo["counts"])
             cells[cell.key] = memo[combo]
+    overhead = memo["load"] + REPORT_S
+    # the encoding is timed only when every cell's time is known (else no total is said)
+    encode = encode_seconds(p, missing) if None not in cells.values() else 0.0
     workers = max(1, min(p.scene.resolved_workers(), len(pending)))
     if workers > 1 or p.scene.executor != "local":
         overhead += WORKER_START_S

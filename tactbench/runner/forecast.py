@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import statistics
+import time
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -135,7 +136,16 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     registry = registry or load_registry()
     if scene.until:
         scene = dataclasses.replace(scene, seeds=scene.seed_order())
-    [p] = plan_runs(scene, registry, progress=progress, first_only=True)
+    made: list[int] = []  # the dataset was made while planning: its load is not timed
+
+    def making(done: int, total: int | None = None) -> None:
+        made.append(done)
+        if progress is not None:
+            progress(done, total)
+
+    t0 = time.perf_counter()
+    [p] = plan_runs(scene, registry, progress=making, first_only=True)
+    planned_s = time.perf_counter() - t0
     pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
     runs = len(scene.seeds)
     splits = p.split.split(SplitData.of(p.dataset, test_per_class=scene.test_per_class),
@@ -151,7 +161,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                                       p.identities)
     cells = _cells(p.cells + others, pilot)
     looks = schedule(scene.max_runs, scene.look_every) if scene.until else None
-    wall = _walls(p, p.cells + others, cells, looks)
+    wall = _walls(p, p.cells + others, cells, looks,
+                  load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
     primaries = scene.resolved_primary()
     level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
@@ -170,7 +181,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
 
 
 def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
-           looks: list[int] | None) -> list[float] | None:
+           looks: list[int] | None, *, load_s: float | None) -> list[float] | None:
     """The run's wall time (:func:`~tactbench.runner.estimate.estimate_run`), cumulative
     at each look (one number without looks); cells without a pilot timing get the
     classifier's own estimate (``cells`` updated in place). None when a cell has
@@ -179,7 +190,7 @@ def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
     ends = looks or [len(order)]
     known = {c.key: f.seconds for c, f in zip(planned, cells)
              if f.seconds is not None and c.key}
-    memo: dict[Any, Any] = {}
+    memo: dict[Any, Any] = {} if load_s is None else {"load": load_s}  # else timed there
     missing = missing_entries(p, planned, EncodingCache())
     total, out, start = 0.0, [], 0
     for i, end in enumerate(ends):

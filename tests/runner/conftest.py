@@ -31,7 +31,7 @@ def tiny_scene(tmp_path):
     def make(**over) -> Scene:
         fields = dict(dataset=TINY_DATASET, encoders=["raw", "frame-diff"],
                       classifiers=[TINY_CLF], L=[3], seeds=[0, 1], test_per_class=1,
-                      pixel_mm=10.0, threads=1, out=str(tmp_path / "out"))
+                      pixel_mm=10.0, threads=1, workers=1, out=str(tmp_path / "out"))
         fields.update(over)
         return Scene(**fields)
 
