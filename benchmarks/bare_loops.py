@@ -26,18 +26,9 @@ import time
 from pathlib import Path
 
 import tactbench  # noqa: F401 — first: it pins the CPU kernels
+from tactbench.classifiers.costs import median_seconds
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _median_seconds(fn, repeats: int = 5) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def farneback(recordings: int) -> dict:
@@ -67,8 +58,8 @@ def farneback(recordings: int) -> dict:
                 cv2.calcOpticalFlowFarneback(prev, frame, None, *args)
                 prev = frame
 
-    encoder = _median_seconds(lambda: [enc.encode(s) for s in images], 3) / frames
-    loop = _median_seconds(bare, 3) / frames
+    encoder = median_seconds(lambda: [enc.encode(s) for s in images], 3) / frames
+    loop = median_seconds(bare, 3) / frames
     return {"frames": frames, "frame_shape": list(images[0].shape[1:]),
             "encoder_ms_per_frame": 1e3 * encoder, "bare_cv2_ms_per_frame": 1e3 * loop,
             "ratio": encoder / loop, "options": o}
@@ -78,7 +69,7 @@ def training() -> dict:
     """ms per optimiser step: a bare torch loop against the committed cells' fits."""
     import torch
 
-    from tactbench.classifiers.costs import _step_seconds
+    from tactbench.classifiers.costs import _step_seconds  # the bare loop plan times
     from tactbench.plugins import load_registry
 
     torch.set_num_threads(1)

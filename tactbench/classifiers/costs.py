@@ -30,7 +30,7 @@ WARMUP_STEPS = 3
 PREPARE_FRAMES = 256
 
 
-def _best_of(fn, repeats: int) -> float:
+def median_seconds(fn, repeats: int) -> float:
     """The median seconds of ``repeats`` calls of ``fn`` (one call first, untimed)."""
     fn()
     times = []
@@ -59,7 +59,7 @@ def estimate_seconds(clf: Any, *, frame_shape: Sequence[int], L: int, n_classes:
             net = clf._build_net(tuple(frame_shape), n_classes, pretrained=False)
             with torch.no_grad():
                 frames = torch.rand((PREPARE_FRAMES, *frame_shape))
-                prepare_s = _best_of(lambda: net.prepare(frames), 3) / PREPARE_FRAMES
+                prepare_s = median_seconds(lambda: net.prepare(frames), 3) / PREPARE_FRAMES
                 prepared = net.prepare(frames[:1]).shape[1:]
             step_s = _step_seconds(clf, net, prepared, L, n_classes)
             predict_s = _predict_seconds(clf, net, prepared, L)
@@ -91,7 +91,7 @@ def _step_seconds(clf: Any, net: Any, prepared: Sequence[int], L: int,
 
     for _ in range(WARMUP_STEPS):
         step()
-    return _best_of(step, TIMED_STEPS)
+    return median_seconds(step, TIMED_STEPS)
 
 
 def _predict_seconds(clf: Any, net: Any, prepared: Sequence[int], L: int) -> float:
@@ -101,4 +101,4 @@ def _predict_seconds(clf: Any, net: Any, prepared: Sequence[int], L: int) -> flo
     net.eval()
     x = torch.rand((clf.eval_batch_size, L, *prepared))
     with torch.no_grad():
-        return _best_of(lambda: net(x), 3)
+        return median_seconds(lambda: net(x), 3)
