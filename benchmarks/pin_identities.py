@@ -3,7 +3,7 @@
     python benchmarks/pin_identities.py FOLDER [FOLDER ...]   (run folders or docs/)
 
 A cell's identity now holds its torch thread count and its CPU kernels (see
-:func:`tactbench.runner.planning.compute_identity`), each left out at its default (1
+:func:`tactbench.runner.execution.planning.compute_identity`), each left out at its default (1
 thread, kernels pinned to AVX2). Rows trained before that recorded both facts (``threads``,
 ``machine``) but their keys did not: a row trained with 2 threads, or with the unpinned
 kernels of its machine, would otherwise be taken for a pinned 1-thread cell. This gives
@@ -23,13 +23,13 @@ from pathlib import Path
 
 from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNEL_VARIABLES, KERNELS_ENV
 from tactbench.paths import discard
-from tactbench.runner.planning import digest, row_identity
-from tactbench.runner.results import ResultStore
+from tactbench.runner.execution.planning import digest, row_identity
+from tactbench.runner.execution.results import ResultStore
 
 
 def old_identity(row: dict) -> dict:
     """The identity a row was keyed by before threads and kernels entered it
-    (:func:`~tactbench.runner.planning.row_identity` without them)."""
+    (:func:`~tactbench.runner.execution.planning.row_identity` without them)."""
     return row_identity(row, compute=False)
 
 

@@ -82,4 +82,4 @@ def cell_finished(row, out):
 @hookspec
 def look_finished(report, out):
     """A look of ``run --until answered`` ended: ``report`` is the folder's
-    :class:`~tactbench.runner.writers.Report` after it, ``out`` the run folder."""
+    :class:`~tactbench.runner.presentation.writers.Report` after it, ``out`` the run folder."""

@@ -53,7 +53,7 @@ def test_the_estimate_follows_the_request_and_the_budget(monkeypatch):
 
 def test_grid_cells_seeds_and_lengths_are_bounded_before_they_are_expanded():
     from tactbench.runner import Scene, plan
-    from tactbench.runner.scene import parse_lengths, parse_seeds
+    from tactbench.runner.execution.scene import parse_lengths, parse_seeds
 
     with pytest.raises(InputError, match="too many seeds"):
         parse_seeds(["0-99999999999"])
@@ -68,7 +68,7 @@ def test_a_dataset_of_more_classes_than_a_row_can_hold_is_refused_at_planning():
     from types import SimpleNamespace
 
     from tactbench.runner import Scene
-    from tactbench.runner.planning import _check_memory
+    from tactbench.runner.execution.planning import _check_memory
 
     many = SimpleNamespace(name="many", classes=[f"c{i}" for i in range(3000)])
     with pytest.raises(BudgetError, match="3000 classes.*at most 2896 classes"):

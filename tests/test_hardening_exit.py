@@ -117,7 +117,7 @@ def test_stop_workers_ends_running_workers_instead_of_waiting_for_them():
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from tactbench.runner.system import stop_workers
+    from tactbench.runner.execution.system import stop_workers
 
     pool = ProcessPoolExecutor(max_workers=2, mp_context=multiprocessing.get_context("spawn"))
     futures = [pool.submit(time.sleep, 300) for _ in range(3)]  # a builtin: no import
@@ -159,7 +159,7 @@ def test_an_unreachable_dask_scheduler_is_one_line(monkeypatch):
     from distributed import Client
 
     from tactbench.errors import InputError
-    from tactbench.runner import executors
+    from tactbench.runner.execution import executors
 
     monkeypatch.setattr(executors, "SCHEDULER_TIMEOUT_S", 2)
     with pytest.raises(InputError, match="the dask scheduler cannot be reached"):

@@ -127,7 +127,7 @@ def test_importing_tactbench_pins_the_kernels_before_numpy_and_says_when_it_came
 
 
 def test_a_cell_keyed_to_other_kernels_is_refused_by_a_worker_computing_with_these():
-    from tactbench.runner.cell import check_kernels
+    from tactbench.runner.execution.cell import check_kernels
 
     import torch  # noqa: F401 — what the worker computes with is torch's capability
 

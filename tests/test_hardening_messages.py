@@ -79,7 +79,7 @@ def test_a_full_disk_is_one_line_and_leaves_nothing_half_written(tmp_path, monke
 
 @pytest.mark.parametrize("address", ["notaurl", "tcp://", "http://x:1", "host:port"])
 def test_a_scheduler_address_is_checked_before_any_work(address):
-    from tactbench.runner.system import check_scheduler
+    from tactbench.runner.execution.system import check_scheduler
 
     with pytest.raises(InputError, match="not a dask scheduler address"):
         check_scheduler(address)

@@ -80,7 +80,7 @@ def test_a_window_larger_than_the_image_is_an_error_naming_both():
 
 def test_planning_refuses_a_window_larger_than_the_image_before_encoding(tmp_path):
     from tactbench.runner import Scene
-    from tactbench.runner.planning import plan
+    from tactbench.runner.execution.planning import plan
 
     scene = Scene(dataset="synthetic-forearm:users=2,repetitions=1",
                   encoders=["farneback:winsize=99999"], classifiers=["logreg"], L=[2],
@@ -188,7 +188,7 @@ def test_readings_near_the_float32_limit_are_normalised_without_nan(tmp_path):
                                   '{"seeds": [%s]}' % ("1" * 400),
                                   '{"threads": %s}' % ("1" * 400)])
 def test_a_json_scene_number_of_400_digits_is_one_line(tmp_path, body):
-    from tactbench.runner.scene import load_scene_file
+    from tactbench.runner.execution.scene import load_scene_file
 
     path = tmp_path / "scene.json"
     path.write_text(body)

@@ -14,7 +14,7 @@ from tactbench.data.windows import Windows, check_windows
 from tactbench.encoders.encoding import Storage
 from tactbench.errors import ContractError, InputError
 from tactbench.runner.orchestrate import next_batch_seconds
-from tactbench.runner.scene import Scene, parse_duration, show_duration
+from tactbench.runner.execution.scene import Scene, parse_duration, show_duration
 
 DATA = SplitData(np.array([0, 1, 0, 1, 0, 1]), {"user": tuple("aabbcc")})
 

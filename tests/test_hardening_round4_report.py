@@ -19,11 +19,11 @@ from click.testing import CliRunner
 
 from tactbench.cli import cli
 from tactbench.encoders.encoding import Storage
-from tactbench.runner.answering import History
-from tactbench.runner.forecast import _primary
-from tactbench.runner.planning import digest, mixed_grids, row_identity, row_key_problem
-from tactbench.runner.power import recordings_for
-from tactbench.runner.results import ResultStore
+from tactbench.runner.analysis.answering import History
+from tactbench.runner.analysis.forecast import _primary
+from tactbench.runner.execution.planning import digest, mixed_grids, row_identity, row_key_problem
+from tactbench.runner.analysis.power import recordings_for
+from tactbench.runner.execution.results import ResultStore
 
 sys.path.insert(0, str(Path(__file__).parent / "runner"))
 from prediction_rows import prediction_row  # noqa: E402

@@ -68,7 +68,7 @@ def test_an_all_nan_or_constant_dataset_is_refused(tmp_path, value, message):
 
 def test_planning_refuses_a_constant_dataset_before_any_work(tmp_path):
     from tactbench.runner import Scene
-    from tactbench.runner.planning import plan
+    from tactbench.runner.execution.planning import plan
 
     scene = Scene(dataset=str(_folder(tmp_path / "d", values=0.0)), encoders=["raw"],
                   classifiers=["taxel-lstm:epochs=1"], L=[2], seeds=[0],
@@ -114,7 +114,7 @@ def test_a_recording_listed_twice_with_different_users_is_refused(tmp_path):
 
 def test_a_scene_files_paths_are_taken_from_its_folder_and_expand_the_home(tmp_path,
                                                                           monkeypatch):
-    from tactbench.runner.scene import load_scene_file
+    from tactbench.runner.execution.scene import load_scene_file
 
     (tmp_path / "study").mkdir()
     scene = tmp_path / "study" / "scene.toml"
@@ -171,7 +171,7 @@ def test_an_npz_with_two_members_of_one_name_in_different_folders_is_refused(tmp
 def test_a_class_name_with_markdown_specials_is_escaped_by_the_markdown_writers(name):
     import re
 
-    from tactbench.runner.tables import failed_cells_markdown, md, per_class_markdown
+    from tactbench.runner.presentation.tables import failed_cells_markdown, md, per_class_markdown
 
     summary = {"encoder": "raw", "classifier": "logreg", "L": 3,
                "classes": [name, "plain"], "per_class_accuracy": {name: 0.5, "plain": 1.0}}

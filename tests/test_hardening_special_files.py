@@ -71,7 +71,7 @@ def test_the_shared_check_names_each_kind_before_opening(tmp_path):
 
 
 def test_a_scene_file_that_is_a_fifo_or_a_device_is_one_line(tmp_path):
-    from tactbench.runner.scene import load_scene_file
+    from tactbench.runner.execution.scene import load_scene_file
 
     for kind, path in specials(tmp_path, "scene.toml").items():
         with deadline(), pytest.raises(TactbenchError, match=WORDS[kind]):
@@ -81,7 +81,7 @@ def test_a_scene_file_that_is_a_fifo_or_a_device_is_one_line(tmp_path):
 def test_rows_and_results_json_that_are_special_files_never_block(tmp_path):
     """A row that is a FIFO or /dev/zero is a damaged row; results.json is never read
     (the cells are the one store), so one that is a special file changes nothing."""
-    from tactbench.runner.results import ResultStore
+    from tactbench.runner.execution.results import ResultStore
 
     REPORT_JSON = "results.json"
 
@@ -103,8 +103,8 @@ def test_rows_and_results_json_that_are_special_files_never_block(tmp_path):
 
 
 def test_a_cache_entrys_metadata_that_is_a_special_file_is_a_damaged_entry(tmp_path):
-    from tactbench.runner.cache import EncodingCache
-    from tactbench.runner.entries import readable_meta, verify_entry
+    from tactbench.runner.execution.cache import EncodingCache
+    from tactbench.runner.execution.entries import readable_meta, verify_entry
 
     cache = EncodingCache(tmp_path / "cache")
     for kind in ("fifo", "zero", "frames"):

@@ -19,7 +19,7 @@ from click.testing import CliRunner
 from tactbench.cli import cli
 from tactbench.errors import InputError
 from tactbench.paths import check_output_file, check_output_folder, temp_name
-from tactbench.runner.results import ROW_MAX_BYTES, ResultStore
+from tactbench.runner.execution.results import ROW_MAX_BYTES, ResultStore
 
 
 def run(*args):

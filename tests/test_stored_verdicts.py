@@ -3,7 +3,7 @@
 A run folder's rows are its cells (docs/reports/*/*/cells/*.json, committed, each verified
 by its key and checksum as it is read), every row with its per-sequence predictions, so
 each comparison is recomputed here from the cells, in the order
-:func:`tactbench.runner.results.scene_order` gives them (with the contrasts and margin
+:func:`tactbench.runner.execution.results.scene_order` gives them (with the contrasts and margin
 the report's results.json says it was made with), and must equal the one results.json
 states; every table of comparisons in the reports' Markdown must be a row of the
 recomputed tables. A report that states another verdict, interval or p fails, and so
@@ -24,8 +24,8 @@ FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "
 
 
 def _recompute(path: Path) -> tuple[dict, list]:
-    from tactbench.runner.results import ResultStore, latest_scene
-    from tactbench.runner.writers import make_report, sequential_design
+    from tactbench.runner.execution.results import ResultStore, latest_scene
+    from tactbench.runner.presentation.writers import make_report, sequential_design
 
     doc = json.loads(path.read_text())
     rows = ResultStore(path.parent).stored_rows()
@@ -65,7 +65,7 @@ def test_each_stored_comparison_is_what_its_rows_give(path, recomputed):
 
 
 def _comparison_lines(text: str, width: int) -> list[str]:
-    from tactbench.runner.summaries import FACTORS
+    from tactbench.runner.execution.questions import FACTORS
 
     kinds = {*FACTORS, "contrast"}
     lines = text.splitlines()
@@ -76,7 +76,7 @@ def _comparison_lines(text: str, width: int) -> list[str]:
 
 
 def test_every_table_of_comparisons_in_the_reports_is_recomputed(recomputed):
-    from tactbench.runner.tables import COMPARISON_HEADER, comparison_rows
+    from tactbench.runner.presentation.tables import COMPARISON_HEADER, comparison_rows
 
     width = len(COMPARISON_HEADER)
     checked = 0

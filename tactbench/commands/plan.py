@@ -8,7 +8,7 @@ import click
 
 from tactbench.cli import get_registry, json_text
 from tactbench.commands.run import scene_from, scene_options
-from tactbench.runner.forecast import forecast, points
+from tactbench.runner.analysis.forecast import forecast, points
 
 
 @click.command("plan")

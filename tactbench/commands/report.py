@@ -8,7 +8,7 @@ from tactbench.cli import get_registry
 from tactbench.commands.run import print_report
 from tactbench.errors import require
 from tactbench.runner import render_folder, write_parquet
-from tactbench.runner.frames import EXTRA
+from tactbench.runner.presentation.frames import EXTRA
 
 
 @click.command("report")

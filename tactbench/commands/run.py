@@ -11,10 +11,10 @@ import click
 from tactbench.cli import get_registry, json_text
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
 from tactbench.runner import Report, Scene, load_scene_file, run, run_until
-from tactbench.runner.scene import parse_duration, parse_lengths, parse_seeds, show_duration
-from tactbench.runner.summaries import failed_cells
-from tactbench.runner.tables import answer_text, print_comparisons, print_table
-from tactbench.runner.writers import run_labels
+from tactbench.runner.execution.scene import parse_duration, parse_lengths, parse_seeds, show_duration
+from tactbench.runner.analysis.summaries import failed_cells
+from tactbench.runner.presentation.tables import answer_text, print_comparisons, print_table
+from tactbench.runner.presentation.writers import run_labels
 
 
 #: Scene fields that only mean something with ``--until``.
@@ -22,7 +22,7 @@ UNTIL_ONLY = ("max_runs", "look_every", "budget")
 
 
 class SceneOption(click.Option):
-    """An option that sets the :class:`~tactbench.runner.scene.Scene` field ``field``.
+    """An option that sets the :class:`~tactbench.runner.execution.scene.Scene` field ``field``.
 
     Its help ends in ``[default: ...]`` read from the Scene's own field default when the
     help is shown (:func:`scene_default`), so the help cannot drift from the dataclass; a
@@ -105,8 +105,11 @@ SCENE_OPTIONS = [
                       "users, every user tested once; group:KEY[:folds=K|:test=A] the same "
                       "over any metadata (position, repetition): group:position:test=side "
                       "trains on the front, tests on the side; kfold:folds=K: stratified "
-                      "K-fold over recordings, each tested once per seed; or a plugin's "
-                      "split (tactbench list)."),
+                      "K-fold over recordings, each tested once per seed; sklearn:NAME: a "
+                      "scikit-learn splitter (sklearn:GroupKFold:n_splits=5, "
+                      "sklearn:LeaveOneGroupOut:groups=position); or a plugin's split "
+                      "(tactbench list). The split's design picks the t "
+                      "(docs/statistics.md)."),
     scene_option("--test-window", field="test_window",
                  help="Which frames a test sequence is classified on: vote (every window, "
                       "probabilities averaged), onset (L frames from contact onset), first "

@@ -5,7 +5,7 @@ The pass streams: the dataset is imaged and encoded a chunk of samples at a time
 (:data:`CHUNK_BYTES` of images), and each encoded sequence goes to its encoder's *sink*
 (a callable taking float ``(T, ...)`` frames, in sample order) as soon as its chunk is
 done, so the memory of encoding is a few chunks whatever the dataset's size. The
-runner's cache (:mod:`tactbench.runner.cache`) gives the sinks: the writers of its
+runner's cache (:mod:`tactbench.runner.execution.cache`) gives the sinks: the writers of its
 entries.
 
 Storage precision (:data:`~tactbench.profiles.PRECISIONS`, :class:`Storage`):

@@ -59,34 +59,26 @@ the torch threads and the CPU kernels included (pinned to AVX2 by default, see
 any x86-64 machine with AVX2, in any executor, whatever runs beside it
 (docs/reliability.md, "Numbers across machines").
 
-Modules, one job each: :mod:`~tactbench.runner.scene` (run configuration, scene files),
-:mod:`~tactbench.runner.planning` (grid checks, cells, identities),
-:mod:`~tactbench.runner.cache` (the cache folder; filling it for a plan),
-:mod:`~tactbench.runner.entries` (one cache entry: files, verification, reading; the pass
-that encodes a dataset is :mod:`tactbench.encoders.encoding`),
-:mod:`~tactbench.runner.cell` (train and test one cell),
-:mod:`~tactbench.runner.executors` (local, processes, dask),
-:mod:`~tactbench.runner.results` (result rows), :mod:`~tactbench.runner.system` (versions,
-memory, git), :mod:`~tactbench.runner.orchestrate` (:func:`run`, :func:`render_folder`),
-:mod:`~tactbench.runner.summaries` (aggregation over seeds, cells, contrasts),
-:mod:`~tactbench.runner.comparisons` (paired comparisons of cells, as records),
-:mod:`~tactbench.runner.statistics` (the tests, with the training run as the unit),
-:mod:`~tactbench.runner.tables` (terminal and Markdown tables),
-:mod:`~tactbench.runner.writers` (the :class:`Report`; results.json/csv, report.md),
-:mod:`~tactbench.runner.plots` (one function per figure).
+The runner is three rooms, the arrows one way (``tests/test_architecture.py``):
+:mod:`tactbench.runner.execution` (scene, plan, cache, cells, executors, the store of
+rows), :mod:`tactbench.runner.analysis` (summaries, statistics, comparisons, the
+sequential looks; it reads execution's records) and :mod:`tactbench.runner.presentation`
+(tables, figures, report files, data frames; it reads both). Beside them,
+:mod:`~tactbench.runner.orchestrate` composes the three into :func:`run`,
+:func:`run_until` and :func:`render_folder`.
 """
 
 from tactbench.machine import git_revision
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
-from tactbench.runner.cache import EncodingCache, ensure_encodings
-from tactbench.runner.cell import CellJob, failed_row, make_jobs, run_cell
-from tactbench.runner.entries import load_encoding
-from tactbench.runner.frames import cells_frame, comparisons_frame, write_parquet
+from tactbench.runner.execution.cache import EncodingCache, ensure_encodings
+from tactbench.runner.execution.cell import CellJob, failed_row, make_jobs, run_cell
+from tactbench.runner.execution.entries import load_encoding
+from tactbench.runner.presentation.frames import cells_frame, comparisons_frame, write_parquet
 from tactbench.runner.orchestrate import render_folder, run, run_until
-from tactbench.runner.planning import ROW_SCHEMA, Cell, Plan, plan
-from tactbench.runner.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
-from tactbench.runner.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
-from tactbench.runner.writers import Report
+from tactbench.runner.execution.planning import ROW_SCHEMA, Cell, Plan, plan
+from tactbench.runner.execution.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
+from tactbench.runner.execution.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
+from tactbench.runner.presentation.writers import Report
 
 __all__ = [
     "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",

@@ -23,12 +23,12 @@ from tactbench.integrity import path_kind
 from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.plugins import load_registry
-from tactbench.runner.answering import first_look_to_run, schedule
-from tactbench.runner.cache import EncodingCache, ensure_encodings
-from tactbench.runner.cell import make_jobs, model_problem
-from tactbench.runner.estimate import packed
-from tactbench.runner.executors import execute
-from tactbench.runner.planning import (
+from tactbench.runner.analysis.answering import first_look_to_run, schedule
+from tactbench.runner.execution.cache import EncodingCache, ensure_encodings
+from tactbench.runner.execution.cell import make_jobs, model_problem
+from tactbench.runner.execution.estimate import packed
+from tactbench.runner.execution.executors import execute
+from tactbench.runner.execution.planning import (
     INDEPENDENT_RUNS,
     Plan,
     mixed_grids,
@@ -36,18 +36,12 @@ from tactbench.runner.planning import (
     row_key_problem,
     with_dataset,
 )
-from tactbench.runner.results import ResultStore, command_line, latest_scene, ok_rows
-from tactbench.runner.scene import Scene, parse_duration, primary_of
-from tactbench.runner.summaries import check_contrasts
-from tactbench.runner.system import MemoryTracker
-from tactbench.runner.writers import (
-    OUT_FILES,
-    Report,
-    is_run_output,
-    make_report,
-    sequential_design,
-    write_report,
-)
+from tactbench.runner.execution.results import ResultStore, command_line, latest_scene, ok_rows
+from tactbench.runner.execution.scene import Scene, parse_duration, primary_of
+from tactbench.runner.execution.questions import check_contrasts
+from tactbench.runner.execution.system import MemoryTracker
+from tactbench.runner.presentation.writers import Report, make_report, sequential_design, write_report
+from tactbench.runner.execution.results import OUT_FILES, is_run_output
 from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner")
@@ -150,7 +144,7 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
 
     ``contrasts``, ``margin`` and ``primary`` (statistics options, which change no cell)
     default to those of the scene that computed the folder's latest row
-    (:func:`~tactbench.runner.results.latest_scene`), so that a report rendered again
+    (:func:`~tactbench.runner.execution.results.latest_scene`), so that a report rendered again
     with no options is the run's own, but for the line saying when and by what. The
     per-user results need the user of each recording: the dataset is loaded (through
     ``registry``) and used when its content hash is the rows'; otherwise they are left
@@ -259,11 +253,11 @@ def next_batch_seconds(rows: Sequence[dict[str, Any]], seeds: int, workers: int)
 def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True,
               on_look=None, on_row=None):
     """Run ``scene`` (with ``until="answered"``) look by look: the first
-    :data:`FIRST_LOOK` seeds of :meth:`~tactbench.runner.scene.Scene.seed_order`, then
+    :data:`FIRST_LOOK` seeds of :meth:`~tactbench.runner.execution.scene.Scene.seed_order`, then
     ``look_every`` more each time, each batch an ordinary :func:`run` (resumable: cells
     already stored are reused, any executor), until every primary comparison is decided,
     ``max_runs`` is reached, or the next batch would start past ``budget``. Returns the
-    last :class:`~tactbench.runner.writers.Report` (its ``looks``: every look, replayed
+    last :class:`~tactbench.runner.presentation.writers.Report` (its ``looks``: every look, replayed
     from the rows); ``on_look(report)`` is called after each look, and so is every
     plugin's ``look_finished`` hook; ``on_row``: see :func:`run`. Ctrl-C between cells
     keeps every finished cell."""

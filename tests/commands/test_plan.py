@@ -104,7 +104,7 @@ def test_without_a_pilot_a_torch_cell_is_timed_here_and_the_wall_time_forecast(t
 
 
 def test_cells_are_packed_onto_the_workers_longest_first():
-    from tactbench.runner.estimate import packed
+    from tactbench.runner.execution.estimate import packed
 
     assert packed([3, 2, 2, 1], 2) == 4
     assert packed([5, 1, 1, 1], 2) == 5

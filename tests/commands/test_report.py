@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
-from tactbench.runner.writers import RENDERED
+from tactbench.runner.presentation.writers import RENDERED
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -110,7 +110,7 @@ def test_a_folder_without_cells_is_one_line(tmp_path):
 def test_a_report_md_tactbench_did_not_write_is_not_replaced(tmp_path):
     from tactbench.runner import ResultStore
 
-    from tactbench.runner.planning import digest, row_identity
+    from tactbench.runner.execution.planning import digest, row_identity
 
     row = {"status": "ok", "encoder": "raw", "dataset": "d", "split": "paper",
            "dataset_hash": "h", "classifier": "logreg", "L": 3, "seed": 0, "accuracy": 0.5,

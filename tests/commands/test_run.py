@@ -208,7 +208,7 @@ def test_the_run_help_shows_the_scene_defaults(monkeypatch):
 
     from tactbench.commands.run import SceneOption, run_cmd
     from tactbench.profiles import PROFILE_NAMES, get_profile
-    from tactbench.runner.scene import Scene
+    from tactbench.runner.execution.scene import Scene
 
     ctx = click.Context(run_cmd, info_name="run")
     options = {p.field: p for p in run_cmd.params if isinstance(p, SceneOption)}

@@ -115,7 +115,7 @@ def test_until_answered_over_runs_that_each_draw_their_people(tmp_path, monkeypa
     import math
     import statistics
 
-    from tactbench.runner.comparisons import INDEPENDENT_METHOD
+    from tactbench.runner.analysis.comparisons import INDEPENDENT_METHOD
 
     out = tmp_path / "out"
     tiny = ["--dataset", "synthetic-forearm:users=2,repetitions=1,people=per-run",

@@ -1,4 +1,4 @@
-"""tactbench.runner.answering: looks replayed from rows, and when they stop."""
+"""tactbench.runner.analysis.answering: looks replayed from rows, and when they stop."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.answering import replay, schedule
+from tactbench.runner.analysis.answering import replay, schedule
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 PRIMARY = ["encoder=raw..encoder=farneback"]
@@ -66,8 +66,8 @@ def test_runs_stored_beyond_the_last_look_are_said_beside_the_looks():
     """A report whose folder holds more runs than its looks used (a batch cut short, or
     runs of an earlier stopping rule) says so: its tables use every run, its verdicts the
     looks' runs."""
-    from tactbench.runner.tables import looks_markdown
-    from tactbench.runner.writers import make_report
+    from tactbench.runner.presentation.tables import looks_markdown
+    from tactbench.runner.presentation.writers import make_report
 
     rows = _rows(range(8), 0.2)
     sequential = {"seed_order": list(range(20)), "looks": schedule(20, 5), "budget": None}

@@ -13,7 +13,7 @@ import pytest
 from tactbench.errors import CorruptArtefactError
 from tactbench.runner import EncodingCache, ensure_encodings, load_encoding, plan
 from tactbench.encoders.encoding import Storage, chunk_bounds
-from tactbench.runner import entries as entries_module
+from tactbench.runner.execution import entries as entries_module
 
 
 def test_write_and_load_round_trip(tmp_path):
@@ -284,7 +284,7 @@ def test_an_entry_records_what_it_is_and_checksums_streamed_while_writing(tmp_pa
 
 
 def test_the_identity_recorded_in_an_entry_must_hash_to_its_key(tmp_path):
-    from tactbench.runner.entries import seal
+    from tactbench.runner.execution.entries import seal
 
     cache = EncodingCache(tmp_path)
     identity = cache.identity("h", {"kind": "vectors"}, "raw", "1")
@@ -345,8 +345,8 @@ RACER = """
 import sys, time, zlib
 from pathlib import Path
 import numpy as np
-from tactbench.runner.cache import EncodingCache
-from tactbench.runner.entries import load_encoding
+from tactbench.runner.execution.cache import EncodingCache
+from tactbench.runner.execution.entries import load_encoding
 root, go = sys.argv[1], Path(sys.argv[2])
 while not go.exists():
     time.sleep(0.001)
@@ -381,7 +381,7 @@ SLOW_WRITER = """
 import sys, time
 import numpy as np
 from tactbench.encoders.encoding import Storage
-from tactbench.runner.cache import EncodingCache
+from tactbench.runner.execution.cache import EncodingCache
 cache = EncodingCache(sys.argv[1])
 with cache.entry("k", [1] * 1000, (3,), Storage.for_channels("float32", 1)) as w:
     for _ in range(1000):

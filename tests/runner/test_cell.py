@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from tactbench.runner import ensure_encodings, make_jobs, plan, run_cell
-from tactbench.runner.cell import TRACEBACK_FRAMES
+from tactbench.runner.execution.cell import TRACEBACK_FRAMES
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -88,7 +88,7 @@ def test_the_memory_tracker_names_the_step_that_set_the_peak():
     import numpy as np
 
     from tactbench.machine import memory_mb
-    from tactbench.runner.system import BEFORE, MemoryTracker
+    from tactbench.runner.execution.system import BEFORE, MemoryTracker
 
     current, peak = memory_mb()
     assert 0 < current <= peak
@@ -229,7 +229,7 @@ def test_rows_with_and_without_fold_and_group_lists_read_back(tiny_scene, cache)
     """Rows made before folds and groups were stored still verify; lists that do not
     match, or are not fold numbers and text, are refused."""
     from tactbench.runner import run
-    from tactbench.runner.results import check_row
+    from tactbench.runner.execution.results import check_row
 
     [row] = run(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0]),
                 progress=False, cache=cache).rows

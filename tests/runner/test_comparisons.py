@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from tactbench.errors import CorruptArtefactError
-from tactbench.runner.comparisons import ADDED_FIELDS, Comparison, comparisons, read_comparisons
-from tactbench.runner.statistics import corrected_t
+from tactbench.runner.analysis.comparisons import ADDED_FIELDS, Comparison, comparisons, read_comparisons
+from tactbench.runner.analysis.statistics import corrected_t
 
 REPORTS = Path(__file__).resolve().parents[2] / "docs" / "reports"
 
@@ -123,7 +123,7 @@ def test_every_stored_comparison_reads_back_as_a_record_and_writes_the_same_json
 
 
 def test_a_field_added_after_a_report_was_made_reads_back_as_its_default(monkeypatch):
-    from tactbench.runner import comparisons as module
+    from tactbench.runner.analysis import comparisons as module
 
     rows, _ = _position_fold_rows()
     [c] = comparisons(rows)

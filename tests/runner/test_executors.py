@@ -63,8 +63,8 @@ def test_dask_local_cluster_gives_the_same_results_as_local(tmp_path, tiny_scene
 def test_serial_cells_name_the_run_step_that_set_their_peak(monkeypatch):
     from types import SimpleNamespace
 
-    from tactbench.runner import executors
-    from tactbench.runner.system import BEFORE, MemoryTracker
+    from tactbench.runner.execution import executors
+    from tactbench.runner.execution.system import BEFORE, MemoryTracker
     from tactbench.ui import Progress
 
     rows = iter([{"peak_step": BEFORE}, {"peak_step": "fit"}])

@@ -1,4 +1,4 @@
-"""A run's results as pandas data frames and Parquet files (tactbench/runner/frames.py),
+"""A run's results as pandas data frames and Parquet files (tactbench/runner/presentation/frames.py),
 and ``tactbench report OUT --parquet``."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from tactbench.cli import cli
 from tactbench.errors import MissingExtraError
 from tactbench.runner import Scene, cells_frame, comparisons_frame, render_folder, run, \
     write_parquet
-from tactbench.runner.frames import COMPARISON_KINDS, PARQUET_FILES
+from tactbench.runner.presentation.frames import COMPARISON_KINDS, PARQUET_FILES
 
 pd = pytest.importorskip("pandas", reason="the extra tactbench[export] (pandas) is not "
                                           "installed")
@@ -87,7 +87,7 @@ def test_parquet_reads_back_with_pandas_and_with_pyarrow_alone(folder, tmp_path)
 
 
 def test_nothing_is_written_when_a_table_cannot_be_made(folder, tmp_path, monkeypatch):
-    from tactbench.runner import frames
+    from tactbench.runner.presentation import frames
 
     def broken(report):
         raise RuntimeError("no comparisons today")

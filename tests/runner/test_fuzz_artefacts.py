@@ -21,9 +21,9 @@ from hypothesis import strategies as st
 from tactbench.errors import CorruptArtefactError
 from tactbench.integrity import hash_file
 from tactbench.runner import EncodingCache, ResultStore, ensure_encodings, load_encoding, plan
-from tactbench.runner import entries as entries_module
-from tactbench.runner.entries import seal
-from tactbench.runner.results import check_row, row_checksum
+from tactbench.runner.execution import entries as entries_module
+from tactbench.runner.execution.entries import seal
+from tactbench.runner.execution.results import check_row, row_checksum
 
 FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
@@ -199,7 +199,7 @@ def _reseal_row(doc):
 @FUZZ
 @given(data=st.data(), kind=st.sampled_from(MUTATIONS))
 def test_a_mutated_cell_row_is_refused_or_read_unchanged(rows, memory_cap, data, kind):
-    from tactbench.runner.summaries import summarise
+    from tactbench.runner.analysis.summaries import summarise
 
     store, want, files = rows
     _restore(store.out, files)

@@ -12,11 +12,11 @@ import pytest
 from scipy import stats
 
 from tactbench.runner import run
-from tactbench.runner.comparisons import comparisons
-from tactbench.runner.forecast import forecast
-from tactbench.runner.planning import plan, plan_runs
-from tactbench.runner.power import detectable_effect, effect_floor, runs_for_power
-from tactbench.runner.results import INDEPENDENT_RUNS
+from tactbench.runner.analysis.comparisons import comparisons
+from tactbench.runner.analysis.forecast import forecast
+from tactbench.runner.execution.planning import plan, plan_runs
+from tactbench.runner.analysis.power import detectable_effect, effect_floor, runs_for_power
+from tactbench.runner.execution.results import INDEPENDENT_RUNS
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 PER_RUN = "synthetic-forearm:users=2,repetitions=1,positions=1,people=per-run"
@@ -184,7 +184,7 @@ def test_the_tables_of_independent_runs_claim_no_correction():
     """report.md's and the terminal's tables name the p column by the t it is; the text
     above says the plain paired t, and where every t is corrected nothing changes (the
     stored reports' header and text)."""
-    from tactbench.runner.tables import (
+    from tactbench.runner.presentation.tables import (
         COMPARISON_HEADER,
         COMPARISONS_TEXT,
         comparison_header,
@@ -210,7 +210,7 @@ def test_an_open_answer_says_what_holds_it_back():
     single test already, does not ask for runs it has; a fixed design names its runs."""
     import dataclasses
 
-    from tactbench.runner.tables import answer_text
+    from tactbench.runner.presentation.tables import answer_text
 
     (c,) = comparisons(_rows()[0], primary=PRIMARY)
     assert c.runs_for_power is not None

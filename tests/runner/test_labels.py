@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import pytest
 
-from tactbench.runner.comparisons import comparisons
-from tactbench.runner.summaries import failed_cells, spec_labels, summarise
-from tactbench.runner.writers import write_reports
+from tactbench.runner.analysis.comparisons import comparisons
+from tactbench.runner.analysis.summaries import failed_cells, summarise
+from tactbench.runner.execution.questions import spec_labels
+from tactbench.runner.presentation.writers import write_reports
 
 #: Two resolved specs of one classifier (profile defaults merged), as rows store them.
 WIDE = ("small-cnn-lstm:batch_size=64,epochs=4,head=concat,input_size=16,lr=0.003,"
@@ -82,7 +83,7 @@ def test_two_variants_of_a_classifier_are_told_apart_in_the_results_table(tmp_pa
 
 
 def test_two_variants_are_told_apart_in_the_paired_comparisons(tmp_path):
-    from tactbench.runner.tables import comparison_rows
+    from tactbench.runner.presentation.tables import comparison_rows
 
     rows = _variant_rows(seeds=range(6))
     comps = comparisons(rows)
@@ -102,7 +103,7 @@ def test_two_variants_are_told_apart_in_the_paired_comparisons(tmp_path):
 
 
 def test_a_contrast_names_the_variant_of_each_side():
-    from tactbench.runner.tables import comparison_rows
+    from tactbench.runner.presentation.tables import comparison_rows
 
     rows = _variant_rows(seeds=range(4), lengths=(3, 5))
     # by the short name: every variant at L=5 against every variant at L=3, each named
@@ -146,7 +147,7 @@ def test_two_variants_get_their_own_confusion_figures_and_lines(tmp_path, drawn)
 
 
 def test_encoders_that_slug_alike_do_not_overwrite_each_others_confusion_figure():
-    from tactbench.runner.plots import confusion_names
+    from tactbench.runner.presentation.plots import confusion_names
 
     summaries = summarise([_row("logreg", 0, 2, encoder="x:mode=a.b"),
                            _row("logreg", 0, 4, encoder="x:mode=a-b"),
@@ -184,7 +185,7 @@ def test_a_run_with_unique_names_shows_short_names_as_before(tmp_path, classifie
 
 
 def test_a_cell_names_its_variant_in_progress_and_peak_steps():
-    from tactbench.runner.planning import Cell
+    from tactbench.runner.execution.planning import Cell
 
     labels = spec_labels([WIDE, NARROW, "sklearn:C=1,estimator=SVC"])
     assert Cell("raw", NARROW, 5, 0, "k").label(labels) == \

@@ -1,5 +1,5 @@
 """A cell whose model did not learn or did not transfer is marked, and no verdict rests
-on it: the rule (tactbench.runner.learning), the rows a cell writes, the comparisons,
+on it: the rule (tactbench.runner.execution.learning), the rows a cell writes, the comparisons,
 the looks and the tables."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tactbench.runner.learning import (
+from tactbench.runner.execution.learning import (
     DID_NOT_LEARN,
     DID_NOT_TRANSFER,
     LEARNED,
@@ -19,7 +19,7 @@ from tactbench.runner.learning import (
     learning_status,
     within_noise,
 )
-from tactbench.runner.statistics import NOT_LEARNED
+from tactbench.runner.analysis.statistics import NOT_LEARNED
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -77,7 +77,7 @@ def _rows(flag=None, seeds=range(6), n=40):
 
 
 def test_rows_made_before_the_fields_keep_their_verdict():
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     [old] = comparisons(_rows())
     [new] = comparisons(_rows(flag={}))
@@ -88,7 +88,7 @@ def test_rows_made_before_the_fields_keep_their_verdict():
 
 
 def test_one_run_of_one_cell_at_chance_takes_the_verdict_and_the_note_says_why():
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     [c] = comparisons(_rows(flag={("raw", 3): DID_NOT_LEARN}))
     assert c.verdict == NOT_LEARNED
@@ -104,7 +104,7 @@ def test_one_run_of_one_cell_at_chance_takes_the_verdict_and_the_note_says_why()
 def test_a_comparison_without_verdict_leaves_the_family_as_it_was():
     """Holm over the same p's: the other comparison's adjusted p and verdict are those
     it has when nothing is flagged."""
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     rows = _rows() + [dict(r, encoder="flow", key=r["key"] + "f")
                       for r in _rows() if r["encoder"] == "farneback"]
@@ -119,8 +119,8 @@ def test_a_comparison_without_verdict_leaves_the_family_as_it_was():
 
 
 def test_a_look_closes_a_question_at_chance_without_passing_its_alpha():
-    from tactbench.runner.answering import replay
-    from tactbench.runner.writers import make_report
+    from tactbench.runner.analysis.answering import replay
+    from tactbench.runner.presentation.writers import make_report
 
     rows = _rows(flag={("raw", 0): DID_NOT_LEARN}, seeds=range(5))
     h = replay(rows, seed_order=list(range(5)), looks=[5],
@@ -136,9 +136,9 @@ def test_a_look_closes_a_question_at_chance_without_passing_its_alpha():
 
 
 def test_the_tables_mark_the_cells_and_answer_with_the_reason():
-    from tactbench.runner.comparisons import comparisons
-    from tactbench.runner.summaries import summarise
-    from tactbench.runner.tables import answer_text, comparison_rows, markdown_table
+    from tactbench.runner.analysis.comparisons import comparisons
+    from tactbench.runner.analysis.summaries import summarise
+    from tactbench.runner.presentation.tables import answer_text, comparison_rows, markdown_table
 
     rows = _rows(flag={("raw", 2): DID_NOT_TRANSFER})
     [c] = comparisons(rows, primary=["encoder=raw..encoder=farneback"])
@@ -178,7 +178,7 @@ def learnable(tmp_path) -> Path:
 def test_a_classifier_that_answers_one_class_is_marked_and_given_no_verdict(
         tiny_scene, cache, fake_registry, learnable, capsys):
     from tactbench.runner import run
-    from tactbench.runner.tables import print_table
+    from tactbench.runner.presentation.tables import print_table
 
     scene = tiny_scene(dataset=str(learnable), encoders=["raw"], test_per_class=4,
                        classifiers=["logreg:max_iter=50", "added-logreg:max_iter=50",
@@ -221,9 +221,9 @@ def test_folds_are_scored_together(tiny_scene, cache, fake_registry, learnable):
 
 
 def test_a_stored_verdict_from_looks_is_not_replaced_for_a_flagged_comparison():
-    from tactbench.runner.answering import comparison_name
-    from tactbench.runner.comparisons import comparisons
-    from tactbench.runner.writers import sequential_verdict
+    from tactbench.runner.analysis.answering import comparison_name
+    from tactbench.runner.analysis.comparisons import comparisons
+    from tactbench.runner.presentation.writers import sequential_verdict
 
     [c] = comparisons(_rows(flag={("farneback", 0): DID_NOT_LEARN}, seeds=range(5)),
                       primary=["encoder=raw..encoder=farneback"])

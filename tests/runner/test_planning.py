@@ -6,7 +6,7 @@ import pytest
 
 from tactbench.errors import InputError, UnknownComponentError
 from tactbench.runner import plan, run
-from tactbench.runner.planning import input_kind
+from tactbench.runner.execution.planning import input_kind
 
 
 @pytest.mark.parametrize("over, error, match", [
@@ -67,7 +67,7 @@ def test_frame_diff_encodes_taxel_vectors_for_a_vector_classifier(tiny_scene, ca
     import numpy as np
 
     from tactbench.runner import run
-    from tactbench.runner.entries import load_encoding
+    from tactbench.runner.execution.entries import load_encoding
 
     scene = tiny_scene(dataset=str(nolayout_dataset), encoders=["raw", "frame-diff"],
                        classifiers=["logreg"], L=[3], seeds=[0], test_per_class=2)
@@ -172,7 +172,7 @@ def test_an_out_folder_that_cannot_be_written_is_refused_before_any_work(
 
 def test_the_writability_probe_leaves_nothing_behind(tmp_path):
     from tactbench.paths import check_output_folder
-    from tactbench.runner.writers import is_run_output
+    from tactbench.runner.execution.results import is_run_output
 
     check_output_folder(tmp_path / "new" / "out", option="out folder", ours=is_run_output)
     assert list(tmp_path.iterdir()) == []
@@ -199,7 +199,7 @@ def test_an_out_folder_holding_files_tactbench_did_not_write_is_not_overwritten(
 
 def test_a_report_md_tactbench_did_not_write_is_not_overwritten(tmp_path, tiny_scene):
     from tactbench.paths import check_output_folder
-    from tactbench.runner.writers import is_run_output
+    from tactbench.runner.execution.results import is_run_output
 
     out = tmp_path / "out"
     out.mkdir()
@@ -212,11 +212,11 @@ def test_a_report_md_tactbench_did_not_write_is_not_overwritten(tmp_path, tiny_s
 
 def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_scene):
     from tactbench.paths import check_output_folder
-    from tactbench.runner.writers import is_run_output
+    from tactbench.runner.execution.results import is_run_output
 
     scene = tiny_scene(encoders=["raw"], classifiers=["logreg:max_iter=20"], seeds=[0])
     run(scene, progress=False, cache=cache)
-    from tactbench.runner.writers import write_reports
+    from tactbench.runner.presentation.writers import write_reports
 
     out = tmp_path / "out"
     write_reports(out, [], plots=False)

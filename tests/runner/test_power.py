@@ -1,4 +1,4 @@
-"""tactbench.runner.power against independent computations: simulation and baycomp."""
+"""tactbench.runner.analysis.power against independent computations: simulation and baycomp."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.power import (
+from tactbench.runner.analysis.power import (
     bayes_correlated_t,
     detectable_effect,
     effect_floor,
@@ -19,7 +19,7 @@ from tactbench.runner.power import (
     seed_mean_ratio,
     t_power,
 )
-from tactbench.runner.statistics import corrected_t, sign_flip_p
+from tactbench.runner.analysis.statistics import corrected_t, sign_flip_p
 
 
 def _correlated_runs(rng, sims, runs, delta, sd, ratio):

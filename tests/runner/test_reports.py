@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from tactbench.runner import run
-from tactbench.runner.summaries import failed_cells, summarise
-from tactbench.runner.writers import write_reports
+from tactbench.runner.analysis.summaries import failed_cells, summarise
+from tactbench.runner.presentation.writers import write_reports
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -34,7 +34,7 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
     assert comp["test_recordings"] == doc["rows"][0]["n_test"]
     # one run gives no verdict; a run whose model did not learn (this one-epoch CNN on 5
     # test recordings is within noise of chance) gives none either, and says so first
-    from tactbench.runner.learning import not_learned
+    from tactbench.runner.execution.learning import not_learned
 
     said = "not learned" if any(not_learned(r) for r in doc["rows"]) else "too few runs"
     assert comp["runs"] == 1 and comp["verdict"] == said
@@ -55,7 +55,7 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
 
 
 def test_the_peak_step_of_a_summary_is_the_most_common_over_seeds():
-    from tactbench.runner.summaries import peak_step
+    from tactbench.runner.analysis.summaries import peak_step
 
     assert peak_step([{"peak_step": "fit"}, {"peak_step": "predict"},
                       {"peak_step": "predict"}]) == "predict"
@@ -126,7 +126,7 @@ def _clear_win_rows(seeds=range(7), n=40, **kw):
 def test_pairs_differing_in_one_factor_are_compared_run_by_run():
     from scipy import stats
 
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     rows = _clear_win_rows()
     [c] = comparisons(rows)
@@ -152,8 +152,8 @@ def test_pairs_differing_in_one_factor_are_compared_run_by_run():
 def test_the_verdict_rests_on_the_corrected_t_alone_as_the_one_rule_says():
     """One rule (P_RULE): p is the corrected t's; the sign-flip p (floor 2/2^5 with 5
     runs) is reported, never governs, and the report states the rule in its words."""
-    from tactbench.runner.comparisons import P_RULE, comparisons
-    from tactbench.runner.tables import COMPARISONS_TEXT
+    from tactbench.runner.analysis.comparisons import P_RULE, comparisons
+    from tactbench.runner.presentation.tables import COMPARISONS_TEXT
 
     [c] = comparisons(_clear_win_rows(seeds=range(5)))
     assert c.t_p < 0.05 and c.permutation_p == pytest.approx(2 / 32)
@@ -164,7 +164,7 @@ def test_the_verdict_rests_on_the_corrected_t_alone_as_the_one_rule_says():
 def test_primary_comparisons_form_their_own_family_and_come_first():
     """--primary: the named pair is confirmatory, Holm-adjusted in a family of its own;
     everything else is exploratory, in another family; the pair is not repeated."""
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -188,7 +188,7 @@ def test_seed_means_of_k_folds_take_the_factor_k_over_k_minus_1():
     needed and the per-class gains all use K/(K − 1), not 1/(K − 1)."""
     from scipy import stats
 
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     rows = _clear_win_rows(seeds=range(6))
     for r in rows:
@@ -202,7 +202,7 @@ def test_seed_means_of_k_folds_take_the_factor_k_over_k_minus_1():
 
 
 def test_a_reader_gets_bayesian_probabilities_power_and_a_named_ceiling():
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     [c] = comparisons(_clear_win_rows(seeds=range(6)))
     probs = (c.bayes_a_better, c.bayes_equivalent, c.bayes_b_better)
@@ -215,7 +215,7 @@ def test_a_reader_gets_bayesian_probabilities_power_and_a_named_ceiling():
 
 
 def test_fewer_than_3_runs_give_no_verdict_in_every_output(tmp_path):
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     rows = _clear_win_rows(seeds=(0, 1))
     c = comparisons(rows)[0]
@@ -229,7 +229,7 @@ def test_fewer_than_3_runs_give_no_verdict_in_every_output(tmp_path):
 
 
 def test_a_few_discordant_recordings_give_no_verdict_however_many_rows():
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -243,7 +243,7 @@ def test_a_few_discordant_recordings_give_no_verdict_however_many_rows():
 
 
 def test_holm_adjusts_within_the_family_and_a_margin_shows_equivalence():
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     truth = [0, 1] * 20
     rows = []
@@ -263,8 +263,8 @@ def test_holm_adjusts_within_the_family_and_a_margin_shows_equivalence():
 
 def test_a_contrast_pairs_two_cells_differing_in_two_factors():
     from tactbench.errors import InputError
-    from tactbench.runner.comparisons import comparisons
-    from tactbench.runner.summaries import parse_contrast
+    from tactbench.runner.analysis.comparisons import comparisons
+    from tactbench.runner.execution.questions import parse_contrast
 
     rows = _clear_win_rows(seeds=range(6), L=3) + [
         dict(r, L=6, key=r["key"] + "-6") for r in _clear_win_rows(seeds=range(6))
@@ -281,14 +281,14 @@ def test_a_contrast_pairs_two_cells_differing_in_two_factors():
         with pytest.raises(InputError, match=match):
             parse_contrast(bad)
     with pytest.raises(InputError, match="names no two cells"):
-        from tactbench.runner.summaries import check_contrasts
+        from tactbench.runner.execution.questions import check_contrasts
 
         check_contrasts(["encoder=dis..encoder=raw"], [{"encoder": "raw", "classifier": "x",
                                                         "L": 5}])
 
 
 def test_per_user_accuracy_and_gains_on_a_users_split(tmp_path):
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     rows = _clear_win_rows(seeds=range(6))
     users = [f"u{i // 10}" for i in range(40)]  # four users, ten recordings each
@@ -308,8 +308,8 @@ def test_per_user_accuracy_and_gains_on_a_users_split(tmp_path):
 
 
 def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_path):
-    from tactbench.runner.comparisons import comparisons
-    from tactbench.runner.summaries import variance_decomposition
+    from tactbench.runner.analysis.comparisons import comparisons
+    from tactbench.runner.analysis.summaries import variance_decomposition
 
     rows = []
     for split in range(3):
@@ -325,8 +325,8 @@ def test_the_variance_is_decomposed_where_runs_vary_split_and_init_apart(tmp_pat
 
 
 def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
-    from tactbench.runner.comparisons import comparisons
-    from tactbench.runner.tables import markdown_table
+    from tactbench.runner.analysis.comparisons import comparisons
+    from tactbench.runner.presentation.tables import markdown_table
 
     truth = [0, 1] * 10
     rows = [_row("raw", s, truth, truth, L=L, classifier=clf)
@@ -346,7 +346,7 @@ def test_l_and_classifier_pairs_and_the_seed_interval_in_the_table():
 
 
 def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     truth = [0, 1] * 10
     a = _row("raw", 0, truth, truth)
@@ -361,7 +361,7 @@ def test_only_shared_seeds_and_sequences_are_paired_and_old_rows_are_left_out():
 
 
 def test_a_row_with_broken_predictions_is_a_damaged_row():
-    from tactbench.runner.results import check_row
+    from tactbench.runner.execution.results import check_row
 
     row = _row("raw", 0, [0, 1], [0, 1])
     row["key"] = "k"
@@ -399,7 +399,7 @@ def _grid(seeds=(0, 1, 2), lengths=(3, 5)):
 
 
 def test_pareto_front_by_hand():
-    from tactbench.runner.plots import pareto_front
+    from tactbench.runner.presentation.plots import pareto_front
 
     points = [(1.0, 0.8),  # 0: front
               (2.0, 0.9),  # 1: front
@@ -417,7 +417,7 @@ def test_pareto_front_by_hand():
 
 def test_accuracy_against_l_has_ci_bands_and_the_other_figures_apply(tmp_path, drawn):
     from tactbench.paths import check_output_folder
-    from tactbench.runner.writers import is_run_output
+    from tactbench.runner.execution.results import is_run_output
 
     rows = _grid()
     paths = write_reports(tmp_path / "out", rows)
@@ -486,7 +486,7 @@ def test_one_seed_gives_lines_without_bands(tmp_path, drawn):
 
 
 def test_the_band_falls_back_to_the_std_and_then_to_none():
-    from tactbench.runner.plots import accuracy_band, band_note
+    from tactbench.runner.presentation.plots import accuracy_band, band_note
 
     s = {"seeds": [0, 1], "accuracy_mean": 0.8, "accuracy_std": 0.1,
          "accuracy_ci95": [0.7, 0.9]}
@@ -565,7 +565,7 @@ def test_a_line_with_one_seed_at_some_l_says_where_it_has_no_band(tmp_path, draw
 
 
 def test_short_names_keep_the_estimator():
-    from tactbench.runner.summaries import short_name
+    from tactbench.runner.execution.questions import short_name
 
     assert short_name("small-cnn-lstm:epochs=4,width=16") == "small-cnn-lstm"
     assert short_name("sklearn:C=10,estimator=SVC") == "sklearn:SVC"
@@ -574,7 +574,7 @@ def test_short_names_keep_the_estimator():
 
 def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differences():
     from tactbench.data.splits import user_folds
-    from tactbench.runner.comparisons import comparisons
+    from tactbench.runner.analysis.comparisons import comparisons
 
     users = [f"u{i // 4}" for i in range(40)]  # ten users, four recordings each
     truth = [i % 2 for i in range(40)]
@@ -606,7 +606,7 @@ def test_k_fold_users_runs_use_the_corrected_repeated_k_fold_t_over_fold_differe
 
 def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():
     from tactbench.errors import InputError
-    from tactbench.runner.summaries import parse_contrast
+    from tactbench.runner.execution.questions import parse_contrast
 
     a, b = parse_contrast("encoder=farneback:levels=3,winsize=9,L=3"
                           "..encoder=dis:preset=fast,L=6")
@@ -621,7 +621,7 @@ def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():
 
 
 def test_the_runs_that_computed_the_rows_are_named_one_way():
-    from tactbench.runner.writers import computed_by
+    from tactbench.runner.presentation.writers import computed_by
 
     def row(key, command, git, finished):
         return {"key": key, "finished": finished, "run": {"command": command, "git": git}}

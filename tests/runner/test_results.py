@@ -122,7 +122,7 @@ def _scene_row(key, encoder, classifier, L, seed, finished, scene=None, **over):
 
 
 def test_stored_rows_come_from_cells_in_the_order_the_scene_lists_them(tmp_path, caplog):
-    from tactbench.runner.results import scene_order
+    from tactbench.runner.execution.results import scene_order
 
     scene = {"encoders": ["raw", "farneback:winsize=9"],
              "classifiers": ["cnn:width=8", "cnn", "sklearn:SVC"],
@@ -167,7 +167,7 @@ def test_results_json_is_never_read_to_decide_anything(tmp_path):
     ([], "python"),
 ])
 def test_the_command_line_is_written_one_way(argv, line):
-    from tactbench.runner.results import command_line
+    from tactbench.runner.execution.results import command_line
 
     assert command_line(argv) == line
 
@@ -192,7 +192,7 @@ def test_a_refused_grid_is_told_how_the_stored_cells_differ(tmp_path):
 def test_a_row_trained_with_other_threads_or_kernels_is_not_the_default_cell():
     """Rows record their threads; a cell's identity leaves 1 thread and avx2 kernels out:
     a 2-thread row must not pass for the 1-thread cell of the same other fields."""
-    from tactbench.runner.results import check_row
+    from tactbench.runner.execution.results import check_row
 
     row = {"key": "k", "encoder": "raw", "classifier": "c", "L": 1, "seed": 0,
            "status": "failed", "error": {"type": "E", "message": "m"}}

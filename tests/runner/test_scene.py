@@ -52,7 +52,7 @@ def test_pixel_size_comes_from_the_profile_unless_given():
 
 def test_cells_share_the_cores_one_thread_each(monkeypatch):
     """The thread count is fixed (1, in no identity); the cores go to cells side by side."""
-    import tactbench.runner.scene as scene_module
+    import tactbench.runner.execution.scene as scene_module
 
     monkeypatch.setattr(scene_module, "usable_cores", lambda: 8)
     assert Scene().threads == 1 and Scene().resolved_workers() == 8
@@ -193,7 +193,7 @@ def test_scene_fields_given_in_python_are_checked_when_the_scene_is_made():
 def test_window_lengths_and_seeds_are_read_by_one_rule(parse, what):
     """-L and --seed (and a scene file's L and seeds) share one "N or A-B" reader: the same
     ranges, bounds and messages; only the order differs (lengths sorted, seeds as given)."""
-    from tactbench.runner.scene import parse_numbers, parse_seeds
+    from tactbench.runner.execution.scene import parse_numbers, parse_seeds
 
     parse = parse_seeds if parse == "seeds" else parse
     assert parse([7, " 2 - 4 ", "3", 2]) == (sorted if what != "seed" else list)([7, 2, 3, 4])
@@ -215,7 +215,7 @@ def test_window_lengths_and_seeds_are_read_by_one_rule(parse, what):
 
 
 def test_seeds_take_ranges_in_files_and_on_the_command_line(tmp_path):
-    from tactbench.runner.scene import parse_seeds
+    from tactbench.runner.execution.scene import parse_seeds
 
     assert parse_seeds(["0-3"]) == [0, 1, 2, 3]
     assert parse_seeds([5, "0-2", 1]) == [5, 0, 1, 2]  # the order given, each once
@@ -238,7 +238,8 @@ def test_a_scene_is_frozen_checked_once_when_made_and_trusted_by_planning(tmp_pa
                                                                         monkeypatch):
     import dataclasses
 
-    from tactbench.runner import plan, scene as scene_module
+    from tactbench.runner import plan
+    from tactbench.runner.execution import scene as scene_module
 
     scene = Scene(L=["1-2"], seeds=3, encoders="raw", out=str(tmp_path / "out"))
     assert (scene.L, scene.seeds, scene.encoders) == ([1, 2], [3], ["raw"])  # normalised
@@ -285,7 +286,7 @@ def test_the_run_defaults_are_written_once_in_the_scene():
     import dataclasses
 
     from tactbench.data.windows import UNNAMED_TEST_WINDOW
-    from tactbench.runner.results import IDENTITY_DEFAULTS
+    from tactbench.runner.execution.results import IDENTITY_DEFAULTS
 
     defaults = {f.name: f.default for f in dataclasses.fields(Scene)}
     assert (defaults["split"], defaults["test_window"]) == ("paper", "vote")

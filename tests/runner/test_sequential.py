@@ -1,4 +1,4 @@
-"""tactbench.runner.sequential: boundaries against a simulation of the canonical joint
+"""tactbench.runner.analysis.sequential: boundaries against a simulation of the canonical joint
 distribution, and the whole procedure's family-wise error and power with overlapping runs."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.sequential import (
+from tactbench.runner.analysis.sequential import (
     FamilyState,
     boundaries,
     family_look,
@@ -81,7 +81,7 @@ def test_a_five_point_difference_is_found_near_the_fixed_designs_power():
     """+5 points (per-run sd 3): the sequential family finds it about as often as a fixed
     design of the full 20 runs at the same α share would, and the null comparison beside
     it ends futile or open."""
-    from tactbench.runner.power import power
+    from tactbench.runner.analysis.power import power
 
     rng = np.random.default_rng(8)
     decisions = _run_family(rng, 400, [0.05, 0.0])
@@ -134,7 +134,7 @@ def test_the_first_looks_boundary_is_the_t_quantile_of_its_spent_alpha():
 
 
 def test_procedure_at_one_look_is_the_fixed_designs_exact_power():
-    from tactbench.runner.power import detectable_effect, power
+    from tactbench.runner.analysis.power import detectable_effect, power
 
     sd = 0.03
     effect = detectable_effect(sd, RATIO, 10, alpha=0.025)
@@ -148,7 +148,7 @@ def test_procedure_says_what_looking_costs_and_keeps_its_level():
     """At the effect a fixed design of all the runs finds with 80 % power, the sequential
     procedure finds it less often and stops earlier on average; under no difference it
     declares a difference in at most α of its paths (plus simulation error)."""
-    from tactbench.runner.power import detectable_effect
+    from tactbench.runner.analysis.power import detectable_effect
 
     sd = 0.03
     effect = detectable_effect(sd, RATIO, 20, alpha=0.025)

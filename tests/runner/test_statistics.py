@@ -1,4 +1,4 @@
-"""tactbench.runner.statistics against independent computations (scipy), simulations with
+"""tactbench.runner.analysis.statistics against independent computations (scipy), simulations with
 a per-run model effect and test-set noise, and degenerate inputs."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.statistics import (
+from tactbench.runner.analysis.statistics import (
     MIN_DISCORDANT_RECORDINGS,
     corrected_t,
     holm,

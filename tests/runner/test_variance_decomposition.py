@@ -1,5 +1,5 @@
 """The variance of a paired difference split into split, initialisation and test sampling
-(tactbench/runner/variance.py), and where comparisons carry it (results.json, report.md).
+(tactbench/runner/analysis/variance.py), and where comparisons carry it (results.json, report.md).
 
 The simulation: each split seed draws a split effect (SD ``sd_split``) and a test set;
 A is right on a recording where its difficulty u < 0.7 (the same in every init seed of a
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.variance import mean_variance, paired_variance_components
+from tactbench.runner.analysis.variance import mean_variance, paired_variance_components
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 
@@ -143,8 +143,8 @@ def _rows(inits, splits=3, users=None):
 
 
 def test_a_comparison_over_init_seeds_carries_the_decomposition_and_reads_back(tmp_path):
-    from tactbench.runner.comparisons import Comparison, comparisons
-    from tactbench.runner.writers import write_reports
+    from tactbench.runner.analysis.comparisons import Comparison, comparisons
+    from tactbench.runner.presentation.writers import write_reports
 
     [c] = comparisons(_rows([0, 1]))
     v = c.variance_components
@@ -160,8 +160,8 @@ def test_a_comparison_over_init_seeds_carries_the_decomposition_and_reads_back(t
 
 
 def test_without_init_seeds_or_with_one_there_is_none(tmp_path):
-    from tactbench.runner.comparisons import Comparison, comparisons
-    from tactbench.runner.writers import write_reports
+    from tactbench.runner.analysis.comparisons import Comparison, comparisons
+    from tactbench.runner.presentation.writers import write_reports
 
     for rows in (_rows([None]), _rows([0]), _rows([0, 1], splits=1),
                  _rows([0, 1], users=40)):  # one test user a split seed
@@ -176,7 +176,7 @@ def test_without_init_seeds_or_with_one_there_is_none(tmp_path):
 
 def test_a_stored_decomposition_of_the_wrong_kind_is_refused():
     from tactbench.errors import CorruptArtefactError
-    from tactbench.runner.comparisons import Comparison, comparisons
+    from tactbench.runner.analysis.comparisons import Comparison, comparisons
 
     [c] = comparisons(_rows([0, 1]))
     entry = c.to_dict()

@@ -22,8 +22,8 @@ from typing import Any
 from tactbench.errors import TactbenchError, require
 from tactbench.machine import describe_machines
 from tactbench.runner import render_folder
-from tactbench.runner.frames import comparison_record
-from tactbench.runner.results import row_status
+from tactbench.runner.presentation.frames import comparison_record
+from tactbench.runner.execution.results import row_status
 
 #: The experiment runs go to unless another is named.
 EXPERIMENT = "tactbench"
@@ -159,7 +159,7 @@ class Exporter:
                             lambda: cell_run(row))
 
     def log_comparison(self, out: str | Path, record: dict[str, Any]) -> bool:
-        """One comparison (:func:`tactbench.runner.frames.comparison_record`) as a run."""
+        """One comparison (:func:`tactbench.runner.presentation.frames.comparison_record`) as a run."""
         identity = {k: record[k] for k in ("family", "dataset", "split", "factor", "a",
                                            "b", "encoder", "classifier", "L")}
         return self._upsert(self.parent(out), {"tactbench.kind": "comparison",

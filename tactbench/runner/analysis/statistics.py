@@ -264,7 +264,7 @@ def runs_needed(sd: float | None, ratio: float, half_width: float, *,
 
 
 #: The verdict of a comparison a run of either cell did not learn or transfer in
-#: (:mod:`tactbench.runner.learning`): no verdict rests on a model at chance.
+#: (:mod:`tactbench.runner.execution.learning`): no verdict rests on a model at chance.
 NOT_LEARNED = "not learned"
 #: What :func:`verdict` may return, and :data:`NOT_LEARNED`.
 VERDICTS = ("B better", "A better", "equivalent", "unresolved", "too few runs", NOT_LEARNED)

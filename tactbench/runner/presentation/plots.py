@@ -12,10 +12,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.summaries import spec_label, spec_labels
+from tactbench.runner.execution.questions import spec_label, spec_labels
 
 #: The top-level figures :func:`write_plots` may write besides ``confusion_*.png``.
-FIGURES = ("accuracy_vs_L", "cost_vs_accuracy", "per_class_vs_L", "per_user_accuracy")
 #: The lowest encode cost drawn on the log axis (a cost of 0 ms is drawn there).
 MIN_PLOTTED_COST_MS = 1e-4
 
@@ -106,7 +105,7 @@ def check_reference(reference: Iterable[dict[str, Any]] | None) -> list[dict[str
 def _labels(summaries: Sequence[dict[str, Any]],
             labels: Mapping[str, str] | None) -> Mapping[str, str]:
     """``labels``, or else the labels among the classifiers of ``summaries``
-    (:func:`tactbench.runner.summaries.spec_labels`)."""
+    (:func:`tactbench.runner.execution.questions.spec_labels`)."""
     return spec_labels(s["classifier"] for s in summaries) if labels is None else labels
 
 
@@ -180,7 +179,7 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
       (:func:`confusion_names`).
 
     A classifier is named by its label in ``labels`` (by default among the classifiers of
-    ``summaries``; :func:`tactbench.runner.summaries.spec_labels`).
+    ``summaries``; :func:`tactbench.runner.execution.questions.spec_labels`).
     """
     import matplotlib
 
@@ -367,7 +366,7 @@ def plot_per_user_accuracy(summaries: Sequence[dict[str, Any]],
 def confusion_names(summaries: Sequence[dict[str, Any]],
                     labels: Mapping[str, str] | None = None) -> list[str]:
     """The name of each summary's confusion figure, ``confusion_<encoder>_<classifier>_L<L>``
-    (the classifier by its label, :func:`tactbench.runner.summaries.spec_labels`, slugged:
+    (the classifier by its label, :func:`tactbench.runner.execution.questions.spec_labels`, slugged:
     ``confusion_raw_small-cnn-lstm-width-8_L5``). Names that slugging still makes alike
     get the first 8 hex digits of SHA-256 of the cell's encoder and classifier specs, so
     no figure overwrites another."""

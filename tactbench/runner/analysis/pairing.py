@@ -1,6 +1,6 @@
 """How the rows of two cells pair up, recording by recording, run by run.
 
-A comparison (:mod:`tactbench.runner.comparisons`) pairs the test recordings both cells
+A comparison (:mod:`tactbench.runner.analysis.comparisons`) pairs the test recordings both cells
 predicted in each run: :func:`aligned` finds them (with the fold that tested each, as the
 rows record it), and the functions here reduce them to what a comparison reports beside
 its run-level tests: the recordings the cells disagree on and McNemar's p per seed, the
@@ -17,8 +17,8 @@ from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from tactbench.runner.statistics import corrected_t, mcnemar_p
-from tactbench.runner.variance import (
+from tactbench.runner.analysis.statistics import corrected_t, mcnemar_p
+from tactbench.runner.analysis.variance import (
     MIN_INIT_SEEDS,
     MIN_SPLIT_SEEDS,
     paired_variance_components,
@@ -164,7 +164,7 @@ def sampling_share(per_seed: Mapping[tuple, Run], splits: Mapping[int, list[tupl
 def difference_components(per_seed: Mapping[tuple, Run], splits: Mapping[int, list[tuple]]
                           ) -> dict[str, Any] | None:
     """The variance of the per-run difference split into split, initialisation and test
-    sampling (:func:`tactbench.runner.variance.paired_variance_components`), over the
+    sampling (:func:`tactbench.runner.analysis.variance.paired_variance_components`), over the
     init seeds every split seed ran (at least 2, in at least 2 split seeds) and, within a
     split seed, the test recordings all its runs paired; test sampling clustered by the
     groups the rows record (the users of a users split). None where the runs do not vary

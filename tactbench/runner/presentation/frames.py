@@ -20,15 +20,15 @@ from typing import TYPE_CHECKING, Any, Sequence
 from tactbench.errors import require
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_bytes
-from tactbench.runner.comparisons import Comparison
-from tactbench.runner.results import ok_rows
-from tactbench.runner.summaries import FACTORS, parse_contrast, spec_label
-from tactbench.runner.writers import csv_columns, flat_rows
+from tactbench.runner.analysis.comparisons import Comparison
+from tactbench.runner.execution.results import ok_rows
+from tactbench.runner.execution.questions import FACTORS, parse_contrast, spec_label
+from tactbench.runner.presentation.writers import csv_columns, flat_rows
 
 if TYPE_CHECKING:
     import pandas
 
-    from tactbench.runner.writers import Report
+    from tactbench.runner.presentation.writers import Report
 
 #: The extra that installs pandas and pyarrow.
 EXTRA = "export"
@@ -57,7 +57,7 @@ COMPARISON_KINDS = {
 
 def cells_frame(report: "Report") -> "pandas.DataFrame":
     """One row per cell of ``report`` (ok and failed, in the scene's order): the columns
-    of results.csv (:func:`~tactbench.runner.writers.csv_columns`: spec, status,
+    of results.csv (:func:`~tactbench.runner.presentation.writers.csv_columns`: spec, status,
     accuracy, ``acc_<class>``, costs, ``key``, ``error``) with ``test_window`` after the
     split and ``machine`` (the CPU and its torch kernels) and ``git`` (the revision that
     computed it) at the end; a failed cell has no accuracy or costs (missing values)."""

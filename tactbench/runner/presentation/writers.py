@@ -2,11 +2,11 @@
 report.md and the figures.
 
 :func:`make_report` computes a :class:`Report` from rows alone (what the cells of a folder
-hold: :meth:`tactbench.runner.results.ResultStore.stored_rows`); :func:`write_report`
+hold: :meth:`tactbench.runner.execution.results.ResultStore.stored_rows`); :func:`write_report`
 writes it. Nothing here reads a file back: the same rows always give the same files, but
 for the one line saying when and by which command they were rendered (:data:`RENDERED`).
-:func:`is_run_output` says what a run writes at the top of its folder (the out-folder
-check, :func:`tactbench.paths.check_output_folder`, asks it).
+What a run writes at the top of its folder (the out-folder check asks it) is said with
+the rows, :func:`tactbench.runner.execution.results.is_run_output`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import csv
 import dataclasses
 import io
 import json
-import re
 import shlex
 from dataclasses import dataclass, field, fields
 from datetime import datetime, timezone
@@ -25,20 +24,22 @@ from typing import Any, Iterable, Sequence
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
-from tactbench.runner.answering import comparison_name, replay, schedule
-from tactbench.runner.comparisons import Comparison, comparisons
-from tactbench.runner.plots import FIGURES, caption, check_reference, write_plots
-from tactbench.runner.results import (
+from tactbench.runner.analysis.answering import comparison_name, replay, schedule
+from tactbench.runner.analysis.comparisons import Comparison, comparisons
+from tactbench.runner.presentation.plots import caption, check_reference, write_plots
+from tactbench.runner.execution.results import (
     INDEPENDENT_RUNS,
+    REPORT_HEADER,
     command_line,
     failed_rows,
     ok_rows,
     row_status,
 )
-from tactbench.runner.scene import Scene
-from tactbench.runner.statistics import NOT_LEARNED
-from tactbench.runner.summaries import spec_labels, summarise, variance_decomposition
-from tactbench.runner.tables import (
+from tactbench.runner.execution.scene import Scene
+from tactbench.runner.analysis.statistics import NOT_LEARNED
+from tactbench.runner.analysis.summaries import summarise, variance_decomposition
+from tactbench.runner.execution.questions import spec_labels
+from tactbench.runner.presentation.tables import (
     comparisons_section,
     primary_section,
     failed_cells_markdown,
@@ -49,33 +50,9 @@ from tactbench.runner.tables import (
     variance_markdown,
 )
 
-#: Every top-level file a run writes (``confusion_*.png`` besides, one per cell; the
-#: Parquet tables of ``tactbench report --parquet``, :mod:`tactbench.runner.frames`).
-OUT_FILES = ("results.json", "results.csv", "report.md", "cells.parquet",
-             "comparisons.parquet", *(f"{name}.png" for name in FIGURES))
-#: The folders a run writes at the top of its out folder.
-OUT_FOLDERS = ("cells", "models")
-#: report.md begins with this line; a report.md without it is not tactbench's.
-REPORT_HEADER = "# tactbench report"
 #: The line of report.md (and the key of results.json) that says when and by which
 #: command the report was rendered: the only part two renders of the same rows differ in.
 RENDERED = "- rendered: "
-_CONFUSION = re.compile(r"confusion_.+\.png")
-
-
-def is_run_output(path: Path) -> bool:
-    """Whether ``path``, at the top of an out folder, is one a run writes (and may write
-    again): ``cells/``, ``models/``, :data:`OUT_FILES`, ``confusion_*.png``; a report.md
-    only when it begins with :data:`REPORT_HEADER`."""
-    name = path.name
-    if name in OUT_FOLDERS:
-        return path.is_dir() or not path.exists()
-    if name == "report.md" and (path.exists() or path.is_symlink()):
-        if not path.is_file():  # a FIFO, a device, a dangling link: not ours, never opened
-            return False
-        with open(path, "rb") as fh:
-            return fh.read(len(REPORT_HEADER)) == REPORT_HEADER.encode()
-    return name in OUT_FILES or bool(_CONFUSION.fullmatch(name))
 
 
 @dataclass
@@ -119,7 +96,7 @@ class Report:
 
     def table(self) -> list[dict[str, Any]]:
         """The rows as a flat table, one dict per cell with the columns of results.csv
-        (:func:`tactbench.runner.frames.cells_frame` makes a typed data frame of it)."""
+        (:func:`tactbench.runner.presentation.frames.cells_frame` makes a typed data frame of it)."""
         return flat_rows(self.rows)
 
     def document(self) -> dict[str, Any]:
@@ -137,7 +114,7 @@ class Report:
         return doc
 
 
-#: The columns on whether a cell's model learned (:mod:`tactbench.runner.learning`),
+#: The columns on whether a cell's model learned (:mod:`tactbench.runner.execution.learning`),
 #: beside its accuracy in results.csv; rows made before have none.
 LEARNING_COLUMNS = ("train_accuracy", "chance_accuracy", "learning")
 
@@ -193,12 +170,12 @@ def make_report(rows: Sequence[dict[str, Any]], *,
     ``reference``: published points to set beside ours (:func:`check_reference`; a
     mistake is refused here, before any file); ``contrasts``, ``margin`` (points) and
     ``primary`` (the contrasts of the confirmatory family): see
-    :func:`tactbench.runner.comparisons.comparisons`; ``users``: the user of each
+    :func:`tactbench.runner.analysis.comparisons.comparisons`; ``users``: the user of each
     dataset sample (by index), for per-user results; ``rendered``: how the report came
     to be, said in report.md beside the command line and the time; ``sequential``
     (``seed_order`` and ``looks``, from :func:`sequential_design`): the looks of a run
     ``--until answered``, replayed from the rows
-    (:func:`tactbench.runner.answering.replay`).
+    (:func:`tactbench.runner.analysis.answering.replay`).
     """
     rows = list(rows)
     reference = check_reference(reference)
@@ -273,7 +250,7 @@ def training_cpu_seconds(rows: Iterable[dict[str, Any]]) -> float | None:
 def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """The runs that computed ``rows``: ``{"command", "git", "cells"}`` for each distinct
     command line and git revision a row records (``run``), the earliest first. A command
-    is shown as :func:`~tactbench.runner.results.command_line` writes it (rows from
+    is shown as :func:`~tactbench.runner.execution.results.command_line` writes it (rows from
     before it kept the program's path: ``/src/tactbench/__main__.py run`` is
     ``tactbench run``)."""
     runs: dict[tuple, dict[str, Any]] = {}
@@ -321,7 +298,7 @@ def run_labels(rows: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any
                ) -> dict[str, str]:
     """The name every report of a run shows for each of its classifiers: its short name,
     with the options that tell it apart where the run has several specs of one
-    (:func:`tactbench.runner.summaries.spec_labels`, over every row, failed ones too)."""
+    (:func:`tactbench.runner.execution.questions.spec_labels`, over every row, failed ones too)."""
     return spec_labels([*(r["classifier"] for r in rows),
                         *(s["classifier"] for s in summaries)])
 

@@ -39,8 +39,8 @@ from tactbench.encoders.encoding import Storage
 from tactbench.errors import CorruptArtefactError, InputError
 from tactbench.integrity import (ALGORITHM, hash_bytes, hash_file, new_hasher, read_npy_header,
                                  read_regular_bytes, special_file_problem)
-from tactbench.runner.planning import digest
-from tactbench.runner.system import now
+from tactbench.runner.execution.planning import digest
+from tactbench.runner.execution.system import now
 
 if TYPE_CHECKING:
     import numpy as np

@@ -7,7 +7,7 @@ the O'Brien–Fleming-type spending function ``α(t) = 2 − 2 Φ(z_{1−α/2} /
 spends almost nothing early and keeps the last look close to a fixed design's.
 
 The *information* of a look is the inverse of the variance of the mean difference; with
-the corrected resampled t (:mod:`tactbench.runner.statistics`) it is proportional to
+the corrected resampled t (:mod:`tactbench.runner.analysis.statistics`) it is proportional to
 ``1 / (1/J + ratio)`` — it grows with the runs J but saturates at ``1/ratio``: the
 information fraction of a look is ``I(J) / I(J_max)``. The boundaries
 (:func:`boundaries`) are values of the corrected t whose crossing probabilities under "no
@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.statistics import NOT_LEARNED
+from tactbench.runner.analysis.statistics import NOT_LEARNED
 
 #: What :func:`look` may decide, and :data:`NOT_LEARNED` (:func:`family_look`).
 DECISIONS = ("B better", "A better", "equivalent", "futile", "continue", NOT_LEARNED)
@@ -277,7 +277,7 @@ def procedure(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
     maximum), this comparison's level ``alpha`` (a family's: its Holm share at the first
     look) and ``margin``: each simulated path draws its runs with the overlap the
     correction assumes (a shared part of variance ``ratio · sd²``, each run its own of
-    ``sd²``, so the fixed-design :func:`tactbench.runner.power.power` is this at one
+    ``sd²``, so the fixed-design :func:`tactbench.runner.analysis.power.power` is this at one
     look) and meets the boundaries of :func:`boundaries` and the rule of :func:`look`.
     Deterministic (a fixed seed)."""
     import numpy as np

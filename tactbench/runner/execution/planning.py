@@ -1,6 +1,6 @@
 """Planning: check a whole scene before any work and expand it into cells.
 
-A :class:`~tactbench.runner.scene.Scene` checked its own fields when it was made; planning
+A :class:`~tactbench.runner.execution.scene.Scene` checked its own fields when it was made; planning
 checks, once, what needs the plugins, the dataset or the disk: every component's name and
 options (encoders, classifiers, the split and the test window, built by the registry),
 the inputs each classifier can be fed, L against the longest sequence, the memory of the
@@ -41,11 +41,11 @@ from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import profile_options
 from tactbench.budget import check_budget
-from tactbench.runner.results import IDENTITY_DEFAULTS, INDEPENDENT_RUNS, ROW_MAX_BYTES
-from tactbench.runner.summaries import check_contrasts, parse_contrast, short_name
+from tactbench.runner.execution.results import IDENTITY_DEFAULTS, INDEPENDENT_RUNS, ROW_MAX_BYTES
+from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
-from tactbench.runner.scene import Scene
-from tactbench.runner.writers import is_run_output  # what a run writes, said there
+from tactbench.runner.execution.scene import Scene
+from tactbench.runner.execution.results import is_run_output  # what a run writes, said there
 
 #: Part of every cell's identity: bump it when a row's meaning changes, so that old
 #: rows are not taken for new ones.
@@ -65,7 +65,7 @@ class Cell:
 
     def label(self, labels: Mapping[str, str] | None = None) -> str:
         """A short human name: ``raw × small-cnn-lstm L=5 seed=0``; the classifier by its
-        label in ``labels`` (:func:`tactbench.runner.summaries.spec_labels`) where that
+        label in ``labels`` (:func:`tactbench.runner.execution.questions.spec_labels`) where that
         tells it from another spec of the same name: ``raw × small-cnn-lstm (width=8)``."""
         clf = (labels or {}).get(self.classifier, "")
         if not clf or clf == short_name(self.classifier):  # unique: its name, as ever
@@ -388,7 +388,7 @@ def mixed_grids(rows: list[Mapping[str, Any]]) -> str | None:
     identities that no run plans together: another pixel size, split, profile, thread
     count, data set ...), said as the first field found with two values; None when
     they are one grid. Every run of a folder plans every cell already there
-    (:meth:`~tactbench.runner.results.ResultStore.claim`), so only cells copied in
+    (:meth:`~tactbench.runner.execution.results.ResultStore.claim`), so only cells copied in
     from elsewhere mix grids; a report would merge them."""
     fields = [f for f in IDENTITY_FIELDS + COMPUTE_FIELDS if f not in GRID_AXES]
     seen: dict[tuple[str, str], tuple[Any, Mapping[str, Any]]] = {}

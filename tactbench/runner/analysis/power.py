@@ -1,7 +1,7 @@
 """Planning numbers for a paired comparison of two training procedures, before and after.
 
 Pure functions (numbers in, numbers out; scipy imported inside them), with the training
-run as the unit as everywhere in :mod:`tactbench.runner.statistics`. The per-run
+run as the unit as everywhere in :mod:`tactbench.runner.analysis.statistics`. The per-run
 differences ``d_1 … d_J`` of repeated random splits of one data set are correlated (they
 share recordings): the corrected resampled t of Nadeau & Bengio (2003) takes
 ``var(mean d) = (1/J + ratio) · s²`` with ``ratio = n_test / n_train`` (``K/(K − 1)`` for
@@ -180,7 +180,7 @@ def sampling_sd(n_test: int, discordance: float, effect: float = 0.0) -> float:
     which the two models disagree and ``δ`` the true difference (fractions). With the
     true ``π`` it is below the real per-run spread (training noise adds to it); with an
     assumed ``π`` it is only as good as the assumption (a plan without a pilot says it
-    as one: :mod:`tactbench.runner.forecast`)."""
+    as one: :mod:`tactbench.runner.analysis.forecast`)."""
     if isinstance(n_test, bool) or not isinstance(n_test, int) or n_test < 1:
         raise InputError(f"n_test must be an integer ≥ 1, got {n_test!r}")
     pi = _check(discordance, "discordance", high=1.0)

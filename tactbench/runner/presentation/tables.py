@@ -6,22 +6,17 @@ import math
 import re
 from typing import Any, Iterable, Mapping, Sequence
 
-from tactbench.runner.answering import beyond_looks
-from tactbench.runner.comparisons import P_RULE, Comparison, plain_t, read_comparisons
-from tactbench.runner.learning import accuracy_mark, legend
-from tactbench.runner.statistics import MIN_RUNS, NOT_LEARNED
-from tactbench.runner.summaries import (
-    FACTORS,
-    failed_cells,
-    short_name,
-    spec_label,
-    spec_labels,
-)
+from tactbench.runner.analysis.answering import beyond_looks
+from tactbench.runner.analysis.comparisons import P_RULE, Comparison, plain_t, read_comparisons
+from tactbench.runner.execution.learning import accuracy_mark, legend
+from tactbench.runner.analysis.statistics import MIN_RUNS, NOT_LEARNED
+from tactbench.runner.analysis.summaries import failed_cells
+from tactbench.runner.execution.questions import FACTORS, short_name, spec_label, spec_labels
 
-#: Classifier spec → the name shown for it (:func:`tactbench.runner.summaries.spec_labels`).
+#: Classifier spec → the name shown for it (:func:`tactbench.runner.execution.questions.spec_labels`).
 Labels = Mapping[str, str]
 #: Comparisons as records, or as results.json stores them (read through
-#: :func:`tactbench.runner.comparisons.read_comparisons`, which verifies them).
+#: :func:`tactbench.runner.analysis.comparisons.read_comparisons`, which verifies them).
 Comparisons = Sequence["Comparison | Mapping[str, Any]"]
 
 
@@ -404,16 +399,16 @@ T_TEXT = {
     "corrected": "the corrected resampled t over runs (Nadeau–Bengio; for K folds "
                  "Bouckaert–Frank), which counts the training variability, not only the "
                  "test set's,",
-    "plain": "the plain paired t over runs (each run drew its own data set, so runs are "
-             "independent replications with no overlap to correct for), which counts the "
-             "training variability, not only the test set's,",
+    "plain": "the plain paired t over runs (no overlap to correct for: each run drew its "
+             "own data set, or every run trained anew on one fixed split, a figure about "
+             "that split; `method` in results.json), which counts the runs' variability,",
     "mixed": "the t over runs: corrected resampled (Nadeau–Bengio; for K folds "
              "Bouckaert–Frank) where runs re-split one data set, the plain paired t where "
-             "each run drew its own (each comparison's `method` in results.json); either "
-             "counts the training variability, not only the test set's,",
+             "each run drew its own or all share one fixed split (each comparison's "
+             "`method` in results.json); either counts the runs' variability,",
 }
 #: What report.md says above its table of comparisons, with the test (:data:`T_TEXT`)
-#: and the rule of p (:data:`~tactbench.runner.comparisons.P_RULE`, "the corrected t's"
+#: and the rule of p (:data:`~tactbench.runner.analysis.comparisons.P_RULE`, "the corrected t's"
 #: said "that t's" where not every t is corrected).
 COMPARISONS_TEMPLATE = (
     "Every two cells that differ in one factor (and every contrast asked for), compared "

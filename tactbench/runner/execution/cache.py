@@ -1,7 +1,7 @@
 """The encoding cache: a folder of entries, each an encoded dataset computed once across
 cells and runs, and the step that fills it with what a plan needs.
 
-An entry (:mod:`tactbench.runner.entries`: its format, verification and reading) is keyed
+An entry (:mod:`tactbench.runner.execution.entries`: its format, verification and reading) is keyed
 by the dataset's content hash, the imaging identity (vectors, or images at a pixel size
 and method), the encoder's canonical spec and version, and the storage precision (left
 out of the key for ``float32``, so entries made before precisions existed keep their
@@ -11,7 +11,7 @@ keys), and the CPU kernels numpy and OpenCV computed with (:func:`~tactbench.ker
 :func:`ensure_encodings` encodes what is missing in one streaming pass over the dataset
 (:mod:`tactbench.encoders.encoding`), each encoding appended to its entry as it is made.
 It reports a damaged entry in one warning line and encodes it again;
-:func:`~tactbench.runner.entries.load_encoding` raises
+:func:`~tactbench.runner.execution.entries.load_encoding` raises
 :class:`~tactbench.errors.CorruptArtefactError`. Writers of one key race safely: the
 first complete folder renamed into place wins, the others verify and use it; temporaries
 of dead writers are removed by the next run.
@@ -49,7 +49,7 @@ from tactbench.paths import (
     remove_path,
     temporaries,
 )
-from tactbench.runner.entries import (
+from tactbench.runner.execution.entries import (
     KEY_DIGITS,
     EntryWriter,
     forget,
@@ -59,12 +59,12 @@ from tactbench.runner.entries import (
     verify_entry,
 )
 from tactbench.kernels import kernels_identity
-from tactbench.runner.planning import Cell, Plan, digest, imaging_identity, storage_identity
+from tactbench.runner.execution.planning import Cell, Plan, digest, imaging_identity, storage_identity
 
 if TYPE_CHECKING:
     from tactbench.ui import Progress
 
-log = logging.getLogger("tactbench.runner.cache")
+log = logging.getLogger("tactbench.runner.execution.cache")
 
 
 class EncodingCache:
@@ -106,7 +106,7 @@ class EncodingCache:
         return (self.path(key) / "meta.json").is_file()
 
     def verify(self, key: str, *, full: bool = True) -> dict[str, Any]:
-        """The entry's ``meta.json`` after :func:`~tactbench.runner.entries.verify_entry`;
+        """The entry's ``meta.json`` after :func:`~tactbench.runner.execution.entries.verify_entry`;
         raises :class:`CorruptArtefactError` naming the entry and what is wrong."""
         return verify_entry(self.path(key), full=full)[0]
 

@@ -1,13 +1,13 @@
 """Where cells run: in turn in this process, in local worker processes, or on dask.
 
 By default as many cells run side by side as the machine has cores, one torch thread
-each (:meth:`~tactbench.runner.scene.Scene.resolved_workers`): the thread count is part
+each (:meth:`~tactbench.runner.execution.scene.Scene.resolved_workers`): the thread count is part
 of a cell's identity, so parallelism comes from cells, not threads. Spawned workers
 inherit the pinned CPU kernels (:func:`~tactbench.machine.pin_cpu_kernels`) from this
 process's environment.
 
 Each executor calls ``finish(row)`` in this process as soon as a cell's row is back, in
-the order cells finish. A cell never raises here (:func:`~tactbench.runner.cell.run_cell`
+the order cells finish. A cell never raises here (:func:`~tactbench.runner.execution.cell.run_cell`
 returns a failed row instead); when a worker itself dies (killed for memory, a crashed
 interpreter), its cell gets a failed row too. Ctrl-C stops at once: cells not started are
 dropped, finished ones were already handed to ``finish``.
@@ -20,12 +20,12 @@ import multiprocessing
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.errors import InputError
-from tactbench.runner.cell import CellJob, failed_row, run_cell
-from tactbench.runner.summaries import spec_labels
-from tactbench.runner.system import BEFORE, MemoryTracker, ignore_interrupts, stop_workers
+from tactbench.runner.execution.cell import CellJob, failed_row, run_cell
+from tactbench.runner.execution.questions import spec_labels
+from tactbench.runner.execution.system import BEFORE, MemoryTracker, ignore_interrupts, stop_workers
 
 if TYPE_CHECKING:
-    from tactbench.runner.scene import Scene
+    from tactbench.runner.execution.scene import Scene
     from tactbench.ui import Progress
 
 Finish = Callable[[dict[str, Any]], None]

@@ -5,7 +5,7 @@ A comparison of two cells rests on both having learned something: a model at cha
 (a network that collapsed on unscaled inputs, a classifier that predicts one class)
 loses to anything, and "B better, +25 points" would then say only that A did not learn.
 Every cell therefore records (:func:`learning_fields`, written by
-:mod:`tactbench.runner.cell`):
+:mod:`tactbench.runner.execution.cell`):
 
 - ``train_accuracy``: the accuracy on a seeded sample of at most :data:`TRAIN_SAMPLE` of
   its training windows (all folds' together), and ``train_chance``, what guessing gives

@@ -12,11 +12,11 @@ window's training and test windows, fits a model and lets the test window combin
 predictions of each test recording's windows. The row keeps, for every test recording,
 its index, true and predicted class, the fold that tested it and the group it was left
 out with (:data:`PREDICTION_LISTS`), and beside its test accuracy its accuracy on a sample
-of its training windows and what guessing gives (:mod:`tactbench.runner.learning`): a
+of its training windows and what guessing gives (:mod:`tactbench.runner.execution.learning`): a
 cell whose model did not learn or did not transfer says so, and no verdict rests on it.
 
 A cell that raises (a bug in a plugin, a classifier that fails in ``fit``, out of memory)
-returns a *failed* row instead (see :mod:`tactbench.runner.results`): no exception object
+returns a *failed* row instead (see :mod:`tactbench.runner.execution.results`): no exception object
 crosses a process boundary, and the rest of the grid goes on. Ctrl-C
 (``KeyboardInterrupt``) is not a failure: it stops the run.
 """
@@ -41,18 +41,19 @@ from tactbench.data.splits import (
     draw_splits,
     describe_splits,
     parse_split,
+    split_design,
 )
 from tactbench.data.windows import UNNAMED_TEST_WINDOW, Windows, check_windows
 from tactbench.errors import TactbenchError
 from tactbench.plugins import Registry
-from tactbench.runner.entries import load_encoding
-from tactbench.runner.learning import TRAIN_SAMPLE, chance_level, learning_fields
-from tactbench.runner.planning import Cell, Plan
-from tactbench.runner.results import FAILED, OK
-from tactbench.runner.scene import Scene
+from tactbench.runner.execution.entries import load_encoding
+from tactbench.runner.execution.learning import TRAIN_SAMPLE, chance_level, learning_fields
+from tactbench.runner.execution.planning import Cell, Plan
+from tactbench.runner.execution.results import FAILED, OK
+from tactbench.runner.execution.scene import Scene
 from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNELS_ENV, torch_kernels
 from tactbench.machine import host, machine, versions
-from tactbench.runner.system import MemoryTracker, now
+from tactbench.runner.execution.system import MemoryTracker, now
 from tactbench.seeds import derive_seed
 from tactbench.specs import parse_spec
 
@@ -114,7 +115,7 @@ class CellJob:
 
 def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
               models: Path | None = None) -> list[CellJob]:
-    """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.cache.ensure_encodings`;
+    """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.execution.cache.ensure_encodings`;
     with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
     scene = p.scene
     data = DatasetFacts.of(p.dataset, window=p.test_window)  # shared by all
@@ -217,7 +218,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     ``memory`` (made here when not given) records the peak resident memory after each
     step: ``load encoding``, ``windows``, ``fit``, ``predict``, ``save model``; the row's
     ``peak_step`` names the step that set ``peak_rss_mb`` (see
-    :class:`~tactbench.runner.system.MemoryTracker`).
+    :class:`~tactbench.runner.execution.system.MemoryTracker`).
     """
     import torch
 
@@ -232,8 +233,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     # The planned components, not a fresh plugin lookup: see the module docstring.
     registry = Registry([job.classifier, job.split, job.test_window])
     data = job.data.split_data(scene.test_per_class)
-    splits = draw_splits(build_split(scene.split, registry), data, cell.seed,
-                         f"split {scene.split!r}")
+    strategy = build_split(scene.split, registry)
+    splits = draw_splits(strategy, data, cell.seed, f"split {scene.split!r}")
     tested = _train_and_predict(job, registry, sequences, data.labels, splits, progress,
                                 memory)
     truth, predicted = tested["labels"], tested["predictions"]
@@ -248,7 +249,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
         "key": cell.key,
         **job.identity,
         "status": OK,
-        **describe_splits(job.identity["split"], cell.seed, splits),
+        **describe_splits(job.identity["split"], cell.seed, splits,
+                          design=split_design(strategy, splits)),
         "test_window": job.identity.get("test_window", UNNAMED_TEST_WINDOW),
         "classes": list(job.data.classes),
         "accuracy": float((predicted == truth).mean()),
@@ -361,7 +363,7 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
 def _score_training(out: dict[str, Any], checked: "_Checked", train: Windows, seed: int,
                     k: int) -> None:
     """Add to ``out`` the right answers on a seeded sample of at most
-    :data:`~tactbench.runner.learning.TRAIN_SAMPLE` of a fold's training windows, their
+    :data:`~tactbench.runner.execution.learning.TRAIN_SAMPLE` of a fold's training windows, their
     count and what guessing gives on them (weighted by the windows scored)."""
     import numpy as np
 

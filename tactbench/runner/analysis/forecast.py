@@ -5,7 +5,7 @@ training) and says, for every cell, its estimated time and where the estimate co
 from, the peak memory, and for each primary comparison the power at the planned runs
 for a given effect, the smallest effect found at 80 % power, and — for a fixed data set
 — the floor no number of runs goes below and how many recordings would lower it
-(:mod:`tactbench.runner.power`); where every run draws its own data set
+(:mod:`tactbench.runner.analysis.power`); where every run draws its own data set
 (``synthetic-forearm:people=per-run``) the runs are independent replications: ratio 0,
 no floor.
 
@@ -19,8 +19,8 @@ alone with the models disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordin
 the stored primaries the observed disagreement was 0–26 %, so it is no bound either way.
 
 Power is at the family's level (Holm's first step, α/m for m primaries) and exact
-(:func:`tactbench.runner.power.power`). For a run ``--until answered`` the forecast is of
-the sequential procedure itself (:func:`tactbench.runner.sequential.procedure`: power,
+(:func:`tactbench.runner.analysis.power.power`). For a run ``--until answered`` the forecast is of
+the sequential procedure itself (:func:`tactbench.runner.analysis.sequential.procedure`: power,
 expected and largest runs, chance of ending futile, by the simulation and rule the looks
 use, at that level and with the margin). :attr:`PrimaryForecast.warnings` says, a line
 each, an effect inside the margin and a design short of 80 % power at its runs.
@@ -34,10 +34,10 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from tactbench.data.splits import SplitData
+from tactbench.data.splits import SplitData, split_design
 from tactbench.plugins import load_registry
-from tactbench.runner.comparisons import comparisons
-from tactbench.runner.planning import (
+from tactbench.runner.analysis.comparisons import comparisons
+from tactbench.runner.execution.planning import (
     Cell,
     Plan,
     digest,
@@ -45,8 +45,8 @@ from tactbench.runner.planning import (
     plan_runs,
     run_datasets,
 )
-from tactbench.runner.answering import schedule
-from tactbench.runner.power import (
+from tactbench.runner.analysis.answering import schedule
+from tactbench.runner.analysis.power import (
     TARGET_POWER,
     detectable_effect,
     effect_floor,
@@ -56,11 +56,11 @@ from tactbench.runner.power import (
     sampling_sd,
     seed_mean_ratio,
 )
-from tactbench.runner.cache import EncodingCache
-from tactbench.runner.estimate import estimate_run, missing_entries
-from tactbench.runner.sequential import procedure
-from tactbench.runner.results import ResultStore, ok_rows
-from tactbench.runner.scene import Scene
+from tactbench.runner.execution.cache import EncodingCache
+from tactbench.runner.execution.estimate import estimate_run, missing_entries
+from tactbench.runner.analysis.sequential import procedure
+from tactbench.runner.execution.results import ResultStore, ok_rows
+from tactbench.runner.execution.scene import Scene
 
 #: The share of test recordings two models are assumed to disagree on without a pilot
 #: (two models near 80 % whose errors are independent disagree on about 32 %).
@@ -153,8 +153,9 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     n_test = sum(len(s.test) for s in splits)
     n_train = len(splits[0].train)
     independent = p.run_dataset is not None  # each run its own data set: no overlap
-    ratio = 0.0 if independent else \
-        seed_mean_ratio(len(splits)) if len(splits) > 1 else n_test / n_train
+    design = "independent" if independent else split_design(p.split, splits)
+    ratio = 0.0 if design in ("independent", "fixed") else \
+        seed_mean_ratio(len(splits)) if design == "kfold" else n_test / n_train
     others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
     # what run's claim refuses, refused here in its words (nothing written)
     ResultStore(scene.out).check_grid([c.key for c in p.cells + others if c.key],
@@ -182,7 +183,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
 
 def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
            looks: list[int] | None, *, load_s: float | None) -> list[float] | None:
-    """The run's wall time (:func:`~tactbench.runner.estimate.estimate_run`), cumulative
+    """The run's wall time (:func:`~tactbench.runner.execution.estimate.estimate_run`), cumulative
     at each look (one number without looks); cells without a pilot timing get the
     classifier's own estimate (``cells`` updated in place). None when a cell has
     neither."""

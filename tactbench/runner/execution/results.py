@@ -1,6 +1,6 @@
 """Result rows on disk: one JSON file per cell under ``OUT/cells``, written atomically.
 
-A row is a cell's identity (see :mod:`tactbench.runner.planning`) plus what came of it:
+A row is a cell's identity (see :mod:`tactbench.runner.execution.planning`) plus what came of it:
 
 - ``status: "ok"``: the cell trained and was tested; the row holds accuracy,
   per-class accuracy, the confusion matrix and the costs (see ``docs/runner.md``);
@@ -19,7 +19,7 @@ Rows written before checksums existed have none to verify and are checked for sh
 only.
 
 ``OUT/cells`` is the one store of a run folder: results.json, results.csv and report.md
-are rendered from these rows (:func:`tactbench.runner.writers.make_report`) and never read
+are rendered from these rows (:func:`tactbench.runner.presentation.writers.make_report`) and never read
 back. :meth:`ResultStore.stored_rows` gives every sound row of a folder in the order of
 the scene that computed it (:func:`scene_order`), for a report that the rows alone decide.
 """
@@ -30,6 +30,7 @@ import json
 import logging
 import math
 import os
+import re
 import shlex
 import sys
 from pathlib import Path
@@ -52,7 +53,7 @@ from tactbench.paths import (
 #: comparisons over such runs need no overlap correction (docs/statistics.md).
 INDEPENDENT_RUNS = "independent_runs"
 
-log = logging.getLogger("tactbench.runner.results")
+log = logging.getLogger("tactbench.runner.execution.results")
 
 OK = "ok"
 FAILED = "failed"
@@ -64,7 +65,7 @@ COST_FIELDS = ("encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "p
 ROW_MAX_BYTES = 16 << 20
 
 #: Identity fields that a cell's identity leaves out at their default (see
-#: :func:`tactbench.runner.planning.cell_identity`), with that default.
+#: :func:`tactbench.runner.execution.planning.cell_identity`), with that default.
 IDENTITY_DEFAULTS = {"test_window": UNNAMED_TEST_WINDOW, "precision": "float32",
                      "init_seed": None, "input": None, "threads": 1, "cpu_kernels": "avx2"}
 
@@ -466,3 +467,33 @@ def _spec_place(spec: str, listed: Sequence[str] | None) -> int:
             if matched > best:
                 best, place = matched, i
     return place
+
+
+# ---------------------------------------------------------------- what a run writes
+
+#: The figures a report draws (:mod:`tactbench.runner.presentation.plots`), one PNG each.
+FIGURES = ("accuracy_vs_L", "cost_vs_accuracy", "per_class_vs_L", "per_user_accuracy")
+#: Every top-level file a run writes (``confusion_*.png`` besides, one per cell; the
+#: Parquet tables of ``tactbench report --parquet``, :mod:`tactbench.runner.presentation.frames`).
+OUT_FILES = ("results.json", "results.csv", "report.md", "cells.parquet",
+             "comparisons.parquet", *(f"{name}.png" for name in FIGURES))
+#: The folders a run writes at the top of its out folder.
+OUT_FOLDERS = ("cells", "models")
+#: report.md begins with this line; a report.md without it is not tactbench's.
+REPORT_HEADER = "# tactbench report"
+_CONFUSION = re.compile(r"confusion_.+\.png")
+
+
+def is_run_output(path: Path) -> bool:
+    """Whether ``path``, at the top of an out folder, is one a run writes (and may write
+    again): ``cells/``, ``models/``, :data:`OUT_FILES`, ``confusion_*.png``; a report.md
+    only when it begins with :data:`REPORT_HEADER`."""
+    name = path.name
+    if name in OUT_FOLDERS:
+        return path.is_dir() or not path.exists()
+    if name == "report.md" and (path.exists() or path.is_symlink()):
+        if not path.is_file():  # a FIFO, a device, a dangling link: not ours, never opened
+            return False
+        with open(path, "rb") as fh:
+            return fh.read(len(REPORT_HEADER)) == REPORT_HEADER.encode()
+    return name in OUT_FILES or bool(_CONFUSION.fullmatch(name))

@@ -12,7 +12,7 @@ and range (:func:`check_fields`: ``seeds = [1.5]``, ``encoders = [1]``, ``thread
 profile, precision, executor and input that exist, a grid of at most
 :data:`MAX_CELLS`, a split and test window written in their grammar). What needs the
 plugins or the disk (the split's and test window's names, the out folder, the dataset)
-is checked once by :func:`tactbench.runner.planning.plan`; neither checks the other's
+is checked once by :func:`tactbench.runner.execution.planning.plan`; neither checks the other's
 part again. An unknown field or a field given twice in a scene file (``seed`` and
 ``seeds``, or a JSON key twice) is refused in one line naming the file and the field;
 :meth:`Scene.of` names a refused field as its source does (``--threads``).
@@ -44,7 +44,7 @@ from tactbench.errors import InputError, MissingFileError, check_choice
 from tactbench.integrity import check_regular_file, read_regular_bytes
 from tactbench.machine import usable_cores
 from tactbench.profiles import PRECISIONS, get_profile
-from tactbench.runner.system import check_scheduler
+from tactbench.runner.execution.system import check_scheduler
 from tactbench.specs import parse_spec
 
 #: Where cells run: this machine (serially or in ``workers`` processes) or a dask cluster.

@@ -3,11 +3,11 @@
 ``tactbench run --until answered`` runs the grid's seeds in batches (a *look* after each)
 and stops when every primary comparison (``--primary``) is decided — better, worse,
 equivalent within ``--margin``, futile, or not learned (a run of one of its cells did not
-learn: no verdict rests on it, :mod:`tactbench.runner.learning`) — or when ``--max-runs`` or ``--budget`` is
+learn: no verdict rests on it, :mod:`tactbench.runner.execution.learning`) — or when ``--max-runs`` or ``--budget`` is
 reached. What each look saw is never stored apart from the cells: :func:`replay`
 recomputes every look from the rows (the first ``n_k`` seeds of the run's seed order at
 look k), so a resumed or re-rendered report shows the same looks, and a look's decision
-cannot drift from its evidence. The decisions follow :mod:`tactbench.runner.sequential`
+cannot drift from its evidence. The decisions follow :mod:`tactbench.runner.analysis.sequential`
 (α spent over the looks, Holm carried over them).
 """
 
@@ -17,11 +17,11 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.comparisons import Comparison, comparisons
-from tactbench.runner.results import ok_rows
-from tactbench.runner.scene import FIRST_LOOK
-from tactbench.runner.sequential import FamilyState, Look, family_look
-from tactbench.runner.statistics import NOT_LEARNED
+from tactbench.runner.analysis.comparisons import Comparison, comparisons
+from tactbench.runner.execution.results import ok_rows
+from tactbench.runner.execution.scene import FIRST_LOOK
+from tactbench.runner.analysis.sequential import FamilyState, Look, family_look
+from tactbench.runner.analysis.statistics import NOT_LEARNED
 
 
 def schedule(max_runs: int, batch: int, first: int = FIRST_LOOK) -> list[int]:

@@ -13,7 +13,7 @@ plan's own dataset and components, in a few seconds:
 - **the run around them**: loading the dataset again (the run plans once more), starting
   the worker processes, writing the report.
 
-Cells run side by side on :meth:`~tactbench.runner.scene.Scene.resolved_workers`
+Cells run side by side on :meth:`~tactbench.runner.execution.scene.Scene.resolved_workers`
 processes: the forecast packs their times onto the workers (longest first, as a pool
 hands them out), each slowed by :data:`SIDE_BY_SIDE` when two or more share the
 machine's cores (measured by ``benchmarks/first_run.py``). How far the estimate lands
@@ -33,8 +33,8 @@ from tactbench.datasets.loading import load_dataset
 from tactbench.encoders.encoding import vector_width
 from tactbench.encoders.parallel import default_workers
 from tactbench.machine import usable_cores
-from tactbench.runner.cache import EncodingCache, entry_key
-from tactbench.runner.planning import Cell, Plan
+from tactbench.runner.execution.cache import EncodingCache, entry_key
+from tactbench.runner.execution.planning import Cell, Plan
 
 #: Recordings imaged and encoded to time the encoding.
 SAMPLE_RECORDINGS = 8

@@ -1,10 +1,10 @@
 """Paired comparisons of cells over runs: the :class:`Comparison` record and how rows make it.
 
 Two cells that differ in one factor (or that a contrast names,
-:func:`tactbench.runner.summaries.parse_contrast`) are compared run by run on the test
+:func:`tactbench.runner.execution.questions.parse_contrast`) are compared run by run on the test
 recordings both predicted: :func:`comparisons` pairs them, :func:`compare_cells` computes
 one record, and the family step (Holm, verdicts) closes the run. The tests themselves are
-pure functions of :mod:`tactbench.runner.statistics`; :func:`run_level_tests` is the one
+pure functions of :mod:`tactbench.runner.analysis.statistics`; :func:`run_level_tests` is the one
 place they are called over a pair's differences, and a :class:`Comparison` holds what
 they give. results.json stores each record as :meth:`Comparison.to_dict` (flat JSON, the
 field names of the reports made before the record), read back by
@@ -23,9 +23,10 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from tactbench.data.splits import DESIGN_FIELD
 from tactbench.errors import CorruptArtefactError, InputError
-from tactbench.runner.results import INDEPENDENT_RUNS
-from tactbench.runner.pairing import (
+from tactbench.runner.execution.results import INDEPENDENT_RUNS
+from tactbench.runner.analysis.pairing import (
     ClassGain,
     UserGains,
     aligned,
@@ -36,14 +37,14 @@ from tactbench.runner.pairing import (
     recordings,
     sampling_share,
 )
-from tactbench.runner.power import (
+from tactbench.runner.analysis.power import (
     bayes_correlated_t,
     detectable_effect,
     runs_for_power,
     seed_mean_ratio,
 )
-from tactbench.runner.learning import describe
-from tactbench.runner.statistics import (
+from tactbench.runner.execution.learning import describe
+from tactbench.runner.analysis.statistics import (
     NOT_LEARNED,
     TARGET_HALF_WIDTH,
     corrected_t,
@@ -54,16 +55,9 @@ from tactbench.runner.statistics import (
     tost_p,
     verdict,
 )
-from tactbench.runner.summaries import (
-    CONFIDENCE,
-    FACTORS,
-    cell_groups,
-    contrast_pairs,
-    parse_contrast,
-    spec_label,
-    spec_labels,
-)
-from tactbench.runner.variance import COMPONENTS, TEST_SAMPLING
+from tactbench.runner.analysis.summaries import CONFIDENCE, cell_groups
+from tactbench.runner.execution.questions import FACTORS, contrast_pairs, parse_contrast, spec_label, spec_labels
+from tactbench.runner.analysis.variance import COMPONENTS, TEST_SAMPLING
 
 #: The one rule for the p a verdict rests on, as report.md and docs/statistics.md state
 #: it: the corrected t's (``p``), Holm-adjusted within its family (``p_holm``). The
@@ -103,11 +97,11 @@ class Comparison:
     - the family (``family``: ``primary``, the comparisons the run names with
       ``--primary``, or ``exploratory``, all the others; each is Holm-adjusted apart):
       ``p_holm``, ``equivalence_p_holm``, ``family_size``, ``verdict`` and ``note``
-      (:func:`tactbench.runner.statistics.verdict`; ``not learned``, with the cells and
+      (:func:`tactbench.runner.analysis.statistics.verdict`; ``not learned``, with the cells and
       runs named in the note, where a run of either did not learn or did not transfer,
-      :mod:`tactbench.runner.learning`); ``ceiling`` when both cells are
+      :mod:`tactbench.runner.execution.learning`); ``ceiling`` when both cells are
       right on every paired recording of every run (a ceiling, not a precise zero);
-    - for a reader (:mod:`tactbench.runner.power`): the Bayesian correlated t's
+    - for a reader (:mod:`tactbench.runner.analysis.power`): the Bayesian correlated t's
       ``bayes_a_better``/``bayes_equivalent``/``bayes_b_better`` within ±``bayes_margin``
       points; ``runs_for_power`` (runs for 80 % power at the observed difference, at the
       family's Bonferroni level; None when no number of runs of these data reaches it),
@@ -115,11 +109,11 @@ class Comparison:
       ``test_sampling_share`` (the share of the per-run variance of the difference that
       test sampling, ``(π − δ²)/n``, accounts for); ``run_ratio``: the correction of
       a mean over per-run differences (``ratio``, or ``K/(K − 1)`` for seed means of K
-      folds, :func:`tactbench.runner.power.seed_mean_ratio`);
+      folds, :func:`tactbench.runner.analysis.power.seed_mean_ratio`);
     - ``variance_components``: where the runs vary the initialisation too (at least 2
       init seeds in each of at least 2 split seeds), the variance of the per-run
       difference split into split, initialisation and test sampling
-      (:func:`tactbench.runner.variance.paired_variance_components`: ``*_var`` in
+      (:func:`tactbench.runner.analysis.variance.paired_variance_components`: ``*_var`` in
       points², ``*_sd`` in points, ``*_share``); None otherwise.
     """
 
@@ -261,7 +255,7 @@ def _user_gains(v: Any) -> bool:
 
 
 def _variance_components(v: Any) -> bool:
-    """A stored :func:`tactbench.runner.variance.paired_variance_components` result."""
+    """A stored :func:`tactbench.runner.analysis.variance.paired_variance_components` result."""
     parts = [f"{c}_{k}" for c in COMPONENTS for k in ("var", "sd", "share")]
     keys = {"split_seeds", "init_seeds", "test_sampling", "groups", "total_var",
             "observed_var", "clipped", *parts}
@@ -327,7 +321,7 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
 
     Two families (:data:`P_RULE`): the primary comparisons (confirmatory), and all the
     others (exploratory); each family's p-values are Holm-adjusted apart, and the
-    verdicts rest on the adjusted ones (:func:`tactbench.runner.statistics.verdict`).
+    verdicts rest on the adjusted ones (:func:`tactbench.runner.analysis.statistics.verdict`).
     ``margin`` (points) adds the equivalence test; ``users`` (the user of each dataset
     sample, by index) adds per-user gains. See :class:`Comparison` for each field.
     """
@@ -446,35 +440,52 @@ def parse_contrast_factors(factor: str, label: Any) -> list[str]:
 def independent(rows: Sequence[dict[str, Any]]) -> bool:
     """Whether every one of these rows' runs trained and tested on a data set of its own,
     drawn independently of the others' (their row field ``independent_runs``, written by
-    :func:`tactbench.runner.planning.cell_identity`): runs that are independent
+    :func:`tactbench.runner.execution.planning.cell_identity`): runs that are independent
     replications, whose training sets share nothing."""
     return bool(rows) and all(r.get(INDEPENDENT_RUNS) is True for r in rows)
 
 
-#: The ``method`` of a comparison over independent replications (its start: a note on
-#: split-seed means may follow); every other comparison's t is corrected for overlap.
+#: The ``method`` of a comparison over independent replications, and of one over runs of
+#: one fixed split (their start: a note on split-seed means may follow); every other
+#: comparison's t is corrected for overlap.
 INDEPENDENT_METHOD = "paired t over independent runs (each run its own data set)"
+FIXED_METHOD = "paired t over runs of one fixed split (they differ by initialisation only)"
 
 
 def plain_t(c: "Comparison") -> bool:
-    """Whether comparison ``c`` is the plain paired t over independent runs (ratio 0,
-    :func:`independent`), not a t corrected for runs that overlap."""
-    return c.method.startswith(INDEPENDENT_METHOD)
+    """Whether comparison ``c`` is the plain paired t over runs (ratio 0: independent
+    replications, or runs of one fixed split), not a t corrected for runs that overlap."""
+    return c.method.startswith((INDEPENDENT_METHOD, FIXED_METHOD))
 
 
-def _ratio(rows: Sequence[dict[str, Any]]) -> tuple[float, str]:
-    """The correction of per-fold differences (1/(K − 1)) or of per-run differences
-    (n_test/n_train) of these runs, and the test's name; 0 for independent replications
-    (:func:`independent`), whose t is the plain paired t over runs."""
+def design(rows: Sequence[dict[str, Any]]) -> str:
+    """The split design of these rows' runs (:data:`~tactbench.contracts.SPLIT_DESIGNS`):
+    ``independent`` where every run drew its own data set (:func:`independent`), else the
+    one they record (``split_design``); rows made before rows recorded it, and rows that
+    record two, read as every row did before: ``kfold`` with ``folds``, else ``resampled``."""
     if independent(rows):
-        return 0.0, INDEPENDENT_METHOD
+        return "independent"
+    recorded = {r.get(DESIGN_FIELD) for r in rows}
+    if len(recorded) == 1 and None not in recorded:
+        return recorded.pop()
+    return "kfold" if rows[0].get("folds") else "resampled"
+
+
+def correction(rows: Sequence[dict[str, Any]]) -> tuple[str, float, str]:
+    """The design of these runs (:func:`design`), the correction of their per-fold
+    (``kfold``: 1/(K − 1)) or per-run differences (``resampled``: n_test/n_train; 0 for
+    ``fixed`` and ``independent``, whose t is the plain paired t over runs), and the test's
+    name."""
+    kind = design(rows)
+    if kind in ("independent", "fixed"):
+        return kind, 0.0, INDEPENDENT_METHOD if kind == "independent" else FIXED_METHOD
     folds = rows[0].get("folds")
-    if folds:
-        return 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "
-                                        "(Bouckaert–Frank)")
+    if kind == "kfold" and folds:
+        return kind, 1.0 / (int(folds) - 1), (f"corrected repeated {int(folds)}-fold t "
+                                              "(Bouckaert–Frank)")
     ratios = [r["n_test"] / r["n_train"] for r in rows if r.get("n_train") and r.get("n_test")]
-    return (statistics.fmean(ratios) if ratios else 1.0,
-            "corrected resampled t (Nadeau–Bengio)")
+    return "resampled", (statistics.fmean(ratios) if ratios else 1.0), \
+        "corrected resampled t (Nadeau–Bengio)"
 
 
 def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[str, Any]],
@@ -497,14 +508,14 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
     if not per_seed:
         return None
     rows_a = [runs_a[k] for k in per_seed]
-    ratio, method = _ratio(rows_a + [runs_b[k] for k in per_seed])
+    kind, ratio, method = correction(rows_a + [runs_b[k] for k in per_seed])
     splits: dict[int, list[tuple]] = {}  # the unit: a split seed (its init seeds averaged)
     for key in per_seed:
         splits.setdefault(key[0], []).append(key)
     d_run = np.array([np.mean([(per_seed[k].cb.mean() - per_seed[k].ca.mean()) for k in ks])
                       for ks in splits.values()])
     d_t, run_ratio = d_run, ratio
-    if rows_a[0].get("folds") and not independent(rows_a):  # a run: the mean of its K folds'
+    if kind == "kfold":  # a run: the mean of its K folds'
         run_ratio = seed_mean_ratio(int(rows_a[0]["folds"]))
         per_fold = fold_differences(per_seed, splits)
         d_t, ratio = (d_run, run_ratio) if per_fold is None else (per_fold, ratio)
@@ -531,9 +542,9 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
 
 def _not_learned(names: Mapping[str, Any], rows_a: Sequence[dict[str, Any]],
                  rows_b: Sequence[dict[str, Any]]) -> dict[str, str]:
-    """``verdict`` :data:`~tactbench.runner.statistics.NOT_LEARNED` and the ``note``
+    """``verdict`` :data:`~tactbench.runner.analysis.statistics.NOT_LEARNED` and the ``note``
     naming the cells and runs, where a run of either cell did not learn or did not
-    transfer (:mod:`tactbench.runner.learning`); nothing otherwise (rows made before
+    transfer (:mod:`tactbench.runner.execution.learning`); nothing otherwise (rows made before
     they recorded it count as learned)."""
     label = spec_label if names["factor"] == "classifier" else str
     said = [describe(label(names[side]), rows) for side, rows in (("a", rows_a), ("b", rows_b))]
@@ -547,7 +558,7 @@ def _not_learned(names: Mapping[str, Any], rows_a: Sequence[dict[str, Any]],
 def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio: float,
                     *, margin: float | None, confidence: float) -> dict[str, Any]:
     """Every test over a pair's runs, by field of :class:`Comparison` — the one place a
-    test of :mod:`tactbench.runner.statistics` or :mod:`tactbench.runner.power` is called
+    test of :mod:`tactbench.runner.analysis.statistics` or :mod:`tactbench.runner.analysis.power` is called
     on a comparison.
 
     ``d_run``: B − A per run (split seed); ``d_t``: the differences the corrected t runs

@@ -1,0 +1,14 @@
+"""The runner's second room, **analysis**: from stored rows to numbers and verdicts.
+
+Summaries over seeds (:mod:`~tactbench.runner.analysis.summaries`), the statistics with the
+training run as the unit (:mod:`~tactbench.runner.analysis.statistics`,
+:mod:`~tactbench.runner.analysis.variance`, :mod:`~tactbench.runner.analysis.pairing`,
+:mod:`~tactbench.runner.analysis.power`), paired comparisons of cells as records
+(:mod:`~tactbench.runner.analysis.comparisons`), the sequential design and its looks
+(:mod:`~tactbench.runner.analysis.sequential`, :mod:`~tactbench.runner.analysis.answering`)
+and what a plan forecasts (:mod:`~tactbench.runner.analysis.forecast`).
+
+Analysis reads execution's records (rows, scenes, plans) and never imports presentation:
+a verdict is the same whether it is printed, written or not shown at all
+(``tests/test_architecture.py``).
+"""
