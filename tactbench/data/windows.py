@@ -29,7 +29,7 @@ strategy object registered through the hook ``register_test_windows`` (the built
 A :class:`Windows` holds the sequences once and the window positions, so the
 many overlapping training windows share memory; :meth:`Windows.batch`
 materialises a batch ``(B, L, *frame_shape)`` on demand. The sequences may be
-arrays or *stored sequences* (:func:`tactbench.runner.entries.load_encoding`: anything
+arrays or *stored sequences* (:func:`tactbench.runner.execution.entries.load_encoding`: anything
 with ``shape`` and slicing that reads frames from disk on demand): a batch then reads
 only its windows' frames, so memory is O(batch), whatever the dataset's size. A batch
 is estimated (windows × L × frame) before it is allocated, and one above the memory
@@ -157,7 +157,7 @@ test_windows.__test__ = False  # not a pytest test, despite the name
 
 #: The test window of rows and cell identities that name none: the study's, the only one
 #: before test windows existed. A cell identity leaves it out, so that keys made then stay
-#: valid; a run's default is :class:`tactbench.runner.scene.Scene`'s ``test_window``.
+#: valid; a run's default is :class:`tactbench.runner.execution.scene.Scene`'s ``test_window``.
 UNNAMED_TEST_WINDOW = "first"
 #: Contact onset: the first frame whose total pressure reaches this fraction of the peak
 #: (both above the recording's quietest frame).
