@@ -37,9 +37,22 @@ import math
 import os
 import subprocess
 import sys
+import textwrap
 import time
+from dataclasses import replace
 from datetime import datetime, timezone
 from pathlib import Path
+
+from tactbench import machine as facts
+from tactbench.runner import render_folder
+from tactbench.runner.analysis.comparisons import Comparison, plain_t
+from tactbench.runner.analysis.statistics import VERDICTS
+from tactbench.runner.analysis.summaries import failed_cells
+from tactbench.runner.execution.questions import short_name
+from tactbench.runner.presentation.plots import check_reference
+from tactbench.runner.presentation.tables import (answer_text, comparisons_markdown,
+                                                  looks_markdown, markdown_table)
+from tactbench.runner.presentation.writers import write_report
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
@@ -62,6 +75,10 @@ STUDY = {"raw_L5": (80.7, 0.4), "flow_L5": (89.1, 0.2),
          "class_gain": {"Grasp": 17.0, "Twist": 16.0, "Pull": 6.0}}
 #: The study's "flow at half the L beats pressure", as a paired contrast (B − A).
 HALF_L = "encoder=raw,L=6..encoder=farneback,L=3"
+#: The package's verdicts by name (:data:`tactbench.runner.analysis.statistics.VERDICTS`).
+B_BETTER, A_BETTER, EQUIVALENT, UNRESOLVED, TOO_FEW_RUNS, NOT_LEARNED = VERDICTS
+#: The verdicts that answer a comparison.
+DECIDED = (B_BETTER, A_BETTER, EQUIVALENT)
 SHORT_NOTE = ("The simulator was built to be a fair test of these methods, not to reproduce "
               "the study: a result on it says how methods compare on its dynamics, nothing "
               "about real skin. On real tactile gesture data held outside the project, flow "
@@ -118,29 +135,6 @@ def _statistics_options(args: list[str]) -> tuple[list[str], float | None]:
     return contrasts, margin
 
 
-_USERS: dict[str, list[str] | None] = {}
-
-
-def dataset_users(rows: list[dict]) -> list[str] | None:
-    """The user of every sample of the rows' dataset (for per-user results), when the
-    dataset loads here with the rows' content hash and has user ids; else None."""
-    ok = [r for r in rows if r.get("status") == "ok"]
-    if not ok or not ok[0].get("test_users") or not str(ok[0]["split"]).startswith("users"):
-        return None
-    name, digest = ok[0]["dataset"], ok[0]["dataset_hash"]
-    if digest not in _USERS:
-        from tactbench.datasets.loading import load_dataset
-        from tactbench.errors import TactbenchError
-
-        try:
-            data = load_dataset(name)
-        except TactbenchError:  # a dataset given by path elsewhere: no per-user results
-            _USERS[digest] = None
-        else:
-            _USERS[digest] = list(data.users) if data.content_hash() == digest else None
-    return _USERS[digest]
-
-
 def run_grid(report: str, part: str, args: list[str], root: Path, *,
              reference: list[dict] | None = None) -> dict:
     """One ``tactbench run``: its results.json, commands and timing (kept across reruns).
@@ -149,11 +143,6 @@ def run_grid(report: str, part: str, args: list[str], root: Path, *,
     the published points, where given). With :data:`FROM_STORED`, nothing runs: the
     stored rows are re-read and everything else recomputed from them.
     """
-    from tactbench.runner.results import ResultStore, latest_scene
-    from tactbench.runner.scene import primary_of
-    from tactbench.runner.summaries import failed_cells
-    from tactbench.runner.writers import sequential_design, write_reports
-
     out = root / report / part
     # beside the run's folder, not in it: tactbench refuses an out folder holding files
     # it did not write
@@ -188,13 +177,12 @@ def run_grid(report: str, part: str, args: list[str], root: Path, *,
                                      {k: kept.get(k) for k in ("command", "wall_s", "computed",
                                                                "date", "cpu_seconds")}]
             timing_path.write_text(json.dumps(timing, indent=2) + "\n")
-    rows = ResultStore(out).stored_rows()  # the cells: the folder's one store of rows
+    # the report from the cells (the folder's one store of rows), with the primary
+    # questions, looks and per-user results as the package renders any run folder, and
+    # the published points beside it
     contrasts, margin = _statistics_options(args)
-    scene = latest_scene(rows)  # the primary questions and the looks, as the run made them
-    write_reports(out, rows, reference=reference, contrasts=contrasts, margin=margin,
-                  users=dataset_users(rows),
-                  primary=primary_of(scene.get("primary"), scene.get("encoders") or ()),
-                  sequential=sequential_design(scene))
+    report = render_folder(out, contrasts=contrasts, margin=margin, write=False)
+    write_report(out, replace(report, reference=check_reference(reference)))
     results = json.loads((out / "results.json").read_text())
     return {"part": part, "out": out, "timing": timing, "results": results,
             "failed": failed_cells(results["rows"])}
@@ -209,8 +197,6 @@ def _today() -> str:
 
 def machine() -> dict:
     """The machine and software a report was computed on (:mod:`tactbench.machine`)."""
-    from tactbench import machine as facts
-
     return {"cpu": facts.cpu_model() or "unknown CPU", "cores": os.cpu_count(),
             "ram_gib": round(facts.memory_bytes() / 2 ** 30, 1), "gpu": facts.gpu_name(),
             "os": facts.operating_system(),
@@ -265,20 +251,14 @@ def pct(x: float | None) -> str:
 
 
 def summary_table(results: dict) -> str:
-    from tactbench.runner.tables import markdown_table
-
     return markdown_table(results["summary"])
 
 
 def comparison_table(comps: list[dict]) -> str:
-    from tactbench.runner.tables import comparisons_markdown
-
     return comparisons_markdown(comps) or "(no paired comparison)"
 
 
 def find(results: dict, **want) -> dict | None:
-    from tactbench.runner.summaries import short_name
-
     for s in results["summary"]:
         if all((short_name(s[k]) if k == "classifier" else s[k]) == v
                for k, v in want.items()):
@@ -287,8 +267,6 @@ def find(results: dict, **want) -> dict | None:
 
 
 def comp(results: dict, factor: str, a, b, **where) -> dict | None:
-    from tactbench.runner.summaries import short_name
-
     for c in results.get("comparisons", []):
         if c["factor"] != factor:
             continue
@@ -305,11 +283,11 @@ def comp(results: dict, factor: str, a, b, **where) -> dict | None:
 def verdict_words(c: dict, a: str, b: str) -> str:
     """The verdict of a comparison in words, with A and B named."""
     v = c["verdict"]
-    if v == "B better":
+    if v == B_BETTER:
         return f"{b} better"
-    if v == "A better":
+    if v == A_BETTER:
         return f"{a} better"
-    if v == "equivalent":
+    if v == EQUIVALENT:
         return f"equivalent within ±{c['equivalence_margin']:g} points"
     return v
 
@@ -327,7 +305,8 @@ def say(c: dict | None, a: str, b: str) -> str:
                  f"{100 * c['high']:+.1f}] (unadjusted)")
     text += f", {c['b_better_runs']} of {c['runs']} runs higher"
     if c["t_p"] is not None:
-        test = "paired t, independent runs" if c.get("ratio") == 0 else "corrected t"
+        test = ("paired t, independent runs" if plain_t(Comparison.from_dict(c))
+                else "corrected t")
         text += (f", p = {c['t_p']:.2g} ({test}), Holm p = {c['p_holm']:.2g} "
                  f"({c.get('family') or 'exploratory'}, {c['family_size']})")
     text += f" → **{verdict_words(c, a, b)}**"
@@ -399,8 +378,6 @@ def study(root: Path, m: dict) -> str:
         lines += [f"## {name}: {what}", "", summary_table(results), "",
                   comparison_table(results["comparisons"]), ""]
         if results.get("looks"):
-            from tactbench.runner.tables import looks_markdown
-
             lines += [looks_markdown(results["looks"]), ""]
         lines += figures(part, Path("study")) + [""]
     lines += lengths_section(lengths)
@@ -449,9 +426,6 @@ def stop_words(results: dict) -> str:
 
 def flagship_section(parts: list[dict]) -> list[str]:
     """The primary question's answer in each design: a table and a sentence each."""
-    from tactbench.runner.comparisons import Comparison
-    from tactbench.runner.tables import answer_text
-
     lines = ["## The flagship question: does Farnebäck flow beat the pressure image?", "",
              "The study's headline (L = 5: 80.7 % → 89.1 %), asked before the runs as "
              "each design's one primary question (`--primary " + FLAGSHIP + "`), runs "
@@ -597,14 +571,6 @@ def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict,
     return lines
 
 
-def _unanimous_L(comparisons: list[dict]) -> str:
-    """Where every run favours flow (the encoder comparisons), in words."""
-    flow = sorted((c for c in comparisons if c["factor"] == "encoder"), key=lambda c: c["L"])
-    every = [str(c["L"]) for c in flow if c["b_better_runs"] == c["runs"]]
-    return ("every run favours flow at L = " + ", ".join(every) if every
-            else "at no L does every run favour flow")
-
-
 def _gain(c: dict | None) -> str:
     if c is None:
         return "-"
@@ -633,7 +599,7 @@ def _runs_note(results: dict) -> str:
             "runs (which assumes the per-run differences roughly normal), Holm-adjusted "
             "within each family (" + ", ".join(f"{name}: {size}" for name, size in families)
             + "). ")
-    open_ = [c for c in comps if c["verdict"] in ("unresolved", "too few runs")]
+    open_ = [c for c in comps if c["verdict"] in (UNRESOLVED, TOO_FEW_RUNS)]
     if not open_:
         return text + "Every comparison here is resolved."
     reachable = [c["runs_for_power"] for c in open_ if c["runs_for_power"] is not None]
@@ -675,8 +641,6 @@ def which_flow(root: Path, m: dict) -> str:
               *[f"- {say(c, c['a'], c['b'])}" for c in results["comparisons"]
                 if c.get("family") == "primary"], ""]
     if results.get("looks"):
-        from tactbench.runner.tables import looks_markdown
-
         lines += [looks_markdown(results["looks"]), ""]
     lines += ["## Accuracy and cost", "", summary_table(results), "",
               "## Paired differences to raw and to farneback", ""]
@@ -722,8 +686,6 @@ STRONGEST = ("classifier=small-cnn-lstm..classifier=sklearn:HistGradientBoosting
 
 
 def which_classifier(root: Path, m: dict) -> str:
-    from tactbench.runner.summaries import short_name
-
     clfs = ["logreg", CNN, "sklearn:HistGradientBoostingClassifier", "sklearn:SVC,C=10"]
     args = [x for c in clfs for x in ("--classifier", c)]
     images = run_grid("which-classifier", "images",
@@ -754,8 +716,6 @@ def which_classifier(root: Path, m: dict) -> str:
                   f"### Paired comparisons ({label})", "",
                   comparison_table(results["comparisons"]), ""]
         if results.get("looks"):
-            from tactbench.runner.tables import looks_markdown
-
             lines += [looks_markdown(results["looks"]), ""]
         lines += figures(part, Path("which-classifier")) + [""]
     lines += ["## What it shows", ""]
@@ -907,12 +867,8 @@ def real_data(root: Path, m: dict) -> str:
                   comparison_table([c for c in results["comparisons"]
                                     if c["factor"] == "encoder"]), ""]
         if results.get("looks"):
-            from tactbench.runner.tables import looks_markdown
-
             lines += [looks_markdown(results["looks"]), ""]
         lines += figures(part, Path("real-data")) + [""]
-    from tactbench.runner.summaries import short_name
-
     lines += ["## What it shows", ""]
     for part in parts:
         for c in part["results"]["comparisons"]:
@@ -1005,11 +961,25 @@ TITLES = {
 FINDINGS_START = ("<!-- findings: written by benchmarks/reports.py from "
                   "docs/reports/*/results.json -->")
 FINDINGS_END = "<!-- /findings -->"
+#: The image size of flowbench's results that the findings compare (the quick profile's).
+FLOW_SIZE = "72x67"
+#: A split of the stored rows, in the findings' words.
+SPLIT_WORDS = {"paper": "study's split", "users": "users left out"}
 
 
 def _load(root: Path, name: str, part: str) -> dict | None:
     path = root / name / part / "results.json"
     return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _split(results: dict) -> str:
+    """The split the rows of ``results`` were made with, in words."""
+    split = str(results["rows"][0]["split"])
+    return SPLIT_WORDS.get(split, f"split `{split}`")
+
+
+def _size(resolution: str) -> str:
+    return resolution.replace("x", " × ")
 
 
 def findings(root: Path) -> tuple[list[str], list[str]]:
@@ -1029,139 +999,163 @@ def answer_words(c: dict, a: str, b: str) -> str:
         text += f" [{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]"
     text += f" over {c['runs']} runs"
     note = c.get("note", "")
-    if c["verdict"] not in ("A better", "B better", "equivalent") and note:
+    if c["verdict"] not in DECIDED and note:
         text += f" ({note.removeprefix('group-sequential: ')})"
     return text
 
 
+def _primaries(results: dict | None) -> list[dict]:
+    return [c for c in (results or {}).get("comparisons", []) if c.get("family") == "primary"]
+
+
 def primary_findings(root: Path) -> list[str]:
+    """The README's primary answers, one bullet a report, from its stored results."""
     out = []
     designs = [(name, _load(root, "study", name)) for name, *_ in DESIGNS]
     said = {"paper": "the study's split", "users": "people left out",
             "people": "independent simulated people"}
-    items = [f"{said[name]}: {answer_words(c, 'raw', 'flow')}" for name, res in designs
-             if res and (c := primary(res))]
-    if items:
+    answered = [(name, c) for name, res in designs if res and (c := primary(res))]
+    if answered:
         out.append("[The study's flagship](docs/reports/study.md), Farnebäck flow against "
-                   "the pressure image at L = 5 (simulator, the default CNN): "
-                   + "; ".join(items) + ".")
+                   f"the pressure image at L = {answered[0][1]['L']} (simulator, the "
+                   "default CNN): " + "; ".join(f"{said[name]}: {answer_words(c, 'raw', 'flow')}"
+                                                for name, c in answered) + ".")
     lengths = _load(root, "study", "lengths")
     half = lengths and comp(lengths, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
     if half:
+        design = "run until answered" if lengths.get("looks") else "a fixed design of"
         out.append("[The study's window length](docs/reports/study.md), its \"flow at half "
-                   "the L beats pressure\" (study's split, a fixed design of "
-                   f"{half['runs']} runs): "
-                   + answer_words(half, "raw at L = 6", "flow at L = 3") + ".")
+                   f"the L beats pressure\" ({_split(lengths)}, {design} {half['runs']} "
+                   "runs): " + answer_words(half, "raw at L = 6", "flow at L = 3") + ".")
     images = _load(root, "which-classifier", "images")
-    if images:
-        prim = [c for c in images["comparisons"] if c.get("family") == "primary"]
-        if prim:
-            out.append("[Which classifier?](docs/reports/which-classifier.md) The CNN against "
-                       "HistGradientBoosting (users left out): " + "; ".join(
-                           f"on {c['encoder']}: " + answer_words(c, "the CNN", "the tree")
-                           for c in prim) + ".")
+    if _primaries(images):
+        out.append("[Which classifier?](docs/reports/which-classifier.md) The CNN against "
+                   f"HistGradientBoosting ({_split(images)}): " + "; ".join(
+                       f"on {c['encoder']}: " + answer_words(c, "the CNN", "the tree")
+                       for c in _primaries(images)) + ".")
     flow = _load(root, "which-flow", "users")
-    if flow:
-        prim = [c for c in flow["comparisons"] if c.get("family") == "primary"]
-        if prim:
-            out.append("[Which flow?](docs/reports/which-flow.md) Farnebäck against the frame "
-                       "difference, the CNN, users left out: "
-                       + "; ".join(answer_words(c, c["a"], c["b"]) for c in prim) + ".")
-    real = [(name, _load(root, "real-data", part)) for name, part in
-            (("CySkin fingers", "cyskin-fingers"), ("iCub grasps", "icub-grasp"))]
+    if _primaries(flow):
+        out.append("[Which flow?](docs/reports/which-flow.md) Farnebäck against the frame "
+                   f"difference, the CNN, {_split(flow)}: "
+                   + "; ".join(answer_words(c, c["a"], c["b"]) for c in _primaries(flow))
+                   + ".")
     items = [f"{name}, {short(c['classifier'])}: {answer_words(c, 'raw', 'frame-diff')}"
-             for name, res in real if res for c in res["comparisons"]
-             if c.get("family") == "primary"]
+             for name, res in _real(root) for c in _primaries(res)]
     if items:
         out.append("[Real data](docs/reports/real-data.md), the sweep-to-sweep change "
                    "(frame-diff) against the raw taxel vectors: " + "; ".join(items) + ".")
     return out
 
 
+def _real(root: Path) -> list[tuple[str, dict]]:
+    """The real-data parts stored: (name, results)."""
+    parts = (("CySkin fingers", "cyskin-fingers"), ("iCub grasps", "icub-grasp"))
+    return [(name, res) for name, part in parts if (res := _load(root, "real-data", part))]
+
+
 def exploratory_findings(root: Path) -> list[str]:
     """The README's exploratory findings, each generated from the stored results."""
-    out = []
-    lengths = _load(root, "study", "lengths")
-    if lengths:
-        out.append("[The study, window length](docs/reports/study.md) (study's split, "
-                   f"{max(len(s['seeds']) for s in lengths['summary'])} "
-                   "runs; its primary question is above). With flow, accuracy at L = "
-                   + ", ".join(f"{s['L']}: {pct(s['accuracy_mean'])} %" for s in sorted(
-                       (s for s in lengths["summary"] if s["encoder"] == "farneback"),
-                       key=lambda s: s["L"]))
-                   + "; the study's model (an ImageNet-pretrained EfficientNet-B0, 100 "
-                   "epochs on a GPU) reached 89.1 % at L = 5. "
-                   + _verdict_count([lengths]))
-    flow = _load(root, "which-flow", "users")
-    if flow:
-        cnn = [c for c in flow["comparisons"] if c["factor"] == "encoder" and c["a"] == "raw"
-               and short(c["classifier"]) == "small-cnn-lstm"]
-        better = [c["b"] for c in cnn if c["verdict"] == "B better"]
-        text = ("[Which flow?](docs/reports/which-flow.md) With the CNN, "
-                f"{len(better)} of {len(cnn)} encoders are resolved better than the pressure "
-                "image" + (f" ({', '.join(better)})" if better else "")
-                + " (Holm over the exploratory family)")
-        link = epe_vs_accuracy(root, flow)
-        if link:
-            pts, rho, p = link
-            text += (f". Endpoint error against accuracy over {len(pts)} flow methods: "
-                     f"Spearman ρ = {rho:+.2f}, p = {p:.2f}"
-                     + (": no evidence either way" if p >= 0.05 else ""))
-        text += ". " + _verdict_count([flow])
-        out.append(text)
-    images = _load(root, "which-classifier", "images")
-    if images:
-        raw = [s for s in images["summary"] if s["encoder"] == "raw"]
-        lo = min(raw, key=lambda s: s["accuracy_mean"])
-        hi = max(raw, key=lambda s: s["accuracy_mean"])
-        best = max(images["summary"], key=lambda s: s["accuracy_mean"])
-        gains = [c for c in images["comparisons"] if c["factor"] == "encoder"]
-        text = ("[Which classifier?](docs/reports/which-classifier.md) On pressure images "
-                f"the models score {pct(lo['accuracy_mean'])} % ({short(lo['classifier'])}) "
-                f"to {pct(hi['accuracy_mean'])} % ({short(hi['classifier'])}); flow changes "
-                "them by " + ", ".join(f"{100 * c['difference']:+.1f}"
-                                       f" ({short(c['classifier'])}: "
-                                       f"{verdict_words(c, 'raw', 'flow')})" for c in gains)
-                + f" points; the best cell is {best['encoder']} / {short(best['classifier'])} "
-                f"at {pct(best['accuracy_mean'])} ± {pct(best['accuracy_std'])} % "
-                f"({len(best['seeds'])} runs). " + _verdict_count([images]))
-        out.append(text)
-    real = [r for r in (_load(root, "real-data", "cyskin-fingers"),
-                        _load(root, "real-data", "icub-grasp")) if r]
-    if real:
-        items = []
-        for name, res in zip(("CySkin fingers", "iCub grasps"), real):
-            for c in res["comparisons"]:
-                if c["factor"] == "encoder" and c.get("family") != "primary":
-                    items.append(f"{name}, {short(c['classifier'])}: ceiling (both "
-                                 "right on every recording)" if c.get("ceiling") else
-                                 f"{name}, {short(c['classifier'])}: "
-                                 f"{100 * c['difference']:+.1f} "
-                                 f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}] "
-                                 f"({verdict_words(c, 'raw', 'frame-diff')})")
-        out.append("[Real data](docs/reports/real-data.md) (real CySkin and iCub skins, taxel "
-                   "vectors, no user ids): "
-                   + ("the sweep-to-sweep change against the raw vectors, points over runs: "
-                      + "; ".join(items) + ". " if items else
-                      "the sweep-to-sweep change against the raw vectors is its primary "
-                      "question (above). ")
-                   + _real_agreement(real) + " " + _verdict_count(real))
+    found = [_lengths_finding(_load(root, "study", "lengths")),
+             _flow_finding(root, _load(root, "which-flow", "users")),
+             _classifier_finding(_load(root, "which-classifier", "images")),
+             _real_finding(_real(root)), _flowbench_finding(root)]
+    return [f for f in found if f]
+
+
+def _lengths_finding(lengths: dict | None) -> str | None:
+    if not lengths:
+        return None
+    flow = sorted((s for s in lengths["summary"] if s["encoder"] == "farneback"),
+                  key=lambda s: s["L"])
+    published, _ = STUDY["flow_L5"]
+    return ("[The study, window length](docs/reports/study.md) "
+            f"({_split(lengths)}, {max(len(s['seeds']) for s in lengths['summary'])} "
+            "runs; its primary question is above). With flow, accuracy at L = "
+            + ", ".join(f"{s['L']}: {pct(s['accuracy_mean'])} %" for s in flow)
+            + "; the study's model (an ImageNet-pretrained EfficientNet-B0, 100 epochs on "
+            f"a GPU) reached {published} % at L = 5. " + _verdict_count([lengths]))
+
+
+def _flow_finding(root: Path, flow: dict | None) -> str | None:
+    if not flow:
+        return None
+    cnn = [c for c in flow["comparisons"] if c["factor"] == "encoder" and c["a"] == "raw"
+           and short(c["classifier"]) == CNN]
+    better = [c["b"] for c in cnn if c["verdict"] == B_BETTER]
+    text = ("[Which flow?](docs/reports/which-flow.md) With the CNN, "
+            f"{len(better)} of {len(cnn)} encoders are resolved better than the pressure "
+            "image" + (f" ({', '.join(better)})" if better else "")
+            + " (Holm over the exploratory family)")
+    link = epe_vs_accuracy(root, flow)
+    if link:
+        pts, rho, p = link
+        text += (f". Endpoint error against accuracy over {len(pts)} flow methods: "
+                 f"Spearman ρ = {rho:+.2f}, p = {p:.2f}"
+                 + (": no evidence either way" if p >= 0.05 else ""))
+    return text + ". " + _verdict_count([flow])
+
+
+def _classifier_finding(images: dict | None) -> str | None:
+    if not images:
+        return None
+    raw = [s for s in images["summary"] if s["encoder"] == "raw"]
+    lo = min(raw, key=lambda s: s["accuracy_mean"])
+    hi = max(raw, key=lambda s: s["accuracy_mean"])
+    best = max(images["summary"], key=lambda s: s["accuracy_mean"])
+    gains = [c for c in images["comparisons"] if c["factor"] == "encoder"]
+    return ("[Which classifier?](docs/reports/which-classifier.md) On pressure images "
+            f"the models score {pct(lo['accuracy_mean'])} % ({short(lo['classifier'])}) "
+            f"to {pct(hi['accuracy_mean'])} % ({short(hi['classifier'])}); flow changes "
+            "them by " + ", ".join(f"{100 * c['difference']:+.1f}"
+                                   f" ({short(c['classifier'])}: "
+                                   f"{verdict_words(c, 'raw', 'flow')})" for c in gains)
+            + f" points; the best cell is {best['encoder']} / {short(best['classifier'])} "
+            f"at {pct(best['accuracy_mean'])} ± {pct(best['accuracy_std'])} % "
+            f"({len(best['seeds'])} runs). " + _verdict_count([images]))
+
+
+def _real_finding(real: list[tuple[str, dict]]) -> str | None:
+    if not real:
+        return None
+    items = []
+    for name, res in real:
+        for c in res["comparisons"]:
+            if c["factor"] == "encoder" and c.get("family") != "primary":
+                items.append(f"{name}, {short(c['classifier'])}: ceiling (both "
+                             "right on every recording)" if c.get("ceiling") else
+                             f"{name}, {short(c['classifier'])}: "
+                             f"{100 * c['difference']:+.1f} "
+                             f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}] "
+                             f"({verdict_words(c, 'raw', 'frame-diff')})")
+    results = [res for _, res in real]
+    inputs = {s.get("input") for res in results for s in res["summary"]}
+    what = "taxel vectors" if inputs == {"vectors"} else "images and taxel vectors"
+    return ("[Real data](docs/reports/real-data.md) (real CySkin and iCub skins, "
+            f"{what}, no user ids): "
+            + ("the sweep-to-sweep change against the raw vectors, points over runs: "
+               + "; ".join(items) + ". " if items else
+               "the sweep-to-sweep change against the raw vectors is its primary "
+               "question (above). ")
+            + _real_agreement(results) + " " + _verdict_count(results))
+
+
+def _flowbench_finding(root: Path) -> str | None:
     bench = root / "flow-error" / "flowbench.json"
-    if bench.is_file():
-        rows = [r for r in json.loads(bench.read_text())["results"]
-                if r["resolution"] == "72x67"]
-        fb = next((r for r in rows if r["encoder"] == "farneback"), None)
-        better = [r for r in rows if fb and r["epe_px"] < fb["epe_px"]
-                  and r["ms_per_pair"] < fb["ms_per_pair"]]
-        if fb:
-            out.append("[Flow error against run time](docs/reports/flow-error.md): on "
-                       "ground-truth tactile scenes at 72 × 67, "
-                       + (" and ".join(f"`{r['encoder']}`" for r in better) or "no encoder")
-                       + (" are" if len(better) > 1 else " is")
-                       + " both faster and more accurate than Farnebäck (endpoint error "
-                       + ", ".join(f"{r['epe_px']:.2f}" for r in better)
-                       + f" px against {fb['epe_px']:.2f} px).")
-    return out
+    if not bench.is_file():
+        return None
+    rows = [r for r in json.loads(bench.read_text())["results"] if r["resolution"] == FLOW_SIZE]
+    fb = next((r for r in rows if r["encoder"] == "farneback"), None)
+    if fb is None:
+        return None
+    better = [r for r in rows if r["epe_px"] < fb["epe_px"]
+              and r["ms_per_pair"] < fb["ms_per_pair"]]
+    return ("[Flow error against run time](docs/reports/flow-error.md): on "
+            f"ground-truth tactile scenes at {_size(FLOW_SIZE)}, "
+            + (" and ".join(f"`{r['encoder']}`" for r in better) or "no encoder")
+            + (" are" if len(better) > 1 else " is")
+            + " both faster and more accurate than Farnebäck (endpoint error "
+            + ", ".join(f"{r['epe_px']:.2f}" for r in better)
+            + f" px against {fb['epe_px']:.2f} px).")
 
 
 def _real_agreement(real: list[dict]) -> str:
@@ -1178,7 +1172,7 @@ def _real_agreement(real: list[dict]) -> str:
 
 
 def epe_vs_accuracy(root: Path, results: dict):
-    """(points, Spearman ρ, p) of flowbench's endpoint error (72 × 67) against the CNN's
+    """(points, Spearman ρ, p) of flowbench's endpoint error (:data:`FLOW_SIZE`) against the CNN's
     accuracy per flow encoder; None without flowbench.json or with fewer than 3."""
     from scipy.stats import spearmanr
 
@@ -1186,10 +1180,10 @@ def epe_vs_accuracy(root: Path, results: dict):
     if not fb.is_file():
         return None
     epe = {r["encoder"]: r["epe_px"] for r in json.loads(fb.read_text())["results"]
-           if r["resolution"] == "72x67"}
+           if r["resolution"] == FLOW_SIZE}
     pts = []
     for enc, e in sorted(epe.items()):
-        s = find(results, encoder=enc, classifier="small-cnn-lstm")
+        s = find(results, encoder=enc, classifier=CNN)
         if s is not None:
             pts.append((enc, e, s["accuracy_mean"]))
     if len(pts) < 3:
@@ -1199,14 +1193,12 @@ def epe_vs_accuracy(root: Path, results: dict):
 
 
 def short(spec: str) -> str:
-    from tactbench.runner.summaries import short_name
-
     return short_name(str(spec))
 
 
 def _verdict_count(results: list[dict]) -> str:
     comps = [c for r in results for c in r["comparisons"]]
-    held = [c for c in comps if c["verdict"] in ("A better", "B better", "equivalent")]
+    held = [c for c in comps if c["verdict"] in DECIDED]
     runs = sorted({c["runs"] for c in comps})
     return (f"Of its {len(comps)} paired comparisons, {len(held)} "
             f"{'reaches' if len(held) == 1 else 'reach'} a verdict with the "
@@ -1214,16 +1206,11 @@ def _verdict_count(results: list[dict]) -> str:
             "[why](docs/statistics.md)).")
 
 
-def write_findings(root: Path, readme: Path = REPO / "README.md") -> None:
-    """Rewrite the README's findings between :data:`FINDINGS_START` and
-    :data:`FINDINGS_END` from the stored results."""
-    text = readme.read_text()
-    if FINDINGS_START not in text or FINDINGS_END not in text:
-        raise SystemExit(f"{readme}: the findings markers are missing")
-    head, rest = text.split(FINDINGS_START, 1)
-    _, tail = rest.split(FINDINGS_END, 1)
+def findings_text(root: Path) -> str:
+    """The README's findings, as :func:`write_findings` writes them between the markers,
+    from the results stored under ``root``."""
     primary, exploratory = findings(root)
-    body = "\n".join(
+    return "\n".join(
         ["**Primary questions**, each named before its run and answered by adding runs "
          "until it was decided or its budget was spent (α = 0.05 per report over its looks; "
          "[docs/statistics.md](docs/statistics.md)):", "",
@@ -1231,12 +1218,27 @@ def write_findings(root: Path, readme: Path = REPO / "README.md") -> None:
          "**Exploratory** (every other comparison of the reports: leads for a next "
          "question, not answers; their verdicts are Holm-adjusted within their own "
          "family):", "", *(_wrap("- " + f) for f in exploratory)])
-    readme.write_text(f"{head}{FINDINGS_START}\n{body}\n{FINDINGS_END}{tail}")
+
+
+def readme_findings(readme: Path = REPO / "README.md") -> str:
+    """The findings the README states now (between the markers)."""
+    text = readme.read_text()
+    if FINDINGS_START not in text or FINDINGS_END not in text:
+        raise SystemExit(f"{readme}: the findings markers are missing")
+    return text.split(FINDINGS_START, 1)[1].split(FINDINGS_END, 1)[0].removeprefix(
+        "\n").removesuffix("\n")
+
+
+def write_findings(root: Path, readme: Path = REPO / "README.md") -> None:
+    """Rewrite the README's findings between :data:`FINDINGS_START` and
+    :data:`FINDINGS_END` from the stored results (:func:`findings_text`)."""
+    readme_findings(readme)  # the markers are there
+    head, rest = readme.read_text().split(FINDINGS_START, 1)
+    _, tail = rest.split(FINDINGS_END, 1)
+    readme.write_text(f"{head}{FINDINGS_START}\n{findings_text(root)}\n{FINDINGS_END}{tail}")
 
 
 def _wrap(text: str, width: int = 92) -> str:
-    import textwrap
-
     return "\n".join(textwrap.wrap(text, width, subsequent_indent="  ",
                                     break_on_hyphens=False, break_long_words=False))
 

@@ -58,7 +58,6 @@ def main() -> None:
     parser.add_argument("--json", dest="json_out")
     args = parser.parse_args()
 
-    from tactbench.datasets.synthetic import CIRCUMFERENCE_MM, TOP_X
     from tactbench.datasets.synthetic_forearm import generate
 
     start = time.perf_counter()
@@ -67,12 +66,34 @@ def main() -> None:
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu0
     print(f"generated {len(ds)} samples in {wall:.1f} s wall, {cpu:.1f} s CPU "
           f"(goal ≤ {GOAL_S:.0f} s for 1900 on one core)")
+    feats, timing = sample_features(ds)
+    per = class_rows(ds, feats, timing)
+    users = np.array([int(u[1:]) for u in ds.users])
+    cues = {k: one_feature_accuracy(np.array(v, dtype=float), ds.labels, users)
+            for k, v in feats.items()}
+    print("\none-feature accuracy, users split in halves (chance 0.20):")
+    for k, acc in cues.items():
+        print(f"  {k:<22}{acc:.2f}")
+    doc = {"benchmark": "simulator", "command": " ".join(["python"] + sys.argv),
+           "machine": platform.platform(), "cpus": os.cpu_count(), "threads": 1,
+           "date": time.strftime("%Y-%m-%d"), "samples": len(ds), "version": args.version,
+           "content_hash": ds.content_hash(),
+           "generation_wall_s": wall, "generation_cpu_s": cpu, "goal_s": GOAL_S,
+           "classes": per, "one_feature_accuracy": cues}
+    if args.json_out:
+        with open(args.json_out, "w") as fh:
+            json.dump(doc, fh, indent=2)
+            fh.write("\n")
+
+
+def sample_features(ds) -> tuple[dict[str, list[float]], dict[str, np.ndarray]]:
+    """Each sample's one-number cues (name → values) and its timing of contact (lead-in
+    and contact frames, settling seconds, centroid movement in x and y)."""
+    from tactbench.datasets.synthetic import CIRCUMFERENCE_MM, TOP_X
+
     vec = ds.vectors()
     xy = ds.layout.positions
     xu = (xy[:, 0] - TOP_X + CIRCUMFERENCE_MM / 2) % CIRCUMFERENCE_MM  # unwrapped round the top
-    y = ds.labels
-    users = np.array([int(u[1:]) for u in ds.users])
-    per = []
     feats: dict[str, list[float]] = {k: [] for k in (
         "length", "mean total pressure", "final total pressure", "final contact area",
         "centroid x", "centroid y", "peak total pressure", "lead-in frames",
@@ -107,8 +128,16 @@ def main() -> None:
         feats["final contact area"].append(float((v[-1] > 0.05).sum()))
         feats["centroid x"].append(float((v.sum(0) * xu).sum() / (v.sum() + 1e-9)))
         feats["centroid y"].append(float((v.sum(0) * xy[:, 1]).sum() / (v.sum() + 1e-9)))
-    settle, move_x, move_y = map(np.array, (settle, move_x, move_y))
-    lengths = ds.lengths()
+    timing = {"settle": settle, "move_x": move_x, "move_y": move_y, "lead": lead,
+              "contact": contact_frames}
+    return feats, {k: np.array(v) for k, v in timing.items()}
+
+
+def class_rows(ds, feats: dict[str, list[float]], timing: dict[str, np.ndarray]
+               ) -> list[dict]:
+    """One row a class (medians of its samples' lengths and timing), printed as a table."""
+    y, lengths, per = ds.labels, ds.lengths(), []
+    settle, move_x, move_y = timing["settle"], timing["move_x"], timing["move_y"]
     print(f"\n{'class':<9}{'frames (med)':>13}{'settle s (med)':>15}{'Δx mm (med)':>13}"
           f"{'Δy mm (med)':>13}{'total (mean)':>14}")
     for c, name in enumerate(ds.classes):
@@ -116,8 +145,8 @@ def main() -> None:
         row = {"class": name, "samples": int(m.sum()),
                "frames_median": float(np.median(lengths[m])),
                "frames_min": int(lengths[m].min()), "frames_max": int(lengths[m].max()),
-               "lead_in_frames_median": float(np.median(np.array(lead)[m])),
-               "contact_frames_median": float(np.median(np.array(contact_frames)[m])),
+               "lead_in_frames_median": float(np.median(timing["lead"][m])),
+               "contact_frames_median": float(np.median(timing["contact"][m])),
                "settle_s_median": float(np.median(settle[m])),
                "centroid_move_x_mm_median": float(np.median(move_x[m])),
                "centroid_move_y_mm_median": float(np.median(move_y[m])),
@@ -126,21 +155,7 @@ def main() -> None:
         print(f"{name:<9}{row['frames_median']:>13g}{row['settle_s_median']:>15.2f}"
               f"{row['centroid_move_x_mm_median']:>13.1f}{row['centroid_move_y_mm_median']:>13.1f}"
               f"{row['mean_total_pressure']:>14.1f}")
-    cues = {k: one_feature_accuracy(np.array(v, dtype=float), y, users)
-            for k, v in feats.items()}
-    print("\none-feature accuracy, users split in halves (chance 0.20):")
-    for k, acc in cues.items():
-        print(f"  {k:<22}{acc:.2f}")
-    doc = {"benchmark": "simulator", "command": " ".join(["python"] + sys.argv),
-           "machine": platform.platform(), "cpus": os.cpu_count(), "threads": 1,
-           "date": time.strftime("%Y-%m-%d"), "samples": len(ds), "version": args.version,
-           "content_hash": ds.content_hash(),
-           "generation_wall_s": wall, "generation_cpu_s": cpu, "goal_s": GOAL_S,
-           "classes": per, "one_feature_accuracy": cues}
-    if args.json_out:
-        with open(args.json_out, "w") as fh:
-            json.dump(doc, fh, indent=2)
-            fh.write("\n")
+    return per
 
 
 if __name__ == "__main__":

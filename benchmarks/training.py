@@ -36,11 +36,15 @@ recipes (:data:`RECIPES`: the shipped one, the one issue 28 measured, and one ch
 each from it) on the default data (``tactbench run``'s: the simulated forearm, quick
 profile, L = 5, vote window, paper split), each paired run by run with
 ``sklearn:HistGradientBoostingClassifier`` on the same cells through
-:func:`tactbench.runner.summaries.comparisons`. The cells are one ``tactbench run``
-(kept in ``--run-out``, so a rerun adds only what is missing); CPU-seconds are the
-fitting process's ``time.process_time`` (every thread), wall seconds beside them. It
-writes ``--out`` (JSON: machine, date, load, per-recipe accuracy, costs, intervals) and
-a PNG beside it.
+:func:`tactbench.runner.analysis.comparisons.comparisons`. The cells are one ``tactbench
+run`` (kept in ``--run-out``, so a rerun adds only what is missing; ``--stored`` trains
+nothing), read back through the run folder's store
+(:class:`tactbench.runner.ResultStore`), each recipe found by the spec its cells carry
+(:func:`tactbench.profiles.canonical_classifier`); CPU-seconds are the ones each row
+records of its fitting process (every thread:
+:func:`tactbench.runner.presentation.writers.training_cpu_seconds`), wall seconds beside
+them. It writes ``--out`` (JSON: machine, date, load, per-recipe accuracy, costs,
+intervals) and a PNG beside it.
 
 Usage::
 
@@ -55,11 +59,18 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from tactbench.plugins import load_registry
+from tactbench.profiles import canonical_classifier
+from tactbench.runner import ResultStore, ok_rows
+from tactbench.runner.analysis.comparisons import comparisons
+from tactbench.runner.presentation.writers import training_cpu_seconds
 
 GESTURES = ("grasp", "2h-grasp", "twist", "push", "pull")
 
@@ -640,8 +651,6 @@ def paper_step(checkpoint: bool) -> dict:
 
 def measure_paper_step() -> list[dict]:
     """:func:`paper_step` without and with checkpointing, each in its own process."""
-    import subprocess
-
     rows = []
     for flag in ("off", "on"):
         out = subprocess.run([sys.executable, __file__, "--paper-step", flag],
@@ -688,36 +697,15 @@ def _load() -> str:
         return "unknown"
 
 
-def _cpu_seconds(row: dict) -> float | None:
-    fits = row.get("fit")
-    fits = fits if isinstance(fits, list) else [fits or {}]
-    values = [f.get("train_cpu_seconds") for f in fits]
-    return float(sum(values)) if values and all(values) else None
-
-
-def stored_rows(run_out: Path) -> list[dict]:
-    """The verified rows of the cells finished so far in ``run_out`` (a run cut short
-    keeps them)."""
-    from tactbench.runner.results import ResultStore
-
-    store = ResultStore(run_out)
-    return [row for path in sorted(store.cells.glob("*.json"))
-            if (row := store.get(path.stem)) is not None]
-
-
 def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
                     threads: int, run_out: Path, extra: list[str],
                     stored: bool = False) -> dict:
     """One ``tactbench run`` of every recipe and the baseline; per recipe and encoder:
     accuracy, CPU and wall seconds per cell, and (recipe − baseline) paired over runs.
     ``stored``: run nothing, read the cells ``run_out`` holds."""
-    import subprocess
-
-    from tactbench.plugins import load_registry
-
     specs = {label: RECIPES[label] for label in labels}
     registry = load_registry()
-    named = {canonical(spec, registry): label
+    named = {canonical_classifier(spec, "quick", registry=registry): label
              for label, spec in [*specs.items(), ("baseline", BASELINE)]}
     cmd = [str(Path(sys.executable).with_name("tactbench")), "run", "--out", str(run_out),
            "--threads", str(threads), "--no-plots"]
@@ -731,10 +719,8 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
     load_before, t0 = _load(), time.perf_counter()
     if not stored:
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    rows = [r for r in stored_rows(run_out) if r.get("status", "ok") == "ok"
-            and int(r["seed"]) in seeds]
-    from tactbench.runner.comparisons import comparisons
-
+    # the verified rows of the cells finished so far (a run cut short keeps them)
+    rows = [r for r in ok_rows(ResultStore(run_out).stored_rows()) if int(r["seed"]) in seeds]
     compared = [c.to_dict() for c in comparisons(rows) if c.factor == "classifier"]
     out = {"command": " ".join(cmd), "from_stored": stored, "wall_s": time.perf_counter() - t0,
            "load_before": load_before, "load_after": _load(), "recipes": []}
@@ -744,7 +730,7 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
             if not cells:
                 continue
             acc = [100 * r["accuracy"] for r in cells]
-            cpu = [c for c in map(_cpu_seconds, cells) if c is not None]
+            cpu = [c for c in (training_cpu_seconds([r]) for r in cells) if c is not None]
             entry = {"recipe": label, "spec": spec, "encoder": enc, "runs": len(cells),
                      "accuracy_mean": float(np.mean(acc)), "accuracy": acc,
                      "cpu_s_mean": float(np.mean(cpu)) if cpu else None,
@@ -760,17 +746,6 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
                                         "runs": c["runs"], "method": c["method"]}
             out["recipes"].append(entry)
     return out
-
-
-def canonical(spec: str, registry, profile: str = "quick") -> str:
-    """The spec as a run's cells name it: the quick profile's options merged in (as
-    :func:`tactbench.runner.planning.plan` does)."""
-    from tactbench.profiles import profile_options
-    from tactbench.specs import format_spec, parse_spec
-
-    name, options = parse_spec(registry.resolve("classifier", spec))
-    return format_spec(name, {**profile_options(profile, name, registry=registry),
-                              **options})
 
 
 def plot_recipes(result: dict, path: Path) -> None:
@@ -864,12 +839,21 @@ def main(argv=None) -> int:
     if args.paper_step:
         print(json.dumps(paper_step(args.paper_step == "on")))
         return 0
-    from tactbench.data.windows import training_windows
-
     result: dict = {"command": "python " + " ".join(sys.argv), "threads": args.threads,
                     "machine": platform.platform(), "torch": torch.__version__,
                     "date": time.strftime("%Y-%m-%d"),
                     "note": "2-core CPU VM shared with other jobs: timings vary by ±30 %"}
+    measure_parts(args, result)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def measure_parts(args, result: dict) -> None:
+    """Every part not in ``--skip``, into ``result``; ``--out`` is written after each."""
+    from tactbench.data.windows import training_windows
+
     small = None
     if any(part not in args.skip for part in ("overhead", "speed", "threads", "compile",
                                               "paper-epoch")):
@@ -911,10 +895,6 @@ def main(argv=None) -> int:
         save()
     if "paper-epoch" not in args.skip:
         result["paper_epoch"] = measure_paper_epoch(small)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {args.out}")
-    return 0
 
 
 if __name__ == "__main__":

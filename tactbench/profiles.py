@@ -38,6 +38,7 @@ from typing import Any, Mapping
 from tactbench.contracts import CLASSIFIER
 from tactbench.errors import InputError
 from tactbench.plugins import load_registry
+from tactbench.specs import format_spec, parse_spec
 
 #: How cached encodings may be stored (see :mod:`tactbench.encoders.encoding`): ``float32``
 #: exactly as encoded, ``float16``, or ``uint8`` (each channel mapped linearly from its
@@ -126,3 +127,13 @@ def profile_options(profile: str = DEFAULT_PROFILE, classifier: str = "small-cnn
         registry = load_registry()
     declared = CLASSIFIER.get(registry.get("classifier", classifier).load(), "profiles")
     return dict((declared or {}).get(profile, {}))
+
+
+def canonical_classifier(spec: str, profile: str = DEFAULT_PROFILE, *, registry=None) -> str:
+    """``spec`` as the cells of a run with ``profile`` name it: resolved by the registry
+    (``sklearn:SVC`` → its estimator option), the profile's options merged in under the
+    spec's own, options sorted (:func:`~tactbench.specs.format_spec`)."""
+    if registry is None:
+        registry = load_registry()
+    name, options = parse_spec(registry.resolve("classifier", spec))
+    return format_spec(name, {**profile_options(profile, name, registry=registry), **options})

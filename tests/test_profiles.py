@@ -95,3 +95,17 @@ def test_a_plugin_classifier_declares_its_own_profiles(tmp_path, monkeypatch):
     assert profile_options("paper", "profiled", registry=reg) == {"max_iter": 500}
     assert profile_options("quick", "profiled", registry=reg) == {}
     assert profile_options("paper", "plain", registry=reg) == {}
+
+
+def test_a_classifier_is_named_as_a_runs_cells_name_it():
+    """canonical_classifier: resolved by the registry, the profile's options under the
+    spec's own, sorted; the name benchmarks/training.py finds its recipes' cells by."""
+    from tactbench.profiles import canonical_classifier, profile_options
+
+    quick = profile_options("quick", "small-cnn-lstm")
+    spec = canonical_classifier("small-cnn-lstm:width=8")
+    assert spec.startswith("small-cnn-lstm:") and "width=8" in spec
+    assert f"input_size={quick['input_size']}" in spec
+    assert canonical_classifier("small-cnn-lstm:width=8") == \
+        canonical_classifier("small-cnn-lstm:width=8,input_size=" + str(quick["input_size"]))
+    assert canonical_classifier("sklearn:SVC") == "sklearn:estimator=SVC"
