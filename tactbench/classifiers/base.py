@@ -24,7 +24,7 @@ Labels are ``0 .. K-1``; ``K`` comes from the ``classes`` option, else from
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Iterator, Sequence
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
@@ -157,13 +157,6 @@ class SequenceClassifier:
             raise InputError(f"frames of shape {tuple(shape)} do not match the trained "
                              f"frame shape {self.frame_shape}")
         return x
-
-    @staticmethod
-    def _chunks(x: Windows | np.ndarray, size: int) -> Iterator[np.ndarray]:
-        n = len(x)
-        for lo in range(0, n, size):
-            hi = min(n, lo + size)
-            yield x.batch(slice(lo, hi)) if isinstance(x, Windows) else x[lo:hi]
 
     # -- the public interface ----------------------------------------------------------
 
