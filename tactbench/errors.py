@@ -50,6 +50,12 @@ class ComponentLoadError(TactbenchError):
 # ----------------------------------------------------------------------------- checks
 
 
+def is_finite_number(value: Any) -> bool:
+    """Whether ``value`` is a finite int or float (a bool is not a number here)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+
+
 def check_positive_int(value: Any, name: str, *, minimum: int = 1,
                        maximum: int | None = None) -> int:
     """``value`` as an ``int`` in [``minimum``, ``maximum``]; bools, floats with a

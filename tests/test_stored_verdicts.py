@@ -25,7 +25,8 @@ FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "
 
 def _recompute(path: Path) -> tuple[dict, list]:
     from tactbench.runner.execution.results import ResultStore, latest_scene
-    from tactbench.runner.presentation.writers import make_report, sequential_design
+    from tactbench.runner.execution.scene import design_of
+    from tactbench.runner.presentation.writers import make_report
 
     doc = json.loads(path.read_text())
     rows = ResultStore(path.parent).stored_rows()
@@ -34,7 +35,7 @@ def _recompute(path: Path) -> tuple[dict, list]:
     # the primary family and (for a run --until answered) the looks its verdicts rest on
     primary = stats.get("primary", [])
     report = make_report(rows, contrasts=stats["contrasts"], margin=stats["margin"],
-                         primary=primary, sequential=sequential_design(latest_scene(rows)))
+                         primary=primary, sequential=design_of(latest_scene(rows)))
     return doc, report.comparisons
 
 

@@ -11,7 +11,16 @@ import click
 from tactbench.cli import get_registry, json_text
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
 from tactbench.runner import Report, Scene, load_scene_file, run, run_until
-from tactbench.runner.execution.scene import parse_duration, parse_lengths, parse_seeds, show_duration
+from tactbench.runner.execution.scene import (
+    DEFAULT_PRIMARY,
+    EXECUTORS,
+    FIRST_LOOK,
+    INPUT_KINDS,
+    UNTIL,
+    parse_lengths,
+    parse_seeds,
+    show_duration,
+)
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.presentation.tables import answer_text, print_comparisons, print_table
 from tactbench.runner.presentation.writers import run_labels
@@ -127,7 +136,7 @@ SCENE_OPTIONS = [
     scene_option("--threads", field="threads", type=int,
                  help="torch threads per cell (part of a cell's identity: another count "
                       "gives other numbers)."),
-    scene_option("--executor", field="executor", type=click.Choice(["local", "dask"]),
+    scene_option("--executor", field="executor", type=click.Choice(EXECUTORS),
                  help="Where cells run: this machine, or a dask cluster."),
     scene_option("--workers", field="workers", type=int, none="this machine's cores / --threads",
                  help="Cells at once (processes)."),
@@ -147,7 +156,7 @@ SCENE_OPTIONS = [
                  help="Also compare two cells differing in several factors, paired over "
                       "runs, repeatable: --contrast encoder=raw,L=6..encoder=farneback,L=3 "
                       "(B − A; factors encoder, classifier, L)."),
-    scene_option("--input", "input_kind", field="input", type=click.Choice(["images", "vectors"]),
+    scene_option("--input", "input_kind", field="input", type=click.Choice(INPUT_KINDS),
                  none="images where the dataset has a layout",
                  help="What a classifier taking either input is fed (part of its cells' "
                       "identity)."),
@@ -156,13 +165,13 @@ SCENE_OPTIONS = [
                  help="Initialisation seeds varied apart from the split seeds (--seed), "
                       "repeatable or a range; report.md then splits the variance."),
     scene_option("--primary", "primary", field="primary", multiple=True, metavar="A..B",
-                 none="encoder=raw..encoder=farneback where the grid has both",
+                 none=f"{DEFAULT_PRIMARY} where the grid has both",
                  help="A confirmatory comparison (contrast syntax), repeatable: the primary "
                       "questions form their own family (Holm) and lead the report; the "
                       "other comparisons are exploratory."),
-    scene_option("--until", field="until", type=click.Choice(["answered"]),
+    scene_option("--until", field="until", type=click.Choice(UNTIL),
                  none="the seeds given, once",
-                 help="answered: run the seeds in batches (the first look after 5 runs) "
+                 help=f"answered: run the seeds in batches (the first look after {FIRST_LOOK} runs) "
                       "until every primary question is better, worse, equivalent within "
                       "--margin, or futile, with α spent over the looks."),
     scene_option("--max-runs", field="max_runs", type=int,
@@ -218,8 +227,8 @@ def run_cmd(ctx: click.Context, scene_file: str | None, as_json: bool, no_plots:
     the failed cells.
     """
     scene = scene_from(ctx, scene_file, options)
-    if scene.budget:  # echoed back as read: "1h30m" is 1 h 30 min
-        click.echo(f"budget: {show_duration(parse_duration(scene.budget))} (no batch of "
+    if scene.design.budget_seconds is not None:  # echoed as read: "1h30m" is 1 h 30 min
+        click.echo(f"budget: {show_duration(scene.design.budget_seconds)} (no batch of "
                    f"runs begun that would end past it)", err=True)
     if scene.until:
         report = run_until(scene, registry=get_registry(), plots=not no_plots,

@@ -1,9 +1,12 @@
 """``run(scene)``: plan, encode what is missing, run the unfinished cells, report;
-``render_folder(out)``: the report of a finished folder again, from its cells alone.
+``run_until(scene)``: the same in batches of runs until the primary questions are
+answered; ``render_folder(out)``: the report of a finished folder again, from its cells.
 
-This module only orchestrates; each step lives in its own module (scene, plan, cache,
-cell, executors, store, writers, system). Both functions end the same way: every sound
-row of ``OUT/cells`` (the one store of a run folder) → :func:`make_report` →
+This module composes the runner's three rooms and does nothing else: execution
+(:mod:`tactbench.runner.execution`: plan, cache, cells, the store of rows), analysis
+(:mod:`tactbench.runner.analysis`: the looks of a sequential run) and presentation
+(:mod:`tactbench.runner.presentation`: the report). Every function ends the same way:
+every sound row of ``OUT/cells`` (the one store of a run folder) → :func:`make_report` →
 :func:`write_report`, so a run's report and a re-rendered one are the same files.
 """
 
@@ -23,7 +26,7 @@ from tactbench.integrity import path_kind
 from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.plugins import load_registry
-from tactbench.runner.analysis.answering import first_look_to_run, schedule
+from tactbench.runner.analysis.answering import History, first_look_to_run
 from tactbench.runner.execution.cache import EncodingCache, ensure_encodings
 from tactbench.runner.execution.cell import make_jobs, model_problem
 from tactbench.runner.execution.estimate import packed
@@ -36,12 +39,18 @@ from tactbench.runner.execution.planning import (
     row_key_problem,
     with_dataset,
 )
-from tactbench.runner.execution.results import ResultStore, command_line, latest_scene, ok_rows
-from tactbench.runner.execution.scene import Scene, parse_duration, primary_of
+from tactbench.runner.execution.results import (
+    OUT_FILES,
+    ResultStore,
+    command_line,
+    is_run_output,
+    latest_scene,
+    ok_rows,
+)
+from tactbench.runner.execution.scene import Scene, design_of
 from tactbench.runner.execution.questions import check_contrasts
 from tactbench.runner.execution.system import MemoryTracker
-from tactbench.runner.presentation.writers import Report, make_report, sequential_design, write_report
-from tactbench.runner.execution.results import OUT_FILES, is_run_output
+from tactbench.runner.presentation.writers import Report, make_report, write_report
 from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner")
@@ -76,7 +85,8 @@ def _pending(p: Plan, store: ResultStore, models: Path | None, progress) -> list
 
 def run(scene: Scene, *, registry=None, progress: bool = True,
         cache: EncodingCache | None = None, plots: bool = True,
-        on_row: Callable[[dict[str, Any]], None] | None = None) -> Report:
+        on_row: Callable[[dict[str, Any]], None] | None = None,
+        resume: History | None = None) -> Report:
     """Run ``scene``: plan, encode what is missing, run unfinished cells, then write the
     folder's report (results.json, results.csv, report.md and, with ``plots``, the
     figures) from every row of ``OUT/cells`` and return it, with ``computed``,
@@ -85,7 +95,9 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     ``registry`` (default: every installed plugin) is used for planning and by every
     cell, in every executor. A cell that raises is stored as a failed row and the others
     go on; ``on_row(row)`` is called with each row as it is stored, and so is every
-    plugin's ``cell_finished`` hook (:mod:`tactbench.hookspecs`).
+    plugin's ``cell_finished`` hook (:mod:`tactbench.hookspecs`). ``resume``: the
+    ``history`` of this run's previous look (:func:`run_until`), whose looks the report
+    does not compute again.
     """
     start = time.perf_counter()
     cache = cache or EncodingCache()  # an unusable cache folder: before any work
@@ -124,10 +136,10 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     claim.unlink(missing_ok=True)
     report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
                          margin=scene.margin,
-                         users=list(p.dataset.users) if p.run_dataset is None else None,
+                         users=known_users(p.dataset.users) if p.run_dataset is None else None,
                          rendered="at the end of the run, from the rows of cells/",
-                         primary=scene.resolved_primary(),
-                         sequential=sequential_design(asdict(scene)))
+                         primary=scene.design.primary, sequential=scene.design,
+                         resume=resume)
     write_report(scene.out, report, plots=plots)
     report.computed, report.skipped = len(pending), len(identities) - len(pending)
     report.seconds = time.perf_counter() - start
@@ -181,14 +193,14 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     scene = latest_scene(rows)
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin
-    primary = (primary_of(scene.get("primary"), scene.get("encoders") or ())
-               if primary is None else list(primary))
+    design = design_of(scene)
+    primary = list(design.primary) if primary is None else list(primary)
     check_contrasts([*contrasts, *primary], [{"encoder": r["encoder"], "classifier": r["classifier"],
                                  "L": r["L"]} for r in rows])
     users, missing = dataset_users(rows, registry)
     how = "re-rendered from the stored rows of cells/ (nothing trained)"
     report = make_report(rows, contrasts=contrasts, margin=margin, users=users,
-                         primary=primary, sequential=sequential_design(scene),
+                         primary=primary, sequential=design,
                          rendered=how + (f"; per-user results left out: {missing}"
                                          if missing else ""))
     if write:
@@ -234,7 +246,14 @@ def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
                     "on (content hash %s, the rows' %s); the report leaves out per-user "
                     "results", spec, data.content_hash()[:16], digest[:16])
         return None, f"dataset `{spec}` here is not the rows' (another content hash)"
-    return list(data.users), None
+    users = known_users(data.users)
+    return (users, None) if users is not None else (None, "the dataset has no user ids")
+
+
+def known_users(users: Sequence[str]) -> list[str] | None:
+    """The user of every sample, or None where the dataset names no user (recordings
+    without user ids: a per-user table would show one user, "")."""
+    return list(users) if any(users) else None
 
 
 def next_batch_seconds(rows: Sequence[dict[str, Any]], seeds: int, workers: int) -> float:
@@ -253,7 +272,7 @@ def next_batch_seconds(rows: Sequence[dict[str, Any]], seeds: int, workers: int)
 def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True,
               on_look=None, on_row=None):
     """Run ``scene`` (with ``until="answered"``) look by look: the first
-    :data:`FIRST_LOOK` seeds of :meth:`~tactbench.runner.execution.scene.Scene.seed_order`, then
+    :data:`FIRST_LOOK` seeds of the scene's seed order (:attr:`Scene.design`), then
     ``look_every`` more each time, each batch an ordinary :func:`run` (resumable: cells
     already stored are reused, any executor), until every primary comparison is decided,
     ``max_runs`` is reached, or the next batch would start past ``budget``. Returns the
@@ -262,16 +281,16 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     plugin's ``look_finished`` hook; ``on_row``: see :func:`run`. Ctrl-C between cells
     keeps every finished cell."""
     registry = registry or load_registry()
-    order = scene.seed_order()
-    looks = schedule(scene.max_runs, scene.look_every)
-    budget = parse_duration(scene.budget) if scene.budget else None
+    design = scene.design  # the seed order, the looks and the budget: decided once
+    order, looks, budget = design.seed_order, design.looks, design.budget_seconds
     stored = {int(r["seed"]) for r in ResultStore(scene.out).stored_rows()}
     start = time.perf_counter()
     report = None
     for k in range(first_look_to_run(stored, order, looks), len(looks)):
         t0 = time.perf_counter()
-        report = run(dataclasses.replace(scene, seeds=order[:looks[k]]), registry=registry,
-                     progress=progress, plots=plots, on_row=on_row)
+        report = run(dataclasses.replace(scene, seeds=list(order[:looks[k]])),
+                     registry=registry, progress=progress, plots=plots, on_row=on_row,
+                     resume=report.history if report is not None else None)
         if on_look is not None:
             on_look(report)
         registry.notify("look_finished", report=report, out=Path(scene.out))
@@ -283,7 +302,7 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
             batch = max(batch, next_batch_seconds(report.ok, looks[k + 1] - looks[k],
                                                   scene.resolved_workers()))
         if budget is not None and k + 1 < len(looks) and elapsed + batch > budget:
-            report.budget_stop = (f"the budget of {scene.budget}: {elapsed / 60:.1f} min "
+            report.budget_stop = (f"the budget of {design.budget}: {elapsed / 60:.1f} min "
                                   f"spent, the next batch would take about "
                                   f"{batch / 60:.1f} more")
             break

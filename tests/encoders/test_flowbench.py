@@ -75,9 +75,12 @@ def test_errors():
     assert fb.angular_error(np.array([[[1.0, 0.0]]]), truth)[0, 0] == pytest.approx(45.0)
 
 
-def test_pareto_front():
+def test_pareto_front_of_time_against_error():
+    """(time, error), both lower better: the front as the benchmark asks it, error negated."""
+    from tactbench.pareto import pareto_front
+
     points = [(1.0, 5.0), (2.0, 1.0), (3.0, 3.0), (1.0, 6.0), (10.0, 0.5)]
-    assert fb.pareto_front(points) == [True, True, False, False, True]
+    assert pareto_front([(t, -e) for t, e in points]) == [0, 1, 4]
 
 
 def test_run_ranks_a_real_method_above_a_blind_one(tmp_path):

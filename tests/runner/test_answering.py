@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from tactbench.errors import InputError
-from tactbench.runner.analysis.answering import replay, schedule
+from tactbench.runner.analysis.answering import replay
+from tactbench.runner.execution.scene import Design, Scene, design_of, schedule
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 PRIMARY = ["encoder=raw..encoder=farneback"]
@@ -33,8 +36,45 @@ def _rows(seeds, gain, n=400, rng_seed=0):
 def test_schedule_starts_at_five_runs_and_ends_at_the_maximum():
     assert schedule(20, 5) == [5, 10, 15, 20]
     assert schedule(12, 5) == [5, 10, 12]
-    with pytest.raises(InputError, match="max-runs"):
-        schedule(3, 5)
+    with pytest.raises(InputError, match="max-runs"):  # the scene refuses it, once
+        Scene(until="answered", max_runs=3)
+
+
+def test_a_scene_is_resolved_once_into_its_design():
+    """The primary questions, the seed order, the looks and the budget are decided in
+    one place; a folder's stored scene gives the same design, no Scene built again."""
+    scene = Scene(seeds=[3, 0], until="answered", max_runs=12, look_every=4, budget="1h30m")
+    d = scene.design
+    assert d is scene.design  # computed once
+    assert d.seed_order == (3, 0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13)
+    assert d.looks == (5, 9, 12) and d.max_runs == 12
+    assert d.primary == ("encoder=raw..encoder=farneback",)
+    assert d.budget == "1h30m" and d.budget_seconds == 5400
+    assert design_of(dataclasses.asdict(scene)) == d
+    old = {k: v for k, v in dataclasses.asdict(scene).items() if k != "look_every"}
+    assert design_of(old).looks == (5, 10, 12)  # a field older rows lack: its default
+    plain = Scene(seeds=[2, 1], encoders=["raw"])
+    assert plain.design.looks == () and plain.design.seed_order == (2, 1)
+    assert plain.design.primary == () and plain.design.budget_seconds is None
+
+
+def test_a_look_goes_on_from_the_earlier_looks_without_computing_them_again(monkeypatch):
+    """Resumed from an earlier history, replay computes only the new look's comparisons:
+    the work of a look does not grow with the looks before it; the result is the same."""
+    from tactbench.runner.analysis import answering
+
+    rows = _rows(range(10), 0.0)
+    looks = schedule(20, 5)
+    first = replay(rows[:10], seed_order=list(range(20)), looks=looks, primary=PRIMARY)
+    calls = []
+    real = answering.comparisons
+    monkeypatch.setattr(answering, "comparisons",
+                        lambda subset, **kw: calls.append(len(subset)) or real(subset, **kw))
+    again = replay(rows, seed_order=list(range(20)), looks=looks, primary=PRIMARY,
+                   resume=first)
+    whole = replay(rows, seed_order=list(range(20)), looks=looks, primary=PRIMARY)
+    assert calls[:1] == [20] and len(calls) == 1 + 2  # resumed: look 2 only; whole: 1, 2
+    assert again.as_dict() == whole.as_dict() and len(first.seen) == 1
 
 
 def test_a_clear_gain_is_answered_at_the_first_look():
@@ -57,9 +97,11 @@ def test_looks_wait_for_their_runs_and_say_why_they_stopped():
     assert "of 20 runs" in h.stopped_because() or h.answered
 
 
-def test_no_primary_is_a_clear_error():
-    with pytest.raises(InputError, match="--primary"):
-        replay(_rows(range(5), 0.1), seed_order=list(range(5)), looks=[5], primary=[])
+def test_without_a_primary_question_there_is_no_look():
+    h = replay(_rows(range(5), 0.1), seed_order=list(range(5)), looks=[5], primary=[])
+    assert h.seen == [] and not h.answered
+    with pytest.raises(InputError, match="--primary"):  # the scene refuses --until alone
+        Scene(encoders=["raw"], until="answered")
 
 
 def test_runs_stored_beyond_the_last_look_are_said_beside_the_looks():
@@ -70,7 +112,8 @@ def test_runs_stored_beyond_the_last_look_are_said_beside_the_looks():
     from tactbench.runner.presentation.writers import make_report
 
     rows = _rows(range(8), 0.2)
-    sequential = {"seed_order": list(range(20)), "looks": schedule(20, 5), "budget": None}
+    sequential = Design(primary=tuple(PRIMARY), seed_order=tuple(range(20)),
+                        looks=tuple(schedule(20, 5)))
     report = make_report(rows, primary=PRIMARY, sequential=sequential)
     assert report.looks["runs_stored"] == 8 and report.looks["looks"][-1]["runs"] == 5
     text = looks_markdown(report.looks)

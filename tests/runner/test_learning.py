@@ -120,6 +120,7 @@ def test_a_comparison_without_verdict_leaves_the_family_as_it_was():
 
 def test_a_look_closes_a_question_at_chance_without_passing_its_alpha():
     from tactbench.runner.analysis.answering import replay
+    from tactbench.runner.execution.scene import Design
     from tactbench.runner.presentation.writers import make_report
 
     rows = _rows(flag={("raw", 0): DID_NOT_LEARN}, seeds=range(5))
@@ -130,7 +131,8 @@ def test_a_look_closes_a_question_at_chance_without_passing_its_alpha():
     assert h.answered and "a model did not learn" in h.stopped_because()
     assert h.state.shares[name] == pytest.approx(0.05)  # kept, passed to no one
     report = make_report(rows, primary=["encoder=raw..encoder=farneback"],
-                         sequential={"seed_order": list(range(5)), "looks": [5]})
+                         sequential=Design(primary=("encoder=raw..encoder=farneback",),
+                                           seed_order=tuple(range(5)), looks=(5,)))
     [c] = report.comparisons
     assert c.verdict == NOT_LEARNED and c.note.startswith("no verdict rests on a model")
 

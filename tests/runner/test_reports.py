@@ -399,7 +399,7 @@ def _grid(seeds=(0, 1, 2), lengths=(3, 5)):
 
 
 def test_pareto_front_by_hand():
-    from tactbench.runner.presentation.plots import pareto_front
+    from tactbench.pareto import pareto_front
 
     points = [(1.0, 0.8),  # 0: front
               (2.0, 0.9),  # 1: front

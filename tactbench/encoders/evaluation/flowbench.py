@@ -48,6 +48,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from tactbench.pareto import pareto_front
 from tactbench.encoders.flow import is_flow_encoder
 from tactbench.errors import InputError
 from tactbench.paths import atomic_write_bytes, atomic_write_text
@@ -365,16 +366,6 @@ def evaluate(encoder: Any, scenes: Iterable[FlowScene]) -> list[dict[str, Any]]:
     return rows
 
 
-def pareto_front(points: Sequence[tuple[float, float]]) -> list[bool]:
-    """Which ``(time, error)`` points no other point beats on both (lower is better)."""
-    flags = []
-    for i, (t, e) in enumerate(points):
-        dominated = any((t2 <= t and e2 <= e) and (t2 < t or e2 < e)
-                        for j, (t2, e2) in enumerate(points) if j != i)
-        flags.append(not dominated)
-    return flags
-
-
 def resolution_label(shape: tuple[int, int]) -> str:
     return f"{shape[0]}x{shape[1]}"
 
@@ -419,7 +410,8 @@ def run_flowbench(encoders: Sequence[tuple[str, Any]],
                 else float("nan"),
                 per_motion=per_motion, scenes=rows))
             done += 1
-        for res, flag in zip(group, pareto_front([(r.ms_per_pair, r.epe) for r in group])):
+        front = set(pareto_front([(r.ms_per_pair, -r.epe) for r in group]))
+        for res, flag in zip(group, (i in front for i in range(len(group)))):
             res.pareto = flag
         results.extend(group)
     if progress:

@@ -13,25 +13,15 @@ cannot drift from its evidence. The decisions follow :mod:`tactbench.runner.anal
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 from tactbench.errors import InputError
 from tactbench.runner.analysis.comparisons import Comparison, comparisons
 from tactbench.runner.execution.results import ok_rows
-from tactbench.runner.execution.scene import FIRST_LOOK
-from tactbench.runner.analysis.sequential import FamilyState, Look, family_look
+from tactbench.runner.analysis.sequential import FUTILE, FamilyState, Look, family_look
 from tactbench.runner.analysis.statistics import NOT_LEARNED
-
-
-def schedule(max_runs: int, batch: int, first: int = FIRST_LOOK) -> list[int]:
-    """The run counts of the looks: ``first``, ``first + batch``, … up to ``max_runs``
-    (which is always the last)."""
-    for value, name, low in ((max_runs, "max-runs", first), (batch, "batch", 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise InputError(f"--{name} must be a whole number ≥ {low}, got {value!r}")
-    looks = list(range(first, max_runs, batch))
-    return [*looks, max_runs]
 
 
 def comparison_name(c: Comparison) -> str:
@@ -63,7 +53,7 @@ class History:
                     f"every primary cell")
         if self.answered:
             closed = [lk.decision for lk in self.state.closed.values()]
-            futile, unlearned = closed.count("futile"), closed.count(NOT_LEARNED)
+            futile, unlearned = closed.count(FUTILE), closed.count(NOT_LEARNED)
             if not futile and not unlearned:
                 return "every primary question is answered"
             return ", ".join(
@@ -87,36 +77,45 @@ class History:
 
 def replay(rows: Sequence[dict[str, Any]], *, seed_order: Sequence[int],
            looks: Sequence[int], primary: Sequence[str], margin: float | None = None,
-           alpha: float = 0.05) -> History:
+           alpha: float = 0.05, resume: History | None = None) -> History:
     """Every look the rows allow: at look k, the comparisons of the rows of the first
     ``looks[k]`` seeds of ``seed_order``; a look is made only when every one of those
     seeds has a row of each primary cell. ``primary``: the contrasts naming the
-    confirmatory comparisons."""
-    if not primary:
-        raise InputError("--until answered needs at least one --primary comparison")
+    confirmatory comparisons (none: no look). ``resume``: the history an earlier report
+    of the same run made (stored rows never change), so only the looks after its last
+    are computed: a look's work does not grow with the looks before it."""
     rows = ok_rows(rows)
     history = History(list(looks), looks[-1])
-    for k, n in enumerate(looks):
-        seeds = set(seed_order[:n])
+    if resume is not None and list(resume.looks) == list(looks):
+        history.seen, history.state = list(resume.seen), copy.deepcopy(resume.state)
+    for k in range(len(history.seen), len(looks) if primary else 0):
+        if history.answered:
+            break
+        seeds = set(seed_order[:looks[k]])
         subset = [r for r in rows if int(r["seed"]) in seeds]
         prim = [c for c in comparisons(subset, primary=primary, margin=margin,
                                        confidence=1 - alpha) if c.family == "primary"]
-        if not prim or any(c.runs < n for c in prim):
+        if not prim or any(c.runs < looks[k] for c in prim):
             break  # this look's runs are not all there yet
-        diffs = {comparison_name(c): list(c.per_run.values()) for c in prim}
-        if history.state is None:
-            history.state = FamilyState(alpha, list(diffs))
-        open_now = [name for name in history.state.names if name not in history.state.closed]
-        ratios = {comparison_name(c): c.run_ratio for c in prim}
-        seen = family_look(history.state, {n_: diffs[n_] for n_ in open_now},
-                           {n_: ratios[n_] for n_ in open_now}, looks=looks[:k + 1],
-                           max_runs=looks[-1], margin=None if margin is None else margin / 100,
-                           not_learned={comparison_name(c): c.note for c in prim
-                                        if c.verdict == NOT_LEARNED})
-        history.seen.append(seen)
-        if history.answered:
-            break
+        history.seen.append(_look(history, prim, looks[:k + 1], margin, alpha))
     return history
+
+
+def _look(history: History, prim: Sequence[Comparison], looks: Sequence[int],
+          margin: float | None, alpha: float) -> dict[str, Look]:
+    """One look of the open primary comparisons ``prim`` (the family's state, made at
+    the first look, carried on in ``history``)."""
+    diffs = {comparison_name(c): list(c.per_run.values()) for c in prim}
+    if history.state is None:
+        history.state = FamilyState(alpha, list(diffs))
+    open_now = [name for name in history.state.names if name not in history.state.closed]
+    ratios = {comparison_name(c): c.run_ratio for c in prim}
+    return family_look(history.state, {n: diffs[n] for n in open_now},
+                       {n: ratios[n] for n in open_now}, looks=list(looks),
+                       max_runs=history.max_runs,
+                       margin=None if margin is None else margin / 100,
+                       not_learned={comparison_name(c): c.note for c in prim
+                                    if c.verdict == NOT_LEARNED})
 
 
 def first_look_to_run(stored_seeds: set[int], seed_order: Sequence[int],

@@ -25,6 +25,7 @@ import numpy as np
 
 from tactbench.data.splits import DESIGN_FIELD
 from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.errors import is_finite_number as _finite
 from tactbench.runner.execution.results import INDEPENDENT_RUNS
 from tactbench.runner.analysis.pairing import (
     ClassGain,
@@ -221,10 +222,6 @@ ADDED_FIELDS: frozenset[str] = frozenset({
     "variance_components"})
 
 
-def _number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
 def _count(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool) and v >= 0
 
@@ -234,15 +231,15 @@ def _maybe(check):
 
 
 def _numbers_by_text(v: Any) -> bool:
-    return isinstance(v, Mapping) and all(isinstance(k, str) and _number(x)
+    return isinstance(v, Mapping) and all(isinstance(k, str) and _finite(x)
                                           for k, x in v.items())
 
 
 def _class_gains(v: Any) -> bool:
     keys = {f.name for f in fields(ClassGain)}
     return isinstance(v, Mapping) and all(
-        isinstance(g, Mapping) and set(g) == keys and _number(g["difference"])
-        and _count(g["runs"]) and _maybe(_number)(g["low"]) and _maybe(_number)(g["high"])
+        isinstance(g, Mapping) and set(g) == keys and _finite(g["difference"])
+        and _count(g["runs"]) and _maybe(_finite)(g["low"]) and _maybe(_finite)(g["high"])
         for g in v.values())
 
 
@@ -261,8 +258,8 @@ def _variance_components(v: Any) -> bool:
             "observed_var", "clipped", *parts}
     return isinstance(v, Mapping) and set(v) == keys and all(
         _count(v[k]) for k in ("split_seeds", "init_seeds")) and all(
-        _number(v[k]) for k in ("groups", "total_var", "observed_var")) and all(
-        (_maybe(_number) if k.endswith("_share") else _number)(v[k]) for k in parts) and \
+        _finite(v[k]) for k in ("groups", "total_var", "observed_var")) and all(
+        (_maybe(_finite) if k.endswith("_share") else _finite)(v[k]) for k in parts) and \
         v["test_sampling"] in TEST_SAMPLING and isinstance(v["clipped"], list) and \
         set(v["clipped"]) <= set(COMPONENTS)
 
@@ -272,16 +269,16 @@ _STORED_KIND = {
     **{k: lambda v: isinstance(v, str) for k in ("dataset", "split", "factor", "method",
                                                  "verdict", "note")},
     "family": lambda v: v in FAMILIES, "ceiling": lambda v: isinstance(v, bool),
-    **{k: _maybe(_number) for k in ("bayes_margin", "bayes_a_better", "bayes_equivalent",
+    **{k: _maybe(_finite) for k in ("bayes_margin", "bayes_a_better", "bayes_equivalent",
                                     "bayes_b_better", "detectable_effect",
                                     "test_sampling_share")},
-    "run_ratio": _number,
+    "run_ratio": _finite,
     "runs_for_power": _maybe(_count),
     "a": lambda v: isinstance(v, (str, int)), "b": lambda v: isinstance(v, (str, int)),
-    **{k: _number for k in ("difference", "low", "high", "confidence", "ratio",
+    **{k: _finite for k in ("difference", "low", "high", "confidence", "ratio",
                             "p_b_better", "permutation_p", "accuracy_a", "accuracy_b",
                             "runs_needed_half_width")},
-    **{k: _maybe(_number) for k in ("t_p", "p", "equivalence_margin", "equivalence_p",
+    **{k: _maybe(_finite) for k in ("t_p", "p", "equivalence_margin", "equivalence_p",
                                     "p_holm", "equivalence_p_holm")},
     **{k: _count for k in ("runs", "b_better_runs", "a_better_runs", "tied_runs", "a_only",
                            "b_only", "discordant_recordings", "test_recordings",
@@ -401,11 +398,11 @@ def _family(comps: list[Comparison], confidence: float) -> list[Comparison]:
         if c.verdict == NOT_LEARNED:  # set by compare_cells; its p stays in the family
             said, note = c.verdict, c.note
         out.append(replace(c, p_holm=p_holm, equivalence_p_holm=eq_holm, family_size=size,
-                           verdict=said, note=note, **_planning(c, alpha / max(1, size))))
+                           verdict=said, note=note, **_runs_and_effect(c, alpha / max(1, size))))
     return out
 
 
-def _planning(c: Comparison, level: float) -> dict[str, Any]:
+def _runs_and_effect(c: Comparison, level: float) -> dict[str, Any]:
     """``runs_for_power`` and ``detectable_effect`` of one comparison at ``level``, from
     the spread of its per-run differences (None with fewer than 2 runs or none)."""
     d = np.array(list(c.per_run.values()))

@@ -45,7 +45,6 @@ from tactbench.runner.execution.planning import (
     plan_runs,
     run_datasets,
 )
-from tactbench.runner.analysis.answering import schedule
 from tactbench.runner.analysis.power import (
     TARGET_POWER,
     detectable_effect,
@@ -135,7 +134,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     the first's (:func:`_other_runs`)."""
     registry = registry or load_registry()
     if scene.until:
-        scene = dataclasses.replace(scene, seeds=scene.seed_order())
+        scene = dataclasses.replace(scene, seeds=list(scene.design.seed_order))
     made: list[int] = []  # the dataset was made while planning: its load is not timed
 
     def making(done: int, total: int | None = None) -> None:
@@ -161,11 +160,11 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     ResultStore(scene.out).check_grid([c.key for c in p.cells + others if c.key],
                                       p.identities)
     cells = _cells(p.cells + others, pilot)
-    looks = schedule(scene.max_runs, scene.look_every) if scene.until else None
+    looks = list(scene.design.looks) or None
     wall = _walls(p, p.cells + others, cells, looks,
                   load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
-    primaries = scene.resolved_primary()
+    primaries = scene.design.primary
     level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
     return Forecast(
         cells=cells, seconds=sum(known) if known else None,
@@ -174,8 +173,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                     default=None),
         primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
                             len(p.dataset.labels), margin=scene.margin,
-                            looks=schedule(scene.max_runs, scene.look_every)
-                            if scene.until else None) for text in primaries],
+                            looks=looks) for text in primaries],
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
         runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
         workers=scene.resolved_workers())

@@ -44,10 +44,13 @@ from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.analysis.statistics import NOT_LEARNED
+from tactbench.runner.analysis.statistics import A_BETTER, B_BETTER, EQUIVALENT, NOT_LEARNED
 
 #: What :func:`look` may decide, and :data:`NOT_LEARNED` (:func:`family_look`).
-DECISIONS = ("B better", "A better", "equivalent", "futile", "continue", NOT_LEARNED)
+#: A look's own words: stop unanswered (no number of runs up to the maximum can decide),
+#: or go on to the next look.
+FUTILE, CONTINUE = "futile", "continue"
+DECISIONS = (B_BETTER, A_BETTER, EQUIVALENT, FUTILE, CONTINUE, NOT_LEARNED)
 #: The interval a futility check gives the benefit of the doubt (two-sided 95 %).
 FUTILITY_Z = 1.959964
 
@@ -220,14 +223,14 @@ def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: in
     z = mean / se if se > 0 else (0.0 if mean == 0 else math.copysign(math.inf, mean))
     code = int(_decide(mean, var, j, ratio, c, c_last, max_runs, margin))
     if code == _REACH:
-        return Look(j, mean, se, z, c, alpha, "futile", _out_of_reach(
+        return Look(j, mean, se, z, c, alpha, FUTILE, _out_of_reach(
             mean, se, math.sqrt((1 / max_runs + ratio) * var) * c_last, max_runs, margin))
-    decision = {_B: "B better", _A: "A better", _EQ: "equivalent", _GO: "continue"}
+    decision = {_B: B_BETTER, _A: A_BETTER, _EQ: EQUIVALENT, _GO: CONTINUE}
     why = {_LAST: "the last planned look",
            _FLAT: "every run gave the same difference, 0: nothing varies to test (a "
                   "ceiling, where both are right on every recording), and more runs like "
                   "these add nothing"}
-    return Look(j, mean, se, z, c, alpha, decision.get(code, "futile"), why.get(code, ""))
+    return Look(j, mean, se, z, c, alpha, decision.get(code, FUTILE), why.get(code, ""))
 
 
 def _out_of_reach(mean: float, se: float, needed: float, max_runs: int,
@@ -349,7 +352,7 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
             if name in not_learned:
                 res = replace(res, decision=NOT_LEARNED, why=not_learned[name])
             out[name] = res
-            if res.decision in ("B better", "A better"):
+            if res.decision in (B_BETTER, A_BETTER):
                 state.closed[name] = res
                 rest = [n for n in open_now if n != name]
                 for n in rest:
@@ -357,6 +360,6 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
                 changed = bool(rest)
                 break
     for name, res in out.items():
-        if name not in state.closed and res.decision in ("equivalent", "futile", NOT_LEARNED):
+        if name not in state.closed and res.decision in (EQUIVALENT, FUTILE, NOT_LEARNED):
             state.closed[name] = res
     return out

@@ -266,8 +266,13 @@ def runs_needed(sd: float | None, ratio: float, half_width: float, *,
 #: The verdict of a comparison a run of either cell did not learn or transfer in
 #: (:mod:`tactbench.runner.execution.learning`): no verdict rests on a model at chance.
 NOT_LEARNED = "not learned"
+#: The verdicts of a comparison (B − A): the words every table, note and decision uses.
+B_BETTER, A_BETTER, EQUIVALENT = "B better", "A better", "equivalent"
+UNRESOLVED, TOO_FEW_RUNS = "unresolved", "too few runs"
+#: The verdicts that answer a question.
+DECIDED = (B_BETTER, A_BETTER, EQUIVALENT)
 #: What :func:`verdict` may return, and :data:`NOT_LEARNED`.
-VERDICTS = ("B better", "A better", "equivalent", "unresolved", "too few runs", NOT_LEARNED)
+VERDICTS = (*DECIDED, UNRESOLVED, TOO_FEW_RUNS, NOT_LEARNED)
 
 
 def verdict(low: float, high: float, p_adjusted: float, runs: int, *,
@@ -285,20 +290,20 @@ def verdict(low: float, high: float, p_adjusted: float, runs: int, *,
     - else "unresolved".
     """
     if runs < MIN_RUNS:
-        return "too few runs", (f"{runs} run(s): no verdict below {MIN_RUNS} (one model "
+        return TOO_FEW_RUNS, (f"{runs} run(s): no verdict below {MIN_RUNS} (one model "
                                 "pair says nothing about the training procedure)")
     if discordant_recordings is not None and discordant_recordings < MIN_DISCORDANT_RECORDINGS:
-        return "unresolved", (f"the cells disagree on {discordant_recordings} distinct test "
+        return UNRESOLVED, (f"the cells disagree on {discordant_recordings} distinct test "
                               f"recording(s): no verdict below {MIN_DISCORDANT_RECORDINGS}")
     if p_adjusted < alpha and low > ZERO_TOLERANCE:
-        return "B better", ""
+        return B_BETTER, ""
     if p_adjusted < alpha and high < -ZERO_TOLERANCE:
-        return "A better", ""
+        return A_BETTER, ""
     if equivalence_p_adjusted is not None and equivalence_p_adjusted < alpha:
-        return "equivalent", ""
+        return EQUIVALENT, ""
     if p_adjusted < alpha:
-        return "unresolved", "the interval touches 0"
-    return "unresolved", ""
+        return UNRESOLVED, "the interval touches 0"
+    return UNRESOLVED, ""
 
 
 def mcnemar_p(correct_a: Any, correct_b: Any) -> float:

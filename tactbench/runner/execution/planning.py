@@ -135,7 +135,7 @@ def _canonical(spec: str, extra: dict[str, Any] | None = None) -> tuple[str, dic
 
 def _check_statistics(scene: Scene) -> None:
     """The contrasts' syntax (see docs/statistics.md); the scene checked the rest."""
-    for text in [*(scene.contrasts or ()), *scene.resolved_primary()]:
+    for text in [*(scene.contrasts or ()), *scene.design.primary]:
         parse_contrast(text)
 
 
@@ -465,7 +465,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
                     cells.append(Cell(enc, clf, int(length), int(seed), key,
                                       None if init is None else int(init)))
                     identities[key] = identity
-    named = [*(scene.contrasts or ()), *scene.resolved_primary()]
+    named = [*(scene.contrasts or ()), *scene.design.primary]
     if named:
         check_contrasts(named, [{"encoder": c.encoder, "classifier": c.classifier,
                                  "L": c.L} for c in cells])

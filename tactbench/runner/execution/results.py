@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import os
 import re
 import shlex
@@ -37,7 +36,7 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
-from tactbench.errors import CorruptArtefactError, InputError
+from tactbench.errors import CorruptArtefactError, InputError, is_finite_number
 from tactbench.integrity import hash_bytes, read_regular_bytes
 from tactbench.specs import POSITIONAL, parse_spec
 from tactbench.paths import (
@@ -91,11 +90,6 @@ def row_checksum(row: dict[str, Any]) -> str:
     return hash_bytes(json.dumps(body, sort_keys=True, separators=(",", ":")).encode())
 
 
-def _number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) \
-        and math.isfinite(value)
-
-
 def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str | None:
     """What is wrong with ``row`` as the row of cell ``key``, or None when nothing is."""
     if not isinstance(row, dict):
@@ -111,11 +105,11 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
         if row.get(field) is not None and not isinstance(row[field], str):
             return f"has a {field} that is not text"
     for field in COST_FIELDS:
-        if row.get(field) is not None and not _number(row[field]):
+        if row.get(field) is not None and not is_finite_number(row[field]):
             return f"has a {field} that is not a finite number"
     status = row.get("status", OK)
     if status == OK:
-        if not _number(row.get("accuracy")) or not 0.0 <= row["accuracy"] <= 1.0:
+        if not is_finite_number(row.get("accuracy")) or not 0.0 <= row["accuracy"] <= 1.0:
             return f"has no accuracy in [0, 1] (got {str(row.get('accuracy'))[:40]})"
         classes, confusion = row.get("classes"), row.get("confusion")
         if not isinstance(classes, list) or not all(isinstance(c, str) for c in classes):
@@ -128,7 +122,7 @@ def check_row(row: Any, key: str, identity: dict[str, Any] | None = None) -> str
             return f"has no {k} × {k} confusion matrix of counts"
         per_class = row.get("per_class_accuracy")
         if not isinstance(per_class, dict) or not all(
-                v is None or (_number(v) and 0.0 <= v <= 1.0) for v in per_class.values()):
+                v is None or (is_finite_number(v) and 0.0 <= v <= 1.0) for v in per_class.values()):
             return "has no per-class accuracy (a number in [0, 1] or null per class)"
         problem = _check_predictions(row.get("test_predictions"), k)
         if problem is not None:

@@ -29,7 +29,8 @@ import math
 import numbers
 import os
 import re
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -101,7 +102,7 @@ class Scene:
     input: str | None = None  # images or vectors; None: images where there is a layout
     init_seeds: list[int] | None = None
     # the confirmatory comparisons (contrasts "A..B"); None: raw..farneback where the grid
-    # has both (resolved_primary); and runs added until they are answered (docs/runner.md)
+    # has both (Scene.design); and runs added until they are answered (docs/runner.md)
     primary: list[str] | None = None
     until: str | None = None  # "answered": seeds in batches until the primaries are decided
     max_runs: int = 20  # with until: the most runs (seeds) planned
@@ -140,21 +141,11 @@ class Scene:
 
         return get_profile(self.profile).precision
 
-    def resolved_primary(self) -> list[str]:
-        """The primary comparisons: the scene's, else :data:`DEFAULT_PRIMARY` where the
-        grid has both of its encoders (the study's question), else none."""
-        return primary_of(self.primary, self.encoders)
-
-    def seed_order(self) -> list[int]:
-        """The seeds in the order runs are made: the scene's, and with ``until`` the next
-        unused whole numbers after them up to :attr:`max_runs`."""
-        seeds = list(self.seeds)
-        nxt = max(seeds) + 1
-        while self.until and len(seeds) < self.max_runs:
-            if nxt not in seeds:
-                seeds.append(nxt)
-            nxt += 1
-        return seeds[:self.max_runs] if self.until else seeds
+    @cached_property
+    def design(self) -> "Design":
+        """What this scene decides once, before any work (:class:`Design`): computed on
+        first use and kept; every look and report reads it."""
+        return design_of(self)
 
     def resolved_workers(self) -> int:
         """Cells at once: the scene's, else this machine's usable cores (one thread each
@@ -354,6 +345,57 @@ def check_fields(values: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+@dataclass(frozen=True)
+class Design:
+    """What a scene decides once, before any work, and every look and report reads.
+
+    ``primary``: the confirmatory questions (:func:`primary_of`); ``seed_order``: the
+    seeds in the order runs are made (the scene's and, with ``until``, the next unused
+    whole numbers up to ``max_runs``); ``looks``: the run counts of the looks
+    (:func:`schedule`; empty for a run that is not ``--until``); ``budget`` and
+    ``budget_seconds``: no batch begun past it (None: none). Made from a :class:`Scene`
+    (:attr:`Scene.design`) or from the scene a folder's rows store (:func:`design_of`),
+    never by building a scene again.
+    """
+
+    primary: tuple[str, ...]
+    seed_order: tuple[int, ...]
+    looks: tuple[int, ...] = ()
+    budget: str | None = None
+    budget_seconds: float | None = None
+
+    @property
+    def max_runs(self) -> int:
+        """The most runs the design makes: its last look's, else every seed's."""
+        return self.looks[-1] if self.looks else len(self.seed_order)
+
+
+def schedule(max_runs: int, look_every: int, first: int = FIRST_LOOK) -> list[int]:
+    """The run counts of the looks: ``first``, ``first + look_every``, … up to
+    ``max_runs`` (always the last); the scene checked both numbers."""
+    return [*range(first, max_runs, look_every), max_runs]
+
+
+def design_of(scene: "Scene | Mapping[str, Any]") -> Design:
+    """The :class:`Design` of a scene, or of its fields as a row stores them (a field
+    older rows lack takes the scene's default)."""
+    if isinstance(scene, Scene):
+        get = lambda name: getattr(scene, name)  # noqa: E731
+    else:
+        defaults = {f.name: f.default_factory() if f.default is MISSING else f.default
+                    for f in fields(Scene)}
+        get = lambda name: scene.get(name, defaults[name])  # noqa: E731
+    seeds, until, max_runs = [int(s) for s in get("seeds")], get("until"), get("max_runs")
+    nxt = max(seeds) + 1
+    while until and len(seeds) < max_runs:
+        seeds, nxt = seeds + [nxt] * (nxt not in seeds), nxt + 1
+    budget = get("budget") if until else None
+    return Design(primary=tuple(primary_of(get("primary"), get("encoders"))),
+                  seed_order=tuple(seeds[:max_runs] if until else seeds),
+                  looks=tuple(schedule(max_runs, get("look_every"))) if until else (),
+                  budget=budget, budget_seconds=parse_duration(budget) if budget else None)
+
+
 def _check_together(scene: Scene) -> None:
     """What a scene's fields need together, without the plugins, a dataset or the disk:
     a profile, precision, executor and input kind that exist, a split and a test window
@@ -374,7 +416,7 @@ def _check_together(scene: Scene) -> None:
             raise InputError(f"--max-runs must be from {FIRST_LOOK} (the first look) to "
                              f"{MAX_LENGTHS} (the most seeds a run takes), got "
                              f"{scene.max_runs}")
-        if not scene.resolved_primary():
+        if not primary_of(scene.primary, scene.encoders):
             raise InputError("--until answered needs a primary comparison: give --primary "
                              "A..B (the default, encoder=raw..encoder=farneback, needs both "
                              "encoders)")

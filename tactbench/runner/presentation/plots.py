@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
+from tactbench.pareto import pareto_front
 from tactbench.errors import InputError
 from tactbench.runner.execution.questions import spec_label, spec_labels
 
@@ -40,25 +41,6 @@ def accuracy_band(summary: dict[str, Any]) -> tuple[float, float, str] | None:
             and math.isfinite(std) and std > 0 and math.isfinite(mean)):
         return mean - std, mean + std, _BAND_STD
     return None
-
-
-def pareto_front(points: Sequence[tuple[float, float]]) -> list[int]:
-    """Indices of the ``(cost, accuracy)`` points no other point beats on both.
-
-    A point is beaten when another costs no more *and* scores no less, and is better in
-    one of the two (lower cost, higher accuracy). Equal points are all on the front;
-    points with a NaN are never on it. Ordered by cost, then index.
-    """
-    finite = [i for i, (c, a) in enumerate(points)
-              if not (math.isnan(float(c)) or math.isnan(float(a)))]
-    front = []
-    for i in finite:
-        ci, ai = points[i]
-        beaten = any(points[j][0] <= ci and points[j][1] >= ai
-                     and (points[j][0] < ci or points[j][1] > ai) for j in finite)
-        if not beaten:
-            front.append(i)
-    return sorted(front, key=lambda i: (points[i][0], i))
 
 
 def check_reference(reference: Iterable[dict[str, Any]] | None) -> list[dict[str, Any]]:
@@ -270,7 +252,7 @@ def plot_accuracy_vs_l(summaries: Sequence[dict[str, Any]], colour: dict[tuple, 
 def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tuple, str],
                           labels: Mapping[str, str] | None = None):
     """Accuracy against encode cost (log x), error bars from the band, the
-    :func:`pareto_front` as a step line with its members ringed."""
+    :func:`tactbench.pareto.pareto_front` as a step line with its members ringed."""
     import matplotlib.pyplot as plt
 
     labels = _labels(summaries, labels)

@@ -9,7 +9,8 @@ from typing import Any, Iterable, Mapping, Sequence
 from tactbench.runner.analysis.answering import beyond_looks
 from tactbench.runner.analysis.comparisons import P_RULE, Comparison, plain_t, read_comparisons
 from tactbench.runner.execution.learning import accuracy_mark, legend
-from tactbench.runner.analysis.statistics import MIN_RUNS, NOT_LEARNED
+from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
+                                                  MIN_RUNS, NOT_LEARNED, TOO_FEW_RUNS, UNRESOLVED)
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.execution.questions import FACTORS, short_name, spec_label, spec_labels
 
@@ -98,11 +99,11 @@ def comparison_header(comps: Comparisons) -> list[str]:
 def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
     """The verdict in words: ``farneback better``, ``equivalent within ±2``, ..."""
     [c] = read_comparisons([c])
-    if c.verdict == "B better":
+    if c.verdict == B_BETTER:
         return f"{_comparison_label(c, 'b', labels)} better"
-    if c.verdict == "A better":
+    if c.verdict == A_BETTER:
         return f"{_comparison_label(c, 'a', labels)} better"
-    if c.verdict == "equivalent":
+    if c.verdict == EQUIVALENT:
         return f"equivalent within ±{c.equivalence_margin:g}"
     return c.verdict
 
@@ -132,7 +133,7 @@ def _bayes(c: Comparison) -> str:
 
 def _power_runs(c: Comparison) -> str:
     """Runs for 80 % power at the observed difference, or why there is no number."""
-    if c.ceiling or c.verdict in ("B better", "A better", "equivalent", NOT_LEARNED):
+    if c.ceiling or c.verdict in (*DECIDED, NOT_LEARNED):
         return "-"
     if c.runs < MIN_RUNS or c.difference == 0:  # too few runs to judge the spread
         return "-"
@@ -539,7 +540,7 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
         detail += (f"; P(B better by > {c.bayes_margin:g}) = {c.bayes_b_better:.2f}, "
                    f"P(within ±{c.bayes_margin:g}) = {c.bayes_equivalent:.2f}")
     answer = verdict_text(c, labels) + (f" — {c.note}" if c.verdict == NOT_LEARNED else "")
-    if c.verdict in ("unresolved", "too few runs"):
+    if c.verdict in (UNRESOLVED, TOO_FEW_RUNS):
         more = _power_runs(c)
         if more == "beyond these data":
             answer += " — at this difference no number of runs of these data gives 80 % power"

@@ -16,7 +16,7 @@ import dataclasses
 import io
 import json
 import shlex
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -24,7 +24,7 @@ from typing import Any, Iterable, Sequence
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
-from tactbench.runner.analysis.answering import comparison_name, replay, schedule
+from tactbench.runner.analysis.answering import History, comparison_name, replay
 from tactbench.runner.analysis.comparisons import Comparison, comparisons
 from tactbench.runner.presentation.plots import caption, check_reference, write_plots
 from tactbench.runner.execution.results import (
@@ -35,8 +35,9 @@ from tactbench.runner.execution.results import (
     ok_rows,
     row_status,
 )
-from tactbench.runner.execution.scene import Scene
-from tactbench.runner.analysis.statistics import NOT_LEARNED
+from tactbench.runner.execution.scene import Design
+from tactbench.runner.analysis.sequential import FUTILE
+from tactbench.runner.analysis.statistics import DECIDED, NOT_LEARNED, UNRESOLVED
 from tactbench.runner.analysis.summaries import summarise, variance_decomposition
 from tactbench.runner.execution.questions import spec_labels
 from tactbench.runner.presentation.tables import (
@@ -77,6 +78,9 @@ class Report:
     rendered: dict[str, str]
     reference: list[dict[str, Any]] = field(default_factory=list)
     looks: dict[str, Any] | None = None  # a run --until answered: every look, replayed
+    # the looks as computed (answering.History), for the next look of the same run to go
+    # on from (make_report's ``resume``); not part of any file
+    history: Any = field(default=None, repr=False, compare=False)
     paths: dict[str, Path] = field(default_factory=dict)
     computed: int = 0  # cells run now (ok or failed); set by run()
     cpu_seconds: float | None = None  # set by run_until: this process and its workers
@@ -162,8 +166,8 @@ def make_report(rows: Sequence[dict[str, Any]], *,
                 reference: Iterable[dict[str, Any]] | None = None,
                 contrasts: Sequence[str] = (), margin: float | None = None,
                 users: Sequence[str] | None = None, rendered: str | None = None,
-                primary: Sequence[str] = (), sequential: dict[str, Any] | None = None
-                ) -> Report:
+                primary: Sequence[str] = (), sequential: Design | None = None,
+                resume: History | None = None) -> Report:
     """The :class:`Report` of ``rows`` (every row of a folder, ok and failed, in the
     scene's order: failed cells are listed and left out of summaries and plots).
 
@@ -172,24 +176,26 @@ def make_report(rows: Sequence[dict[str, Any]], *,
     ``primary`` (the contrasts of the confirmatory family): see
     :func:`tactbench.runner.analysis.comparisons.comparisons`; ``users``: the user of each
     dataset sample (by index), for per-user results; ``rendered``: how the report came
-    to be, said in report.md beside the command line and the time; ``sequential``
-    (``seed_order`` and ``looks``, from :func:`sequential_design`): the looks of a run
-    ``--until answered``, replayed from the rows
-    (:func:`tactbench.runner.analysis.answering.replay`).
+    to be, said in report.md beside the command line and the time; ``sequential``: the
+    :class:`~tactbench.runner.execution.scene.Design` of a run ``--until answered``, whose
+    looks are replayed from the rows (:func:`tactbench.runner.analysis.answering.replay`;
+    ``resume``: an earlier report's ``history`` of the same run, whose looks are not
+    computed again).
     """
     rows = list(rows)
     reference = check_reference(reference)
-    looks = None
-    if sequential and primary:
-        looks = replay(rows, seed_order=sequential["seed_order"], looks=sequential["looks"],
-                       primary=primary, margin=margin).as_dict()
-        looks["budget"] = sequential.get("budget")
+    looks = history = None
+    if sequential is not None and sequential.looks and primary:
+        history = replay(rows, seed_order=sequential.seed_order, looks=sequential.looks,
+                         primary=primary, margin=margin, resume=resume)
+        looks = history.as_dict()
+        looks["budget"] = sequential.budget
         looks["train_cpu_seconds"] = training_cpu_seconds(rows)
         looks["runs_stored"] = len({int(r["seed"]) for r in ok_rows(rows)})
     comps = comparisons(rows, contrasts=contrasts, margin=margin, users=users, primary=primary)
     if looks is not None:
         comps = [sequential_verdict(c, looks) if c.family == "primary" else c for c in comps]
-    return Report(looks=looks,
+    return Report(looks=looks, history=history,
         rows=rows, summaries=summarise(rows, users=users), comparisons=comps,
         variance=variance_decomposition(rows),
         statistics={"unit": "run (one split seed)", "contrasts": list(contrasts),
@@ -213,25 +219,14 @@ def sequential_verdict(c: Comparison, looks: dict[str, Any]) -> Comparison:
         return c
     runs, last = seen[-1]
     decided = (looks.get("decisions") or {}).get(name)
-    if decided in ("A better", "B better", "equivalent"):
+    if decided in DECIDED:
         return dataclasses.replace(c, verdict=decided, note=(
             f"group-sequential: decided at the look after {runs} runs, α spent over "
             f"{len(seen)} look(s)"))
     why = (f"futile after {runs} runs" + (f" ({last['why']})" if last.get("why") else "")
-           if last["decision"] == "futile"
+           if last["decision"] == FUTILE
            else f"no boundary crossed in {len(seen)} look(s) up to {runs} runs")
-    return dataclasses.replace(c, verdict="unresolved", note=f"group-sequential: {why}")
-
-
-def sequential_design(scene: dict[str, Any]) -> dict[str, Any] | None:
-    """``{"seed_order", "looks"}`` of a scene (its fields) run ``--until answered``;
-    None for any other."""
-    if not scene.get("until"):
-        return None
-    known = {f.name for f in fields(Scene)}
-    made = Scene(**{k: v for k, v in scene.items() if k in known})
-    return {"seed_order": made.seed_order(),
-            "looks": schedule(made.max_runs, made.look_every), "budget": made.budget}
+    return dataclasses.replace(c, verdict=UNRESOLVED, note=f"group-sequential: {why}")
 
 
 def training_cpu_seconds(rows: Iterable[dict[str, Any]]) -> float | None:
