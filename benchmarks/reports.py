@@ -46,7 +46,8 @@ from pathlib import Path
 from tactbench import machine as facts
 from tactbench.runner import render_folder
 from tactbench.runner.analysis.comparisons import Comparison, plain_t
-from tactbench.runner.analysis.statistics import VERDICTS
+from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
+                                                  TOO_FEW_RUNS, UNRESOLVED)
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.execution.questions import short_name
 from tactbench.runner.presentation.plots import check_reference
@@ -75,10 +76,6 @@ STUDY = {"raw_L5": (80.7, 0.4), "flow_L5": (89.1, 0.2),
          "class_gain": {"Grasp": 17.0, "Twist": 16.0, "Pull": 6.0}}
 #: The study's "flow at half the L beats pressure", as a paired contrast (B − A).
 HALF_L = "encoder=raw,L=6..encoder=farneback,L=3"
-#: The package's verdicts by name (:data:`tactbench.runner.analysis.statistics.VERDICTS`).
-B_BETTER, A_BETTER, EQUIVALENT, UNRESOLVED, TOO_FEW_RUNS, NOT_LEARNED = VERDICTS
-#: The verdicts that answer a comparison.
-DECIDED = (B_BETTER, A_BETTER, EQUIVALENT)
 SHORT_NOTE = ("The simulator was built to be a fair test of these methods, not to reproduce "
               "the study: a result on it says how methods compare on its dynamics, nothing "
               "about real skin. On real tactile gesture data held outside the project, flow "
