@@ -39,7 +39,7 @@ from tactbench.errors import BudgetError, InputError
 from tactbench.kernels import DEFAULT_KERNELS, kernels_identity, pin_cpu_kernels
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
-from tactbench.profiles import profile_options
+from tactbench.profiles import canonical_classifier
 from tactbench.budget import check_budget
 from tactbench.runner.execution.results import IDENTITY_DEFAULTS, INDEPENDENT_RUNS, ROW_MAX_BYTES
 from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
@@ -263,11 +263,8 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
     spec → windows per batch)``."""
     frame_ranks: dict[str, int | None] = {}
     batch_sizes: dict[str, int] = {}
-    for spec in dict.fromkeys(scene.classifiers):
-        spec = registry.resolve("classifier", spec)  # "sklearn:SVC" → estimator=SVC
-        name, _ = parse_spec(spec)
-        canonical, _ = _canonical(spec, profile_options(scene.profile, name,
-                                                        registry=registry))
+    for spec in dict.fromkeys(scene.classifiers):  # "sklearn:SVC" → estimator=SVC
+        canonical = canonical_classifier(spec, scene.profile, registry=registry)
         clf = registry.build("classifier", canonical)  # validates option names and values
         frame_ranks.setdefault(canonical, CLASSIFIER.get(clf, "frame_rank"))
         batch_sizes[canonical] = CLASSIFIER.get(clf, "batch_size")
