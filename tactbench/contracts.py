@@ -262,6 +262,34 @@ DATASET = Contract("dataset", (
            default=None),
 ))
 
+#: The designs a split declares (its ``design``): how its runs relate, and so which t
+#: a comparison of two cells' runs uses (docs/statistics.md, "Which t a split's design
+#: gets").
+SPLIT_DESIGNS = {
+    "resampled": "a random train/test split redrawn for every seed: the Nadeau–Bengio "
+                 "corrected t, with n_test/n_train",
+    "kfold": "K folds per run, each recording tested once (repeated over seeds): the "
+             "corrected repeated K-fold t, 1/(K − 1)",
+    "fixed": "the same train/test split every seed (runs differ by initialisation only): "
+             "the plain paired t over runs, about this one split",
+    "independent": "the test set of each run from data of its own, independent of the "
+                   "others': the plain paired t over runs",
+}
+
+
+def _design(value: Any) -> str | None:
+    if value is None or (isinstance(value, str) and value in SPLIT_DESIGNS):
+        return None
+    return f"must be one of {', '.join(SPLIT_DESIGNS)} (or None: undeclared), got {value!r}"
+
+
+def _group_key(value: Any) -> str | None:
+    if value is None or (isinstance(value, str) and value.isidentifier()):
+        return None
+    return f"must be the name of recording metadata ('user', 'position') or None, " \
+           f"got {value!r}"
+
+
 #: Splits: how a dataset's recordings become train/test pairs (docs/plugins.md).
 #: ``split`` returns one :class:`tactbench.data.splits.Split` per fold, numbered from 0,
 #: each with a group id for every test recording; the runner checks what it returns
@@ -271,6 +299,14 @@ SPLIT = Contract("split", (
            "folds 0, 1, ...; the same for the same data and seed"),
     Member("spec", False, "how cell identities and rows record this split ('users:folds=5'); "
            "'' means its name with its options sorted", default="", check=_spec),
+    Member("design", False, "how its runs relate, one of SPLIT_DESIGNS: 'resampled', "
+           "'kfold', 'fixed', 'independent'; it picks the t of every comparison (None: "
+           "undeclared, read as 'resampled', or 'kfold' where it returns several folds)",
+           default=None, check=_design),
+    Member("group_key", False, "the recording metadata ('user', 'position', ...) whose "
+           "values it keeps apart: no value in both the train and the test set of a fold, "
+           "checked on every draw (None: a split over recordings)", default=None,
+           check=_group_key),
 ))
 
 #: Test windows: which L-frame windows of a recording a classifier is trained and tested

@@ -234,6 +234,7 @@ def _builtin_specs(registry, kind, tmp_path):
         ("dataset", "cost"): {"path": str(tmp_path / "cost.csv")},
         ("dataset", "folder"): {"path": str(tmp_path)},
         ("split", "group"): {"key": "position"},
+        ("split", "sklearn"): {"splitter": "GroupKFold"},
     }
     for comp in registry.components(kind):
         if comp.plugin.startswith("tactbench."):

@@ -18,10 +18,13 @@ module              what it holds
 ``imaging``         ``Imager`` (imaging Φ: taxel values → images), ``image_shape``
 ``preview``         ``preview_strip``: one sample as a picture (``tactbench data preview``)
 ``splits``          what a split yields (``Split``: train/test indices, fold and group
-                    ids), the built-in designs (``paper``, ``users``, ``group``, ``kfold``)
+                    ids), the built-in designs (``paper``, ``users``, ``group``, ``kfold``),
+                    the checks of every draw (``draw_splits``: its design, its groups)
 ``windows``         windows of L frames for training and testing
 ``strategies``      the built-in splits and test windows as the small objects the hooks
                     ``register_splits`` and ``register_test_windows`` register (below)
+``sklearn_splits``  ``sklearn:NAME``: any scikit-learn splitter as a split (``GroupKFold``,
+                    ``LeaveOneGroupOut``, ...), its design following from the splitter
 ==================  ========================================================================
 
 Datasets themselves (the simulator, file formats, the generated forearm) are in
@@ -47,6 +50,11 @@ def register_splits(register):
     register("kfold", "tactbench.data.strategies:KFoldSplit",
              summary="kfold:folds=K: stratified K-fold over recordings, repeated over "
                      "seeds (each recording tested once per run)")
+    register("sklearn", "tactbench.data.sklearn_splits:SklearnSplit",
+             summary="sklearn:NAME[:options]: any scikit-learn splitter (GroupKFold, "
+                     "LeaveOneGroupOut, StratifiedKFold, ...), groups=KEY for the group "
+                     "ones (optional extra 'sklearn')",
+             requires=("sklearn",))
 
 
 @hookimpl

@@ -27,6 +27,14 @@ and seed and recomputed anywhere:
   once (every recording is tested once per run); a test recording's group is its own
   index.
 
+A split declares its *design* (``design``, one of
+:data:`~tactbench.contracts.SPLIT_DESIGNS`): ``resampled`` (``paper``, ``users``,
+``group:KEY``), ``kfold`` (every ``folds=K``, ``kfold``), ``fixed`` (``group:KEY:test=A|B``:
+the same split every seed) or ``independent``; each row records it
+(:data:`DESIGN_FIELD`), and the comparisons pick their t from it (docs/statistics.md). A
+split over groups names the metadata it keeps apart (``group_key``: ``user`` for
+``users``, ``KEY`` for ``group:KEY``); :func:`draw_splits` checks every draw against both.
+
 The split spec grammar (:func:`parse_split`) is the component grammar ``name:key=value``
 with one more spelling: a leading value may be followed by ``:`` (``group:position:folds=3``).
 """
@@ -47,6 +55,9 @@ from tactbench.specs import format_spec, parse_spec
 
 #: Sample metadata a group split can leave out, in the order errors list them.
 GROUP_KEYS = ("user", "position", "repetition")
+#: The row field that records the design of the split its cell was tested on (rows made
+#: before splits declared designs lack it: :func:`split_design` says how they read).
+DESIGN_FIELD = "split_design"
 
 
 @dataclass(frozen=True, eq=False)
@@ -367,22 +378,79 @@ def check_splits(splits: Sequence[Split], n: int, name: str = "split") -> list[S
 def draw_splits(strategy: Any, data: "SplitData", seed: int, name: str) -> list[Split]:
     """What ``strategy.split(data, seed=seed)`` returns, checked as a classifier's output
     is (:func:`check_splits`) and for what a paired comparison needs of it: the same
-    splits when drawn twice for one seed, and ``data`` left as it was given (a split that
-    changed the labels would score every cell against other classes). Raises
-    :class:`~tactbench.errors.ContractError` naming the split and the rule."""
+    splits when drawn twice for one seed, ``data`` left as it was given (a split that
+    changed the labels would score every cell against other classes), and what the split
+    declares (:func:`check_design`): its design, and train and test disjoint by its
+    ``group_key``. Raises :class:`~tactbench.errors.ContractError` naming the split and
+    the rule."""
     labels, groups = data.labels.copy(), {k: tuple(v) for k, v in data.groups.items()}
     first = check_splits(strategy.split(data, seed=seed), len(labels), name)
     if not np.array_equal(data.labels, labels) or \
             {k: tuple(v) for k, v in data.groups.items()} != groups:
         raise ContractError(f"{name} changed the labels or metadata it was given")
     again = check_splits(strategy.split(data, seed=seed), len(labels), name)
-    if len(again) != len(first) or any(
-            not (np.array_equal(a.train, b.train) and np.array_equal(a.test, b.test))
-            for a, b in zip(first, again)):
+    if not _same_draw(first, again):
         raise ContractError(f"{name} gave other recordings when drawn twice with seed "
                             f"{seed}: a split must be a function of its seed, or the cells "
                             f"compared as paired would not share their test recordings")
+    check_design(strategy, data, seed, name, first)
     return first
+
+
+def _same_draw(first: Sequence[Split], again: Sequence[Split]) -> bool:
+    return len(again) == len(first) and all(
+        np.array_equal(a.train, b.train) and np.array_equal(a.test, b.test)
+        for a, b in zip(first, again))
+
+
+def split_design(strategy: Any, splits: Sequence[Split]) -> str:
+    """The design of ``strategy`` (:data:`~tactbench.contracts.SPLIT_DESIGNS`), as its
+    rows record it: the one it declares; an undeclared one is read as every split was
+    before splits declared designs, ``kfold`` where it returned several folds, else
+    ``resampled``: a corrected t, never the plain one."""
+    declared = SPLIT.get(strategy, "design")
+    if declared is not None:
+        return declared
+    return "kfold" if len(splits) > 1 else "resampled"
+
+
+def check_design(strategy: Any, data: "SplitData", seed: int, name: str,
+                 splits: Sequence[Split]) -> None:
+    """Refuse, as :class:`~tactbench.errors.ContractError` naming the split and the
+    rule, ``splits`` (drawn with ``seed``) that are not what ``strategy`` declares: a
+    ``kfold`` design of one fold, a ``resampled`` one of several, a ``fixed`` one that
+    another seed draws otherwise, or a test set that shares a value of its ``group_key``
+    with the training set of its fold."""
+    design = SPLIT.get(strategy, "design")
+    if design == "kfold" and len(splits) < 2:
+        raise ContractError(f"{name} declares design 'kfold' and returned one fold; K folds "
+                            f"need K ≥ 2 (one train/test pair per seed is 'resampled' or "
+                            f"'fixed')")
+    if design == "resampled" and len(splits) > 1:
+        raise ContractError(f"{name} declares design 'resampled' (one random train/test "
+                            f"pair per seed) and returned {len(splits)} folds; a split of "
+                            f"K folds declares 'kfold'")
+    if design == "fixed" and not _same_draw(splits, check_splits(
+            strategy.split(data, seed=seed + 1), len(data), name)):
+        raise ContractError(f"{name} declares design 'fixed' and gave other recordings "
+                            f"for seeds {seed} and {seed + 1}: a fixed split is the same "
+                            f"for every seed (one drawn anew is 'resampled')")
+    key = SPLIT.get(strategy, "group_key")
+    if key is None:
+        return
+    values = [str(v) for v in data.groups.get(key, ())]
+    if not any(values):
+        raise InputError(f"{name} keeps {key!r} apart, and the recordings have no "
+                         f"{key!r}; this dataset's groups are: "
+                         f"{', '.join(k for k in data.groups if any(data.groups[k])) or 'none'}")
+    values_arr = np.asarray(values)
+    for s in splits:
+        both = np.intersect1d(values_arr[s.train], values_arr[s.test])
+        if both.size:
+            raise ContractError(
+                f"{name} breaks its group_key rule (train and test disjoint by {key}): "
+                f"fold {s.fold} trains and tests {key} "
+                f"{', '.join(repr(str(v)) for v in both[:3])}" + (" …" if both.size > 3 else ""))
 
 
 def make_splits(spec: str, *, labels: Sequence[int], users: Sequence[str], seed: int,
@@ -399,11 +467,15 @@ def make_splits(spec: str, *, labels: Sequence[int], users: Sequence[str], seed:
     return draw_splits(strategy, data, seed, f"split {spec!r}")
 
 
-def describe_splits(spec: str, seed: int, splits: Sequence[Split]) -> dict:
-    """What a cell's row records of its split(s): the spec and seed, and one split's
-    sizes or the folds' together (``folds``, ``n_train`` the mean per fold, ``n_test`` the
-    total, every value left out)."""
-    out = {"split": spec, "split_seed": seed}
+def describe_splits(spec: str, seed: int, splits: Sequence[Split],
+                    design: str | None = None) -> dict:
+    """What a cell's row records of its split(s): the spec and seed, its ``design``
+    (:func:`split_design`, as :data:`DESIGN_FIELD`) where given, and one split's sizes or
+    the folds' together (``folds``, ``n_train`` the mean per fold, ``n_test`` the total,
+    every value left out)."""
+    out: dict[str, Any] = {"split": spec, "split_seed": seed}
+    if design is not None:
+        out[DESIGN_FIELD] = design
     if len(splits) > 1:
         out["folds"] = len(splits)
     out.update({"n_train": int(round(float(np.mean([len(s.train) for s in splits])))),

@@ -41,9 +41,11 @@ from tactbench.errors import InputError, check_positive_int
 
 class PaperSplit:
     """``paper``: ``test_per_class`` random recordings of each class (the scene's) are the
-    test set, the rest train (the study's split). One fold."""
+    test set, the rest train (the study's split). One fold, drawn anew for every seed."""
 
     spec = "paper"
+    design = "resampled"
+    group_key = None
 
     def split(self, data: SplitData, *, seed: int) -> list[Split]:
         return [paper_split(data.labels, seed=seed, test_per_class=data.test_per_class)]
@@ -52,7 +54,10 @@ class PaperSplit:
 class GroupSplit:
     """``group:KEY``: leave values of the recording metadata ``key`` out: a random fifth,
     ``folds`` folds of them (each tested once), or exactly the values ``test``
-    (``A|B``). ``group:user`` is the ``users`` split."""
+    (``A|B``). ``group:user`` is the ``users`` split. Its design: ``resampled`` (a fifth,
+    drawn anew for every seed), ``kfold`` (``folds``) or ``fixed`` (``test``: the same
+    split every seed); train and test never share a value of ``key`` (its
+    ``group_key``)."""
 
     positional_option = "key"
 
@@ -70,6 +75,15 @@ class GroupSplit:
         if self.test == ():
             raise InputError("test= names the test group(s), as in test=side or "
                              "test=u01|u02")
+
+    @property
+    def design(self) -> str:
+        return "kfold" if self.folds is not None else \
+            "resampled" if self.test is None else "fixed"
+
+    @property
+    def group_key(self) -> str:
+        return self.key
 
     @property
     def spec(self) -> str:
@@ -99,6 +113,9 @@ class UsersSplit(GroupSplit):
 class KFoldSplit:
     """``kfold:folds=K``: repeated stratified K-fold over recordings (each recording
     tested once per run seed; :func:`~tactbench.data.splits.kfold_folds`)."""
+
+    design = "kfold"
+    group_key = None
 
     def __init__(self, *, folds: int = 5) -> None:
         self.folds = check_positive_int(folds, "folds", minimum=2)

@@ -41,7 +41,7 @@ def test_users_split_shares_no_user():
 
 def test_bad_splits_are_named():
     with pytest.raises(UnknownComponentError,
-                       match="unknown split 'random'.*Known splits: group, kfold, paper, users"):
+                       match="unknown split 'random'.*Known splits: group, kfold, paper, sklearn, users"):
         make_splits("random", labels=LABELS, users=USERS, seed=0)
     with pytest.raises(ValueError, match="≥ 2 users"):
         users_split(["a"] * 4, [0, 1, 0, 1], seed=0)
