@@ -43,12 +43,14 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import platform  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-from datetime import datetime, timezone  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+from tactbench.machine import benchmark_meta  # noqa: E402
+from tactbench.runner.analysis.statistics import corrected_t  # noqa: E402
+
 from typing import Sequence  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -65,19 +67,14 @@ def corrected_t_interval(differences: Sequence[float], test_train_ratio: float,
                          confidence: float = CONFIDENCE) -> dict:
     """Nadeau–Bengio corrected resampled t over ``J`` paired run-level differences:
     mean, interval and two-sided p. ``test_train_ratio`` is ``n_test / n_train``."""
-    from scipy import stats
-
-    d = np.asarray(differences, dtype=float)
-    j = len(d)
+    j = len(differences)
     if j < 2:
         raise ValueError("a corrected t interval needs ≥ 2 runs")
-    mean = float(d.mean())
-    var = (1.0 / j + float(test_train_ratio)) * float(d.var(ddof=1))
-    se = math.sqrt(var)
-    q = float(stats.t.ppf(0.5 + confidence / 2, j - 1))
-    p = float(2 * stats.t.sf(abs(mean) / se, j - 1)) if se > 0 else (0.0 if mean else 1.0)
-    return {"mean": mean, "low": mean - q * se, "high": mean + q * se, "p": p, "runs": j,
-            "test_train_ratio": float(test_train_ratio), "confidence": confidence}
+    res = corrected_t(np.asarray(differences, dtype=float), float(test_train_ratio),
+                      confidence=confidence)  # the package's test, one definition
+    return {"mean": float(res["mean"]), "low": float(res["low"]), "high": float(res["high"]),
+            "p": float(res["p"]), "runs": j, "test_train_ratio": float(test_train_ratio),
+            "confidence": confidence}
 
 
 def corrected_kfold_interval(differences: Sequence[float], folds: int,
@@ -293,17 +290,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="cells in parallel, one torch thread each (the runner's --workers)")
     ap.add_argument("--work", help="folder for the runs (default: a temporary one)")
     args = ap.parse_args(argv)
-    given, shown = list(argv if argv is not None else sys.argv[1:]), []
-    while given:  # the command as run, less where it kept its runs
-        a = given.pop(0)
-        if a == "--work":
-            given = given[1:]
-        elif not a.startswith("--work="):
-            shown.append(a)
-    meta = {"command": " ".join(["python benchmarks/people.py", *shown]),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
-                       f"{platform.python_implementation()} {platform.python_version()}",
-            "date": datetime.now(timezone.utc).strftime("%Y-%m-%d")}
+    meta = benchmark_meta("benchmarks/people.py", argv if argv is not None else sys.argv[1:])
     if args.work:
         res = measure(args, Path(args.work))
     else:

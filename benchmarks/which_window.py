@@ -27,12 +27,13 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import platform  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-from datetime import datetime, timezone  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+from tactbench.machine import benchmark_meta  # noqa: E402
+
 
 import numpy as np  # noqa: E402
 
@@ -182,18 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_text(out, markdown(args, doc["results"], meta))
         add_to_index(out)
         return 0
-    shown = ["python benchmarks/which_window.py"]
-    given = list(argv if argv is not None else sys.argv[1:])
-    while given:
-        a = given.pop(0)
-        if a == "--work":
-            given.pop(0) if given else None
-            continue
-        shown.append(a)
-    meta = {"command": " ".join(shown),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
-                       f"{platform.python_implementation()} {platform.python_version()}",
-            "date": datetime.now(timezone.utc).strftime("%Y-%m-%d")}
+    meta = benchmark_meta("benchmarks/which_window.py",
+                          argv if argv is not None else sys.argv[1:])
     if args.work:
         res = measure(args, Path(args.work))
     else:

@@ -14,6 +14,7 @@ import os
 import platform
 import subprocess
 import sys
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Iterable
 
@@ -181,3 +182,21 @@ def git_revision(*, short: bool = False) -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return (rev + ("+dirty" if dirty else "")) or None
+
+
+def benchmark_meta(script: str, argv: Iterable[str], *, private: Iterable[str] = ("--work",)
+                   ) -> dict[str, str]:
+    """What a benchmark records of its run: ``command`` (``python SCRIPT ARGS``, less each
+    option in ``private`` and its value: a scratch folder says nothing of the numbers),
+    ``machine`` (architecture, cores, Python) and ``date`` (UTC)."""
+    hidden, given, shown = set(private), list(argv), [f"python {script}"]
+    while given:
+        arg = given.pop(0)
+        if arg in hidden:
+            given = given[1:]
+        elif arg.split("=", 1)[0] not in hidden:
+            shown.append(arg)
+    return {"command": " ".join(shown),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
+                       f"{platform.python_implementation()} {platform.python_version()}",
+            "date": datetime.now(timezone.utc).strftime("%Y-%m-%d")}

@@ -29,3 +29,12 @@ def test_the_short_revision_starts_the_full_one():
 def test_memory_and_gpu_are_told_plainly():
     assert memory_bytes() > 2 ** 20
     assert isinstance(gpu_name(), str) and gpu_name()
+
+
+def test_a_benchmark_records_its_command_without_its_scratch_folder():
+    from tactbench.machine import benchmark_meta
+
+    meta = benchmark_meta("benchmarks/people.py",
+                          ["--users", "4", "--work", "/tmp/w", "--work=/tmp/v", "--json", "x"])
+    assert meta["command"] == "python benchmarks/people.py --users 4 --json x"
+    assert "cores" in meta["machine"] and len(meta["date"]) == 10
