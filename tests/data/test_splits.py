@@ -3,6 +3,8 @@ K-fold; each a registered strategy whose splits carry fold and group ids."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -210,7 +212,7 @@ def test_train_on_front_test_on_side_is_one_run(tmp_path):
     assert set(positions[row["test_predictions"]["indices"]]) == {"side"}
     assert row["n_test"] == 10
     with pytest.raises(InputError, match="this dataset's groups are: user, position"):
-        run(Scene(**{**scene.__dict__, "split": "group:surface"}), progress=False,
+        run(dataclasses.replace(scene, split="group:surface"), progress=False,
             cache=EncodingCache(tmp_path / "cache"))
 
 
