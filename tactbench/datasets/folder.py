@@ -33,10 +33,11 @@ first ``users_sep``, default ``_``), ``users=folder`` (``ROOT/<class>/<user>/``)
 the folder), or ``ROOT/users.csv`` when present; otherwise no users. Classes are the
 folder names (natural order) or ``classes=a;b;c`` (that order; every name must be a
 folder and every folder a name). Normalisation: ``vmin``/``vmax`` (the sensor's range),
-``normalisation=SPEC`` (e.g. ``baseline``), or by default the data's own range (0, or the
-minimum when negative, to the maximum), stored in the manifest so it is reproducible.
-Negative readings (baseline-subtracted, shear, signed sensors) are read as signed by
-default, and one line says so and how to clip them at 0 instead (``vmin=0``).
+``normalisation=SPEC`` (e.g. ``baseline``), or by default 0 to the data's maximum, stored
+in the manifest so it is reproducible. Negative readings (baseline-subtracted, shear,
+signed sensors) are clipped at 0 by default, since every later stage reads an image
+value of 0 as no contact, and one line says so and how to keep the sign (``vmin=`` the
+data's minimum).
 
 Every mistake is one :class:`~tactbench.errors.InputError` naming the file (and line).
 See ``docs/own-data.md``.
@@ -451,12 +452,12 @@ def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None
     if lo is None or hi is None:
         finite = [s.recording.values[np.isfinite(s.recording.values)] for s in samples]
         values = np.concatenate([f for f in finite if f.size] or [np.zeros(1, np.float32)])
-        if lo is None:
-            lo = min(0.0, float(values.min()))
         if hi is None:
             hi = float(values.max())
-        if vmin is None and lo < 0 < hi:
-            _say_signed(float(np.mean(values < 0)), lo, hi)
+        if lo is None:  # a reading of 0 is no contact, the images' 0 (see _say_clipped);
+            lo = min(0.0, float(values.min())) if hi <= 0 else 0.0  # unless none is above
+            if float(values.min()) < 0 < hi:
+                _say_clipped(float(np.mean(values < 0)), float(values.min()), hi)
     for v, what in ((lo, "vmin"), (hi, "vmax")):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise InputError(f"{what} must be a finite number, got {v!r}")
@@ -472,15 +473,25 @@ def _normalisation(samples: list[Sample], vmin: float | None, vmax: float | None
     return f"fixed:offset={float(lo)!r},scale={float(hi - lo)!r}"
 
 
-def _say_signed(share: float, lo: float, hi: float) -> None:
-    """One line on what was done to signed readings (baseline-subtracted, shear) and how
-    to choose otherwise: read as signed, the range ``[lo, hi]`` mapped onto [0, 1], so a
-    reading of 0 (rest, for baseline-subtracted data) is not 0 in the images."""
+def _say_clipped(share: float, lo: float, hi: float) -> None:
+    """One line on what was done to negative readings and how to choose otherwise.
+
+    Every stage after the reader takes an image value of 0 as no contact: pixels off the
+    skin are 0, a pixel on the skin's edge is dimmed towards 0 by the skin it covers, the
+    frame before a recording's first is all 0 for the flow and difference encoders. So a
+    reading of 0 (rest, for readings minus a baseline) must image as 0, and a negative
+    reading (noise or drift below the baseline, or a baseline taken under contact) is
+    clipped there, as pressure above a baseline (what CySkin's own acquisition writes).
+    Mapped as signed instead, rest sits above 0 and every dip below the baseline is
+    structure the flow follows (``benchmarks/signed.py``); ``vmin=LO`` keeps the sign
+    (shear, a signed sensor).
+    """
+    rest = -lo / (hi - lo)
     logging.getLogger("tactbench.datasets").warning(
-        "tactbench: note: %.0f %% of the readings are negative (down to %.4g): read as "
-        "signed, [%.4g, %.4g] mapped onto [0, 1], so a reading of 0 is %.2f; give vmin=0 to "
-        "clip them at 0 (pressure above a baseline), or vmin=/vmax= for the sensor's range "
-        "(docs/own-data.md)", 100 * share, lo, lo, hi, -lo / (hi - lo))
+        "tactbench: note: %.0f %% of the readings are negative (down to %.4g): clipped at "
+        "0, so that rest (a reading of 0) images as no contact; give vmin=%.4g to keep "
+        "the sign ([%.4g, %.4g] mapped onto [0, 1], rest at %.2f), or vmin=/vmax= for the "
+        "sensor's range (docs/own-data.md)", 100 * share, lo, lo, lo, hi, rest)
 
 
 class FolderDataset:

@@ -16,7 +16,8 @@ with rounding, clipping values outside the range: the error is at most half a qu
 ``(high - low) / 510``, inside the range. A value further outside is clipped to the
 range's end (a negative reading of an encoder declaring no range, stored as 0): the
 storage counts them (:attr:`Storage.clipped`), and the cache says how many, once per
-encoder, in one warning line naming the encoder and the precision that keeps them.
+encoder, in one warning line naming the encoder and the precision that keeps them; the
+counts are kept in the entry, so a later run that reads it says the line again.
 """
 
 from __future__ import annotations

@@ -1,17 +1,23 @@
 """Signed readings in an own-data folder (each recording minus its baseline, so many are
-negative): what reaches the encoders is in [0, 1], and the user is told in one line what
-was done and how to choose otherwise."""
+negative): clipped at 0 by default, so that rest images as no contact as every later
+stage assumes, and the user is told in one line what was done and how to keep the sign."""
 
 from __future__ import annotations
 
+import importlib.util
 import logging
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tactbench.datasets.folder import read_folder
+from tactbench.datasets.loading import load_dataset
+from tactbench.plugins import load_registry
 
 NOTE = "tactbench: note:"
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -19,8 +25,6 @@ def signed_folder(tmp_path_factory):
     """The simulator's recordings as a 'real' sensor gives them (rest ≈ 300 counts with
     noise, contact up to +1000), each minus its own baseline (the mean of its first 3
     frames): ROOT/<class>/<user>_<rep>.npy grids, many readings negative."""
-    from tactbench.datasets.loading import load_dataset
-
     ds = load_dataset("synthetic-forearm:users=2,repetitions=1")
     rng = np.random.default_rng(3)
     root = tmp_path_factory.mktemp("signed")
@@ -37,43 +41,104 @@ def _notes(caplog):
     return [r.getMessage() for r in caplog.records if r.getMessage().startswith(NOTE)]
 
 
-def test_signed_readings_reach_the_encoders_in_range_and_the_user_is_told(
-        signed_folder, caplog):
+def _mean_flow(ds, pixel_mm=10.0, n=6):
+    """Mean Farnebäck flow (px/frame) over the frame pairs of ``n`` recordings."""
+    encoder = load_registry().build("encoder", "farneback")
+    flows = []
+    for images in ds.images(pixel_mm)[:n]:
+        f = encoder.flow(images[:-1], images[1:])
+        flows.append(np.hypot(f[..., 0], f[..., 1]).mean())
+    return float(np.mean(flows))
+
+
+def test_signed_readings_are_clipped_at_0_so_rest_images_as_no_contact(signed_folder,
+                                                                       caplog):
     with caplog.at_level(logging.WARNING, logger="tactbench.datasets"):
         ds = read_folder(signed_folder, pitch_mm=10)
     [note] = _notes(caplog)
-    assert "% of the readings are negative" in note and "vmin=0" in note
     assert "\n" not in note  # one line
+    assert "% of the readings are negative" in note and "clipped at 0" in note
     raw = np.concatenate([s.recording.values.ravel() for s in ds.samples])
     assert (raw < 0).mean() > 0.2  # the fixture is what the issue describes
+    # rest (a reading of 0) is what every later stage takes as no contact: image 0,
+    # as the pixels off the skin and the frame the flow encoders put before the first
+    assert ds.normalise(np.zeros((1, ds.n_taxels), np.float32)).max() == 0
+    assert ds.normalise(np.minimum(ds.samples[0].recording.values, 0)).max() == 0
     images = ds.images(10.0)
     assert all(img.min() >= 0 and img.max() <= 1 for img in images)
-    rest = float(ds.normalise(np.zeros((1, ds.n_taxels), np.float32)).mean())
-    assert f"a reading of 0 is {rest:.2f}" in note and 0 < rest < 1
-    # the encoders take these frames as their contract says, and give finite values
-    from tactbench.plugins import load_registry
-
-    registry = load_registry()
+    assert ds.normalisation == read_folder(signed_folder, pitch_mm=10, vmin=0).normalisation
     for name in ("raw", "farneback", "frame-diff"):
-        out = registry.build("encoder", name).encode(images[0])
+        out = load_registry().build("encoder", name).encode(images[0])
         assert np.isfinite(out).all(), name
 
 
-def test_vmin_0_clips_signed_readings_at_rest_without_a_note(signed_folder, caplog):
+def test_the_note_gives_the_option_that_keeps_the_sign_and_where_rest_then_reads(
+        signed_folder, caplog):
     with caplog.at_level(logging.WARNING, logger="tactbench.datasets"):
-        ds = read_folder(signed_folder, pitch_mm=10, vmin=0)
-        read_folder(signed_folder, pitch_mm=10, normalisation="baseline")
+        read_folder(signed_folder, pitch_mm=10)
+    [note] = _notes(caplog)
+    lo = min(float(np.load(p).min()) for p in signed_folder.rglob("*.npy"))
+    given = re.search(r"give vmin=(\S+) to keep the sign", note)
+    assert given and float(given.group(1)) == pytest.approx(lo, rel=1e-3)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="tactbench.datasets"):
+        signed = read_folder(signed_folder, pitch_mm=10, vmin=float(given.group(1)))
     assert _notes(caplog) == []  # a choice the user made is not remarked on
-    values = ds.samples[0].recording.values
-    assert ds.normalise(np.minimum(values, 0)).max() == 0  # below rest reads as no pressure
-    assert all(img.min() >= 0 and img.max() <= 1 for img in ds.images(10.0))
+    rest = float(signed.normalise(np.zeros((1, signed.n_taxels), np.float32)).mean())
+    assert 0 < rest < 1 and f"rest at {rest:.2f}" in note
+    assert all(img.min() >= 0 and img.max() <= 1 for img in signed.images(10.0))
 
 
-def test_readings_that_are_never_negative_give_no_note(signed_folder, tmp_path, caplog):
+def test_readings_never_negative_keep_their_normalisation_and_give_no_note(
+        signed_folder, tmp_path, caplog):
     for path in signed_folder.rglob("*.npy"):
         target = tmp_path / path.relative_to(signed_folder)
         target.parent.mkdir(exist_ok=True)
         np.save(target, np.abs(np.load(path)))
     with caplog.at_level(logging.WARNING, logger="tactbench.datasets"):
-        read_folder(tmp_path, pitch_mm=10)
+        ds = read_folder(tmp_path, pitch_mm=10)
+        read_folder(signed_folder, pitch_mm=10, normalisation="baseline")
     assert _notes(caplog) == []
+    hi = max(float(np.load(p).max()) for p in tmp_path.rglob("*.npy"))
+    assert dict(ds.normalisation.options) == {"offset": 0.0, "scale": hi}  # as before
+
+
+def test_readings_all_at_or_below_0_keep_their_range(tmp_path, caplog):
+    """Nothing above 0 to keep: clipped, every reading would be one value; their range
+    is mapped as before, without a note."""
+    rng = np.random.default_rng(0)
+    for cls in ("a", "b"):
+        (tmp_path / cls).mkdir()
+        for i in range(2):
+            np.save(tmp_path / cls / f"r{i}.npy",
+                    -rng.uniform(0, 5, (4, 3, 3)).astype(np.float32))
+    with caplog.at_level(logging.WARNING, logger="tactbench.datasets"):
+        ds = read_folder(tmp_path)
+    assert _notes(caplog) == []
+    lo = min(float(np.load(p).min()) for p in tmp_path.rglob("*.npy"))
+    hi = max(float(np.load(p).max()) for p in tmp_path.rglob("*.npy"))
+    assert dict(ds.normalisation.options) == {"offset": lo, "scale": hi - lo}
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("signed_bench", REPO / "benchmarks" /
+                                                  "signed.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_real_cyskin_recordings_minus_their_baseline(shared_data, tmp_path, caplog):
+    """benchmarks/signed.py's folder (real CySkin recordings, each minus its baseline),
+    10 recordings a class: clipped by default, rest images at 0, and kept signed the
+    flow follows the dips (the benchmark trains the CNN on all of it)."""
+    made = _bench().make_signed_folder(shared_data / "cyskin-fingers", tmp_path, limit=10)
+    assert made["recordings"] == 60 and made["negative_share"] > 0.2
+    with caplog.at_level(logging.WARNING, logger="tactbench.datasets"):
+        clipped = read_folder(tmp_path)
+    [note] = _notes(caplog)
+    assert "clipped at 0" in note
+    assert clipped.normalise(np.zeros((1, clipped.n_taxels), np.float32)).max() == 0
+    lo = min(float(np.load(p).min()) for p in tmp_path.rglob("*.npy"))
+    signed = read_folder(tmp_path, vmin=lo)
+    assert _mean_flow(signed, 5.0, 20) > 5 * _mean_flow(clipped, 5.0, 20)

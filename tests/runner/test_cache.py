@@ -263,6 +263,50 @@ def test_a_run_at_uint8_completes_and_its_rows_record_the_precision(tiny_scene, 
     assert entry["scale"] == pytest.approx([1 / 255, 2 / 255]) and entry["offset"] == [0, -1]
 
 
+def test_values_uint8_clipped_are_said_when_written_and_again_when_read(
+        tiny_scene, cache, caplog, monkeypatch):
+    """An entry whose values uint8 storage clipped says so once when it is written; a
+    later run (another process: the said-once record is empty) reading the entry says it
+    again from the counts its meta keeps. Storage of raw at (0, 0.5) stands in for an
+    encoder declaring no range that gives values beyond (0, 1)."""
+    from tactbench.runner.execution import cache as cache_module
+
+    monkeypatch.setattr(cache_module, "image_storage",
+                        lambda encoder, precision: Storage.for_channels("uint8", 1,
+                                                                        [(0.0, 0.5)]))
+    p = plan(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0],
+                        precision="uint8"))
+
+    def said():
+        lines = [r.getMessage() for r in caplog.records if "were clipped" in r.getMessage()]
+        caplog.clear()
+        return lines
+
+    with caplog.at_level("WARNING", logger="tactbench.runner"):
+        (folder,) = ensure_encodings(p, cache, p.cells).values()
+        [written] = said()
+        _, meta = load_encoding(folder)
+        counts = meta["clipped"]
+        assert counts["above"] > 0 and counts["below"] == 0
+        assert f"{counts['above']} of {counts['values']} values" in written
+        ensure_encodings(p, cache, p.cells)
+        assert said() == []  # once per entry in a process
+        monkeypatch.setattr(cache_module, "_SAID_CLIPPING", set())  # a later run
+        ensure_encodings(p, cache, p.cells)
+        [read] = said()
+    assert read.startswith(written) and "cached encoding" in read and "\n" not in read
+
+
+def test_an_entry_without_clipped_values_records_and_says_nothing(tiny_scene, cache, caplog):
+    p = plan(tiny_scene(encoders=["raw"], classifiers=["logreg"], seeds=[0],
+                        precision="uint8"))
+    with caplog.at_level("WARNING", logger="tactbench.runner"):
+        (folder,) = ensure_encodings(p, cache, p.cells).values()
+        ensure_encodings(p, cache, p.cells)
+    assert "clipped" not in load_encoding(folder)[1]
+    assert "were clipped" not in caplog.text
+
+
 # ------------------------------------------------------- verification, races, orphans
 
 

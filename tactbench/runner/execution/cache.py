@@ -10,6 +10,8 @@ keys), and the CPU kernels numpy and OpenCV computed with (:func:`~tactbench.ker
 
 :func:`ensure_encodings` encodes what is missing in one streaming pass over the dataset
 (:mod:`tactbench.encoders.encoding`), each encoding appended to its entry as it is made.
+Values uint8 storage clipped are said in one warning line per encoder, when the entry
+is written and, from the counts its ``meta.json`` keeps, when a later run uses it.
 It reports a damaged entry in one warning line and encodes it again;
 :func:`~tactbench.runner.execution.entries.load_encoding` raises
 :class:`~tactbench.errors.CorruptArtefactError`. Writers of one key race safely: the
@@ -267,9 +269,11 @@ def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:
     for _ in range(3):
         found = signature(cache.path(key))
         try:
-            if cache.verify(key).get(VIOLATION):  # a plugin's output broke its contract
+            meta = cache.verify(key)
+            if meta.get(VIOLATION):  # a plugin's output broke its contract
                 cache.discard(key)  # last run's cells failed on it: encode it again
                 return False
+            _say_stored_clipping(enc, key, meta)
             return True
         except CorruptArtefactError as exc:
             if signature(cache.path(key)) != found:
@@ -296,12 +300,39 @@ def _guard(plan_: Plan, enc: str, sink: Any, frame_shape: Sequence[int]) -> Enco
                         component=enc, plugin=plugin)
 
 
-def _say_clipping(enc: str, storage: Storage, guard: EncoderGuard) -> None:
+#: Entries whose clipped values this process has said (once each, written or read).
+_SAID_CLIPPING: set[str] = set()
+
+
+def _say_clipping(enc: str, storage: Storage, guard: EncoderGuard, key: str,
+                  meta: dict[str, Any]) -> None:
     """Warn, once per encoder and entry, of values uint8 storage clipped (an output
-    outside its declared ranges is the guard's to refuse: its cells fail instead)."""
+    outside its declared ranges is the guard's to refuse: its cells fail instead), and
+    record the counts in the entry's ``meta`` (``clipped``) for the runs that read it."""
     line = None if guard.violation else storage.clipping(enc)
     if line is not None:
+        meta["clipped"] = {"values": storage.values, "below": storage.clipped[0],
+                           "above": storage.clipped[1]}
+        _SAID_CLIPPING.add(key)
         log.warning("tactbench: warning: %s", line)
+
+
+def _say_stored_clipping(enc: str, key: str, meta: dict[str, Any]) -> None:
+    """The warning of :func:`_say_clipping`, said again (once per process) by a run that
+    uses the cached entry instead of writing it: the clipped values are still in it."""
+    counts = meta.get("clipped")
+    if key in _SAID_CLIPPING or not isinstance(counts, dict):
+        return
+    storage = Storage.from_meta(meta, len(meta.get("scale") or [1.0]))
+    try:  # counts tactbench wrote are integers; anything else says nothing
+        storage.values = int(counts.get("values", 0))
+        storage.clipped = [int(counts.get("below", 0)), int(counts.get("above", 0))]
+    except (TypeError, ValueError, OverflowError):
+        return
+    line = storage.clipping(enc)
+    if line is not None:
+        _SAID_CLIPPING.add(key)
+        log.warning("tactbench: warning: %s (cached encoding %s, stored so)", line, key)
 
 
 def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
@@ -327,7 +358,7 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
         with cache.entry(key, dataset.lengths(), (width,), storage) as writer:
             guard = _guard(plan_, enc, writer.append, (width,))
             encode_s = encode_vectors(dataset, enc, encoder, guard, chunk_bytes=chunk_bytes)
-            _say_clipping(enc, storage, guard)
+            _say_clipping(enc, storage, guard, key, writer.meta)
             writer.meta.update({**_common_meta(plan_, enc, "vectors"),
                                 **({VIOLATION: guard.violation} if guard.violation else {}),
                                 "identity": identities[key],
@@ -358,7 +389,7 @@ def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], preci
         times = encode_images(dataset, encoders, guards, pixel_mm=pixel_mm, method=method,
                               progress=progress, chunk_bytes=chunk_bytes)
         for enc, writer in writers.items():
-            _say_clipping(enc, writer.storage, guards[enc])
+            _say_clipping(enc, writer.storage, guards[enc], keys[enc], writer.meta)
             writer.meta.update({
                 **_common_meta(plan_, enc, "images"),
                 **({VIOLATION: guards[enc].violation} if guards[enc].violation else {}),
