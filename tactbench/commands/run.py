@@ -22,8 +22,8 @@ from tactbench.runner.execution.scene import (
     show_duration,
 )
 from tactbench.runner.analysis.summaries import failed_cells
-from tactbench.runner.presentation.tables import answer_text, print_comparisons, print_table
-from tactbench.runner.presentation.writers import run_labels
+from tactbench.runner.presentation.tables import (answer_text, labels_for, print_comparisons,
+                                                  print_table)
 
 
 #: Scene fields that only mean something with ``--until``.
@@ -252,7 +252,7 @@ def print_report(report: Report, *, as_json: bool, title: str, done: str) -> Non
     the report was rendered, and what this command did; ``summary``, ``comparisons``,
     ``failed``, ``files``); then each failed cell, on stderr."""
     failed = failed_cells(report.rows)
-    labels = run_labels(report.rows)  # variants of one classifier told apart
+    labels = labels_for(rows=report.rows)  # variants of one classifier told apart
     if as_json:
         meta = {"runs": report.runs, "rendered": report.rendered,
                 "computed": report.computed, "skipped": report.skipped,

@@ -13,7 +13,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.pareto import pareto_front
 from tactbench.errors import InputError
-from tactbench.runner.execution.questions import spec_label, spec_labels
+from tactbench.runner.execution.questions import spec_label
+from tactbench.runner.presentation.tables import labels_for
 
 #: The top-level figures :func:`write_plots` may write besides ``confusion_*.png``.
 #: The lowest encode cost drawn on the log axis (a cost of 0 ms is drawn there).
@@ -84,13 +85,6 @@ def check_reference(reference: Iterable[dict[str, Any]] | None) -> list[dict[str
     return out
 
 
-def _labels(summaries: Sequence[dict[str, Any]],
-            labels: Mapping[str, str] | None) -> Mapping[str, str]:
-    """``labels``, or else the labels among the classifiers of ``summaries``
-    (:func:`tactbench.runner.execution.questions.spec_labels`)."""
-    return spec_labels(s["classifier"] for s in summaries) if labels is None else labels
-
-
 def _curve_key(s: dict[str, Any], labels: Mapping[str, str]) -> tuple:
     return s["dataset"], s["split"], s["encoder"], spec_label(s["classifier"], labels)
 
@@ -98,7 +92,7 @@ def _curve_key(s: dict[str, Any], labels: Mapping[str, str]) -> tuple:
 def _curve_keys(summaries: Sequence[dict[str, Any]], labels: Mapping[str, str] | None = None
                 ) -> dict[tuple, list[dict[str, Any]]]:
     """(dataset, split, encoder, classifier label) → that curve's summaries, by L."""
-    labels = _labels(summaries, labels)
+    labels = labels_for(summaries=summaries) if labels is None else labels
     curves: dict[tuple, list[dict[str, Any]]] = {}
     for s in summaries:
         key = _curve_key(s, labels)
@@ -170,7 +164,7 @@ def write_plots(out: Path, summaries: Sequence[dict[str, Any]], *,
 
     out = Path(out)
     reference = check_reference(reference)
-    labels = _labels(summaries, labels)
+    labels = labels_for(summaries=summaries) if labels is None else labels
     names = confusion_names(summaries, labels)  # as caption() names them
     named = [(s, n) for s, n in zip(summaries, names) if not math.isnan(s["accuracy_mean"])]
     summaries = [s for s, _ in named]
@@ -255,7 +249,7 @@ def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tupl
     :func:`tactbench.pareto.pareto_front` as a step line with its members ringed."""
     import matplotlib.pyplot as plt
 
-    labels = _labels(summaries, labels)
+    labels = labels_for(summaries=summaries) if labels is None else labels
     drawn = [s for s in summaries if not math.isnan(s["encode_ms_per_frame_mean"])]
     fig, ax = plt.subplots(figsize=(7, 4.5))
     costs = [max(s["encode_ms_per_frame_mean"], MIN_PLOTTED_COST_MS) for s in drawn]
@@ -352,7 +346,7 @@ def confusion_names(summaries: Sequence[dict[str, Any]],
     ``confusion_raw_small-cnn-lstm-width-8_L5``). Names that slugging still makes alike
     get the first 8 hex digits of SHA-256 of the cell's encoder and classifier specs, so
     no figure overwrites another."""
-    labels = _labels(summaries, labels)
+    labels = labels_for(summaries=summaries) if labels is None else labels
     names = [f"confusion_{_slug(s['encoder'])}_{_slug(_file_label(s['classifier'], labels))}"
              f"_L{s['L']}" for s in summaries]
     cells = {}  # name → the distinct cells given it
@@ -400,7 +394,7 @@ def caption(name: str, summaries: Sequence[dict[str, Any]],
             reference: Sequence[dict[str, Any]], labels: Mapping[str, str] | None = None
             ) -> str:
     """What figure ``name`` shows, for report.md (``labels`` as :func:`write_plots`'s)."""
-    labels = _labels(summaries, labels)
+    labels = labels_for(summaries=summaries) if labels is None else labels
     curves = _curve_keys(summaries, labels)
     several = len({k[:2] for k in curves}) > 1
     if name == "accuracy_vs_L":

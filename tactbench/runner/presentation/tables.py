@@ -31,16 +31,17 @@ def md(text: Any) -> str:
     return _MD_SPECIAL.sub(r"\\\1", " ".join(str(text).split()))
 
 
-def summary_labels(summaries: Iterable[dict[str, Any]]) -> dict[str, str]:
-    """The labels of the classifiers of ``summaries`` (or rows, or variance entries)."""
-    return spec_labels(s["classifier"] for s in summaries)
-
-
-def comparison_labels(comps: Comparisons) -> dict[str, str]:
-    """The labels of the classifiers ``comps`` compare or share."""
-    comps = read_comparisons(comps)
-    return spec_labels([v for c in comps if c.factor == "classifier" for v in (c.a, c.b)]
-                       + [c.where["classifier"] for c in comps if "classifier" in c.where])
+def labels_for(*, rows: Iterable[dict[str, Any]] = (), summaries: Iterable[dict[str, Any]] = (),
+               comps: Comparisons = ()) -> dict[str, str]:
+    """The name every table and figure of a run shows for each classifier that ``rows``,
+    ``summaries`` or the comparisons ``comps`` name (compared, or shared where they
+    differ in another factor): :func:`~tactbench.runner.execution.questions.spec_labels`
+    over them all, so one run tells its variants apart the same way everywhere."""
+    comps = read_comparisons(comps) if comps else []
+    return spec_labels([*(r["classifier"] for r in rows),
+                        *(s["classifier"] for s in summaries),
+                        *(v for c in comps if c.factor == "classifier" for v in (c.a, c.b)),
+                        *(c.where["classifier"] for c in comps if "classifier" in c.where)])
 
 
 def _comparison_label(c: Comparison, side: str, labels: Labels | None = None) -> str:
@@ -111,9 +112,9 @@ def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None
 def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[list[str]]:
     """Table cells, :data:`COMPARISON_HEADER`'s columns (the p: the comparison's
     ``method``'s t). A classifier is named by its label in ``labels`` (by default the
-    labels among the classifiers of ``comps``, :func:`comparison_labels`)."""
+    labels among the classifiers of ``comps``, :func:`labels_for`)."""
     comps = read_comparisons(comps)
-    labels = comparison_labels(comps) if labels is None else labels
+    labels = labels_for(comps=comps) if labels is None else labels
     return [[*_pair(c, labels), "ceiling" if c.ceiling else f"{100 * c.difference:+.1f}",
              "both 100 %" if c.ceiling else
              f"[{100 * c.low:+.1f}, {100 * c.high:+.1f}]" if c.df else "-",
@@ -163,7 +164,7 @@ def print_comparisons(comps: Comparisons, *, factors: Sequence[str] = ("encoder"
     them), then the exploratory ones (by default of encoders and classifiers; report.md
     and results.json hold every factor)."""
     comps = read_comparisons(comps)
-    labels = comparison_labels(comps) if labels is None else labels
+    labels = labels_for(comps=comps) if labels is None else labels
     primary = [c for c in comps if c.family == "primary"]
     rest = [c for c in comps if c.family != "primary" and c.factor in factors]
     from rich.console import Console
@@ -210,8 +211,8 @@ TABLE_HEADER = ["encoder", "classifier", "input", "L", "accuracy %", "95 % CI of
 def table_rows(summaries: Sequence[dict[str, Any]], labels: Labels | None = None
                ) -> list[list[str]]:
     """The accuracy table's cells; a classifier by its label in ``labels`` (by default
-    among the classifiers of ``summaries``, :func:`summary_labels`)."""
-    labels = summary_labels(summaries) if labels is None else labels
+    among the classifiers of ``summaries``, :func:`labels_for`)."""
+    labels = labels_for(summaries=summaries) if labels is None else labels
     rows = []
     for s in summaries:
         rows.append([
@@ -249,7 +250,7 @@ def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "",
 
 def _legend(summaries: Sequence[dict[str, Any]], labels: Labels | None) -> list[str]:
     """The lines under the accuracy table on cells that did not learn (none without)."""
-    labels = summary_labels(summaries) if labels is None else labels
+    labels = labels_for(summaries=summaries) if labels is None else labels
     return legend(summaries, lambda s: f"{s['encoder']} / {spec_label(s['classifier'], labels)}"
                   f" L={s['L']}")
 
@@ -265,7 +266,7 @@ def per_class_markdown(summaries: Sequence[dict[str, Any]], labels: Labels | Non
                        ) -> str:
     if not summaries:
         return ""
-    labels = summary_labels(summaries) if labels is None else labels
+    labels = labels_for(summaries=summaries) if labels is None else labels
     classes = summaries[0]["classes"]
     lines = ["| encoder | classifier | L | " + " | ".join(map(md, classes)) + " |",
              "|" + "---|" * (3 + len(classes))]
@@ -296,7 +297,7 @@ def reference_markdown(reference: Sequence[dict[str, Any]],
                        ) -> str:
     """A table: each published point, and our cells it compares with ("-" where none):
     those of its label's encoder, or ``encoder / classifier`` (by short name or label)."""
-    labels = summary_labels(summaries) if labels is None else labels
+    labels = labels_for(summaries=summaries) if labels is None else labels
     lines = ["| published | L | published % | ours (cell) | ours % | 95 % CI of mean |",
              "|---|---|---|---|---|---|"]
     for p in reference:
@@ -320,7 +321,7 @@ def per_class_gains_markdown(comps: Comparisons, labels: Labels | None = None) -
     """Per-class gains B − A (points) with their run-level intervals, one line per
     comparison ("" when none has them)."""
     comps = read_comparisons(comps)
-    labels = comparison_labels(comps) if labels is None else labels
+    labels = labels_for(comps=comps) if labels is None else labels
     comps = [c for c in comps if c.per_class]
     if not comps:
         return ""
@@ -340,7 +341,7 @@ def per_user_gains_markdown(comps: Comparisons, labels: Labels | None = None) ->
     """Per-user gains of every pair: users tested, helped, hurt, median and quartiles
     (points) ("" when no comparison has them: not a users split, or no user ids)."""
     comps = read_comparisons(comps)
-    labels = comparison_labels(comps) if labels is None else labels
+    labels = labels_for(comps=comps) if labels is None else labels
     comps = [c for c in comps if c.per_user]
     if not comps:
         return ""
@@ -368,7 +369,7 @@ def variance_components_markdown(comps: Comparisons, labels: Labels | None = Non
     comparisons that carry it, or every comparison where none is primary ("" when no
     comparison carries it: the runs vary no init seed)."""
     comps = read_comparisons(comps)
-    labels = comparison_labels(comps) if labels is None else labels
+    labels = labels_for(comps=comps) if labels is None else labels
     comps = [c for c in comps if c.variance_components]
     comps = [c for c in comps if c.family == "primary"] or comps
     if not comps:
@@ -491,7 +492,7 @@ def per_user_accuracy_markdown(summaries: Sequence[dict[str, Any]],
     value is drawn in ``per_user_accuracy.png`` and kept in results.json."""
     import numpy as np
 
-    labels = summary_labels(summaries) if labels is None else labels
+    labels = labels_for(summaries=summaries) if labels is None else labels
     summaries = [s for s in summaries if s.get("per_user_accuracy")]
     if not summaries:
         return ""
@@ -511,7 +512,7 @@ def variance_markdown(parts: Sequence[dict[str, Any]], labels: Labels | None = N
     a pair's difference is :func:`variance_components_markdown`."""
     if not parts:
         return ""
-    labels = summary_labels(parts) if labels is None else labels
+    labels = labels_for(summaries=parts) if labels is None else labels
     lines = ["| encoder | classifier | L | split seeds × init seeds | split sd | "
              "initialisation sd | test-sampling sd |", "|---|---|---|---|---|---|---|"]
     for v in parts:

@@ -39,9 +39,9 @@ from tactbench.runner.execution.scene import Design
 from tactbench.runner.analysis.sequential import FUTILE
 from tactbench.runner.analysis.statistics import DECIDED, NOT_LEARNED, UNRESOLVED
 from tactbench.runner.analysis.summaries import summarise, variance_decomposition
-from tactbench.runner.execution.questions import spec_labels
 from tactbench.runner.presentation.tables import (
     comparisons_section,
+    labels_for,
     primary_section,
     failed_cells_markdown,
     markdown_table,
@@ -275,7 +275,7 @@ def write_report(out: str | Path, report: Report, *, plots: bool = True) -> dict
     figures: dict[str, Path] = {}
     if plots and report.summaries:
         figures = write_plots(out, report.summaries, reference=report.reference,
-                              labels=run_labels(report.rows, report.summaries))
+                              labels=labels_for(rows=report.rows, summaries=report.summaries))
         paths.update(figures)
     atomic_write_text(paths["markdown"], markdown_report(report, figures))
     report.paths = paths
@@ -287,15 +287,6 @@ def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *, plots: boo
     """:func:`make_report` of ``rows`` (with its ``options``), written into ``out`` by
     :func:`write_report`; returns the paths written."""
     return write_report(out, make_report(rows, **options), plots=plots)
-
-
-def run_labels(rows: Sequence[dict[str, Any]], summaries: Sequence[dict[str, Any]] = ()
-               ) -> dict[str, str]:
-    """The name every report of a run shows for each of its classifiers: its short name,
-    with the options that tell it apart where the run has several specs of one
-    (:func:`tactbench.runner.execution.questions.spec_labels`, over every row, failed ones too)."""
-    return spec_labels([*(r["classifier"] for r in rows),
-                        *(s["classifier"] for s in summaries)])
 
 
 def _runs_text(runs: Sequence[dict[str, Any]]) -> str:
@@ -347,7 +338,7 @@ def markdown_report(report: Report, figures: dict[str, Path]) -> str:
     decomposition, published reference points, failed cells, figures with captions."""
     summaries, rows, comps = report.summaries, report.rows, report.comparisons
     reference, variance = report.reference, report.variance
-    labels = run_labels(rows, summaries)
+    labels = labels_for(rows=rows, summaries=summaries)
     done = ok_rows(rows)
     failed = failed_cells_markdown(rows)
     first = done[0] if done else (rows[0] if rows else {})
