@@ -46,6 +46,7 @@ from pathlib import Path
 from tactbench import machine as facts
 from tactbench.runner import render_folder
 from tactbench.runner.analysis.comparisons import Comparison, plain_t
+from tactbench.runner.execution.scene import DEFAULT_PRIMARY
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
                                                   TOO_FEW_RUNS, UNRESOLVED)
 from tactbench.runner.analysis.summaries import failed_cells
@@ -59,8 +60,9 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
 #: The CPU-sized CNN at the quick profile's recipe (docs/classifiers.md, issue 28).
 CNN = "small-cnn-lstm"
-#: The flagship question of the study, each design's primary comparison.
-FLAGSHIP = "encoder=raw..encoder=farneback"
+#: The flagship question of the study, each design's primary comparison: the package's
+#: default primary question.
+FLAGSHIP = DEFAULT_PRIMARY
 #: The simulator drawing new people for every run (independent replications).
 PEOPLE = "synthetic-forearm:people=per-run"
 #: With ``--until answered``: looks after 5 and 10 runs at most.

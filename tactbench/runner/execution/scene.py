@@ -418,7 +418,7 @@ def _check_together(scene: Scene) -> None:
                              f"{scene.max_runs}")
         if not primary_of(scene.primary, scene.encoders):
             raise InputError("--until answered needs a primary comparison: give --primary "
-                             "A..B (the default, encoder=raw..encoder=farneback, needs both "
+                             f"A..B (the default, {DEFAULT_PRIMARY}, needs both "
                              "encoders)")
     if scene.budget is not None:
         parse_duration(scene.budget)
