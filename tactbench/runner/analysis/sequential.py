@@ -159,8 +159,12 @@ class Look:
     t: float  # the corrected t
     boundary: float  # |t| needed now
     alpha: float  # the comparison's share of α at this look
-    decision: str
+    decision: str  # one of DECISIONS
     why: str = ""
+
+    def __post_init__(self) -> None:
+        if self.decision not in DECISIONS:  # a bug, not a user's mistake
+            raise ValueError(f"a look cannot decide {self.decision!r} (one of {DECISIONS})")
 
     def as_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
