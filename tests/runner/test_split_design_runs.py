@@ -148,3 +148,15 @@ def test_a_plugin_split_that_leaks_a_user_at_a_later_seed_fails_that_cell(
     with pytest.raises(ContractError, match="'leaky-users' breaks its group_key rule"):
         plan(tiny_scene(split="leaky-users", encoders=["raw"], classifiers=["logreg"],
                         seeds=[1], out=str(Path(scene.out).parent / "first")), design_registry)
+
+
+def test_only_runs_that_drew_their_own_data_are_said_to_be_replications():
+    """report.md's text above the comparisons: a fixed split's plain t is a figure about
+    that split, not independent replications of a population."""
+    from tactbench.runner.presentation.tables import INDEPENDENT_TEXT, comparisons_text
+
+    fixed = comparisons(_rows(**{DESIGN_FIELD: "fixed"})[0], primary=PRIMARY)
+    independent = comparisons(_rows(**{DESIGN_FIELD: "independent"})[0], primary=PRIMARY)
+    assert "one fixed split" in comparisons_text(fixed)
+    assert INDEPENDENT_TEXT not in comparisons_text(fixed)
+    assert INDEPENDENT_TEXT in comparisons_text(independent)

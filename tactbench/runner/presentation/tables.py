@@ -7,7 +7,8 @@ import re
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.analysis.answering import beyond_looks
-from tactbench.runner.analysis.comparisons import P_RULE, Comparison, plain_t, read_comparisons
+from tactbench.runner.analysis.comparisons import (INDEPENDENT_METHOD, P_RULE, Comparison, plain_t,
+                                                   read_comparisons)
 from tactbench.runner.execution.learning import accuracy_mark, legend
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
                                                   MIN_RUNS, NOT_LEARNED, TOO_FEW_RUNS, UNRESOLVED)
@@ -442,12 +443,15 @@ INDEPENDENT_TEXT = (
 
 def comparisons_text(comps: Comparisons) -> str:
     """The text above report.md's tables of ``comps``: :data:`COMPARISONS_TEXT` where every
-    t is corrected, else naming the plain paired t too (and :data:`INDEPENDENT_TEXT`)."""
+    t is corrected, else naming the plain paired t too (and :data:`INDEPENDENT_TEXT` where
+    runs drew their own data sets; a fixed split's plain t is not that)."""
     kind = _t_kind(read_comparisons(comps))
     if kind == "corrected":
         return COMPARISONS_TEXT
     rule = P_RULE.replace("the corrected t's", "that t's")
-    return COMPARISONS_TEMPLATE.format(test=T_TEXT[kind], rule=rule) + INDEPENDENT_TEXT
+    independent = any(c.method.startswith(INDEPENDENT_METHOD) for c in read_comparisons(comps))
+    return (COMPARISONS_TEMPLATE.format(test=T_TEXT[kind], rule=rule)
+            + (INDEPENDENT_TEXT if independent else ""))
 
 
 def comparisons_section(comps: Comparisons, labels: Labels | None = None) -> list[str]:
