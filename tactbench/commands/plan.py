@@ -75,6 +75,12 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                        "replications of the simulator's population), so more runs resolve "
                        "ever smaller differences")
             continue
+        if f.design == "fixed":
+            click.echo(f"  no floor: one fixed split, the same {f.n_test} test recordings in "
+                       f"every run (runs differ only by initialisation), so more runs "
+                       f"resolve ever smaller differences on that split; the answer speaks "
+                       f"of it alone, not of new recordings")
+            continue
         more = ("" if p.recordings_for_effect is None or p.recordings_for_effect
                 <= p.recordings else f"; about {p.recordings_for_effect} recordings (now "
                 f"{p.recordings}) would bring it to {points(p.effect)[1:]}")

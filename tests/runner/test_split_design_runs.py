@@ -160,3 +160,26 @@ def test_only_runs_that_drew_their_own_data_are_said_to_be_replications():
     assert "one fixed split" in comparisons_text(fixed)
     assert INDEPENDENT_TEXT not in comparisons_text(fixed)
     assert INDEPENDENT_TEXT in comparisons_text(independent)
+
+
+def test_plan_says_a_fixed_split_has_no_floor_and_what_its_answer_speaks_of(
+        tiny_scene, design_registry, monkeypatch):
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+    from tactbench.runner.analysis.forecast import forecast
+
+    scene = tiny_scene(split="fixed-halves", classifiers=["logreg"], seeds=[0, 1, 2])
+    f = forecast(scene, design_registry)
+    assert f.design == "fixed" and not f.independent
+    monkeypatch.setattr("tactbench.commands.plan.get_registry", lambda: design_registry)
+    toml = Path(scene.out).parent / "fixed.toml"
+    toml.write_text("\n".join([
+        f'dataset = "{scene.dataset}"', 'encoders = ["raw", "frame-diff"]',
+        'classifiers = ["logreg"]', "L = [3]", "seeds = [0, 1, 2]", "test_per_class = 1",
+        f"pixel_mm = {scene.pixel_mm}", 'split = "fixed-halves"',
+        'primary = ["encoder=raw..encoder=frame-diff"]',
+        f'out = "{Path(scene.out).parent / "p"}"']) + "\n")
+    out = CliRunner().invoke(cli, ["plan", str(toml)])
+    assert out.exit_code == 0, out.output
+    assert "no floor: one fixed split" in out.output and "speaks of it alone" in out.output

@@ -113,6 +113,7 @@ class Forecast:
     n_train: int
     alpha: float
     independent: bool = False  # each run draws its own data set: no overlap, no floor
+    design: str = "resampled"  # the split's design (contracts.SPLIT_DESIGNS)
     runs_not_made: int = 0  # runs whose own data set the plan did not make (all but one)
     # the run's wall time on this machine (runner.estimate), at each look with --until
     # (cumulative; one entry without): encoding, cells side by side, the run around them
@@ -175,6 +176,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                             len(p.dataset.labels), margin=scene.margin,
                             looks=looks) for text in primaries],
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
+        design=design,
         runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
         workers=scene.resolved_workers())
 
