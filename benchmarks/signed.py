@@ -116,7 +116,7 @@ def mean_flow(spec: str, pixel_mm: float = 5.0) -> dict:
         f = encoder.flow(images[:-1], images[1:])
         flows.append(float(np.hypot(f[..., 0], f[..., 1]).mean()))
     rest = float(ds.normalise(np.zeros((1, ds.n_taxels), np.float32)).mean())
-    return {"normalisation": str(ds.normalisation), "rest_level": rest,
+    return {"normalisation": ds.normalisation.spec, "rest_level": rest,
             "mean_flow_px_per_frame": float(np.mean(flows))}
 
 

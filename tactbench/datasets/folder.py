@@ -489,7 +489,7 @@ def _say_clipped(share: float, lo: float, hi: float) -> None:
     rest = -lo / (hi - lo)
     logging.getLogger("tactbench.datasets").warning(
         "tactbench: note: %.0f %% of the readings are negative (down to %.4g): clipped at "
-        "0, so that rest (a reading of 0) images as no contact; give vmin=%.4g to keep "
+        "0, so that rest (a reading of 0) images as no contact; give vmin=%.6g to keep "
         "the sign ([%.4g, %.4g] mapped onto [0, 1], rest at %.2f), or vmin=/vmax= for the "
         "sensor's range (docs/own-data.md)", 100 * share, lo, lo, lo, hi, rest)
 
