@@ -53,6 +53,7 @@ def test_a_scene_is_resolved_once_into_its_design():
     assert design_of(dataclasses.asdict(scene)) == d
     old = {k: v for k, v in dataclasses.asdict(scene).items() if k != "look_every"}
     assert design_of(old).looks == (5, 10, 12)  # a field older rows lack: its default
+    assert design_of({}).primary == () and design_of({}).looks == ()  # rows of no scene
     plain = Scene(seeds=[2, 1], encoders=["raw"])
     assert plain.design.looks == () and plain.design.seed_order == (2, 1)
     assert plain.design.primary == () and plain.design.budget_seconds is None

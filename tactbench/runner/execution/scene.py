@@ -384,6 +384,7 @@ def design_of(scene: "Scene | Mapping[str, Any]") -> Design:
     else:
         defaults = {f.name: f.default_factory() if f.default is MISSING else f.default
                     for f in fields(Scene)}
+        defaults["encoders"] = []  # rows that store no scene ask no default question
         get = lambda name: scene.get(name, defaults[name])  # noqa: E731
     seeds, until, max_runs = [int(s) for s in get("seeds")], get("until"), get("max_runs")
     nxt = max(seeds) + 1
