@@ -10,7 +10,10 @@ On one thread, from the simulator's default data set (made once, cached):
   magnitude and angle channels and checks its output);
 - **training**: one optimiser step of the quick profile's ``small-cnn-lstm`` network on a
   batch of prepared windows (a bare torch loop: forward, loss, backward, AdamW), against
-  the seconds per step a committed cell of docs/results/study-quick spent in its fit.
+  the seconds per step a committed cell of docs/results/study-quick spent in its fit;
+- **side by side**: the same bare loop alone, and in two processes at once (one per
+  core, as the main job trains its cells), alternated twice: what two cells on the two
+  cores of one machine cost each other, with no tactbench code in the loop.
 
 Median of repeats; the machine and date are recorded.
 """
@@ -91,6 +94,53 @@ def training() -> dict:
     return out
 
 
+def _bare_steps(channels: int, steps: int = 60) -> float:
+    """Median ms of ``steps`` optimiser steps of the committed cells' network, one thread
+    (the loop of :func:`training`, timed over more steps so two processes overlap)."""
+    import torch
+
+    from tactbench.classifiers.training import make_optimizer
+    from tactbench.plugins import load_registry
+
+    torch.set_num_threads(1)
+    row = json.loads(next(iter(sorted((REPO / "docs/results/study-quick/cells")
+                                      .glob("*.json")))).read_text())
+    clf = load_registry().build("classifier", row["classifier"], classes=len(row["classes"]))
+    clf.L = row["L"]
+    net = clf._build_net((channels, 72, 67), len(row["classes"]), pretrained=False)
+    net.train()
+    prepared = net.prepare(torch.zeros((1, channels, 72, 67))).shape[1:]
+    opt = make_optimizer(clf.optimizer, net.parameters(), lr=clf.lr, momentum=clf.momentum,
+                         weight_decay=clf.weight_decay)
+    x = torch.rand((clf.batch_size, row["L"], *prepared))
+    y = torch.randint(0, len(row["classes"]), (clf.batch_size,))
+    times = []
+    for i in range(steps + 5):
+        t0 = time.perf_counter()
+        opt.zero_grad(set_to_none=True)
+        torch.nn.functional.cross_entropy(net(x), y).backward()
+        opt.step()
+        if i >= 5:  # warm-up steps untimed
+            times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def side_by_side(channels: int = 3, rounds: int = 2) -> dict:
+    """The bare loop alone and two of it at once (two processes), alternated."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    alone, pairs = [], []
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        list(pool.map(_bare_steps, [channels, channels], [5, 5]))  # start both workers
+        for _ in range(rounds):
+            alone.append(pool.submit(_bare_steps, channels).result())
+            pairs += list(pool.map(_bare_steps, [channels, channels]))
+    return {"channels": channels, "alone_ms_per_step": alone,
+            "side_by_side_ms_per_step": pairs,
+            "ratio": statistics.median(pairs) / statistics.median(alone)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="docs/benchmarks/bare-loops.json")
@@ -98,10 +148,12 @@ def main() -> None:
     args = parser.parse_args()
     doc = {"benchmark": "bare-loops", "command": "python " + " ".join(sys.argv),
            "farneback": farneback(args.recordings), "training": training(),
+           "side_by_side": side_by_side(),
            "machine": platform.platform(), "python": sys.version.split()[0],
            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     Path(args.out).write_text(json.dumps(doc, indent=2) + "\n")
-    print(json.dumps({k: doc[k] for k in ("farneback", "training")}, indent=1))
+    print(json.dumps({k: doc[k] for k in ("farneback", "training", "side_by_side")},
+                     indent=1))
 
 
 if __name__ == "__main__":
