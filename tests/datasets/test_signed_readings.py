@@ -142,3 +142,16 @@ def test_real_cyskin_recordings_minus_their_baseline(shared_data, tmp_path, capl
     lo = min(float(np.load(p).min()) for p in tmp_path.rglob("*.npy"))
     signed = read_folder(tmp_path, vmin=lo)
     assert _mean_flow(signed, 5.0, 20) > 5 * _mean_flow(clipped, 5.0, 20)
+
+
+def test_plan_says_the_note_once_though_it_times_a_second_load(signed_folder, tmp_path,
+                                                                 caplog):
+    from tactbench.runner import Scene
+    from tactbench.runner.analysis.forecast import forecast
+
+    scene = Scene(dataset=str(signed_folder), encoders=["raw"], classifiers=["logreg"],
+                  seeds=[0, 1, 2], test_per_class=1, out=str(tmp_path / "out"))
+    with caplog.at_level(logging.WARNING):
+        forecast(scene, load_registry())
+    assert len(_notes(caplog)) == 1
+    assert logging.getLogger("tactbench.datasets").isEnabledFor(logging.WARNING)  # restored
