@@ -13,12 +13,15 @@ analysis and the reports, so they live here, with the run.
 from __future__ import annotations
 
 from collections import Counter
+from functools import lru_cache
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.errors import InputError
 
 #: The factors a paired comparison may differ in (the rest of a cell's group is shared).
 FACTORS = ("encoder", "classifier", "L")
+#: How a contrast is written, for the errors that refuse one.
+_EXAMPLE = "e.g. encoder=raw,L=6..encoder=farneback,L=3"
 
 
 def short_name(spec: str) -> str:
@@ -88,9 +91,15 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
     a comma starts a new factor only where a factor's name and ``=`` follow it. The
     difference is B − A. Raises :class:`InputError` naming the mistake.
     """
-    example = "e.g. encoder=raw,L=6..encoder=farneback,L=3"
     if not isinstance(text, str) or text.count("..") != 1:
-        raise InputError(f"contrast {text!r} must be two cells joined by '..' ({example})")
+        raise InputError(f"contrast {text!r} must be two cells joined by '..' ({_EXAMPLE})")
+    a, b = _parsed(text)  # each text parsed once (a look asks the same questions again)
+    return dict(a), dict(b)
+
+
+@lru_cache(maxsize=1024)
+def _parsed(text: str) -> tuple[tuple, tuple]:
+    """:func:`parse_contrast`'s work, kept per text: each side's ``(factor, value)``."""
     sides = []
     for part in text.split(".."):
         side: dict[str, str] = {}
@@ -99,7 +108,7 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
             factor, value = factor.strip(), value.strip()
             if not eq or not factor or not value:
                 raise InputError(f"contrast {text!r}: {item.strip()!r} is not factor=value "
-                                 f"({example})")
+                                 f"({_EXAMPLE})")
             if factor not in FACTORS:
                 raise InputError(f"contrast {text!r}: unknown factor {factor!r} (factors: "
                                  f"{', '.join(FACTORS)})")
@@ -119,7 +128,7 @@ def parse_contrast(text: str) -> tuple[dict[str, str], dict[str, str]]:
                          f"({', '.join(sorted(a))} against {', '.join(sorted(b))})")
     if a == b:
         raise InputError(f"contrast {text!r} compares a cell with itself")
-    return a, b
+    return tuple(a.items()), tuple(b.items())
 
 
 def _contrast_items(side: str) -> list[str]:
