@@ -171,7 +171,8 @@ SCENE_OPTIONS = [
                       "other comparisons are exploratory."),
     scene_option("--until", field="until", type=click.Choice(UNTIL),
                  none="the seeds given, once",
-                 help=f"answered: run the seeds in batches (the first look after {FIRST_LOOK} runs) "
+                 help=f"answered: run the seeds in batches (the first look after "
+                      f"{FIRST_LOOK} runs) "
                       "until every primary question is better, worse, equivalent within "
                       "--margin, or futile, with α spent over the looks."),
     scene_option("--max-runs", field="max_runs", type=int,

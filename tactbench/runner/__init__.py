@@ -76,7 +76,8 @@ from tactbench.runner.execution.entries import load_encoding
 from tactbench.runner.presentation.frames import cells_frame, comparisons_frame, write_parquet
 from tactbench.runner.orchestrate import render_folder, run, run_until
 from tactbench.runner.execution.planning import ROW_SCHEMA, Cell, Plan, plan
-from tactbench.runner.execution.results import FAILED, OK, ResultStore, failed_rows, ok_rows, row_status
+from tactbench.runner.execution.results import (FAILED, OK, ResultStore, failed_rows, ok_rows,
+                                                row_status)
 from tactbench.runner.execution.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
 from tactbench.runner.presentation.writers import Report
 

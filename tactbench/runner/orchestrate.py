@@ -195,8 +195,8 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     margin = scene.get("margin") if margin is None else margin
     design = design_of(scene)
     primary = list(design.primary) if primary is None else list(primary)
-    check_contrasts([*contrasts, *primary], [{"encoder": r["encoder"], "classifier": r["classifier"],
-                                 "L": r["L"]} for r in rows])
+    check_contrasts([*contrasts, *primary], [{f: r[f] for f in ("encoder", "classifier", "L")}
+                                             for r in rows])
     users, missing = dataset_users(rows, registry)
     how = "re-rendered from the stored rows of cells/ (nothing trained)"
     report = make_report(rows, contrasts=contrasts, margin=margin, users=users,

@@ -3,12 +3,14 @@
 ``tactbench run --until answered`` runs the grid's seeds in batches (a *look* after each)
 and stops when every primary comparison (``--primary``) is decided — better, worse,
 equivalent within ``--margin``, futile, or not learned (a run of one of its cells did not
-learn: no verdict rests on it, :mod:`tactbench.runner.execution.learning`) — or when ``--max-runs`` or ``--budget`` is
-reached. What each look saw is never stored apart from the cells: :func:`replay`
-recomputes every look from the rows (the first ``n_k`` seeds of the run's seed order at
-look k), so a resumed or re-rendered report shows the same looks, and a look's decision
-cannot drift from its evidence. The decisions follow :mod:`tactbench.runner.analysis.sequential`
-(α spent over the looks, Holm carried over them).
+learn: no verdict rests on it, :mod:`tactbench.runner.execution.learning`) — or when
+``--max-runs`` or ``--budget`` is reached. What each look saw is never stored apart from
+the cells: :func:`replay` recomputes every look from the rows (the first ``n_k`` seeds of
+the run's seed order at look k, :class:`~tactbench.runner.execution.scene.Design`), so a
+resumed or re-rendered report shows the same looks, and a look's decision cannot drift
+from its evidence; within one run, each look goes on from the last (``resume``). The
+decisions follow :mod:`tactbench.runner.analysis.sequential` (α spent over the looks,
+Holm carried over them).
 """
 
 from __future__ import annotations

@@ -57,7 +57,8 @@ from tactbench.runner.analysis.statistics import (
     verdict,
 )
 from tactbench.runner.analysis.summaries import CONFIDENCE, cell_groups
-from tactbench.runner.execution.questions import FACTORS, contrast_pairs, parse_contrast, spec_label, spec_labels
+from tactbench.runner.execution.questions import (FACTORS, contrast_pairs, parse_contrast,
+                                                  spec_label, spec_labels)
 from tactbench.runner.analysis.variance import COMPONENTS, TEST_SAMPLING
 
 #: The one rule for the p a verdict rests on, as report.md and docs/statistics.md state
@@ -555,8 +556,8 @@ def _not_learned(names: Mapping[str, Any], rows_a: Sequence[dict[str, Any]],
 def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio: float,
                     *, margin: float | None, confidence: float) -> dict[str, Any]:
     """Every test over a pair's runs, by field of :class:`Comparison` — the one place a
-    test of :mod:`tactbench.runner.analysis.statistics` or :mod:`tactbench.runner.analysis.power` is called
-    on a comparison.
+    test of :mod:`tactbench.runner.analysis.statistics` or
+    :mod:`tactbench.runner.analysis.power` is called on a comparison.
 
     ``d_run``: B − A per run (split seed); ``d_t``: the differences the corrected t runs
     over (per fold for K folds, else ``d_run``); ``ratio``: its correction;

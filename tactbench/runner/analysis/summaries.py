@@ -1,10 +1,11 @@
 """Summaries of result rows: accuracy and costs over seeds, the cells a run compares.
 
-Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.execution.results`) are left
-out of every summary and listed on their own (:func:`failed_cells`). This module groups
-rows into cells (:func:`cell_groups`); the cells' names and the contrasts that pair them
-are :mod:`tactbench.runner.execution.questions`; the paired comparisons are
-:mod:`tactbench.runner.analysis.comparisons`, the statistics :mod:`tactbench.runner.analysis.statistics`.
+Rows of failed cells (``status: "failed"``, see :mod:`tactbench.runner.execution.results`)
+are left out of every summary and listed on their own (:func:`failed_cells`). This module
+groups rows into cells (:func:`cell_groups`); the cells' names and the contrasts that pair
+them are :mod:`tactbench.runner.execution.questions`; the paired comparisons are
+:mod:`tactbench.runner.analysis.comparisons`, the statistics
+:mod:`tactbench.runner.analysis.statistics`.
 """
 
 from __future__ import annotations
@@ -41,8 +42,8 @@ def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = N
     the classifier was fed (images or vectors). With ``users`` (the user of each dataset
     sample, by index), ``per_user_accuracy``: user → accuracy on that user's test
     sequences. Failed cells are left out (:func:`failed_cells` lists them). ``learning``
-    (only where a run's model did not learn or transfer, :mod:`tactbench.runner.execution.learning`):
-    status → seeds.
+    (only where a run's model did not learn or transfer,
+    :mod:`tactbench.runner.execution.learning`): status → seeds.
     """
     rows = list(rows)
     by_user = per_user_accuracy(rows, users) if users is not None else {}

@@ -61,7 +61,8 @@ from tactbench.runner.execution.entries import (
     verify_entry,
 )
 from tactbench.kernels import kernels_identity
-from tactbench.runner.execution.planning import Cell, Plan, digest, imaging_identity, storage_identity
+from tactbench.runner.execution.planning import (Cell, Plan, digest, imaging_identity,
+                                                 storage_identity)
 
 if TYPE_CHECKING:
     from tactbench.ui import Progress

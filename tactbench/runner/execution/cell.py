@@ -115,7 +115,8 @@ class CellJob:
 
 def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str],
               models: Path | None = None) -> list[CellJob]:
-    """The jobs of ``cells``: ``folders`` from :func:`~tactbench.runner.execution.cache.ensure_encodings`;
+    """The jobs of ``cells``: ``folders`` from
+    :func:`~tactbench.runner.execution.cache.ensure_encodings`;
     with ``models``, each job also saves its model as ``models/<cell key>.safetensors``."""
     scene = p.scene
     data = DatasetFacts.of(p.dataset, window=p.test_window)  # shared by all

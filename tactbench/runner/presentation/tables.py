@@ -15,7 +15,8 @@ from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, E
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.execution.questions import FACTORS, short_name, spec_label, spec_labels
 
-#: Classifier spec → the name shown for it (:func:`tactbench.runner.execution.questions.spec_labels`).
+#: Classifier spec → the name shown for it
+#: (:func:`tactbench.runner.execution.questions.spec_labels`).
 Labels = Mapping[str, str]
 #: Comparisons as records, or as results.json stores them (read through
 #: :func:`tactbench.runner.analysis.comparisons.read_comparisons`, which verifies them).

@@ -100,7 +100,8 @@ class Report:
 
     def table(self) -> list[dict[str, Any]]:
         """The rows as a flat table, one dict per cell with the columns of results.csv
-        (:func:`tactbench.runner.presentation.frames.cells_frame` makes a typed data frame of it)."""
+        (:func:`tactbench.runner.presentation.frames.cells_frame` makes a typed data frame
+        of it)."""
         return flat_rows(self.rows)
 
     def document(self) -> dict[str, Any]:
