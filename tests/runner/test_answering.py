@@ -59,6 +59,22 @@ def test_a_scene_is_resolved_once_into_its_design():
     assert plain.design.primary == () and plain.design.budget_seconds is None
 
 
+@pytest.mark.parametrize("stored, says", [
+    ({"seeds": []}, "scene field 'seeds' is empty"),
+    ({"until": "answered", "max_runs": 10 ** 9}, "'max_runs' must be from 5 to 1000"),
+    ({"until": "answered", "budget": "1h30"}, "bad duration '1h30'"),
+    ({"look_every": 0, "until": "answered"}, "'look_every' must be ≥ 1"),
+    ({"primary": [3]}, "'primary' entry 1 must be text"),
+    ([1], "must be a table"),
+])
+def test_a_damaged_stored_scene_is_one_line_not_a_traceback_or_a_hang(stored, says):
+    """A row's stored scene is read back: the fields its design needs are checked as a
+    scene checks them (a huge max_runs would otherwise expand a billion seeds)."""
+    with pytest.raises(InputError, match="the rows' stored scene") as err:
+        design_of(stored)
+    assert says in str(err.value)
+
+
 def test_a_look_goes_on_from_the_earlier_looks_without_computing_them_again(monkeypatch):
     """Resumed from an earlier history, replay computes only the new look's comparisons:
     the work of a look does not grow with the looks before it; the result is the same."""

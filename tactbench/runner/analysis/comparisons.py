@@ -25,7 +25,7 @@ import numpy as np
 
 from tactbench.data.splits import DESIGN_FIELD
 from tactbench.errors import CorruptArtefactError, InputError
-from tactbench.errors import is_finite_number as _finite
+from tactbench.errors import is_finite_number
 from tactbench.runner.execution.results import INDEPENDENT_RUNS
 from tactbench.runner.analysis.pairing import (
     ClassGain,
@@ -231,16 +231,21 @@ def _maybe(check):
     return lambda v: v is None or check(v)
 
 
+#: A finite number or None (a stored field that may be absent).
+_optional_number = _maybe(is_finite_number)
+
+
 def _numbers_by_text(v: Any) -> bool:
-    return isinstance(v, Mapping) and all(isinstance(k, str) and _finite(x)
+    return isinstance(v, Mapping) and all(isinstance(k, str) and is_finite_number(x)
                                           for k, x in v.items())
 
 
 def _class_gains(v: Any) -> bool:
     keys = {f.name for f in fields(ClassGain)}
     return isinstance(v, Mapping) and all(
-        isinstance(g, Mapping) and set(g) == keys and _finite(g["difference"])
-        and _count(g["runs"]) and _maybe(_finite)(g["low"]) and _maybe(_finite)(g["high"])
+        isinstance(g, Mapping) and set(g) == keys and is_finite_number(g["difference"])
+        and _count(g["runs"]) and _optional_number(g["low"])
+        and _optional_number(g["high"])
         for g in v.values())
 
 
@@ -259,8 +264,9 @@ def _variance_components(v: Any) -> bool:
             "observed_var", "clipped", *parts}
     return isinstance(v, Mapping) and set(v) == keys and all(
         _count(v[k]) for k in ("split_seeds", "init_seeds")) and all(
-        _finite(v[k]) for k in ("groups", "total_var", "observed_var")) and all(
-        (_maybe(_finite) if k.endswith("_share") else _finite)(v[k]) for k in parts) and \
+        is_finite_number(v[k]) for k in ("groups", "total_var", "observed_var")) and all(
+        (_optional_number if k.endswith("_share") else is_finite_number)(v[k])
+        for k in parts) and \
         v["test_sampling"] in TEST_SAMPLING and isinstance(v["clipped"], list) and \
         set(v["clipped"]) <= set(COMPONENTS)
 
@@ -270,17 +276,17 @@ _STORED_KIND = {
     **{k: lambda v: isinstance(v, str) for k in ("dataset", "split", "factor", "method",
                                                  "verdict", "note")},
     "family": lambda v: v in FAMILIES, "ceiling": lambda v: isinstance(v, bool),
-    **{k: _maybe(_finite) for k in ("bayes_margin", "bayes_a_better", "bayes_equivalent",
-                                    "bayes_b_better", "detectable_effect",
-                                    "test_sampling_share")},
-    "run_ratio": _finite,
+    **{k: _optional_number for k in ("bayes_margin", "bayes_a_better", "bayes_equivalent",
+                                     "bayes_b_better", "detectable_effect",
+                                     "test_sampling_share")},
+    "run_ratio": is_finite_number,
     "runs_for_power": _maybe(_count),
     "a": lambda v: isinstance(v, (str, int)), "b": lambda v: isinstance(v, (str, int)),
-    **{k: _finite for k in ("difference", "low", "high", "confidence", "ratio",
-                            "p_b_better", "permutation_p", "accuracy_a", "accuracy_b",
-                            "runs_needed_half_width")},
-    **{k: _maybe(_finite) for k in ("t_p", "p", "equivalence_margin", "equivalence_p",
-                                    "p_holm", "equivalence_p_holm")},
+    **{k: is_finite_number for k in ("difference", "low", "high", "confidence", "ratio",
+                                     "p_b_better", "permutation_p", "accuracy_a",
+                                     "accuracy_b", "runs_needed_half_width")},
+    **{k: _optional_number for k in ("t_p", "p", "equivalence_margin", "equivalence_p",
+                                     "p_holm", "equivalence_p_holm")},
     **{k: _count for k in ("runs", "b_better_runs", "a_better_runs", "tied_runs", "a_only",
                            "b_only", "discordant_recordings", "test_recordings",
                            "family_size")},

@@ -24,6 +24,7 @@ part again. An unknown field or a field given twice in a scene file (``seed`` an
 from __future__ import annotations
 
 import difflib
+import itertools
 import json
 import math
 import numbers
@@ -376,25 +377,48 @@ def schedule(max_runs: int, look_every: int, first: int = FIRST_LOOK) -> list[in
     return [*range(first, max_runs, look_every), max_runs]
 
 
+#: The fields a :class:`Design` is made of.
+_DESIGN_FIELDS = ("seeds", "until", "max_runs", "look_every", "budget", "primary", "encoders")
+
+
 def design_of(scene: "Scene | Mapping[str, Any]") -> Design:
-    """The :class:`Design` of a scene, or of its fields as a row stores them (a field
-    older rows lack takes the scene's default)."""
+    """The :class:`Design` of a scene, or of its fields as a row stores them: read back,
+    so the fields the design needs are checked (no :class:`Scene` is built again); a
+    field older rows lack takes the scene's default. A stored scene refused is one
+    :class:`InputError` line."""
     if isinstance(scene, Scene):
-        get = lambda name: getattr(scene, name)  # noqa: E731
+        v = {name: getattr(scene, name) for name in _DESIGN_FIELDS}
     else:
-        defaults = {f.name: f.default_factory() if f.default is MISSING else f.default
-                    for f in fields(Scene)}
-        defaults["encoders"] = []  # rows that store no scene ask no default question
-        get = lambda name: scene.get(name, defaults[name])  # noqa: E731
-    seeds, until, max_runs = [int(s) for s in get("seeds")], get("until"), get("max_runs")
-    nxt = max(seeds) + 1
-    while until and len(seeds) < max_runs:
-        seeds, nxt = seeds + [nxt] * (nxt not in seeds), nxt + 1
-    budget = get("budget") if until else None
-    return Design(primary=tuple(primary_of(get("primary"), get("encoders"))),
-                  seed_order=tuple(seeds[:max_runs] if until else seeds),
-                  looks=tuple(schedule(max_runs, get("look_every"))) if until else (),
+        v = _stored_design_fields(scene)
+    seeds, until, max_runs = list(v["seeds"]), v["until"], v["max_runs"]
+    if until:  # the scene's seeds, then the next unused whole numbers up to max_runs
+        extra = (n for n in itertools.count(max(seeds) + 1) if n not in seeds)
+        seeds = (seeds + list(itertools.islice(extra, max(0, max_runs - len(seeds)))))[:max_runs]
+    budget = v["budget"] if until else None
+    return Design(primary=tuple(primary_of(v["primary"], v["encoders"])),
+                  seed_order=tuple(seeds),
+                  looks=tuple(schedule(max_runs, v["look_every"])) if until else (),
                   budget=budget, budget_seconds=parse_duration(budget) if budget else None)
+
+
+def _stored_design_fields(record: Mapping[str, Any]) -> dict[str, Any]:
+    """The design's fields of a scene as a row stores it, checked as a scene checks them."""
+    defaults = {f.name: f.default_factory() if f.default is MISSING else f.default
+                for f in fields(Scene) if f.name in _DESIGN_FIELDS}
+    defaults["encoders"] = []  # rows that store no scene ask no default question
+    if not isinstance(record, Mapping):
+        raise InputError(f"the rows' stored scene must be a table, got {_show(record)}")
+    try:
+        v = {**defaults, **check_fields({name: record[name] for name in _DESIGN_FIELDS
+                                         if name in record})}
+        if v["until"] is not None and not FIRST_LOOK <= v["max_runs"] <= MAX_LENGTHS:
+            raise InputError(f"scene field 'max_runs' must be from {FIRST_LOOK} to "
+                             f"{MAX_LENGTHS}, got {v['max_runs']}")
+        if v["budget"] is not None:
+            parse_duration(v["budget"])
+    except InputError as exc:
+        raise InputError(f"the rows' stored scene: {exc}") from None
+    return v
 
 
 def _check_together(scene: Scene) -> None:
