@@ -51,7 +51,8 @@ Usage::
     python benchmarks/training.py [--threads 2] [--out docs/benchmarks/training.json]
                                   [--skip quick] [--sequences 1750]
     python benchmarks/training.py --recipes [LABEL ...] [--encoders farneback]
-                                  [--seeds 0 1] [--out docs/benchmarks/recipes.json]
+                                  [--seeds 0 1] [--reference LABEL]
+                                  [--out docs/benchmarks/recipes.json]
 """
 
 from __future__ import annotations
@@ -683,6 +684,11 @@ RECIPES = {
                       + _ONECYCLE,
     "adamw-onecycle-160k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=40000,"
                            + _ONECYCLE,
+    # issue 36: the same at half the training cost, by half the windows or half the width
+    "adamw-onecycle-48k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=12000,"
+                          + _ONECYCLE,
+    "adamw-onecycle-w8": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=24000,"
+                         "width=8," + _ONECYCLE,
     "smoothing": _ISSUE + ",label_smoothing=0.1",
     "augment": _ISSUE + ",shift=1,gain=0.2",
     "early-stop": "small-cnn-lstm:input_size=16,head=concat,epochs=8,windows_per_epoch=12000,"
@@ -699,9 +705,10 @@ def _load() -> str:
 
 def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
                     threads: int, run_out: Path, extra: list[str],
-                    stored: bool = False) -> dict:
+                    stored: bool = False, reference: str | None = None) -> dict:
     """One ``tactbench run`` of every recipe and the baseline; per recipe and encoder:
-    accuracy, CPU and wall seconds per cell, and (recipe − baseline) paired over runs.
+    accuracy, CPU and wall seconds per cell, and (recipe − baseline) paired over runs,
+    and (recipe − ``reference``, one of the recipes) when given.
     ``stored``: run nothing, read the cells ``run_out`` holds."""
     specs = {label: RECIPES[label] for label in labels}
     registry = load_registry()
@@ -735,17 +742,29 @@ def measure_recipes(labels: list[str], encoders: list[str], seeds: list[int], *,
                      "accuracy_mean": float(np.mean(acc)), "accuracy": acc,
                      "cpu_s_mean": float(np.mean(cpu)) if cpu else None,
                      "wall_s_mean": float(np.mean([r["train_s"] for r in cells]))}
-            for c in compared:
-                if c.get("encoder") != enc or {named.get(c["a"]), named.get(c["b"])} != \
-                        {label, "baseline"} or label == "baseline":
-                    continue
-                sign = 1 if named.get(c["a"]) == "baseline" else -1  # recipe − baseline
-                low, high = sorted((sign * c["low"], sign * c["high"]))
-                entry["vs_baseline"] = {"difference": 100 * sign * c["difference"],
-                                        "low": 100 * low, "high": 100 * high,
-                                        "runs": c["runs"], "method": c["method"]}
+            for other in ("baseline", reference):
+                paired = _paired(compared, named, label, other, enc)
+                if paired is not None:
+                    entry["vs_" + ("baseline" if other == "baseline" else "reference")] = \
+                        {"reference": other, **paired}
             out["recipes"].append(entry)
     return out
+
+
+def _paired(compared: list[dict], named: dict, label: str, other: str | None,
+            encoder: str) -> dict | None:
+    """``label`` − ``other`` in points, paired over runs, from the run's comparisons;
+    None when ``other`` is ``label`` itself, not given or not compared."""
+    if other is None or other == label:
+        return None
+    for c in compared:
+        if c.get("encoder") == encoder and \
+                {named.get(c["a"]), named.get(c["b"])} == {label, other}:
+            sign = 1 if named.get(c["a"]) == other else -1  # label − other
+            low, high = sorted((sign * c["low"], sign * c["high"]))
+            return {"difference": 100 * sign * c["difference"], "low": 100 * low,
+                    "high": 100 * high, "runs": c["runs"], "method": c["method"]}
+    return None
 
 
 def plot_recipes(result: dict, path: Path) -> None:
@@ -778,6 +797,9 @@ def recipes_main(args) -> int:
     unknown = [x for x in labels if x not in RECIPES]
     if unknown:
         raise SystemExit(f"unknown recipes {unknown}; known: {', '.join(RECIPES)}")
+    if args.reference is not None and args.reference not in labels:
+        raise SystemExit(f"--reference {args.reference} is not among the recipes run: "
+                         f"{', '.join(labels)}")
     result = {"command": "python " + " ".join(sys.argv), "threads": args.threads,
               "machine": platform.platform(), "cpu_count": __import__("os").cpu_count(),
               "torch": torch.__version__, "date": time.strftime("%Y-%m-%d %H:%M UTC",
@@ -786,7 +808,7 @@ def recipes_main(args) -> int:
                       "robust cost; wall seconds grow with contention",
               **measure_recipes(labels, args.encoders, args.seeds, threads=args.threads,
                                 run_out=args.run_out, extra=args.run_args,
-                                stored=args.stored)}
+                                stored=args.stored, reference=args.reference)}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     plot_recipes(result, args.out.with_suffix(".png"))
@@ -795,7 +817,11 @@ def recipes_main(args) -> int:
         interval = (f"{vs['difference']:+.1f} [{vs['low']:+.1f}, {vs['high']:+.1f}]"
                     if vs else "")
         cpu = f"{e['cpu_s_mean']:.0f}" if e["cpu_s_mean"] is not None else "?"
-        print(f"{e['recipe']:15s} {e['encoder']:10s} {e['accuracy_mean']:5.1f} %  "
+        ref = e.get("vs_reference")
+        if ref:
+            interval += (f"  − {ref['reference']}: {ref['difference']:+.1f} "
+                         f"[{ref['low']:+.1f}, {ref['high']:+.1f}]")
+        print(f"{e['recipe']:18s} {e['encoder']:10s} {e['accuracy_mean']:5.1f} %  "
               f"{cpu:>5s} CPU-s {e['wall_s_mean']:5.0f} s  {interval}")
     print(f"wrote {args.out} and {args.out.with_suffix('.png')}")
     return 0
@@ -809,6 +835,8 @@ def main(argv=None) -> int:
     ap.add_argument("--encoders", nargs="+", default=["raw", "farneback"])
     ap.add_argument("--run-out", type=Path, default=Path("tactbench-out/recipes"),
                     help="where the recipes' tactbench run keeps its cells")
+    ap.add_argument("--reference", metavar="LABEL",
+                    help="--recipes: pair every other recipe with this one too")
     ap.add_argument("--stored", action="store_true",
                     help="--recipes: train nothing, report the cells --run-out holds")
     ap.add_argument("--run-args", nargs="*", default=[],
