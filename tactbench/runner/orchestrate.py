@@ -279,18 +279,20 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     last :class:`~tactbench.runner.presentation.writers.Report` (its ``looks``: every look, replayed
     from the rows); ``on_look(report)`` is called after each look, and so is every
     plugin's ``look_finished`` hook; ``on_row``: see :func:`run`. Ctrl-C between cells
-    keeps every finished cell."""
+    keeps every finished cell. The report's ``computed``, ``skipped`` and ``seconds`` are
+    this call's, over all its looks."""
     registry = registry or load_registry()
     design = scene.design  # the seed order, the looks and the budget: decided once
     order, looks, budget = design.seed_order, design.looks, design.budget_seconds
     stored = {int(r["seed"]) for r in ResultStore(scene.out).stored_rows()}
     start = time.perf_counter()
-    report = None
+    report, computed = None, 0
     for k in range(first_look_to_run(stored, order, looks), len(looks)):
         t0 = time.perf_counter()
         report = run(dataclasses.replace(scene, seeds=list(order[:looks[k]])),
                      registry=registry, progress=progress, plots=plots, on_row=on_row,
                      resume=report.history if report is not None else None)
+        computed += report.computed
         if on_look is not None:
             on_look(report)
         registry.notify("look_finished", report=report, out=Path(scene.out))
@@ -306,6 +308,10 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
                                   f"spent, the next batch would take about "
                                   f"{batch / 60:.1f} more")
             break
+    # what this command did over all its looks, not its last look's batch alone: a
+    # look's run counts the cells of the looks before it as already done
+    report.skipped -= computed - report.computed
+    report.computed, report.seconds = computed, time.perf_counter() - start
     usage = [resource.getrusage(who) for who in (resource.RUSAGE_SELF,
                                                  resource.RUSAGE_CHILDREN)]
     report.cpu_seconds = sum(u.ru_utime + u.ru_stime for u in usage)

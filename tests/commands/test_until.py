@@ -71,6 +71,24 @@ def test_runs_are_added_until_the_primary_is_answered_and_the_looks_replay(tmp_p
     assert json.loads((out / "results.json").read_text())["looks"] == looks
 
 
+def test_what_a_run_until_answered_did_counts_every_look(tmp_path, monkeypatch):
+    """meta's computed / skipped / seconds are the whole command's, not its last look's:
+    a report saying "N reused from an earlier run" of cells this run made misleads."""
+    out = tmp_path / "out"
+    args = ["run", *TINY, "--seed", "0", "--out", str(out), "--primary", PRIMARY,
+            "--until", "answered", "--max-runs", "7", "--look-every", "1", "--json"]
+    first = _invoke(tmp_path, monkeypatch, *args)
+    assert first.exit_code == 0, first.output
+    meta = json.loads(first.output)["meta"]
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert (meta["computed"], meta["skipped"]) == (len(rows), 0)
+    looks = json.loads((out / "results.json").read_text())["looks"]["looks"]
+    assert len(rows) == 2 * looks[-1]["runs"]  # two encoders, one classifier, one L
+    again = json.loads(_invoke(tmp_path, monkeypatch, *args).output)["meta"]
+    assert (again["computed"], again["skipped"]) == (0, len(rows))
+    assert again["seconds"] < meta["seconds"]
+
+
 def test_until_needs_a_primary_and_a_readable_budget(tmp_path, monkeypatch):
     out = str(tmp_path / "out")
     no_primary = _invoke(tmp_path, monkeypatch, "run", *TINY[:2], "--encoder", "raw",
