@@ -689,6 +689,13 @@ RECIPES = {
                           + _ONECYCLE,
     "adamw-onecycle-w8": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=24000,"
                          "width=8," + _ONECYCLE,
+    # ... and between the default and half: 2/3 and 3/4 of the windows, 3/4 of the width
+    "adamw-onecycle-64k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=16000,"
+                          + _ONECYCLE,
+    "adamw-onecycle-72k": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=18000,"
+                          + _ONECYCLE,
+    "adamw-onecycle-w12": "small-cnn-lstm:input_size=16,head=concat,windows_per_epoch=24000,"
+                          "width=12," + _ONECYCLE,
     "smoothing": _ISSUE + ",label_smoothing=0.1",
     "augment": _ISSUE + ",shift=1,gain=0.2",
     "early-stop": "small-cnn-lstm:input_size=16,head=concat,epochs=8,windows_per_epoch=12000,"
