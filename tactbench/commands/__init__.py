@@ -35,6 +35,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("tactbench.commands.report:report_cmd",
                "Render a run folder's report again from its stored cell rows, training "
                "nothing."),
+    "reproduce": ("tactbench.commands.reproduce:reproduce_cmd",
+                  "Train a run folder's stored cells again here and compare every test "
+                  "prediction."),
     "cache": ("tactbench.commands.cache:cache_group",
               "Inspect or clear cached encodings (TACTBENCH_CACHE, default ~/.cache/tactbench)."),
     "encode": ("tactbench.commands.encode:encode_cmd",

@@ -1,0 +1,246 @@
+"""``tactbench reproduce FOLDER``: train a run folder's stored cells again on this machine
+and say, test prediction by test prediction, whether they come out the same.
+
+The check a researcher makes before citing a colleague's table (docs/reliability.md,
+"Numbers across machines"). A row's identity holds everything that changes its result,
+the thread count and the CPU kernels included, and the row stores the scene that planned
+it; planned again from that scene, a cell trained with the default pinned kernels has
+the same key on any x86-64 machine with AVX2, and must give the same predictions. Each
+chosen cell ends as one of:
+
+- ``identical``: the same key, every test prediction and the accuracy the same;
+- ``differs``: the same key, other predictions (how many, and the accuracy before and
+  now): this machine does not keep the promise for this cell;
+- ``other identity``: planned here, the cell has another identity, so another key, and
+  the fields that differ are named (a row trained with a machine's native kernels,
+  ``cpu_kernels: native AMD EPYC (avx2)``, is that kind of processor's alone; it is
+  trained anyway, and its predictions compared);
+- ``failed``: the cell failed here (its error is shown).
+
+By default one cell of each encoder × classifier × L, the lowest seed's; ``--cell KEY``
+names cells, ``--all`` takes every one. The cells are trained in a separate folder
+(``--out``, else a temporary one, removed after), never in FOLDER, and share the
+encoding cache with every other run. Exit status 0 when every chosen cell is identical,
+1 otherwise.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import fields
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import click
+
+from tactbench.cli import get_registry
+from tactbench.errors import InputError
+from tactbench.kernels import DEFAULT_KERNELS
+from tactbench.runner import OK, ResultStore, Scene, run
+from tactbench.runner.execution.planning import row_identity
+
+#: The stored scene's fields a reproduction sets itself: one plain run of the chosen
+#: cells, in its own folder, with no question asked of them.
+PLAIN_RUN = {"until": None, "primary": None, "contrasts": None, "margin": None,
+             "budget": None, "rerun": False, "save_models": False, "executor": "local",
+             "scheduler": None}
+IDENTICAL, DIFFERS, OTHER_IDENTITY, CELL_FAILED = ("identical", "differs", "other identity",
+                                                   "failed")
+
+
+def stored_rows(folder: str) -> list[dict[str, Any]]:
+    """The sound ``ok`` rows of ``folder``'s cells, or one :class:`InputError` line."""
+    store = ResultStore(folder)
+    if not store.cells.is_dir():
+        raise InputError(f"{folder} has no cells/ folder: not the --out of a "
+                         f"`tactbench run`")
+    rows = [r for r in store.stored_rows() if r.get("status") == OK]
+    if not rows:
+        raise InputError(f"{folder}/cells holds no finished cell to reproduce")
+    return rows
+
+
+def choose(rows: Sequence[dict[str, Any]], keys: Sequence[str],
+           everything: bool) -> list[dict[str, Any]]:
+    """The rows to train again: those of ``keys`` (a key or a unique prefix of one), every
+    row with ``everything``, else the lowest seed's of each encoder × classifier × L."""
+    if keys:
+        chosen = []
+        for key in keys:
+            hits = [r for r in rows if str(r["key"]).startswith(key)]
+            if len(hits) != 1:
+                what = "no" if not hits else f"{len(hits)}"
+                raise InputError(f"--cell {key}: {what} finished cell(s) of the folder "
+                                 f"match (its keys: {', '.join(r['key'] for r in rows[:6])}"
+                                 f"{', …' if len(rows) > 6 else ''})")
+            chosen.append(hits[0])
+        return list({r["key"]: r for r in chosen}.values())
+    if everything:
+        return list(rows)
+    first: dict[tuple, dict[str, Any]] = {}
+    for row in sorted(rows, key=lambda r: (r["seed"], r.get("init_seed") or 0)):
+        first.setdefault((row["encoder"], row["classifier"], row["L"]), row)
+    return [r for r in rows if r in first.values()]
+
+
+def scenes_for(rows: Sequence[dict[str, Any]], out: Path,
+               workers: int | None) -> list[tuple[Scene, list[dict[str, Any]]]]:
+    """Scenes that plan the cells of ``rows`` again, each with the rows it covers: rows of
+    one stored scene and seed go in one scene where they are its whole grid (encoders ×
+    classifiers × L), else one scene a row."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        stored = (row.get("run") or {}).get("scene")
+        if not isinstance(stored, dict):
+            raise InputError(f"cell {row['key']}: its row keeps no scene (written before "
+                             f"rows stored one): it cannot be planned again")
+        group = (json.dumps(stored, sort_keys=True), row["seed"], row.get("init_seed"))
+        groups.setdefault(group, []).append(row)
+    scenes = []
+    for group in groups.values():
+        grid = {(r["encoder"], r["classifier"], r["L"]) for r in group}
+        axes = [sorted({c[i] for c in grid}, key=str) for i in range(3)]
+        whole = len(grid) == len(axes[0]) * len(axes[1]) * len(axes[2])
+        for part in ([group] if whole else [[r] for r in group]):
+            scenes.append((_scene(part, out / f"part{len(scenes) + 1}", workers), part))
+    return scenes
+
+
+def _scene(rows: Sequence[dict[str, Any]], out: Path, workers: int | None) -> Scene:
+    stored = rows[0]["run"]["scene"]
+    known = {f.name for f in fields(Scene)}
+    values = {k: v for k, v in stored.items() if k in known}
+    init = rows[0].get("init_seed")
+    values.update(PLAIN_RUN, out=str(out), workers=workers,
+                  encoders=_distinct(r["encoder"] for r in rows),
+                  classifiers=_distinct(r["classifier"] for r in rows),
+                  L=_distinct(r["L"] for r in rows), seeds=[rows[0]["seed"]],
+                  init_seeds=None if init is None else [init])
+    return Scene.of(values)
+
+
+def _distinct(values: Iterable[Any]) -> list[Any]:
+    return list(dict.fromkeys(values))
+
+
+def compare(old: dict[str, Any], new: dict[str, Any] | None) -> dict[str, Any]:
+    """What training ``old``'s cell again gave: its outcome and the numbers behind it."""
+    out: dict[str, Any] = {"key": old["key"], "encoder": old["encoder"],
+                           "classifier": old["classifier"], "L": old["L"],
+                           "seed": old["seed"], "accuracy_before": old["accuracy"]}
+    if new is None:  # a bug: every planned cell leaves a row
+        raise RuntimeError(f"cell {old['key']} was planned again but left no row")
+    out["key_now"] = new["key"]
+    if new.get("status") != OK:
+        return {**out, "outcome": CELL_FAILED, "error": new.get("error", "")}
+    before, now = old["test_predictions"], new["test_predictions"]
+    same = 0  # recordings tested in another order (another split) share no prediction
+    if before["indices"] == now["indices"]:
+        same = sum(a == b for a, b in zip(before["predictions"], now["predictions"]))
+    out.update(accuracy_now=new["accuracy"], predictions=len(before["predictions"]),
+               predictions_same=same)
+    if new["key"] != old["key"]:
+        return {**out, "outcome": OTHER_IDENTITY,
+                "identity_differs": identity_difference(old, new)}
+    identical = before == now and old["accuracy"] == new["accuracy"]
+    return {**out, "outcome": IDENTICAL if identical else DIFFERS}
+
+
+def identity_difference(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    """``field: THERE there, HERE here`` for each identity field the two rows differ in
+    (a field left out is at its default: 1 thread, the pinned AVX2 kernels, ...)."""
+    a, b = row_identity(old), row_identity(new)
+    at_default = {"threads": 1, "cpu_kernels": f"{DEFAULT_KERNELS} (the default)"}
+    return [f"{k}: {a.get(k, at_default.get(k, 'none'))} there, "
+            f"{b.get(k, at_default.get(k, 'none'))} here"
+            for k in sorted(set(a) | set(b), key=str) if a.get(k) != b.get(k)]
+
+
+def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False,
+              out: str | None = None, workers: int | None = None,
+              progress: bool = True, registry=None) -> list[dict[str, Any]]:
+    """Train the chosen cells of ``folder`` again (in ``out``, else a temporary folder
+    removed after) and return one :func:`compare` result per cell."""
+    rows = choose(stored_rows(folder), keys, everything)
+    root = Path(out) if out else Path(tempfile.mkdtemp(prefix="tactbench-reproduce-"))
+    inside = Path(folder).resolve()
+    if root.resolve() == inside or inside in root.resolve().parents:
+        raise InputError(f"--out {out} lies in {folder}: the cells are trained again "
+                         f"elsewhere, so that nothing stored there changes")
+    try:
+        results = []
+        for scene, part in scenes_for(rows, root, workers):
+            run(scene, registry=registry, progress=progress, plots=False)
+            store = ResultStore(scene.out)
+            made = store.stored_rows()
+            for row in part:
+                new = store.get(row["key"]) or _same_cell(row, made)
+                results.append(compare(row, new))
+        return results
+    finally:
+        if not out:
+            shutil.rmtree(root, ignore_errors=True)
+
+
+def _same_cell(row: dict[str, Any], made: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """The row trained here for ``row``'s cell under another key: the same encoder,
+    classifier, L and seed."""
+    for new in made:
+        if all(new.get(k) == row.get(k) for k in ("encoder", "classifier", "L", "seed",
+                                                   "init_seed")):
+            return new
+    return None
+
+
+def _line(r: dict[str, Any]) -> str:
+    cell = f"{r['key']} {r['encoder']} / {r['classifier'].split(':')[0]} L={r['L']} " \
+           f"seed {r['seed']}"
+    if r["outcome"] == CELL_FAILED:
+        return f"{cell}: failed here: {r['error']}"
+    preds = f"{r['predictions_same']} of {r['predictions']} test predictions the same"
+    acc = f"accuracy {100 * r['accuracy_before']:.2f} % there, {100 * r['accuracy_now']:.2f} % here"
+    if r["outcome"] == IDENTICAL:
+        return f"{cell}: identical ({preds}; {acc})"
+    if r["outcome"] == DIFFERS:
+        return f"{cell}: differs ({preds}; {acc})"
+    return f"{cell}: other identity here ({'; '.join(r['identity_differs'])}): {preds}; {acc}"
+
+
+@click.command("reproduce")
+@click.argument("folder", type=click.Path(file_okay=False))
+@click.option("--cell", "keys", multiple=True, metavar="KEY",
+              help="A cell to train again (its key, or a unique start of it); repeatable. "
+                   "[default: the lowest seed's cell of each encoder × classifier × L]")
+@click.option("--all", "everything", is_flag=True, help="Train every finished cell again.")
+@click.option("--out", type=click.Path(file_okay=False), default=None,
+              help="Where the cells are trained again. [default: a temporary folder, "
+                   "removed after]")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Cells at once. [default: this machine's usable cores]")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
+def reproduce_cmd(folder: str, keys: tuple[str, ...], everything: bool, out: str | None,
+                  workers: int | None, as_json: bool) -> None:
+    """Train a run folder's stored cells again here and compare every test prediction.
+
+    FOLDER is the --out of a `tactbench run` (a colleague's, a committed report's). Each
+    chosen cell is planned again from the scene its row stored and trained in another
+    folder; the cell is identical (same key, every test prediction the same), differs
+    (same key, other predictions), has another identity here (the fields that differ are
+    named: threads, CPU kernels, ...) or failed. Exit status 0 when every cell is
+    identical, 1 otherwise.
+    """
+    if keys and everything:
+        raise InputError("--cell and --all: give one or the other")
+    results = reproduce(folder, keys=keys, everything=everything, out=out,
+                        workers=workers, progress=not as_json, registry=get_registry())
+    if as_json:
+        click.echo(json.dumps({"folder": folder, "cells": results}, indent=2))
+    else:
+        for r in results:
+            click.echo(_line(r))
+        same = sum(r["outcome"] == IDENTICAL for r in results)
+        click.echo(f"{same} of {len(results)} cell(s) of {folder} identical on this machine")
+    if any(r["outcome"] != IDENTICAL for r in results):
+        click.get_current_context().exit(1)
