@@ -113,7 +113,8 @@ def _scene(rows: Sequence[dict[str, Any]], out: Path, workers: int | None) -> Sc
     known = {f.name for f in fields(Scene)}
     values = {k: v for k, v in stored.items() if k in known}
     init = rows[0].get("init_seed")
-    values.update(PLAIN_RUN, out=str(out), workers=workers,
+    # the threads the row trained with (a scene of before kept None: "this machine's")
+    values.update(PLAIN_RUN, out=str(out), workers=workers, threads=rows[0].get("threads") or 1,
                   encoders=_distinct(r["encoder"] for r in rows),
                   classifiers=_distinct(r["classifier"] for r in rows),
                   L=_distinct(r["L"] for r in rows), seeds=[rows[0]["seed"]],

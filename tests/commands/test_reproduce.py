@@ -107,3 +107,15 @@ def test_a_folder_without_cells_and_an_out_inside_the_folder_are_refused(folder,
     result = _reproduce(str(folder), "--out", str(folder / "again"))
     assert result.exit_code == 2 and "lies in" in result.output
     assert not (folder / "again").exists()
+
+
+def test_a_row_whose_scene_left_the_threads_to_the_machine_trains_with_its_own(folder):
+    """Scenes of before stored ``threads: null`` ("this machine's"); the row says what
+    its cell trained with, and that is what it is planned with again."""
+    store = ResultStore(folder)
+    row = next(r for r in store.stored_rows() if r["encoder"] == "raw" and r["seed"] == 0)
+    row["run"]["scene"]["threads"] = None
+    store.put(row)
+    result = _reproduce(str(folder), "--cell", row["key"])
+    assert result.exit_code == 0, result.output
+    assert f"{row['key']} raw / logreg L=3 seed 0: identical" in result.output
