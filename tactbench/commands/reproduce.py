@@ -43,8 +43,9 @@ from tactbench.runner.execution.planning import row_identity
 
 #: The stored scene's fields a reproduction sets itself: one plain run of the chosen
 #: cells, in its own folder, with no question asked of them.
+#: ``rerun``: a cell already in ``--out`` (a reproduction of before) is trained again too.
 PLAIN_RUN = {"until": None, "primary": None, "contrasts": None, "margin": None,
-             "budget": None, "rerun": False, "save_models": False, "executor": "local",
+             "budget": None, "rerun": True, "save_models": False, "executor": "local",
              "scheduler": None}
 IDENTICAL, DIFFERS, OTHER_IDENTITY, CELL_FAILED = ("identical", "differs", "other identity",
                                                    "failed")
@@ -82,7 +83,8 @@ def choose(rows: Sequence[dict[str, Any]], keys: Sequence[str],
     first: dict[tuple, dict[str, Any]] = {}
     for row in sorted(rows, key=lambda r: (r["seed"], r.get("init_seed") or 0)):
         first.setdefault((row["encoder"], row["classifier"], row["L"]), row)
-    return [r for r in rows if r in first.values()]
+    lowest = {r["key"] for r in first.values()}
+    return [r for r in rows if r["key"] in lowest]
 
 
 def scenes_for(rows: Sequence[dict[str, Any]], out: Path,

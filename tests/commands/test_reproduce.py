@@ -89,6 +89,10 @@ def test_every_cell_with_all_and_the_cells_kept_where_asked(folder, tmp_path):
     assert "4 of 4 cell(s)" in result.output
     kept = {p.stem for p in keep.rglob("cells/*.json")}
     assert kept == set(ResultStore(folder).keys())
+    # the same --out again: every cell is trained anew, not read from the last time
+    first = {p: p.read_bytes() for p in keep.rglob("cells/*.json")}
+    assert _reproduce(str(folder), "--all", "--out", str(keep)).exit_code == 0
+    assert all(p.read_bytes() != data for p, data in first.items())
 
 
 @pytest.mark.parametrize("args, says", [
