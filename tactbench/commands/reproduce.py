@@ -116,7 +116,8 @@ def _scene(rows: Sequence[dict[str, Any]], out: Path, workers: int | None) -> Sc
     values = {k: v for k, v in stored.items() if k in known}
     init = rows[0].get("init_seed")
     # the threads the row trained with (a scene of before kept None: "this machine's")
-    values.update(PLAIN_RUN, out=str(out), workers=workers, threads=rows[0].get("threads") or 1,
+    values.update(PLAIN_RUN, out=str(out), workers=workers,
+                  threads=rows[0].get("threads") or 1,
                   encoders=_distinct(r["encoder"] for r in rows),
                   classifiers=_distinct(r["classifier"] for r in rows),
                   L=_distinct(r["L"] for r in rows), seeds=[rows[0]["seed"]],
@@ -137,7 +138,9 @@ def compare(old: dict[str, Any], new: dict[str, Any] | None) -> dict[str, Any]:
         raise RuntimeError(f"cell {old['key']} was planned again but left no row")
     out["key_now"] = new["key"]
     if new.get("status") != OK:
-        return {**out, "outcome": CELL_FAILED, "error": new.get("error", "")}
+        error = new.get("error") or {}
+        return {**out, "outcome": CELL_FAILED,
+                "error": f"{error.get('type', 'error')}: {error.get('message', '')}"}
     before, now = old["test_predictions"], new["test_predictions"]
     same = 0  # recordings tested in another order (another split) share no prediction
     if before["indices"] == now["indices"]:

@@ -10,6 +10,7 @@ from click.testing import CliRunner
 
 from tactbench.cli import cli
 from tactbench.kernels import KERNELS_ENV
+from tactbench.commands.reproduce import _line, compare
 from tactbench.runner import ResultStore
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -123,3 +124,13 @@ def test_a_row_whose_scene_left_the_threads_to_the_machine_trains_with_its_own(f
     result = _reproduce(str(folder), "--cell", row["key"])
     assert result.exit_code == 0, result.output
     assert f"{row['key']} raw / logreg L=3 seed 0: identical" in result.output
+
+
+def test_a_cell_that_fails_here_says_its_error():
+    old = {"key": "abc", "encoder": "raw", "classifier": "logreg:max_iter=20", "L": 3,
+           "seed": 0, "accuracy": 0.5}
+    new = {"key": "abc", "status": "failed",
+           "error": {"type": "MemoryError", "message": "out of memory", "traceback": ""}}
+    result = compare(old, new)
+    assert result["outcome"] == "failed"
+    assert _line(result) == "abc raw / logreg L=3 seed 0: failed here: MemoryError: out of memory"
