@@ -47,6 +47,8 @@ WRITERS: dict[tuple[str, str], dict] = {
                                  kind="folder", writes="flowbench.json"),
     ("layout generate", "--out"): dict(args=["layout", "generate", "--out", "{out}",
                                              "--taxels", "16"], kind="file", suffix=".csv"),
+    ("reproduce", "--out"): dict(args=["reproduce", "{input}", "--out", "{out}"],
+                                 kind="folder", writes="part1", input="dataset"),
     ("run", "--out"): dict(args=["run", "--dataset", "{input}", "--encoder", "raw",
                                  "--classifier", "logreg", "--out", "{out}"],
                            kind="folder", writes="report.md", input="dataset"),

@@ -27,6 +27,7 @@ encoding cache with every other run. Exit status 0 when every chosen cell is ide
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import tempfile
 from dataclasses import fields
@@ -38,6 +39,7 @@ import click
 from tactbench.cli import get_registry
 from tactbench.errors import InputError
 from tactbench.kernels import DEFAULT_KERNELS
+from tactbench.paths import check_output_folder
 from tactbench.runner import OK, ResultStore, Scene, run
 from tactbench.runner.execution.planning import row_identity
 
@@ -47,6 +49,9 @@ from tactbench.runner.execution.planning import row_identity
 PLAIN_RUN = {"until": None, "primary": None, "contrasts": None, "margin": None,
              "budget": None, "rerun": True, "save_models": False, "executor": "local",
              "scheduler": None}
+#: The run folders a reproduction makes in ``--out``: part1, part2, ...
+PART_PREFIX = "part"
+PART = re.compile(PART_PREFIX + r"[1-9][0-9]*")
 IDENTICAL, DIFFERS, OTHER_IDENTITY, CELL_FAILED = ("identical", "differs", "other identity",
                                                    "failed")
 
@@ -106,7 +111,8 @@ def scenes_for(rows: Sequence[dict[str, Any]], out: Path,
         axes = [sorted({c[i] for c in grid}, key=str) for i in range(3)]
         whole = len(grid) == len(axes[0]) * len(axes[1]) * len(axes[2])
         for part in ([group] if whole else [[r] for r in group]):
-            scenes.append((_scene(part, out / f"part{len(scenes) + 1}", workers), part))
+            scenes.append((_scene(part, out / f"{PART_PREFIX}{len(scenes) + 1}", workers),
+                           part))
     return scenes
 
 
@@ -169,12 +175,10 @@ def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False
               progress: bool = True, registry=None) -> list[dict[str, Any]]:
     """Train the chosen cells of ``folder`` again (in ``out``, else a temporary folder
     removed after) and return one :func:`compare` result per cell."""
+    if out:  # new, empty or an earlier reproduction's; never in FOLDER or the cache
+        check_output_folder(out, inputs=[folder], ours=_is_part)
     rows = choose(stored_rows(folder), keys, everything)
     root = Path(out) if out else Path(tempfile.mkdtemp(prefix="tactbench-reproduce-"))
-    inside = Path(folder).resolve()
-    if root.resolve() == inside or inside in root.resolve().parents:
-        raise InputError(f"--out {out} lies in {folder}: the cells are trained again "
-                         f"elsewhere, so that nothing stored there changes")
     try:
         results = []
         for scene, part in scenes_for(rows, root, workers):
@@ -188,6 +192,11 @@ def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False
     finally:
         if not out:
             shutil.rmtree(root, ignore_errors=True)
+
+
+def _is_part(entry: Path) -> bool:
+    """Whether ``entry`` of ``--out`` is a run folder a reproduction made (``partN``)."""
+    return entry.is_dir() and PART.fullmatch(entry.name) is not None
 
 
 def _same_cell(row: dict[str, Any], made: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
@@ -221,8 +230,8 @@ def _line(r: dict[str, Any]) -> str:
                    "[default: the lowest seed's cell of each encoder × classifier × L]")
 @click.option("--all", "everything", is_flag=True, help="Train every finished cell again.")
 @click.option("--out", type=click.Path(file_okay=False), default=None,
-              help="Where the cells are trained again. [default: a temporary folder, "
-                   "removed after]")
+              help="Where the cells are trained again: a new or empty folder, or an "
+                   "earlier reproduction's. [default: a temporary folder, removed after]")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Cells at once. [default: this machine's usable cores]")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")

@@ -110,7 +110,7 @@ def test_a_folder_without_cells_and_an_out_inside_the_folder_are_refused(folder,
     result = _reproduce(str(tmp_path / "nowhere"))
     assert result.exit_code == 2 and "has no cells/ folder" in result.output
     result = _reproduce(str(folder), "--out", str(folder / "again"))
-    assert result.exit_code == 2 and "lies in" in result.output
+    assert result.exit_code == 2 and "overlaps the input" in result.output
     assert not (folder / "again").exists()
 
 
