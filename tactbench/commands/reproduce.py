@@ -38,10 +38,11 @@ import click
 
 from tactbench.cli import get_registry
 from tactbench.errors import InputError
-from tactbench.kernels import DEFAULT_KERNELS
 from tactbench.paths import check_output_folder
-from tactbench.runner import OK, ResultStore, Scene, run
+from tactbench.runner import OK, ResultStore, Scene, ok_rows, run
 from tactbench.runner.execution.planning import row_identity
+from tactbench.runner.execution.results import (IDENTITY_DEFAULTS, identity_differences,
+                                                row_scene)
 
 #: The stored scene's fields a reproduction sets itself: one plain run of the chosen
 #: cells, in its own folder, with no question asked of them.
@@ -62,7 +63,7 @@ def stored_rows(folder: str) -> list[dict[str, Any]]:
     if not store.cells.is_dir():
         raise InputError(f"{folder} has no cells/ folder: not the --out of a "
                          f"`tactbench run`")
-    rows = [r for r in store.stored_rows() if r.get("status") == OK]
+    rows = ok_rows(store.stored_rows())
     if not rows:
         raise InputError(f"{folder}/cells holds no finished cell to reproduce")
     return rows
@@ -99,8 +100,8 @@ def scenes_for(rows: Sequence[dict[str, Any]], out: Path,
     classifiers × L), else one scene a row."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for row in rows:
-        stored = (row.get("run") or {}).get("scene")
-        if not isinstance(stored, dict):
+        stored = row_scene(row)
+        if stored is None:
             raise InputError(f"cell {row['key']}: its row keeps no scene (written before "
                              f"rows stored one): it cannot be planned again")
         group = (json.dumps(stored, sort_keys=True), row["seed"], row.get("init_seed"))
@@ -162,12 +163,14 @@ def compare(old: dict[str, Any], new: dict[str, Any] | None) -> dict[str, Any]:
 
 def identity_difference(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
     """``field: THERE there, HERE here`` for each identity field the two rows differ in
-    (a field left out is at its default: 1 thread, the pinned AVX2 kernels, ...)."""
-    a, b = row_identity(old), row_identity(new)
-    at_default = {"threads": 1, "cpu_kernels": f"{DEFAULT_KERNELS} (the default)"}
-    return [f"{k}: {a.get(k, at_default.get(k, 'none'))} there, "
-            f"{b.get(k, at_default.get(k, 'none'))} here"
-            for k in sorted(set(a) | set(b), key=str) if a.get(k) != b.get(k)]
+    (:func:`~tactbench.runner.execution.results.identity_differences`; a value at its
+    default, 1 thread or the pinned AVX2 kernels, says so)."""
+    def shown(field: str, value: Any) -> str:
+        default = field in IDENTITY_DEFAULTS and value == IDENTITY_DEFAULTS[field]
+        return f"{value} (the default)" if default and value is not None else f"{value}"
+
+    return [f"{field}: {shown(field, there)} there, {shown(field, here)} here"
+            for field, there, here in identity_differences(old, row_identity(new))]
 
 
 def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False,

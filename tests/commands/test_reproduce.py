@@ -134,3 +134,14 @@ def test_a_cell_that_fails_here_says_its_error():
     result = compare(old, new)
     assert result["outcome"] == "failed"
     assert _line(result) == "abc raw / logreg L=3 seed 0: failed here: MemoryError: out of memory"
+
+
+@pytest.mark.parametrize("run_meta", ["not a record", {"scene": None}])
+def test_a_row_without_a_readable_scene_is_one_line(folder, run_meta):
+    store = ResultStore(folder)
+    row = store.stored_rows()[0]
+    row["run"] = run_meta
+    store.put(row)  # sealed again: sound, but no scene to plan it from
+    result = _reproduce(str(folder), "--cell", row["key"])
+    assert result.exit_code == 2, result.output
+    assert f"cell {row['key']}: its row keeps no scene" in result.output

@@ -396,12 +396,20 @@ def _short(value: Any) -> str:
 # ------------------------------------------------------------------ the order of a report
 
 
+def row_scene(row: dict[str, Any]) -> dict[str, Any] | None:
+    """The scene (as its fields) that planned ``row``, ``run.scene``; None when the row
+    records none (written before rows did, or not a mapping where one belongs)."""
+    run = row.get("run")
+    scene = run.get("scene") if isinstance(run, dict) else None
+    return scene if isinstance(scene, dict) else None
+
+
 def latest_scene(rows: Iterable[dict[str, Any]]) -> dict[str, Any]:
     """The scene (as its fields, ``run.scene``) recorded by the row finished last, ``{}``
     when no row records one. One out folder holds one grid and every run plans every cell
     already there (:meth:`ResultStore.claim`), so this scene covers every row."""
     stamped = [((str(r.get("finished", "")), str(r.get("key", ""))), scene) for r in rows
-               if isinstance(scene := (r.get("run") or {}).get("scene"), dict)]
+               if (scene := row_scene(r)) is not None]
     return max(stamped, key=lambda pair: pair[0])[1] if stamped else {}
 
 
