@@ -9,6 +9,7 @@ budget is refused in one line naming the step, the estimate and how to raise the
 from __future__ import annotations
 
 import os
+import re
 
 from tactbench.errors import BudgetError, InputError
 from tactbench.machine import memory_bytes
@@ -38,6 +39,23 @@ def human_bytes(n: float) -> str:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024
     return f"{n:.1f} PiB"  # pragma: no cover
+
+
+#: Units of :func:`parse_bytes`: decimal (kB = 1000 B) and binary (KiB = 1024 B).
+_BYTE_UNITS = {"": 1, "b": 1, "kb": 10 ** 3, "mb": 10 ** 6, "gb": 10 ** 9, "tb": 10 ** 12,
+               "k": 2 ** 10, "kib": 2 ** 10, "m": 2 ** 20, "mib": 2 ** 20, "g": 2 ** 30,
+               "gib": 2 ** 30, "t": 2 ** 40, "tib": 2 ** 40}
+_SIZE = re.compile(r"(\d{1,15}(?:\.\d+)?)\s*([a-z]*)")
+
+
+def parse_bytes(text: str, what: str) -> int:
+    """Bytes of a size as people write it: ``"20GB"`` (10⁹), ``"500MiB"`` (2²⁰), ``"1.5 G"``
+    (a bare letter is binary, as ``du -h`` prints it), ``"0"``; ``what`` names the option in
+    the one-line error for anything else."""
+    m = _SIZE.fullmatch(str(text).strip().lower())
+    if not m or m.group(2) not in _BYTE_UNITS:
+        raise InputError(f"{what} must be a size such as 20GB, 500MiB or 0, got {text!r}")
+    return int(float(m.group(1)) * _BYTE_UNITS[m.group(2)])
 
 
 def check_budget(nbytes: float, what: str, *, budget: int | None = None) -> None:

@@ -39,7 +39,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                   "Train a run folder's stored cells again here and compare every test "
                   "prediction."),
     "cache": ("tactbench.commands.cache:cache_group",
-              "Inspect or clear cached encodings (TACTBENCH_CACHE, default ~/.cache/tactbench)."),
+              "Inspect, prune or clear cached encodings (TACTBENCH_CACHE, default "
+              "~/.cache/tactbench)."),
     "encode": ("tactbench.commands.encode:encode_cmd",
                "Encode a (T, H, W) sequence into (T, C, H, W) feature images."),
     "flowbench": ("tactbench.commands.flowbench:flowbench_cmd",

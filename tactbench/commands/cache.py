@@ -1,16 +1,23 @@
-"""``tactbench cache ls|clear``: the encoded datasets kept on disk."""
+"""``tactbench cache ls|prune|clear``: the encoded datasets kept on disk."""
 
 from __future__ import annotations
 
+import time
+
 import click
 
+from tactbench.budget import human_bytes, parse_bytes
 from tactbench.cli import json_text
+from tactbench.errors import InputError
 from tactbench.runner import EncodingCache
+from tactbench.runner.execution.cache import KEEP_RECENT_S
+from tactbench.runner.execution.scene import parse_duration, show_duration
 
 
 @click.group("cache")
 def cache_group() -> None:
-    """Inspect or clear cached encodings (TACTBENCH_CACHE, default ~/.cache/tactbench)."""
+    """Inspect, prune or clear cached encodings (TACTBENCH_CACHE, default
+    ~/.cache/tactbench)."""
 
 
 @cache_group.command("ls")
@@ -62,3 +69,59 @@ def cache_clear(yes: bool) -> None:
     click.echo(f"removed {removed} cached encoding(s) and orphaned temporary folder(s) "
                f"from {cache.root}"
                + (f"; kept {len(busy)} being written by running processes" if busy else ""))
+
+
+@cache_group.command("prune")
+@click.option("--max-size", metavar="SIZE",
+              help="Remove the least recently used entries until the cache holds at most "
+                   "SIZE (20GB, 500MiB, 0).")
+@click.option("--unused-for", metavar="DURATION",
+              help="Remove the entries no run has used for DURATION (7d, 12h, 90m).")
+@click.option("--dry-run", is_flag=True, help="Say what would be removed; remove nothing.")
+@click.option("--yes", is_flag=True, help="Do not ask.")
+def cache_prune(max_size: str | None, unused_for: str | None, dry_run: bool,
+                yes: bool) -> None:
+    """Remove the cached encodings a run is least likely to need, least recently used
+    first: damaged ones, those unused for --unused-for, then as many as --max-size asks;
+    and orphaned temporary folders. An entry a run used in the last 15 minutes is kept (it
+    may be reading it). A later run that needs a removed entry encodes it again."""
+    if max_size is None and unused_for is None:
+        raise InputError("say what to prune: --max-size SIZE, --unused-for DURATION, "
+                         "or both")
+    limits = {"max_bytes": None if max_size is None else parse_bytes(max_size, "--max-size"),
+              "unused_for": None if unused_for is None else parse_duration(unused_for)}
+    cache = EncodingCache()
+    planned = cache.prune(**limits, dry_run=True)
+    _show_pruned(cache, planned, "would remove" if dry_run else "to remove")
+    if dry_run or not (planned["removed"] or planned["orphans"]):
+        return
+    if not yes and not click.confirm(
+            f"Remove {len(planned['removed'])} cached encoding(s) "
+            f"({human_bytes(planned['bytes_before'] - planned['bytes_after'])})?"):
+        return
+    done = cache.prune(**limits)
+    left = len(cache.entries())
+    click.echo(f"removed {len(done['removed'])} cached encoding(s) "
+               f"({human_bytes(done['bytes_before'] - done['bytes_after'])}) and "
+               f"{len(done['orphans'])} orphaned temporary folder(s); {cache.root} now "
+               f"holds {human_bytes(done['bytes_after'])} in {left} entr"
+               f"{'y' if left == 1 else 'ies'}")
+
+
+def _show_pruned(cache: EncodingCache, planned: dict, verb: str) -> None:
+    """What prune removes (or would), and what it keeps because a run used it lately."""
+    now = time.time()
+    for e in planned["removed"]:
+        click.echo(f"{verb}: {e['key'][:12]} {e.get('encoder', '?')} "
+                   f"({e.get('dataset', '?')}), {human_bytes(e['bytes'])}, last used "
+                   f"{show_duration(now - e['last_used'])} ago ({e['why']})")
+    for e in planned["held"]:
+        click.echo(f"kept: {e['key'][:12]} {e.get('encoder', '?')}, "
+                   f"{human_bytes(e['bytes'])}: used "
+                   f"{show_duration(now - e['last_used'])} ago, within "
+                   f"{show_duration(KEEP_RECENT_S)}")
+    freed = planned["bytes_before"] - planned["bytes_after"]
+    click.echo(f"{verb}: {len(planned['removed'])} cached encoding(s), {human_bytes(freed)}, "
+               f"and {len(planned['orphans'])} orphaned temporary folder(s); "
+               f"{cache.root} holds {human_bytes(planned['bytes_before'])}"
+               + (f", {human_bytes(planned['bytes_after'])} after" if freed else ""))

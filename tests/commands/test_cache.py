@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from tactbench.cli import cli
@@ -80,3 +81,143 @@ def test_ls_shows_damaged_entries_and_temporaries_and_clear_removes_orphans(tmp_
     assert cleared.exit_code == 0 and "removed 3" in cleared.output
     assert "kept 1 being written" in cleared.output
     assert [p.name for p in cache.root.iterdir()] == [running.name]
+
+
+# -- prune ---------------------------------------------------------------------------
+
+DAY = 86400.0
+
+
+def _aged(cache, key, frames, days):
+    """An entry of ``frames`` frames last used ``days`` ago."""
+    import os
+    import time
+
+    from tactbench.runner.execution.entries import USED_MARKER, mark_used
+
+    cache.write(key, [np.zeros((frames, 1, 4, 4), np.float32)], {"encoder": "raw"})
+    mark_used(cache.path(key))
+    t = time.time() - days * DAY
+    os.utime(cache.path(key) / USED_MARKER, (t, t))
+    return (cache.path(key) / "frames.npy").stat().st_size
+
+
+def test_prune_removes_the_unused_then_the_least_recently_used_down_to_the_size(
+        tmp_path, monkeypatch):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    cache = EncodingCache()
+    sizes = {k: _aged(cache, k, 100, days) for k, days in
+             (("old", 30), ("older", 40), ("mid", 5), ("new", 1))}
+
+    unused = CliRunner().invoke(cli, ["cache", "prune", "--unused-for", "7d", "--yes"])
+    assert unused.exit_code == 0, unused.output
+    assert "older" in unused.output and "(unused)" in unused.output
+    assert sorted(e["key"] for e in cache.entries()) == ["mid", "new"]
+    assert "removed 2 cached encoding(s)" in unused.output
+
+    # room for one entry and a bit: the least recently used of the two goes
+    limit = str(sizes["new"] + 1000)
+    by_size = CliRunner().invoke(cli, ["cache", "prune", "--max-size", limit, "--yes"])
+    assert by_size.exit_code == 0, by_size.output
+    assert [e["key"] for e in cache.entries()] == ["new"]
+    assert "mid" in by_size.output and "(size)" in by_size.output
+
+
+def test_prune_dry_run_removes_nothing_and_recent_entries_are_kept(tmp_path, monkeypatch):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    cache = EncodingCache()
+    _aged(cache, "stale", 10, 3)
+    _aged(cache, "recent", 10, 60 / DAY)  # used a minute ago: a run may be reading it
+    dry = CliRunner().invoke(cli, ["cache", "prune", "--max-size", "0", "--dry-run"])
+    assert dry.exit_code == 0, dry.output
+    assert "would remove: stale" in dry.output and "kept: recent" in dry.output
+    assert sorted(e["key"] for e in cache.entries()) == ["recent", "stale"]
+    asked = CliRunner().invoke(cli, ["cache", "prune", "--max-size", "0"], input="n\n")
+    assert asked.exit_code == 0 and cache.has("stale")
+
+    done = CliRunner().invoke(cli, ["cache", "prune", "--max-size", "0", "--yes"])
+    assert done.exit_code == 0, done.output
+    assert [e["key"] for e in cache.entries()] == ["recent"]
+
+
+def test_prune_removes_damaged_entries_and_orphans_whatever_the_limit(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+
+    from tactbench.paths import host_tag
+
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    cache = EncodingCache()
+    _aged(cache, "good", 10, 2)
+    _aged(cache, "bad", 10, 2)
+    with open(cache.path("bad") / "frames.npy", "r+b") as fh:
+        fh.truncate(100)
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    (cache.root / f".gone.tmp-{proc.pid}-{host_tag()}-12345678").mkdir()
+    out = cache.prune(unused_for=30 * DAY)
+    assert [(e["key"], e["why"]) for e in out["removed"]] == [("bad", "damaged")]
+    assert [t["key"] for t in out["orphans"]] == ["gone"]
+    assert [p.name for p in cache.root.iterdir()] == ["good"]
+
+
+def test_a_run_loading_or_checking_an_entry_marks_it_used(tmp_path):
+    import os
+
+    from tactbench.runner.execution.entries import USED_MARKER, last_used, load_encoding
+
+    cache = EncodingCache(tmp_path)
+    cache.write("k", [np.zeros((3, 2), np.float32)], {"encoder": "raw"})
+    meta_time = (cache.path("k") / "meta.json").stat().st_mtime
+    assert not (cache.path("k") / USED_MARKER).exists()
+    assert last_used(cache.path("k")) == meta_time  # written: its first use
+    os.utime(cache.path("k") / "meta.json", (1e9, 1e9))
+    assert last_used(cache.path("k")) == 1e9
+    load_encoding(cache.path("k"))
+    assert last_used(cache.path("k")) > 1e9 + 365 * DAY
+    assert cache.verify("k")["key"] == "k"  # the marker is not one of the entry's files
+
+
+def test_the_used_marker_is_never_followed_or_opened_when_it_is_not_a_file(tmp_path):
+    import os
+
+    from tactbench.runner.execution.entries import USED_MARKER, mark_used
+
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("x")
+    os.utime(target, (1e9, 1e9))
+    entry = tmp_path / "entry"
+    entry.mkdir()
+    (entry / USED_MARKER).symlink_to(target)
+    mark_used(entry)
+    assert target.stat().st_mtime == 1e9  # the link was not followed
+    (entry / USED_MARKER).unlink()
+    os.mkfifo(entry / USED_MARKER)
+    mark_used(entry)  # returns at once: a FIFO without a reader is not waited on
+    mark_used(tmp_path / "missing")  # nothing to record in: no error
+
+
+@pytest.mark.parametrize("args, message", [
+    ([], "say what to prune"),
+    (["--max-size", "lots"], "--max-size must be a size"),
+    (["--max-size", "-1GB"], "--max-size must be a size"),
+    (["--unused-for", "a week"], "bad duration"),
+])
+def test_prune_mistakes_are_one_line(tmp_path, monkeypatch, args, message):
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    out = CliRunner().invoke(cli, ["cache", "prune", *args])
+    assert out.exit_code == 2 and message in out.output
+    assert "Traceback" not in out.output
+
+
+def test_sizes_and_durations_read_as_written():
+    from tactbench.budget import parse_bytes
+    from tactbench.runner.execution.scene import parse_duration
+
+    assert parse_bytes("20GB", "s") == 20 * 10 ** 9
+    assert parse_bytes("500MiB", "s") == 500 * 2 ** 20
+    assert parse_bytes("1.5 G", "s") == int(1.5 * 2 ** 30)
+    assert parse_bytes("0", "s") == 0 and parse_bytes("512", "s") == 512
+    assert parse_duration("7d") == 7 * DAY and parse_duration("1d12h") == 1.5 * DAY
+    with pytest.raises(Exception, match="bad duration"):
+        parse_duration("1d12")

@@ -55,6 +55,8 @@ from tactbench.runner.execution.entries import (
     KEY_DIGITS,
     EntryWriter,
     forget,
+    last_used,
+    mark_used,
     mark_verified,
     readable_meta,
     signature,
@@ -68,6 +70,10 @@ if TYPE_CHECKING:
     from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner.execution.cache")
+
+#: :meth:`EncodingCache.prune` keeps every entry used more recently than this (seconds),
+#: whatever the limits: a run may be reading it.
+KEEP_RECENT_S = 15 * 60
 
 
 class EncodingCache:
@@ -184,6 +190,52 @@ class EncodingCache:
             out.append(entry)
         return out
 
+    def prune(self, *, max_bytes: int | None = None, unused_for: float | None = None,
+              dry_run: bool = False, now: float | None = None) -> dict[str, Any]:
+        """Remove what a run is least likely to need, least recently used first: damaged
+        entries, entries unused for ``unused_for`` seconds, then entries until the rest
+        take at most ``max_bytes``; and orphaned temporary folders. An entry used within
+        :data:`KEEP_RECENT_S` is kept whatever the limits (``held``). With ``dry_run``
+        nothing is removed. Returns ``removed`` and ``held`` (:meth:`entries` rows with
+        ``last_used`` and, removed, ``why``), ``orphans`` and ``bytes_before`` /
+        ``bytes_after`` of the entries."""
+        now = time.time() if now is None else now
+        rows = sorted(({**e, "last_used": last_used(self.path(e["key"]))}
+                       for e in self.entries()), key=lambda e: (e["last_used"], e["key"]))
+        before = sum(e["bytes"] for e in rows)
+        removed: list[dict[str, Any]] = []
+        held: list[dict[str, Any]] = []
+
+        def take(e: dict[str, Any], why: str) -> int:
+            """Remove ``e`` unless a run used it lately (looked at again: a run may have
+            since); the bytes freed."""
+            if now - last_used(self.path(e["key"])) < KEEP_RECENT_S:
+                held.append(e)
+                return 0
+            if not dry_run:
+                forget(self.path(e["key"]))
+                remove_path(self.path(e["key"]))
+            removed.append({**e, "why": why})
+            return e["bytes"]
+
+        total, rest = before, []
+        for e in rows:
+            if e["state"] != "ok":
+                total -= take(e, "damaged")
+            elif unused_for is not None and now - e["last_used"] >= unused_for:
+                total -= take(e, "unused")
+            else:
+                rest.append(e)
+        for e in rest:
+            if max_bytes is None or total <= max_bytes:
+                break
+            total -= take(e, "size")
+        orphans = [t for t in self.temporaries() if t["state"] == "orphaned"]
+        if not dry_run:
+            self.clean()
+        return {"removed": removed, "held": held, "orphans": orphans,
+                "bytes_before": before, "bytes_after": total}
+
     def temporaries(self) -> list[dict[str, Any]]:
         """Temporary folders beside the entries: ``name``, ``key`` (the entry it was
         going to be), ``pid``, ``state`` (``"orphaned"``: its process is gone, removed
@@ -275,6 +327,7 @@ def _usable(cache: EncodingCache, key: str, enc: str, kind: str) -> bool:
                 cache.discard(key)  # last run's cells failed on it: encode it again
                 return False
             _say_stored_clipping(enc, key, meta)
+            mark_used(cache.path(key))
             return True
         except CorruptArtefactError as exc:
             if signature(cache.path(key)) != found:

@@ -30,6 +30,7 @@ import io
 import json
 import math
 import os
+import stat
 import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
@@ -161,6 +162,42 @@ def signature(folder: Path) -> tuple:
             continue
         sig.append((st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns))
     return tuple(sig)
+
+
+#: The file whose modification time is an entry's last use: touched when a run checks or
+#: loads the entry; ``tactbench cache prune`` removes the least recently used first.
+USED_MARKER = "used"
+
+
+def mark_used(folder: str | Path) -> None:
+    """Record that the entry at ``folder`` is used now (:data:`USED_MARKER`'s time). Only
+    a regular file is touched (never through a link, never a FIFO); a cache that cannot
+    be written (a read-only disk) keeps no record, and that is not an error."""
+    try:
+        fd = os.open(Path(folder) / USED_MARKER,
+                     os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError:
+        return
+    try:
+        if stat.S_ISREG(os.fstat(fd).st_mode):
+            os.utime(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def last_used(folder: str | Path) -> float:
+    """When the entry at ``folder`` was last used (seconds since the epoch): its
+    :data:`USED_MARKER`'s time, else when its ``meta.json`` was written (entries from
+    before the marker), else the folder's time; 0 when none can be read."""
+    folder = Path(folder)
+    for path in (folder / USED_MARKER, folder / "meta.json", folder):
+        try:
+            return path.stat().st_mtime
+        except OSError:
+            continue
+    return 0.0
 
 
 def mark_verified(folder: str | Path) -> None:
@@ -494,6 +531,7 @@ def load_encoding(folder: str | Path) -> tuple[list[StoredSequence], dict[str, A
     memo = (str(path), signature(path))
     if memo not in _LOADED:
         meta, offsets = verify_entry(path)
+        mark_used(path)
         frame_shape = meta["frame_shape"]
         channels = frame_shape[0] if len(frame_shape) == 3 else 1
         file = EntryFile(path / "frames.npy", Storage.from_meta(meta, channels))

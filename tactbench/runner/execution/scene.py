@@ -485,17 +485,16 @@ def primary_of(primary: Sequence[str] | None, encoders: Iterable[str]) -> list[s
 
 
 def parse_duration(text: str) -> float:
-    """Seconds of ``"90s"``, ``"30m"``, ``"2h"``, ``"1h30m"`` (a bare number alone:
-    seconds); one clear error for anything else — ``"1h30"`` is refused, not read as
-    1 h 0 min 30 s: every part after the first names its unit."""
+    """Seconds of ``"90s"``, ``"30m"``, ``"2h"``, ``"1h30m"``, ``"7d"`` (a bare number
+    alone: seconds); ``"1h30"`` is refused: every part after the first names its unit."""
     clean = str(text).strip().lower()
     m = _DURATION.fullmatch(clean)
     if not m or not any(m.groups()) or \
-            (m.group(3) and (m.group(1) or m.group(2)) and not clean.endswith("s")):
-        raise InputError(f"bad duration {_show(text)}: use e.g. 90s, 30m, 2h or 1h30m "
+            (m.group(4) and any(m.groups()[:3]) and not clean.endswith("s")):
+        raise InputError(f"bad duration {_show(text)}: use e.g. 90s, 30m, 2h, 1h30m or 7d "
                          f"(every part with its unit)")
-    h, mins, secs = (float(g) if g else 0.0 for g in m.groups())
-    seconds = 3600 * h + 60 * mins + secs
+    days, h, mins, secs = (float(g) if g else 0.0 for g in m.groups())
+    seconds = 86400 * days + 3600 * h + 60 * mins + secs
     if not 0 < seconds < 1e9:
         raise InputError(f"duration {_show(text)} must be more than 0 and finite")
     return seconds
@@ -509,7 +508,8 @@ def show_duration(seconds: float) -> str:
                     if v) or "0 s"
 
 
-_DURATION = re.compile(r"(?:(\d{1,7}(?:\.\d+)?)h)?(?:(\d{1,7}(?:\.\d+)?)m)?"
+_DURATION = re.compile(r"(?:(\d{1,5}(?:\.\d+)?)d)?"
+                       r"(?:(\d{1,7}(?:\.\d+)?)h)?(?:(\d{1,7}(?:\.\d+)?)m)?"
                        r"(?:(\d{1,9}(?:\.\d+)?)s?)?")
 
 
