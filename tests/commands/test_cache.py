@@ -221,3 +221,32 @@ def test_sizes_and_durations_read_as_written():
     assert parse_duration("7d") == 7 * DAY and parse_duration("1d12h") == 1.5 * DAY
     with pytest.raises(Exception, match="bad duration"):
         parse_duration("1d12")
+
+
+def test_a_run_whose_encodings_would_not_fit_is_refused_before_encoding(tmp_path,
+                                                                       monkeypatch):
+    """One line naming what the encodings need and what is free, before any work; nothing
+    is left in the cache, and the same run goes through once there is room."""
+    import shutil
+    from collections import namedtuple
+
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    scene = tmp_path / "scene.toml"
+    scene.write_text("test_per_class = 1\n")
+    args = ["run", "--dataset", "synthetic-forearm:users=2,repetitions=1", "--encoder", "raw",
+            "--encoder", "frame-diff", "--classifier", "logreg:max_iter=20", "-L", "3",
+            "--seed", "0", "--pixel-mm", "10", "--out", str(tmp_path / "out"), str(scene)]
+    real = shutil.disk_usage
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 12, 10 ** 12 - 1000, 1000))
+    refused = CliRunner().invoke(cli, args)
+    assert refused.exit_code != 0
+    line = refused.output.strip().splitlines()[-1]
+    assert "the encodings of frame-diff, raw need about" in line or \
+        "the encodings of raw, frame-diff need about" in line, refused.output
+    assert "1000 B free" in line and "cache prune" in line and "Traceback" not in line
+    assert EncodingCache().entries() == [] and EncodingCache().temporaries() == []
+    monkeypatch.setattr(shutil, "disk_usage", real)
+    done = CliRunner().invoke(cli, args)
+    assert done.exit_code == 0, done.output
+    assert len(EncodingCache().entries()) == 2

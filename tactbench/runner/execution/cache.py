@@ -24,6 +24,8 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
+import shutil
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence
@@ -39,7 +41,8 @@ from tactbench.encoders.encoding import (
     vector_storage,
     vector_width,
 )
-from tactbench.errors import CorruptArtefactError
+from tactbench.budget import human_bytes
+from tactbench.errors import CorruptArtefactError, StorageError
 from tactbench.machine import peak_rss_mb
 from tactbench.paths import (
     Temporary,
@@ -397,6 +400,25 @@ def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
 
 
 
+def check_room(root: Path, entries: dict[str, tuple[int, Sequence[int], Storage]]) -> None:
+    """Refuse before any encoding when the entries (encoder → frames, frame shape,
+    storage) would not fit on the disk of ``root``: a :class:`StorageError` naming what
+    they need, what is free and how to make room. A disk that cannot say how much is free
+    is not refused here (the write itself says so, as when space runs out meanwhile)."""
+    need = sum(frames * math.prod(shape) * storage.dtype.itemsize
+               for frames, shape, storage in entries.values())
+    try:
+        free = shutil.disk_usage(root).free
+    except OSError:
+        return
+    if need > free:
+        raise StorageError(
+            f"the encodings of {', '.join(entries)} need about {human_bytes(need)} in "
+            f"{root}, and its disk has {human_bytes(free)} free; make room (tactbench "
+            f"cache prune --max-size SIZE) or set TACTBENCH_CACHE to a folder on another "
+            f"disk")
+
+
 def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
                    precision: str, chunk_bytes: int,
                    identities: dict[str, dict[str, Any]]) -> None:
@@ -409,6 +431,7 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
         t0 = time.perf_counter()
         width = vector_width(encoder, dataset.n_taxels)
         storage = vector_storage(encoder, precision)
+        check_room(cache.root, {enc: (sum(dataset.lengths()), (width,), storage)})
         with cache.entry(key, dataset.lengths(), (width,), storage) as writer:
             guard = _guard(plan_, enc, writer.append, (width,))
             encode_s = encode_vectors(dataset, enc, encoder, guard, chunk_bytes=chunk_bytes)
@@ -432,12 +455,15 @@ def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], preci
     pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
     h, w = dataset.image_shape(pixel_mm, method)
     encoders = {enc: plan_.encoders[enc] for enc in keys}
+    shapes = {enc: (len(tuple(ENCODER.get(encoders[enc], "channels"))), h, w) for enc in keys}
+    storages = {enc: image_storage(encoders[enc], precision) for enc in keys}
+    check_room(cache.root, {enc: (sum(dataset.lengths()), shapes[enc], storages[enc])
+                            for enc in keys})
     with contextlib.ExitStack() as stack:
         writers = {}
         for enc, key in keys.items():
-            shape = (len(tuple(ENCODER.get(encoders[enc], "channels"))), h, w)
             writers[enc] = stack.enter_context(cache.entry(
-                key, dataset.lengths(), shape, image_storage(encoders[enc], precision)))
+                key, dataset.lengths(), shapes[enc], storages[enc]))
         guards = {e: _guard(plan_, e, w.append, w.frame_shape)
                   for e, w in writers.items()}
         times = encode_images(dataset, encoders, guards, pixel_mm=pixel_mm, method=method,
