@@ -6,6 +6,7 @@ import sys
 
 import click
 
+from tactbench.budget import human_bytes
 from tactbench.cli import get_registry, json_text
 from tactbench.commands.run import scene_from, scene_options
 from tactbench.runner.analysis.forecast import forecast, points
@@ -110,3 +111,17 @@ def _print_time(f, out: str) -> None:
               else f"{f.wall_s[0] / 60:.1f} min")
         click.echo(f"wall time of the run: about {at} ({f.workers} cell(s) at once, one "
                    f"thread each; encoding what the cache lacks included)")
+    _print_cache(f)
+
+
+def _print_cache(f) -> None:
+    """What the run adds to the encoding cache, and whether its disk has room."""
+    if not f.cache_bytes:
+        click.echo("cache: every encoding the run needs is already there")
+        return
+    free = "" if f.cache_free is None else f" ({human_bytes(f.cache_free)} free on its disk)"
+    click.echo(f"cache: about {human_bytes(f.cache_bytes)} of new encodings{free}")
+    if f.cache_free is not None and f.cache_bytes > f.cache_free:
+        click.echo("warning: the cache's disk is too small for them, and the run would be "
+                   "refused: make room (tactbench cache prune --max-size SIZE) or set "
+                   "TACTBENCH_CACHE to a folder on another disk")

@@ -109,3 +109,34 @@ def test_cells_are_packed_onto_the_workers_longest_first():
     assert packed([3, 2, 2, 1], 2) == 4
     assert packed([5, 1, 1, 1], 2) == 5
     assert packed([1, 1, 1], 1) == 3 and packed([], 3) == 0
+
+
+def test_plan_says_what_the_run_adds_to_the_cache_and_whether_it_fits(tmp_path, monkeypatch):
+    """The bytes plan forecasts are the bytes of the frames the run then writes; once they
+    are there, nothing; a disk too small for them is a warning before the run's refusal."""
+    import shutil
+    from collections import namedtuple
+
+    import numpy as np
+
+    from tactbench.runner import EncodingCache
+
+    out = tmp_path / "out"
+    args = [*TINY, "--seed", "0", "--out", str(out)]
+    doc = json.loads(_invoke(tmp_path, monkeypatch, "plan", *args, "--json").output)
+    assert doc["cache_bytes"] > 0 and doc["cache_free"] > 0
+    assert "cache: about" in _invoke(tmp_path, monkeypatch, "plan", *args).output
+
+    real = shutil.disk_usage
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 12, 10 ** 12 - 10, 10))
+    small = _invoke(tmp_path, monkeypatch, "plan", *args).output
+    assert "(10 B free on its disk)" in small and "the run would be refused" in small
+    monkeypatch.setattr(shutil, "disk_usage", real)
+
+    assert _invoke(tmp_path, monkeypatch, "run", *args).exit_code == 0
+    data = sum(int(np.load(EncodingCache().path(e["key"]) / "frames.npy",
+                           mmap_mode="r").nbytes) for e in EncodingCache().entries())
+    assert data == doc["cache_bytes"]  # the frames, without the .npy headers
+    again = _invoke(tmp_path, monkeypatch, "plan", *args)
+    assert "cache: every encoding the run needs is already there" in again.output

@@ -29,9 +29,11 @@ each, an effect inside the margin and a design short of 80 % power at its runs.
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import statistics
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 from tactbench.data.splits import SplitData, split_design
@@ -55,7 +57,7 @@ from tactbench.runner.analysis.power import (
     sampling_sd,
     seed_mean_ratio,
 )
-from tactbench.runner.execution.cache import EncodingCache
+from tactbench.runner.execution.cache import EncodingCache, entries_bytes
 from tactbench.runner.execution.estimate import estimate_run, missing_entries
 from tactbench.runner.analysis.sequential import procedure
 from tactbench.runner.execution.results import ResultStore, ok_rows
@@ -120,6 +122,8 @@ class Forecast:
     wall_s: list[float] | None = None
     looks: list[int] | None = None  # runs at each look (with --until)
     workers: int = 1
+    cache_bytes: int = 0  # the new encodings the run writes to the cache (its first data set's)
+    cache_free: int | None = None  # free on the cache's disk (None: it cannot say)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -162,7 +166,9 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
                                       p.identities)
     cells = _cells(p.cells + others, pilot)
     looks = list(scene.design.looks) or None
-    wall = _walls(p, p.cells + others, cells, looks,
+    cache = EncodingCache()
+    missing = missing_entries(p, p.cells + others, cache)
+    wall = _walls(p, p.cells + others, cells, looks, missing,
                   load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
     primaries = scene.design.primary
@@ -178,11 +184,21 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
         design=design,
         runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
-        workers=scene.resolved_workers())
+        workers=scene.resolved_workers(), cache_bytes=entries_bytes(p, missing),
+        cache_free=_free_bytes(cache.root))
+
+
+def _free_bytes(root: Path) -> int | None:
+    """Bytes free on the disk of ``root``; None when it cannot say."""
+    try:
+        return int(shutil.disk_usage(root).free)
+    except OSError:
+        return None
 
 
 def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
-           looks: list[int] | None, *, load_s: float | None) -> list[float] | None:
+           looks: list[int] | None, missing: list[tuple[str, str]], *,
+           load_s: float | None) -> list[float] | None:
     """The run's wall time (:func:`~tactbench.runner.execution.estimate.estimate_run`), cumulative
     at each look (one number without looks); cells without a pilot timing get the
     classifier's own estimate (``cells`` updated in place). None when a cell has
@@ -192,7 +208,6 @@ def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
     known = {c.key: f.seconds for c, f in zip(planned, cells)
              if f.seconds is not None and c.key}
     memo: dict[Any, Any] = {} if load_s is None else {"load": load_s}  # else timed there
-    missing = missing_entries(p, planned, EncodingCache())
     total, out, start = 0.0, [], 0
     for i, end in enumerate(ends):
         seeds = set(order[start:end])

@@ -305,10 +305,9 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
                 continue
         missing[kind][enc] = key
     if missing["vectors"]:
-        _store_vectors(plan_, cache, missing["vectors"], precision, chunk_bytes, identities)
+        _store_vectors(plan_, cache, missing["vectors"], chunk_bytes, identities)
     if missing["images"]:
-        _store_images(plan_, cache, missing["images"], precision, progress, chunk_bytes,
-                       identities)
+        _store_images(plan_, cache, missing["images"], progress, chunk_bytes, identities)
     return folders
 
 
@@ -400,28 +399,47 @@ def _common_meta(plan_: Plan, enc: str, kind: str) -> dict[str, Any]:
 
 
 
-def check_room(root: Path, entries: dict[str, tuple[int, Sequence[int], Storage]]) -> None:
-    """Refuse before any encoding when the entries (encoder → frames, frame shape,
-    storage) would not fit on the disk of ``root``: a :class:`StorageError` naming what
-    they need, what is free and how to make room. A disk that cannot say how much is free
-    is not refused here (the write itself says so, as when space runs out meanwhile)."""
-    need = sum(frames * math.prod(shape) * storage.dtype.itemsize
-               for frames, shape, storage in entries.values())
+def entry_layout(plan_: Plan, enc: str, kind: str) -> tuple[tuple[int, ...], Storage]:
+    """The frame shape and storage of encoder ``enc``'s entry for input ``kind``
+    (``"images"``: ``(channels, h, w)`` at the scene's imaging; ``"vectors"``:
+    ``(C·N,)``), as the run writes it."""
+    encoder, precision = plan_.encoders[enc], plan_.scene.resolved_precision()
+    if kind == "vectors":
+        return (vector_width(encoder, plan_.dataset.n_taxels),), \
+            vector_storage(encoder, precision)
+    h, w = plan_.dataset.image_shape(plan_.scene.resolved_pixel_mm(), plan_.scene.imaging)
+    return (len(tuple(ENCODER.get(encoder, "channels"))), h, w), \
+        image_storage(encoder, precision)
+
+
+def entries_bytes(plan_: Plan, pairs: Sequence[tuple[str, str]]) -> int:
+    """Bytes the entries of ``pairs`` ((encoder, input kind)) take on disk (their frames;
+    the offsets and ``meta.json`` are a few kB)."""
+    frames = sum(plan_.dataset.lengths())
+    return sum(frames * math.prod(shape) * storage.dtype.itemsize
+               for shape, storage in (entry_layout(plan_, *pair) for pair in pairs))
+
+
+def check_room(root: Path, plan_: Plan, pairs: Sequence[tuple[str, str]]) -> None:
+    """Refuse before any encoding when the entries of ``pairs`` would not fit on the disk
+    of ``root``: a :class:`StorageError` naming what they need, what is free and how to
+    make room. A disk that cannot say how much is free is not refused here (the write
+    itself says so, as when space runs out meanwhile)."""
+    need = entries_bytes(plan_, pairs)
     try:
         free = shutil.disk_usage(root).free
     except OSError:
         return
     if need > free:
         raise StorageError(
-            f"the encodings of {', '.join(entries)} need about {human_bytes(need)} in "
-            f"{root}, and its disk has {human_bytes(free)} free; make room (tactbench "
-            f"cache prune --max-size SIZE) or set TACTBENCH_CACHE to a folder on another "
-            f"disk")
+            f"the encodings of {', '.join(enc for enc, _ in pairs)} need about "
+            f"{human_bytes(need)} in {root}, and its disk has {human_bytes(free)} free; "
+            f"make room (tactbench cache prune --max-size SIZE) or set TACTBENCH_CACHE to "
+            f"a folder on another disk")
 
 
 def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
-                   precision: str, chunk_bytes: int,
-                   identities: dict[str, dict[str, Any]]) -> None:
+                   chunk_bytes: int, identities: dict[str, dict[str, Any]]) -> None:
     """The taxel-vector entries: no imaging; each encoder's ``encode_vectors`` gives
     ``(T, C·N)`` frames, its channels side by side (planning refuses an encoder without
     one on vectors). Stored as one channel whose range spans every channel's."""
@@ -429,9 +447,8 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
     for enc, key in keys.items():
         encoder = plan_.encoders[enc]
         t0 = time.perf_counter()
-        width = vector_width(encoder, dataset.n_taxels)
-        storage = vector_storage(encoder, precision)
-        check_room(cache.root, {enc: (sum(dataset.lengths()), (width,), storage)})
+        (width,), storage = entry_layout(plan_, enc, "vectors")
+        check_room(cache.root, plan_, [(enc, "vectors")])
         with cache.entry(key, dataset.lengths(), (width,), storage) as writer:
             guard = _guard(plan_, enc, writer.append, (width,))
             encode_s = encode_vectors(dataset, enc, encoder, guard, chunk_bytes=chunk_bytes)
@@ -445,7 +462,7 @@ def _store_vectors(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
                                 "peak_rss_mb": peak_rss_mb()})
 
 
-def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], precision: str,
+def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str],
                   progress: "Progress | None", chunk_bytes: int,
                   identities: dict[str, dict[str, Any]]) -> None:
     """One streaming pass (:func:`~tactbench.encoders.encoding.encode_images`) appends
@@ -453,17 +470,13 @@ def _store_images(plan_: Plan, cache: EncodingCache, keys: dict[str, str], preci
     the end."""
     scene, dataset = plan_.scene, plan_.dataset
     pixel_mm, method = scene.resolved_pixel_mm(), scene.imaging
-    h, w = dataset.image_shape(pixel_mm, method)
     encoders = {enc: plan_.encoders[enc] for enc in keys}
-    shapes = {enc: (len(tuple(ENCODER.get(encoders[enc], "channels"))), h, w) for enc in keys}
-    storages = {enc: image_storage(encoders[enc], precision) for enc in keys}
-    check_room(cache.root, {enc: (sum(dataset.lengths()), shapes[enc], storages[enc])
-                            for enc in keys})
+    check_room(cache.root, plan_, [(enc, "images") for enc in keys])
     with contextlib.ExitStack() as stack:
         writers = {}
         for enc, key in keys.items():
             writers[enc] = stack.enter_context(cache.entry(
-                key, dataset.lengths(), shapes[enc], storages[enc]))
+                key, dataset.lengths(), *entry_layout(plan_, enc, "images")))
         guards = {e: _guard(plan_, e, w.append, w.frame_shape)
                   for e, w in writers.items()}
         times = encode_images(dataset, encoders, guards, pixel_mm=pixel_mm, method=method,
