@@ -101,24 +101,32 @@ def cache_prune(max_size: str | None, unused_for: str | None, dry_run: bool,
         return
     done = cache.prune(**limits)
     left = len(cache.entries())
+    for e in done["stuck"]:
+        click.echo(f"could not remove {cache.path(e['key'])}: check its permissions and "
+                   f"whether its disk is read-only")
     click.echo(f"removed {len(done['removed'])} cached encoding(s) "
                f"({human_bytes(done['bytes_before'] - done['bytes_after'])}) and "
                f"{len(done['orphans'])} orphaned temporary folder(s); {cache.root} now "
                f"holds {human_bytes(done['bytes_after'])} in {left} entr"
                f"{'y' if left == 1 else 'ies'}")
+    if done["stuck"]:
+        raise SystemExit(1)  # asked to remove what it could not
 
 
 def _show_pruned(cache: EncodingCache, planned: dict, verb: str) -> None:
     """What prune removes (or would), and what it keeps because a run used it lately."""
     now = time.time()
+
+    def ago(e: dict) -> str:  # a use dated in the future (a clock set wrong) is "now"
+        return show_duration(max(0.0, now - e["last_used"]))
+
     for e in planned["removed"]:
         click.echo(f"{verb}: {e['key'][:12]} {e.get('encoder', '?')} "
                    f"({e.get('dataset', '?')}), {human_bytes(e['bytes'])}, last used "
-                   f"{show_duration(now - e['last_used'])} ago ({e['why']})")
+                   f"{ago(e)} ago ({e['why']})")
     for e in planned["held"]:
         click.echo(f"kept: {e['key'][:12]} {e.get('encoder', '?')}, "
-                   f"{human_bytes(e['bytes'])}: used "
-                   f"{show_duration(now - e['last_used'])} ago, within "
+                   f"{human_bytes(e['bytes'])}: used {ago(e)} ago, within "
                    f"{show_duration(KEEP_RECENT_S)}")
     freed = planned["bytes_before"] - planned["bytes_after"]
     click.echo(f"{verb}: {len(planned['removed'])} cached encoding(s), {human_bytes(freed)}, "

@@ -250,3 +250,16 @@ def test_a_run_whose_encodings_would_not_fit_is_refused_before_encoding(tmp_path
     done = CliRunner().invoke(cli, args)
     assert done.exit_code == 0, done.output
     assert len(EncodingCache().entries()) == 2
+
+
+def test_an_entry_the_disk_will_not_let_go_of_is_not_reported_removed(tmp_path, monkeypatch):
+    from tactbench.runner.execution import cache as cache_module
+
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    cache = EncodingCache()
+    _aged(cache, "kept", 10, 3)
+    monkeypatch.setattr(cache_module, "remove_path", lambda path: None)  # as a read-only disk
+    out = CliRunner().invoke(cli, ["cache", "prune", "--max-size", "0", "--yes"])
+    assert out.exit_code == 1, out.output
+    assert "could not remove" in out.output and "removed 0 cached encoding(s)" in out.output
+    assert cache.has("kept")

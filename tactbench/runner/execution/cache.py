@@ -198,8 +198,9 @@ class EncodingCache:
         """Remove what a run is least likely to need, least recently used first: damaged
         entries, entries unused for ``unused_for`` seconds, then entries until the rest
         take at most ``max_bytes``; and orphaned temporary folders. An entry used within
-        :data:`KEEP_RECENT_S` is kept whatever the limits (``held``). With ``dry_run``
-        nothing is removed. Returns ``removed`` and ``held`` (:meth:`entries` rows with
+        :data:`KEEP_RECENT_S` is kept whatever the limits (``held``); one the disk would
+        not let go of is ``stuck``. With ``dry_run`` nothing is removed. Returns
+        ``removed``, ``held`` and ``stuck`` (:meth:`entries` rows with
         ``last_used`` and, removed, ``why``), ``orphans`` and ``bytes_before`` /
         ``bytes_after`` of the entries."""
         now = time.time() if now is None else now
@@ -208,6 +209,7 @@ class EncodingCache:
         before = sum(e["bytes"] for e in rows)
         removed: list[dict[str, Any]] = []
         held: list[dict[str, Any]] = []
+        stuck: list[dict[str, Any]] = []
 
         def take(e: dict[str, Any], why: str) -> int:
             """Remove ``e`` unless a run used it lately (looked at again: a run may have
@@ -218,6 +220,9 @@ class EncodingCache:
             if not dry_run:
                 forget(self.path(e["key"]))
                 remove_path(self.path(e["key"]))
+                if self.path(e["key"]).exists():  # the disk refused (read-only, permissions)
+                    stuck.append(e)
+                    return 0
             removed.append({**e, "why": why})
             return e["bytes"]
 
@@ -236,7 +241,7 @@ class EncodingCache:
         orphans = [t for t in self.temporaries() if t["state"] == "orphaned"]
         if not dry_run:
             self.clean()
-        return {"removed": removed, "held": held, "orphans": orphans,
+        return {"removed": removed, "held": held, "stuck": stuck, "orphans": orphans,
                 "bytes_before": before, "bytes_after": total}
 
     def temporaries(self) -> list[dict[str, Any]]:
