@@ -39,9 +39,26 @@ def cache_root() -> Path:
     (not created)."""
     root = os.environ.get(CACHE_ENV)
     if root:
-        return Path(root)
+        return expand_env_path(root, CACHE_ENV)
     xdg = os.environ.get("XDG_CACHE_HOME")
     return (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
+
+
+def expand_env_path(text: str, name: str) -> Path:
+    """A path given through the environment variable ``name`` (a ``.env`` file, a
+    notebook's ``os.environ``: no shell expanded it), with ``~`` and ``$VARIABLE`` /
+    ``${VARIABLE}`` expanded as a shell would; a variable that is not set is one line
+    (a folder named ``$HOME`` in the working folder is never what was meant)."""
+    expanded = os.path.expanduser(os.path.expandvars(text))
+    unset = re.search(r"\$(\w+|\{[^}]*\})", expanded)
+    if unset:
+        raise InputError(f"{name}={text} names the environment variable "
+                         f"{unset.group(1).strip('{}')}, which is not set; set it or give "
+                         f"the folder itself")
+    if expanded.startswith("~"):  # ~user of no such user
+        raise InputError(f"{name}={text}: {expanded.split('/')[0]} is not a user's home "
+                         f"folder here; give the folder itself")
+    return Path(expanded)
 
 
 def cache_dir(*parts: str) -> Path:

@@ -66,8 +66,12 @@ def cache_clear(yes: bool) -> None:
         return
     removed = cache.clear()
     busy = [t for t in cache.temporaries() if t["state"] != "orphaned"]
+    leased = cache.leased()
+    for key, who in sorted(leased.items()):
+        click.echo(f"kept: {key[:12]}: in use by a running run ({who})")
     click.echo(f"removed {removed} cached encoding(s) and orphaned temporary folder(s) "
                f"from {cache.root}"
+               + (f"; kept {len(leased)} in use by running runs" if leased else "")
                + (f"; kept {len(busy)} being written by running processes" if busy else ""))
 
 
@@ -88,6 +92,8 @@ def cache_prune(max_size: str | None, unused_for: str | None, dry_run: bool,
     if max_size is None and unused_for is None:
         raise InputError("say what to prune: --max-size SIZE, --unused-for DURATION, "
                          "or both")
+    _no_bare_number(max_size, "--max-size", "20GB, 500MiB, or 20B for bytes")
+    _no_bare_number(unused_for, "--unused-for", "7d, 12h, 90m, or 7s for seconds")
     limits = {"max_bytes": None if max_size is None else parse_bytes(max_size, "--max-size"),
               "unused_for": None if unused_for is None else parse_duration(unused_for)}
     cache = EncodingCache()
@@ -113,6 +119,21 @@ def cache_prune(max_size: str | None, unused_for: str | None, dry_run: bool,
         raise SystemExit(1)  # asked to remove what it could not
 
 
+def _no_bare_number(text: str | None, option: str, examples: str) -> None:
+    """Refuse a number without its unit (``--max-size 20``: bytes or gigabytes?); a
+    size of 0 needs none."""
+    if text is None:
+        return
+    try:
+        value = float(text.strip())
+    except ValueError:
+        return  # has a unit (or is not a number: the parser says so)
+    if value == 0 and option == "--max-size":
+        return
+    raise InputError(f"{option} {text.strip()} has no unit: write it with one, e.g. "
+                     f"{examples} (nothing was removed)")
+
+
 def _show_pruned(cache: EncodingCache, planned: dict, verb: str) -> None:
     """What prune removes (or would), and what it keeps because a run used it lately."""
     now = time.time()
@@ -124,6 +145,9 @@ def _show_pruned(cache: EncodingCache, planned: dict, verb: str) -> None:
         click.echo(f"{verb}: {e['key'][:12]} {e.get('encoder', '?')} "
                    f"({e.get('dataset', '?')}), {human_bytes(e['bytes'])}, last used "
                    f"{ago(e)} ago ({e['why']})")
+    for e in planned["leased"]:
+        click.echo(f"kept: {e['key'][:12]} {e.get('encoder', '?')}, "
+                   f"{human_bytes(e['bytes'])}: in use by a running run ({e['lease']})")
     for e in planned["held"]:
         click.echo(f"kept: {e['key'][:12]} {e.get('encoder', '?')}, "
                    f"{human_bytes(e['bytes'])}: used {ago(e)} ago, within "

@@ -102,7 +102,8 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     start = time.perf_counter()
     cache = cache or EncodingCache()  # an unusable cache folder: before any work
     memory = MemoryTracker()  # which of this process's steps sets its peak memory
-    with Progress(enabled=progress) as bars:
+    # the lease: no prune or clear removes an entry this run uses while it lives
+    with cache.lease(), Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
         made = bars.callback(f"make dataset {scene.dataset}")
         plans = plan_runs(scene, registry, progress=made)

@@ -116,7 +116,7 @@ def test_prune_removes_the_unused_then_the_least_recently_used_down_to_the_size(
     assert "removed 2 cached encoding(s)" in unused.output
 
     # room for one entry and a bit: the least recently used of the two goes
-    limit = str(sizes["new"] + 1000)
+    limit = f"{sizes['new'] + 1000}B"
     by_size = CliRunner().invoke(cli, ["cache", "prune", "--max-size", limit, "--yes"])
     assert by_size.exit_code == 0, by_size.output
     assert [e["key"] for e in cache.entries()] == ["new"]

@@ -66,6 +66,7 @@ from tactbench.runner.execution.entries import (
     verify_entry,
 )
 from tactbench.kernels import kernels_identity
+from tactbench.runner.execution.leases import LEASES, Lease, cache_lock, leased_keys
 from tactbench.runner.execution.planning import (Cell, Plan, digest, imaging_identity,
                                                  storage_identity)
 
@@ -94,6 +95,27 @@ class EncodingCache:
     def __init__(self, root: str | Path | None = None) -> None:
         self.root = Path(root) if root is not None else cache_dir("encodings")
         self.root.mkdir(parents=True, exist_ok=True)
+        self._lease: Lease | None = None
+
+    @contextlib.contextmanager
+    def lease(self) -> Iterator[Lease]:
+        """Hold a lease (:mod:`~tactbench.runner.execution.leases`) for the block: every
+        key given to :meth:`hold` meanwhile is kept by ``prune`` and ``clear`` until the
+        block ends (or the process dies). Nested blocks share the outer lease."""
+        if self._lease is not None:
+            yield self._lease
+            return
+        self._lease = Lease(self.root).open()
+        try:
+            yield self._lease
+        finally:
+            self._lease.close()
+            self._lease = None
+
+    def hold(self, keys: Sequence[str]) -> None:
+        """Add ``keys`` to this cache's lease, when one is held (:meth:`lease`)."""
+        if self._lease is not None:
+            self._lease.hold(keys)
 
     @staticmethod
     def identity(dataset_hash: str, imaging: dict[str, Any], encoder: str, version: str,
@@ -180,50 +202,79 @@ class EncodingCache:
         out = []
         for folder in sorted(p for p in self.root.iterdir()
                              if p.is_dir() and not p.name.startswith(".")):
-            size = sum(f.stat().st_size for f in folder.iterdir() if f.is_file())
-            entry: dict[str, Any] = {"key": folder.name, "bytes": size,
-                                     "precision": "float32"}
             try:
-                entry.update(verify_entry(folder, full=False)[0])
-                entry["state"] = "ok"
-            except CorruptArtefactError as exc:
-                entry.update(readable_meta(folder))
-                entry.update({"state": "damaged", "problem": exc.problem})
-            entry["key"], entry["bytes"] = folder.name, size
-            out.append(entry)
+                out.append(self._entry_row(folder))
+            except (FileNotFoundError, NotADirectoryError):
+                if folder.exists():
+                    raise
+                # removed while it was listed (a prune beside us): not an entry any more
         return out
+
+    @staticmethod
+    def _entry_row(folder: Path) -> dict[str, Any]:
+        size = sum(f.stat().st_size for f in folder.iterdir() if f.is_file())
+        entry: dict[str, Any] = {"key": folder.name, "bytes": size, "precision": "float32"}
+        try:
+            entry.update(verify_entry(folder, full=False)[0])
+            entry["state"] = "ok"
+        except CorruptArtefactError as exc:
+            if not folder.is_dir():
+                raise FileNotFoundError(folder) from None
+            entry.update(readable_meta(folder))
+            entry.update({"state": "damaged", "problem": exc.problem})
+        entry["key"], entry["bytes"] = folder.name, size
+        return entry
 
     def prune(self, *, max_bytes: int | None = None, unused_for: float | None = None,
               dry_run: bool = False, now: float | None = None) -> dict[str, Any]:
         """Remove what a run is least likely to need, least recently used first: damaged
         entries, entries unused for ``unused_for`` seconds, then entries until the rest
-        take at most ``max_bytes``; and orphaned temporary folders. An entry used within
-        :data:`KEEP_RECENT_S` is kept whatever the limits (``held``); one the disk would
-        not let go of is ``stuck``. With ``dry_run`` nothing is removed. Returns
-        ``removed``, ``held`` and ``stuck`` (:meth:`entries` rows with
-        ``last_used`` and, removed, ``why``), ``orphans`` and ``bytes_before`` /
-        ``bytes_after`` of the entries."""
-        now = time.time() if now is None else now
-        rows = sorted(({**e, "last_used": last_used(self.path(e["key"]))}
+        take at most ``max_bytes``; and orphaned temporary folders. An entry a live run
+        holds a lease on (:meth:`lease`) is kept (``leased``, with ``lease``: who holds
+        it), and so is one used within :data:`KEEP_RECENT_S` (``held``: a run from before
+        leases may be reading it); a last use dated in the future (a clock set wrong) is
+        taken as now and its mark set to now. One the disk would not let go of is
+        ``stuck``. With ``dry_run`` nothing is removed or marked. Returns ``removed``,
+        ``held``, ``leased`` and ``stuck`` (:meth:`entries` rows with ``last_used`` and,
+        removed, ``why``), ``orphans`` and ``bytes_before`` / ``bytes_after``."""
+        with cache_lock(self.root, exclusive=not dry_run):
+            return self._prune(max_bytes, unused_for, dry_run,
+                               time.time() if now is None else now)
+
+    def _last_used(self, key: str, now: float, dry_run: bool) -> float:
+        """The entry's last use, a future one taken as now (and, removing, marked now)."""
+        when = last_used(self.path(key))
+        if when > now:
+            if not dry_run:
+                mark_used(self.path(key))
+            return now
+        return when
+
+    def _prune(self, max_bytes: int | None, unused_for: float | None, dry_run: bool,
+               now: float) -> dict[str, Any]:
+        leases = leased_keys(self.root)
+        rows = sorted(({**e, "last_used": self._last_used(e["key"], now, dry_run)}
                        for e in self.entries()), key=lambda e: (e["last_used"], e["key"]))
         before = sum(e["bytes"] for e in rows)
-        removed: list[dict[str, Any]] = []
-        held: list[dict[str, Any]] = []
-        stuck: list[dict[str, Any]] = []
+        out: dict[str, list[dict[str, Any]]] = {"removed": [], "held": [], "leased": [],
+                                                "stuck": []}
 
         def take(e: dict[str, Any], why: str) -> int:
-            """Remove ``e`` unless a run used it lately (looked at again: a run may have
-            since); the bytes freed."""
-            if now - last_used(self.path(e["key"])) < KEEP_RECENT_S:
-                held.append(e)
+            """Remove ``e`` unless a live run holds it or used it lately (looked at
+            again: a run may have since); the bytes freed."""
+            if e["key"] in leases:
+                out["leased"].append({**e, "lease": leases[e["key"]].describe(now)})
+                return 0
+            if now - self._last_used(e["key"], now, dry_run) < KEEP_RECENT_S:
+                out["held"].append(e)
                 return 0
             if not dry_run:
                 forget(self.path(e["key"]))
                 remove_path(self.path(e["key"]))
                 if self.path(e["key"]).exists():  # the disk refused (read-only, permissions)
-                    stuck.append(e)
+                    out["stuck"].append(e)
                     return 0
-            removed.append({**e, "why": why})
+            out["removed"].append({**e, "why": why})
             return e["bytes"]
 
         total, rest = before, []
@@ -241,8 +292,7 @@ class EncodingCache:
         orphans = [t for t in self.temporaries() if t["state"] == "orphaned"]
         if not dry_run:
             self.clean()
-        return {"removed": removed, "held": held, "stuck": stuck, "orphans": orphans,
-                "bytes_before": before, "bytes_after": total}
+        return {**out, "orphans": orphans, "bytes_before": before, "bytes_after": total}
 
     def temporaries(self) -> list[dict[str, Any]]:
         """Temporary folders beside the entries: ``name``, ``key`` (the entry it was
@@ -260,19 +310,28 @@ class EncodingCache:
         return out
 
     def clear(self) -> int:
-        """Delete every entry and every orphaned temporary folder; returns how many.
-        Temporaries of running writers (``"in progress"``) are left to them."""
+        """Delete every entry and every orphaned temporary folder but those a live run
+        holds a lease on (:meth:`lease`, see :meth:`leased`) and the temporaries of
+        running writers (``"in progress"``), which are left to them; returns how many
+        were deleted."""
         n = 0
-        for child in self.root.iterdir():
-            temp = parse_temporary(child)
-            if temp is not None and temp.state != "orphaned":
-                continue
-            if child.is_dir() or temp is not None:
-                forget(child)
-                remove_path(child)
-                n += 1
+        with cache_lock(self.root, exclusive=True):
+            leases = leased_keys(self.root)
+            for child in self.root.iterdir():
+                temp = parse_temporary(child)
+                if child.name == LEASES or child.name in leases or \
+                        (temp is not None and temp.state != "orphaned"):
+                    continue
+                if child.is_dir() or temp is not None:
+                    forget(child)
+                    remove_path(child)
+                    n += 1
         return n
 
+    def leased(self) -> dict[str, str]:
+        """Entry key → which live run holds a lease on it (for entries that exist)."""
+        return {k: v.describe() for k, v in leased_keys(self.root).items()
+                if self.path(k).is_dir()}
 
 
 # ----------------------------------------------------------------------- filling
@@ -298,7 +357,8 @@ def ensure_encodings(plan_: Plan, cache: EncodingCache, pending: Sequence[Cell],
     for orphan in cache.clean():
         log.info("removed the temporary folder %s left by process %s", orphan.path,
                  orphan.pid)
-    for enc, kind in sorted(needed):
+    cache.hold([entry_key(plan_, cache, enc, kind) for enc, kind in needed])
+    for enc, kind in sorted(needed):  # leased first: a prune now keeps what is checked
         key = entry_key(plan_, cache, enc, kind)
         identities[key] = cache.identity(plan_.dataset_hash, imaging_identity(scene, kind),
                                          enc, plan_.encoder_versions[enc], precision)
