@@ -32,11 +32,12 @@ def test_reports_are_written(tmp_path, tiny_scene, cache):
     [comp] = doc["comparisons"]
     assert (comp["factor"], comp["a"], comp["b"]) == ("encoder", "raw", "frame-diff")
     assert comp["test_recordings"] == doc["rows"][0]["n_test"]
-    # one run gives no verdict; a run whose model did not learn (this one-epoch CNN on 5
+    # one run gives no verdict; a cell whose model did not learn (this one-epoch CNN on 5
     # test recordings is within noise of chance) gives none either, and says so first
-    from tactbench.runner.execution.learning import not_learned
+    from tactbench.runner.execution.learning import cell_learning
 
-    said = "not learned" if any(not_learned(r) for r in doc["rows"]) else "too few runs"
+    said = ("not learned" if any(not cell_learning([r]).learned for r in doc["rows"])
+            else "too few runs")
     assert comp["runs"] == 1 and comp["verdict"] == said
     assert all(0 <= r["train_accuracy"] <= 1 and r["learning"] for r in doc["rows"])
     assert "## Paired comparisons over runs" in paths["markdown"].read_text()

@@ -44,7 +44,7 @@ from tactbench.runner.analysis.power import (
     runs_for_power,
     seed_mean_ratio,
 )
-from tactbench.runner.execution.learning import describe
+from tactbench.runner.execution.learning import cell_learning, describe_cell
 from tactbench.runner.analysis.statistics import (
     NOT_LEARNED,
     TARGET_HALF_WIDTH,
@@ -547,11 +547,12 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
 def _not_learned(names: Mapping[str, Any], rows_a: Sequence[dict[str, Any]],
                  rows_b: Sequence[dict[str, Any]]) -> dict[str, str]:
     """``verdict`` :data:`~tactbench.runner.analysis.statistics.NOT_LEARNED` and the ``note``
-    naming the cells and runs, where a run of either cell did not learn or did not
-    transfer (:mod:`tactbench.runner.execution.learning`); nothing otherwise (rows made before
-    they recorded it count as learned)."""
+    naming the cell and why, where either cell's runs together did not learn or did not
+    transfer (:func:`tactbench.runner.execution.learning.cell_learning`, over the runs
+    paired here); nothing otherwise."""
     label = spec_label if names["factor"] == "classifier" else str
-    said = [describe(label(names[side]), rows) for side, rows in (("a", rows_a), ("b", rows_b))]
+    said = [describe_cell(label(names[side]), cell_learning(rows))
+            for side, rows in (("a", rows_a), ("b", rows_b))]
     said = [s for s in said if s]
     if not said:
         return {}

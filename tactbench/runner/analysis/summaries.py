@@ -14,7 +14,7 @@ import math
 import statistics
 from typing import Any, Iterable, Sequence
 
-from tactbench.runner.execution.learning import LEARNING_FIELD, flagged_runs
+from tactbench.runner.execution.learning import LEARNING_FIELD, summary_learning
 from tactbench.runner.execution.questions import short_name, spec_labels
 from tactbench.runner.execution.results import failed_rows, ok_rows
 from tactbench.runner.analysis.statistics import seed_summary, variance_components
@@ -42,8 +42,8 @@ def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = N
     the classifier was fed (images or vectors). With ``users`` (the user of each dataset
     sample, by index), ``per_user_accuracy``: user → accuracy on that user's test
     sequences. Failed cells are left out (:func:`failed_cells` lists them). ``learning``
-    (only where a run's model did not learn or transfer,
-    :mod:`tactbench.runner.execution.learning`): status → seeds.
+    (only where the cell's runs together did not learn or transfer,
+    :func:`tactbench.runner.execution.learning.cell_learning`): status → the seeds judged.
     """
     rows = list(rows)
     by_user = per_user_accuracy(rows, users) if users is not None else {}
@@ -84,7 +84,7 @@ def summarise(rows: Iterable[dict[str, Any]], *, users: Sequence[str] | None = N
         trained = [r["train_accuracy"] for r in members if "train_accuracy" in r]
         if trained:  # rows made before recorded none
             summary["train_accuracy_mean"] = statistics.fmean(trained)
-        flagged = flagged_runs(members)  # status → seeds that did not learn
+        flagged = summary_learning(members)  # status → seeds, judged together
         if flagged:
             summary[LEARNING_FIELD] = flagged
         if users is not None:
