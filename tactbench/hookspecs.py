@@ -69,8 +69,11 @@ def register_commands(cli):
 # ------------------------------------------------------------------ events
 #
 # Called while a benchmark runs, by ``tactbench run`` (with ``--until`` too) and by
-# :func:`tactbench.runner.run`, in the process that stores the rows. A hook that raises is
-# reported as a warning and the run goes on (with ``TACTBENCH_STRICT_PLUGINS=1`` it ends).
+# :func:`tactbench.runner.run`, in the process that stores the rows, each plugin on a
+# thread of its own with its own copy of the arguments (:mod:`tactbench.events`). A hook
+# that raises or calls sys.exit is reported once as a warning and the run goes on (with
+# ``TACTBENCH_STRICT_PLUGINS=1`` it ends); one that does not return within
+# ``TACTBENCH_HOOK_TIMEOUT`` seconds is reported and abandoned.
 
 
 @hookspec

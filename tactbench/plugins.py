@@ -31,6 +31,7 @@ import pluggy
 
 from tactbench import __version__, hookspecs
 from tactbench.errors import InputError, PluginError
+from tactbench.events import EventLanes
 from tactbench.registry import KIND_HOOKS, Component, PluginInfo, PluginProblem, Registry
 
 ENTRY_POINT_GROUP = "tactbench"
@@ -63,6 +64,7 @@ class PluginManager(pluggy.PluginManager):
         self.strict = strict
         self.infos: dict[str, PluginInfo] = {}
         self.problems: list[PluginProblem] = []
+        self.events = EventLanes(self._event_problem)
 
     def report(self, plugin: str, distribution: str, message: str, *,
                mark: bool = True) -> None:
@@ -120,10 +122,24 @@ class PluginManager(pluggy.PluginManager):
                 on_success(impl.plugin_name, kwargs)
 
     def notify(self, hook_name: str, **arguments: Any) -> None:
-        """Call the event hook ``hook_name`` on each plugin with ``arguments``; one that
-        raises is warned about on stderr (and skipped) and the others are still called."""
+        """Call the event hook ``hook_name`` of each plugin with its own deep copy of
+        ``arguments``, on that plugin's thread, without waiting (:mod:`tactbench.events`);
+        what an earlier call did wrong (raised, exited, overran its bound) is warned
+        about on stderr here, once, and the run goes on."""
+        caller = getattr(self.hook, hook_name)
+        calls = [(impl.plugin_name, impl.function, list(impl.argnames))
+                 for impl in caller.get_hookimpls()]
+        self.events.notify(hook_name, calls, arguments)
+
+    def settle(self) -> None:
+        """Wait for the event hooks called so far (each within its bound), then warn
+        about what they did wrong (:meth:`tactbench.events.EventLanes.settle`)."""
+        self.events.settle()
+
+    def _event_problem(self, plugin: str, message: str) -> None:
+        info = self.infos.get(plugin)
         before = len(self.problems)
-        self.call_each(hook_name, lambda _plugin, _dist: arguments)
+        self.report(plugin, info.distribution if info else "?", message)
         for problem in self.problems[before:]:
             log.warning("tactbench: warning: %s (the run goes on)", problem)
 
@@ -232,7 +248,8 @@ def collect_registry(pm: PluginManager) -> Registry:
                 accepted[key] = comp
 
         pm.call_each(hook_name, make_kwargs, on_success)
-    return Registry(accepted.values(), pm.infos.values(), pm.problems, events=pm.notify)
+    return Registry(accepted.values(), pm.infos.values(), pm.problems, events=pm.notify,
+                    settle=pm.settle)
 
 
 def _make_register(kind: str, plugin: str, dist: str,

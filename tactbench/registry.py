@@ -109,8 +109,10 @@ class Registry:
         plugins: Iterable[PluginInfo] = (),
         problems: Iterable[PluginProblem] = (),
         events: Callable[..., None] | None = None,
+        settle: Callable[[], None] | None = None,
     ) -> None:
         self._events = events  # the plugin manager's event caller (PluginManager.notify)
+        self._settle = settle  # and its wait for the calls (PluginManager.settle)
         self._by_kind: dict[str, dict[str, Component]] = {kind: {} for kind in KINDS}
         for comp in components:
             self._by_kind[comp.kind][comp.name] = comp
@@ -119,10 +121,18 @@ class Registry:
 
     def notify(self, event: str, **arguments: Any) -> None:
         """Call the event hook ``event`` (``cell_finished``, ``look_finished``: see
-        :mod:`tactbench.hookspecs`) of every plugin implementing it; nothing for a registry
-        made without plugins."""
+        :mod:`tactbench.hookspecs`) of every plugin implementing it, each with its own
+        copy of ``arguments`` and without waiting (:mod:`tactbench.events`); nothing for
+        a registry made without plugins."""
         if self._events is not None:
             self._events(event, **arguments)
+
+    def settle(self) -> None:
+        """Wait for the event hooks notified so far, each within its bound, and warn
+        about what they did wrong (:mod:`tactbench.events`); nothing for a registry made
+        without plugins."""
+        if self._settle is not None:
+            self._settle()
 
     def components(self, kind: str | None = None) -> list[Component]:
         kinds = KINDS if kind is None else (_check_kind(kind),)

@@ -187,6 +187,7 @@ def test_hook_cell_finished(tmp_path):
     seen = []
     reg = registry_with(("events", _events_plugin(seen)))
     reg.notify("cell_finished", row={"key": "k1"}, out=tmp_path)
+    reg.settle()  # hooks run on their plugin's thread; settle waits for them
     assert seen == [("cell", "k1", tmp_path)]
 
 
@@ -194,6 +195,7 @@ def test_hook_look_finished(tmp_path):
     seen = []
     reg = registry_with(("events", _events_plugin(seen)))
     reg.notify("look_finished", report="R", out=tmp_path)
+    reg.settle()
     assert seen == [("look", "R", tmp_path)]
 
 
@@ -206,11 +208,13 @@ def test_an_event_hook_that_raises_is_a_warning_and_the_others_still_hear(tmp_pa
     reg = registry_with(("broken", namespace(cell_finished=broken)),
                         ("events", _events_plugin(seen)))
     reg.notify("cell_finished", row={"key": "k1"}, out=tmp_path)
+    reg.settle()
     assert seen == [("cell", "k1", tmp_path)]
     assert "tracking server down" in caplog.text and "the run goes on" in caplog.text
+    strict = registry_with(("broken", namespace(cell_finished=broken)), strict=True)
+    strict.notify("cell_finished", row={}, out=tmp_path)
     with pytest.raises(PluginError, match="tracking server down"):
-        registry_with(("broken", namespace(cell_finished=broken)),
-                      strict=True).notify("cell_finished", row={}, out=tmp_path)
+        strict.settle()
 
 
 def hook_names():

@@ -22,6 +22,7 @@ from typing import Any, Callable, Sequence
 
 from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.events import hook_timeout
 from tactbench.integrity import path_kind
 from tactbench.machine import git_revision
 from tactbench.paths import discard
@@ -100,6 +101,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     does not compute again.
     """
     start = time.perf_counter()
+    hook_timeout()  # a bad TACTBENCH_HOOK_TIMEOUT: one line before any work
     cache = cache or EncodingCache()  # an unusable cache folder: before any work
     memory = MemoryTracker()  # which of this process's steps sets its peak memory
     # the lease: no prune or clear removes an entry this run uses while it lives
@@ -128,12 +130,15 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         def finish(row: dict[str, Any]) -> None:
             row["run"] = run_meta
             row = store.put(row)  # as stored: a row too large to keep is a failed one
+            # each plugin gets its own copy, on its own thread: no hook holds back the
+            # next row or changes what another sees (tactbench.events)
+            plans[0].registry.notify("cell_finished", row=row, out=Path(scene.out))
             if on_row is not None:
                 on_row(row)
-            plans[0].registry.notify("cell_finished", row=row, out=Path(scene.out))
 
         if jobs:
             execute(scene, jobs, finish, bars, memory)
+        plans[0].registry.settle()  # the hooks' calls, each within its bound
     claim.unlink(missing_ok=True)
     report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
                          margin=scene.margin,
@@ -297,6 +302,7 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
         if on_look is not None:
             on_look(report)
         registry.notify("look_finished", report=report, out=Path(scene.out))
+        registry.settle()
         if report.failed or (report.looks or {}).get("answered"):
             break
         elapsed = time.perf_counter() - start

@@ -45,7 +45,7 @@ from tactbench.runner.execution.results import IDENTITY_DEFAULTS, INDEPENDENT_RU
 from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.execution.scene import Scene
-from tactbench.runner.execution.results import is_run_output  # what a run writes, said there
+from tactbench.runner.execution.results import run_folder_entries  # what a run writes, said there
 
 #: Part of every cell's identity: bump it when a row's meaning changes, so that old
 #: rows are not taken for new ones.
@@ -420,7 +420,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
     registry = registry or load_registry()
     pin_cpu_kernels()  # the kernels every cell of the plan computes with (in its identity)
     # The scene checked itself when it was made; here what needs the plugins and the disk.
-    check_output_folder(scene.out, option="out folder", ours=is_run_output)
+    check_output_folder(scene.out, option="out folder", ours=run_folder_entries(scene.out))
     _check_statistics(scene)
     # Names and options first (cheap), so a typo fails before a dataset is loaded.
     split, window, *designs = _build_designs(scene, registry)

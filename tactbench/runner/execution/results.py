@@ -33,7 +33,7 @@ import re
 import shlex
 import sys
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import CorruptArtefactError, InputError, is_finite_number
@@ -484,6 +484,22 @@ OUT_FOLDERS = ("cells", "models")
 #: report.md begins with this line; a report.md without it is not tactbench's.
 REPORT_HEADER = "# tactbench report"
 _CONFUSION = re.compile(r"confusion_.+\.png")
+
+
+def run_folder_entries(out: str | Path) -> Callable[[Path], bool]:
+    """What the out folder ``out`` may hold for a run to go on: what a run writes
+    (:func:`is_run_output`); and, in a folder an earlier run made (its ``cells/`` holds
+    rows), anything else beside it too (a plugin's state file, a benchmark's notes),
+    which a run never writes over. A run's own names stay checked there: a report.md
+    tactbench did not write is refused in both."""
+    earlier = bool(ResultStore(out).keys())
+    taken = {*OUT_FILES, *OUT_FOLDERS}
+
+    def ours(path: Path) -> bool:
+        return is_run_output(path) or (earlier and path.name not in taken
+                                       and not _CONFUSION.fullmatch(path.name))
+
+    return ours
 
 
 def is_run_output(path: Path) -> bool:
