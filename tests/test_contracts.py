@@ -232,6 +232,7 @@ def _builtin_specs(registry, kind, tmp_path):
         ("sensor", "cyskin-can"): {"taxel_ids": "0-10,16-26", "channel": "tb-contracts"},
         ("dataset", "cyskin-text"): {"path": str(tmp_path)},
         ("dataset", "cost"): {"path": str(tmp_path / "cost.csv")},
+        ("dataset", "haart"): {"path": str(tmp_path)},
         ("dataset", "folder"): {"path": str(tmp_path)},
         ("split", "group"): {"key": "position"},
         ("split", "sklearn"): {"splitter": "GroupKFold"},

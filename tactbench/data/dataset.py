@@ -127,6 +127,15 @@ class Dataset:
         return np.array([s.repetition for s in self.samples], dtype=np.int64)
 
     @property
+    def attributes(self) -> dict[str, list[str]]:
+        """``{name: value of every sample}`` for each attribute some sample has (``""``
+        where a sample lacks it), names in the order they first appear."""
+        names: dict[str, None] = {}
+        for s in self.samples:
+            names.update(dict.fromkeys(s.attributes))
+        return {n: [s.attributes.get(n, "") for s in self.samples] for n in names}
+
+    @property
     def sources(self) -> list[str]:
         return [s.source for s in self.samples]
 
@@ -166,6 +175,9 @@ class Dataset:
             "taxels": self.n_taxels,
             "layout": (None if self.layout is None else self.layout.summary()),
             "normalisation": self.normalisation.spec,
+            **({"attributes": {name: dict(sorted(_counts(values).items()))
+                               for name, values in self.attributes.items()}}
+               if any(s.attributes for s in self.samples) else {}),
             "missing_readings": missing,
             "content_hash": self.content_hash(),
         }
@@ -254,10 +266,11 @@ class Dataset:
     def content_hash(self) -> str:
         """SHA-256 (hex) of everything that defines the data, stable across processes.
 
-        Covers classes, labels, per-sample user/position/repetition, values,
-        timestamps, taxel ids, the layout and the normalisation; not the
+        Covers classes, labels, per-sample user/position/repetition and attributes,
+        values, timestamps, taxel ids, the layout and the normalisation; not the
         dataset's name, description or sample sources (where files were read).
-        Computed once and cached.
+        Computed once and cached (a dataset without attributes hashes as it did before
+        samples had them).
         """
         if self._hash is None:
             h = hashlib.sha256()
@@ -266,6 +279,8 @@ class Dataset:
                     "normalisation": self.normalisation.spec,
                     "samples": [[int(s.label), s.user, s.position, int(s.repetition)]
                                 for s in self.samples]}
+            if any(s.attributes for s in self.samples):
+                meta["attributes"] = [sorted(s.attributes.items()) for s in self.samples]
             h.update(json.dumps(meta, sort_keys=True).encode())
             h.update(_le(self.taxel_ids, "<i8"))
             for s in self.samples:
@@ -311,6 +326,13 @@ class Dataset:
                              f"not match the manifest's {str(recorded)[:12]}…: the files were "
                              f"modified or are corrupted")
         return ds
+
+
+def _counts(values: Sequence[str]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[v] = out.get(v, 0) + 1
+    return out
 
 
 def _le(arr: np.ndarray, dtype: str) -> bytes:

@@ -4,7 +4,8 @@
   marks a missing reading), timestamps ``(T,)`` float64 seconds
   (non-decreasing), taxel ids ``(N,)`` int64 (unique).
 - :class:`Frame`: one sweep of a recording (what a sensor yields).
-- :class:`Sample`: a recording with its label and where it came from.
+- :class:`Sample`: a recording with its label, where it came from and the conditions
+  it was recorded under (``attributes``: a corpus's variant, substrate, cover).
 
 The dataset is :class:`tactbench.data.dataset.Dataset`, its normalisation
 :class:`tactbench.data.normalisation.Normalisation` and its on-disk format
@@ -13,8 +14,8 @@ The dataset is :class:`tactbench.data.dataset.Dataset`, its normalisation
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, Iterator, NamedTuple
+from dataclasses import dataclass, field
+from typing import Any, Iterator, Mapping, NamedTuple
 
 import numpy as np
 
@@ -101,9 +102,17 @@ def _as_ids(ids: Any, n: int) -> np.ndarray:
     return arr
 
 
+#: Metadata every sample has by name; an attribute may not take one of these names.
+RESERVED_ATTRIBUTES = ("user", "position", "repetition", "label", "source")
+
+
 @dataclass(frozen=True, eq=False)
 class Sample:
-    """A labelled recording. ``label`` indexes the dataset's ``classes``."""
+    """A labelled recording. ``label`` indexes the dataset's ``classes``.
+
+    ``attributes`` are further conditions of the recording, ``{name: value}`` text (CoST's
+    ``variant``, HAART's ``substrate`` and ``cover``): a group split leaves their values
+    out as it does users (``group:variant``), and they are kept with the dataset."""
 
     recording: Recording
     label: int
@@ -111,3 +120,17 @@ class Sample:
     position: str = ""
     repetition: int = 0
     source: str = ""
+    attributes: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        attrs = dict(self.attributes)
+        for key, value in attrs.items():
+            if not isinstance(key, str) or not key.isidentifier() or \
+                    key in RESERVED_ATTRIBUTES:
+                raise InputError(f"a sample attribute is named by a word that is not one of "
+                                 f"{', '.join(RESERVED_ATTRIBUTES)} (variant, substrate), "
+                                 f"got {key!r}")
+            if not isinstance(value, str):
+                raise InputError(f"sample attribute {key!r} must be text, got "
+                                 f"{type(value).__name__}")
+        object.__setattr__(self, "attributes", attrs)

@@ -19,7 +19,7 @@ and seed and recomputed anywhere:
   pools their test predictions;
 - ``group:KEY`` (``group:KEY:folds=K``, ``group:KEY:test=A|B``): the same over any
   recording metadata a dataset has (:func:`dataset_groups`: ``user``, ``position``,
-  ``repetition``): a random fifth of its values, ``K`` folds of them, or the named values
+  ``repetition``, and the samples' attributes, such as CoST's ``variant``): a random fifth of its values, ``K`` folds of them, or the named values
   as the test set (``group:position:test=side`` trains on the front, tests on the side).
   ``group:user`` is ``users`` (same spec in a cell's identity, same split);
 - ``kfold:folds=K``: repeated stratified K-fold over recordings: for each run seed the
@@ -165,10 +165,12 @@ def paper_split(labels: Sequence[int], *, seed: int, test_per_class: int = 30) -
 def dataset_groups(dataset: Any) -> dict[str, list[str]]:
     """The recording metadata of ``dataset`` a group split can use: ``{key: value of every
     sample}`` for each of :data:`GROUP_KEYS` that some sample has (a missing user or
-    position is ``""``; a missing repetition is 0)."""
+    position is ``""``; a missing repetition is 0), then each of the samples' attributes
+    (``variant``, ``substrate``: ``group:variant`` leaves variants out)."""
     out = {"user": [str(u) for u in dataset.users],
            "position": [str(p) for p in dataset.positions],
-           "repetition": [str(int(r)) if int(r) else "" for r in dataset.repetitions]}
+           "repetition": [str(int(r)) if int(r) else "" for r in dataset.repetitions],
+           **getattr(dataset, "attributes", {})}  # a duck-typed dataset may lack them
     return {k: v for k, v in out.items() if any(v)}
 
 

@@ -4,7 +4,9 @@ A dataset folder holds
 
 - ``manifest.json``: format name (:data:`FORMAT_NAME`), :data:`SCHEMA_VERSION`, the
   dataset's name, description, classes and normalisation spec, counts, per-sample
-  users, positions and sources, the layout's name and the content hash;
+  users, positions and sources, the samples' attributes where they have any
+  (``{"attributes": {name: [value of every sample]}}``), the layout's name and the
+  content hash;
 - ``arrays.npz``: all numbers, read with ``allow_pickle=False``: ``values``
   ``(F, N)`` (uint16 when every reading is a whole number in [0, 65535], else float32;
   ``F`` frames of all samples stacked), ``timestamps`` ``(F,)`` s, ``offsets``
@@ -110,6 +112,8 @@ def write_dataset(dataset: Any, folder: str | Path) -> Path:
         "users": dataset.users,
         "positions": dataset.positions,
         "sources": dataset.sources,
+        **({"attributes": dataset.attributes}
+           if any(s.attributes for s in samples) else {}),
         "content_hash": dataset.content_hash(),
     }
     buf = io.BytesIO()
@@ -167,7 +171,7 @@ _MANIFEST_FIELDS = {
 }
 #: Optional fields and their types (``None`` allowed where the type is a tuple with it).
 _MANIFEST_OPTIONAL = {"description": (str,), "values_dtype": (str,),
-                      "layout": (dict, type(None))}
+                      "layout": (dict, type(None)), "attributes": (dict,)}
 #: The values types write_dataset stores.
 _VALUES_DTYPES = ("uint16", "float32")
 
@@ -205,6 +209,11 @@ def _check_manifest(m: Any, path: Path) -> None:
     for key in ("users", "positions", "sources"):
         if len(m[key]) != n or not all(isinstance(v, str) for v in m[key]):
             raise InputError(f"{path}: {key!r} must list {n} strings, got {len(m[key])} items")
+    for key, values in m.get("attributes", {}).items():
+        if not key.isidentifier() or not isinstance(values, list) or len(values) != n \
+                or not all(isinstance(v, str) for v in values):
+            raise InputError(f"{path}: 'attributes' must map names to lists of {n} strings; "
+                             f"{key!r:.40} does not")
     if not all(isinstance(c, str) for c in m["classes"]):
         raise InputError(f"{path}: 'classes' must be strings")
     if not re.fullmatch(r"[0-9a-f]{64}", m["content_hash"]):
@@ -336,14 +345,17 @@ def _fields_from(m: dict, arrays: dict, apath: Path) -> dict[str, Any]:
         raise InputError(f"{apath}: the manifest names a layout, but there is no "
                          f"'layout_ids' array")
     vals32 = values.astype(np.float32, copy=False)
+    attributes = m.get("attributes", {})
     samples = []
     for k in range(n):
         a, b = offsets[k], offsets[k + 1]
         try:
             rec = Recording(vals32[a:b], timestamps[a:b], taxel_ids)
+            samples.append(Sample(rec, int(labels[k]), m["users"][k], m["positions"][k],
+                                  int(reps[k]), m["sources"][k],
+                                  {name: values[k] for name, values in attributes.items()
+                                   if values[k]}))
         except InputError as exc:
             raise InputError(f"{apath}: sample {k}: {exc}") from None
-        samples.append(Sample(rec, int(labels[k]), m["users"][k], m["positions"][k],
-                              int(reps[k]), m["sources"][k]))
     return {"name": m["name"], "samples": samples, "classes": classes, "layout": layout,
             "normalisation": m["normalisation"], "description": str(m.get("description", ""))}

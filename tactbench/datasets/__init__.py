@@ -18,7 +18,13 @@ def register_datasets(register):
     register("cyskin-text", "tactbench.datasets.cyskin_text:CySkinText",
              summary="CySkin acquisition text files; path=FOLDER|FILE")
     register("cost", "tactbench.datasets.cost:CoST",
-             summary="Corpus of Social Touch CSV (8x8, 135 Hz); path=FILE")
+             summary="Corpus of Social Touch, the CSV as distributed (31 subjects, 14 "
+                     "gestures, 8x8, 135 Hz; variant an attribute); path=FILE "
+                     "(docs/datasets.md)")
+    register("haart", "tactbench.datasets.haart:HAART",
+             summary="HAART challenge files training.csv + testWITHLABELS.csv (7 gestures, "
+                     "8x8, 54 Hz; substrate, cover, set=training|test); path=FOLDER "
+                     "(docs/datasets.md)")
     register("folder", "tactbench.datasets.folder:FolderDataset",
              summary="your own data: ROOT/<class>/<recording>.npy|.npz|.csv, (T,H,W) grids "
                      "or (T,N) taxel vectors; path=ROOT (see docs/own-data.md)")

@@ -14,7 +14,7 @@ from typing import Any, Callable
 from tactbench.can.logs import read_log
 from tactbench.data.dataset import Dataset
 from tactbench.data.store import MANIFEST
-from tactbench.datasets.cost import read_cost_csv
+from tactbench.datasets.cost import CoST
 from tactbench.datasets.cyskin_text import read_cyskin_folder
 from tactbench.datasets.folder import looks_like_folder, read_folder
 from tactbench.errors import ContractError, InputError, MissingFileError
@@ -69,7 +69,7 @@ def load_path(path: str | Path, *, progress: Callable[..., None] | None = None) 
     if kind == "can-log":  # CySkin traffic recorded by `tactbench can record`
         return read_log(path).to_dataset()
 
-    return read_cost_csv(path)
+    return CoST(str(path)).load()  # converted once into the store, then read from there
 
 
 def is_path_spec(text: str) -> bool:

@@ -42,8 +42,8 @@ def test_cost_csv(tmp_path):
     from tactbench.datasets.cost import COLUMNS
 
     path = tmp_path / "c.csv"
-    path.write_text(",".join(COLUMNS) + "\n" + ",".join(["1", "gentle", "pat", "0"] +
-                                                         ["5"] * 64) + "\n")
+    path.write_text(",".join(COLUMNS) + "\n" + "".join(
+        ",".join(["1", "gentle", "pat", str(frame)] + ["5"] * 64) + "\n" for frame in (0, 1)))
     assert load_dataset(path).classes == ("pat",)
 
 
