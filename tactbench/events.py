@@ -17,7 +17,8 @@ back to the calling thread, where it is reported (:meth:`EventLanes.collect`):
   by this plugin manager.
 
 :meth:`EventLanes.settle` (at the end of each run and look) waits until every lane has
-called what it was given, or has overrun its bound.
+called what it was given, or has overrun its bound; the threads of idle lanes then end
+(the next event starts them again), so no thread waits between runs.
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ class _Lane:
     """One plugin's event hooks: its thread, its queue and what came of its calls."""
 
     plugin: str
-    calls: "queue.SimpleQueue[tuple[str, Callable[..., Any], dict[str, Any]]]" = field(
+    calls: "queue.SimpleQueue[tuple[str, Callable[..., Any], dict[str, Any]] | None]" = field(
         default_factory=queue.SimpleQueue)
     pending: int = 0  # calls given and not yet returned (under EventLanes._lock)
     busy_since: float | None = None  # time.monotonic() of the call running now
@@ -92,7 +93,7 @@ class EventLanes:
         self.collect()
         for plugin, function, names in calls:
             lane = self._lane(plugin)
-            if lane.abandoned:
+            if lane.abandoned:  # kept, so that it is never called again
                 continue
             kwargs = copy.deepcopy({k: arguments[k] for k in names})
             with self._lock:
@@ -108,7 +109,10 @@ class EventLanes:
 
     def _serve(self, lane: _Lane) -> None:
         while True:
-            hook, function, kwargs = lane.calls.get()
+            call = lane.calls.get()
+            if call is None:  # settled and idle: the thread ends (a new one if needed)
+                return
+            hook, function, kwargs = call
             if not lane.abandoned:
                 with self._lock:
                     lane.busy_since, lane.busy_with = time.monotonic(), hook
@@ -162,6 +166,10 @@ class EventLanes:
                            else bound for lane in busy)
                 self._lock.wait(timeout=min(max(left, 0.0) + 0.01, 1.0))
         self.collect(bound)
+        for plugin, lane in list(self._lanes.items()):
+            if not lane.abandoned:  # idle now: no thread waits between runs
+                lane.calls.put(None)
+                del self._lanes[plugin]
         for key, count in self._failed.items():
             if count > self._said.get(key, 0):
                 self._said[key] = count

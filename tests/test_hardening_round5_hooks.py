@@ -48,6 +48,11 @@ def test_a_hook_calling_sys_exit_is_contained_and_said_once(tmp_path, caplog):
     assert len(said) == 2, said
     assert "called sys.exit (0)" in said[0] and "the run goes on" in said[0]
     assert "failed 3 time(s) in all" in said[1]
+    lanes = [t for t in threading.enumerate()
+             if t.name in ("tactbench-hooks-quitter", "tactbench-hooks-listener")]
+    for thread in lanes:  # settled: the lanes' threads end
+        thread.join(2)
+    assert not any(t.is_alive() for t in lanes)
 
 
 def test_each_hook_gets_its_own_copy_of_the_row(tmp_path):
