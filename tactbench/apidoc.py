@@ -81,8 +81,10 @@ def _inline(text: str) -> str:
 
     text = _ROLE.sub(role, text)
     text = re.sub(r"``(.+?)``", r"`\1`", text)
-    # dunder names outside code would read as bold in Markdown
-    return re.sub(r"(?<![`\w])(__\w+__(?:\(\))?)", r"`\1`", text)
+    # dunder names outside code would read as bold in Markdown (inside code they are code)
+    parts = re.split(r"(`[^`\n]*`)", text)
+    return "".join(part if i % 2 else re.sub(r"(?<![`\w])(__\w+__(?:\(\))?)", r"`\1`", part)
+                   for i, part in enumerate(parts))
 
 
 def _indent(line: str) -> int:

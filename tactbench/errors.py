@@ -47,6 +47,11 @@ class ComponentLoadError(TactbenchError):
     """A component's target did not import, or its requirements are missing."""
 
 
+class WorkerError(TactbenchError):
+    """Worker processes could not start here, or died while cells ran (the cause and
+    the fix are in the message; finished cells are stored)."""
+
+
 # ----------------------------------------------------------------------------- checks
 
 

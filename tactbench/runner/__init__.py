@@ -59,6 +59,16 @@ the torch threads and the CPU kernels included (pinned to AVX2 by default, see
 any x86-64 machine with AVX2, in any executor, whatever runs beside it
 (docs/reliability.md, "Numbers across machines").
 
+Worker processes are spawned, and a spawned worker imports the main module again. A
+script that calls ``run`` at its top level without ``if __name__ == "__main__":``, or one
+read from standard input (``python - < script.py``), would run again in every worker (or
+cannot be read again): there the cells run one at a time in the calling process, said in
+one warning line naming the fix; a notebook, ``python -c`` and a guarded script get
+workers. Workers that cannot start, or one that dies while cells run (killed for
+memory), stop the run with a :class:`~tactbench.errors.WorkerError` naming the cause and
+the fix (``workers=1``, fewer workers); the cells finished before are stored, and a run
+again computes the others.
+
 The runner is three rooms, the arrows one way (``tests/test_architecture.py``):
 :mod:`tactbench.runner.execution` (scene, plan, cache, cells, executors, the store of
 rows), :mod:`tactbench.runner.analysis` (summaries, statistics, comparisons, the

@@ -8,27 +8,38 @@ process's environment.
 
 Each executor calls ``finish(row)`` in this process as soon as a cell's row is back, in
 the order cells finish. A cell never raises here (:func:`~tactbench.runner.execution.cell.run_cell`
-returns a failed row instead); when a worker itself dies (killed for memory, a crashed
-interpreter), its cell gets a failed row too. Ctrl-C stops at once: cells not started are
+returns a failed row instead). Local worker processes that cannot start (a script's main
+module that cannot be imported again) or one that dies (killed for memory, a crashed
+interpreter) stop the run with a :class:`~tactbench.errors.WorkerError` naming the cause
+and the fix, the finished cells stored; a script that calls tactbench at its top level
+without ``if __name__ == "__main__":``, or one read from standard input, runs its cells in
+this process instead, said in one warning line (:func:`~tactbench.runner.execution.system.main_reimport_problem`).
+On dask, a worker that dies gives its cell a failed row. Ctrl-C stops at once: cells not started are
 dropped, finished ones were already handed to ``finish``.
 """
 
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+import logging
 import multiprocessing
+import os
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
-from tactbench.errors import InputError
+from tactbench.errors import InputError, WorkerError
 from tactbench.runner.execution.cell import CellJob, failed_row, run_cell
 from tactbench.runner.execution.questions import spec_labels
-from tactbench.runner.execution.system import BEFORE, MemoryTracker, ignore_interrupts, stop_workers
+from tactbench.runner.execution.system import (BEFORE, MemoryTracker, ignore_interrupts,
+                                               main_reimport_problem, stop_workers)
 
 if TYPE_CHECKING:
     from tactbench.runner.execution.scene import Scene
     from tactbench.ui import Progress
 
 Finish = Callable[[dict[str, Any]], None]
+
+log = logging.getLogger("tactbench.runner.execution.executors")
 
 
 def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress",
@@ -45,9 +56,17 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         bars.update(overall, done)
 
     workers = scene.resolved_workers()
+    problem = main_reimport_problem()  # before the bootstrapping of a spawned worker
     if scene.executor == "dask":
+        if problem and not scene.scheduler:  # a local cluster spawns its workers too
+            raise InputError(f"the local dask cluster cannot start its workers: {problem} "
+                             f"(or give --scheduler)")
         run_dask(jobs, finished, workers=workers, scheduler=scene.scheduler)
     elif min(workers, len(jobs)) == 1:
+        run_serial(jobs, finished, bars, memory)
+    elif problem:
+        log.warning("tactbench: warning: the %d cells run one at a time in this process, "
+                    "not %d at once: %s", len(jobs), min(workers, len(jobs)), problem)
         run_serial(jobs, finished, bars, memory)
     else:
         run_processes(jobs, finished, workers=min(workers, len(jobs)))
@@ -76,15 +95,43 @@ def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
     """``workers`` cells at once in local processes (spawned: torch and fork do not mix)."""
     pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts,
                                mp_context=multiprocessing.get_context("spawn"))
+    stored = 0
     try:
+        probe = pool.submit(os.getpid)  # one worker started, before any cell is sent
+        started = dict(getattr(pool, "_processes", None) or {})  # known after a break
+        try:
+            probe.result()
+        except BrokenProcessPool:
+            raise WorkerError(f"worker processes cannot start here ({_deaths(started)}); "
+                              f"the worker's own error, if any, is printed above; run with workers=1 (--workers "
+                              f"1) to compute the cells in this process") from None
         futures = {pool.submit(run_cell, job): job for job in jobs}
+        started.update(getattr(pool, "_processes", None) or {})
         for fut in as_completed(futures):
+            if isinstance(fut.exception(), BrokenProcessPool):
+                raise WorkerError(
+                    f"a worker process died while cells ran ({_deaths(started)}); the "
+                    f"{stored} cell(s) finished are stored, {len(jobs) - stored} are not: "
+                    f"run again to compute them, with fewer workers (--workers) or more "
+                    f"memory if it was killed for memory") from None
             finish(_row(fut, futures[fut]))
+            stored += 1
     except BaseException:  # Ctrl-C or a failing finish(): do not wait for the queue
         stop_workers(pool)  # Ctrl-C is the parent's: it ends the workers, whose running
         # cells are lost (a resumed run trains them again); finished cells are stored
         raise
     pool.shutdown()
+
+
+def _deaths(processes: dict[int, Any]) -> str:
+    """How a pool's worker ``processes`` (pid → process) ended, as far as it can be told."""
+    for p in processes.values():
+        p.join(timeout=1)  # a dead worker's exit status is known once it is reaped
+    codes = sorted({p.exitcode for p in processes.values() if p.exitcode not in (None, 0)})
+    said = [f"killed by signal {-c}" + (" (SIGKILL: the out-of-memory killer?)" if c == -9
+                                        else "") if c < 0 else f"exit status {c}"
+            for c in codes]
+    return "a worker " + ", ".join(said) if said else "a worker ended abruptly"
 
 
 #: Seconds to wait for a dask scheduler to answer before saying it cannot be reached.

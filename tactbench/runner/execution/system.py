@@ -4,8 +4,11 @@ memory, host, versions, git revision) are :mod:`tactbench.machine`."""
 
 from __future__ import annotations
 
+import ast
+import os
 import re
 import signal
+import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -82,6 +85,68 @@ class MemoryTracker:
         """``{step: {"rss_mb": current, "peak_mb": peak}}`` in order (JSON-ready)."""
         return {name: {"rss_mb": current, "peak_mb": peak}
                 for name, current, peak in self.steps}
+
+
+def _main_frame():
+    """The frame running the main module's top-level code, when this call is within it
+    (None: the main module has finished, or this runs on another thread)."""
+    main = sys.modules.get("__main__")
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_name == "<module>" and frame.f_globals is vars(main):
+            return frame
+        frame = frame.f_back
+    return None
+
+
+def _under_main_guard(source: str, line: int) -> bool:
+    """Whether ``line`` of the module ``source`` lies in the body of a top-level
+    ``if __name__ == "__main__":``."""
+    try:
+        tree = ast.parse(source)
+    except (SyntaxError, ValueError):
+        return False
+    for node in tree.body:
+        if not isinstance(node, ast.If) or not isinstance(node.test, ast.Compare):
+            continue
+        names = [node.test.left, *node.test.comparators]
+        guard = len(names) == 2 and isinstance(node.test.ops[0], ast.Eq) and \
+            {ast.dump(n) for n in names} == {ast.dump(ast.Name("__name__", ast.Load())),
+                                             ast.dump(ast.Constant("__main__"))}
+        if guard and node.body[0].lineno <= line <= (node.body[-1].end_lineno or line):
+            return True
+    return False
+
+
+def main_reimport_problem() -> str | None:
+    """Why a spawned worker process cannot start from this process's main module, or
+    None when it can. A spawned worker imports the main module again (as
+    ``__mp_main__``): a script read from standard input cannot be read again, and one
+    that calls tactbench at its top level outside ``if __name__ == "__main__":`` would
+    run again in every worker. A notebook, ``python -c`` or a prompt is not imported
+    again; a call from a function or a guarded block is safe."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    path = getattr(spec, "origin", None) or getattr(main, "__file__", None)
+    if path is None:
+        return None
+    if not os.path.isfile(path):
+        return (f"the main program was read from {path} (standard input?), which a "
+                f"worker process cannot read again; save it to a file, with the call "
+                f"under `if __name__ == \"__main__\":`, to run cells side by side")
+    frame = _main_frame()
+    if frame is None:
+        return None
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            source = f.read()
+    except OSError:
+        source = ""
+    if _under_main_guard(source, frame.f_lineno):
+        return None
+    return (f"{path} calls tactbench at its top level, outside `if __name__ == "
+            f"\"__main__\":`, so every worker process would run it again; put the call "
+            f"under that guard to run cells side by side")
 
 
 def ignore_interrupts() -> None:

@@ -1,0 +1,132 @@
+"""Hardening, round five: processes. The Python API from a plain script or standard input
+(cells in this process rather than workers that would run the script again), a pool that
+breaks is an error naming the cause and the fix, and workers that outlive their run."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import types
+from pathlib import Path
+
+import pytest
+
+from tactbench.errors import WorkerError
+from tactbench.runner.execution import executors
+from tactbench.runner.execution.system import main_reimport_problem
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _problem_seen_from(tmp_path, monkeypatch, source: str, *, write: bool = True):
+    """What :func:`main_reimport_problem` says when called from the top level of a main
+    module whose file holds ``source`` (``write=False``: a main with no file there)."""
+    path = tmp_path / "script.py"
+    if write:
+        path.write_text(source)
+    main = types.ModuleType("__main__")
+    main.__file__ = str(path) if write else "<stdin>"
+    main.__spec__ = None
+    seen: list = []
+    main.probe = lambda: seen.append(main_reimport_problem())
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    exec(compile(source, main.__file__, "exec"), vars(main))
+    return seen[0]
+
+
+def test_a_top_level_call_without_the_guard_is_seen(tmp_path, monkeypatch):
+    said = _problem_seen_from(tmp_path, monkeypatch, "x = 1\nprobe()\n")
+    assert "calls tactbench at its top level" in said and "if __name__" in said
+
+
+@pytest.mark.parametrize("source", [
+    'if __name__ == "__main__":\n    probe()\n',
+    "def main():\n    probe()\n\n\nif '__main__' == __name__:\n    x = 1\n    main()\n",
+])
+def test_a_guarded_call_is_safe(tmp_path, monkeypatch, source):
+    assert _problem_seen_from(tmp_path, monkeypatch, source) is None
+
+
+def test_a_program_read_from_standard_input_is_seen(tmp_path, monkeypatch):
+    said = _problem_seen_from(tmp_path, monkeypatch, "probe()\n", write=False)
+    assert "<stdin>" in said and "cannot read again" in said
+
+
+def test_a_notebook_or_python_c_is_not_imported_again(monkeypatch):
+    monkeypatch.setitem(sys.modules, "__main__", types.ModuleType("__main__"))
+    assert main_reimport_problem() is None
+
+
+WORKERS = """\
+import os
+import signal
+
+
+def die_at_start():  # a worker that cannot start (as an unimportable main module)
+    os._exit(3)
+
+
+def killed_on_b(job):  # a worker killed mid-cell (as by the out-of-memory killer)
+    if job == "b":
+        os.kill(os.getpid(), signal.SIGKILL)
+    return {"key": job, "status": "ok"}
+"""
+
+
+def _workers_module(tmp_path, monkeypatch):
+    """Functions a spawned worker can import (the tests folder is not on its path)."""
+    import importlib
+    import uuid
+
+    name = f"r5_workers_{uuid.uuid4().hex[:8]}"
+    (tmp_path / f"{name}.py").write_text(WORKERS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    return importlib.import_module(name)
+
+
+def test_workers_that_cannot_start_are_an_error_naming_the_fix(tmp_path, monkeypatch):
+    helpers = _workers_module(tmp_path, monkeypatch)
+    monkeypatch.setattr(executors, "ignore_interrupts", helpers.die_at_start)
+    stored: list = []
+    with pytest.raises(WorkerError, match=r"cannot start here \(a worker exit status 3\).*"
+                                          r"--workers 1"):
+        executors.run_processes(["a", "b"], stored.append, workers=2)
+    assert stored == []
+
+
+def test_a_worker_killed_mid_run_is_an_error_not_failed_rows(tmp_path, monkeypatch):
+    helpers = _workers_module(tmp_path, monkeypatch)
+    monkeypatch.setattr(executors, "run_cell", helpers.killed_on_b)
+    stored: list = []
+    with pytest.raises(WorkerError, match="a worker process died while cells ran") as err:
+        executors.run_processes(["a", "b", "c", "d"], stored.append, workers=1)
+    assert "SIGKILL" in str(err.value) and "run again" in str(err.value)
+    assert [r["key"] for r in stored] == ["a"]  # what finished first is stored
+
+
+SCRIPT = """\
+from tactbench.runner import Scene, run
+report = run(Scene(dataset="synthetic-forearm:users=2,repetitions=1", encoders=["raw"],
+                   classifiers=["logreg:max_iter=20"], L=[3], seeds=[0, 1], pixel_mm=10,
+                   test_per_class=1, workers=2, out={out!r}), progress=False, plots=False)
+print("computed", report.computed, sorted(r["status"] for r in report.rows))
+"""
+
+
+@pytest.mark.slow("starts Python twice and runs a two-cell grid in each (~6 s)")
+@pytest.mark.parametrize("how", ["file", "stdin"])
+def test_the_api_from_a_plain_script_or_stdin_computes_every_cell(tmp_path, how):
+    script = tmp_path / "plain.py"
+    script.write_text(SCRIPT.format(out=str(tmp_path / "out")))
+    env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}
+    args = [sys.executable, str(script)] if how == "file" else [sys.executable, "-"]
+    done = subprocess.run(args, input=None if how == "file" else script.read_text(),
+                          capture_output=True, text=True, cwd=tmp_path, env=env,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "computed 2 ['ok', 'ok']" in done.stdout
+    assert "run one at a time in this process" in done.stderr
+    assert "Traceback" not in done.stderr
