@@ -7,6 +7,11 @@ Each part simulates the rule the package applies (its own functions, not a copy)
 writes its rates with their Monte Carlo standard errors into the JSON file (other parts'
 entries are kept), with the command, the machine and the date:
 
+- ``futility``: the sequential looks' futility rule
+  (:func:`tactbench.runner.analysis.sequential.simulate_paths`, the paths ``tactbench
+  plan`` forecasts with), each scene's paths run with futility on and off: how often it
+  stops at the first look, and how often it gives up on a path that, continued, a later
+  look would have decided (better, worse or equivalent).
 - ``learned``: "not learned" (:func:`tactbench.runner.execution.learning.cell_learning`'s
   pooled test over a cell's runs) against the rule before it (any one run within noise of
   chance). A cell of J runs (5, 10, 20), 150 or 400 balanced test recordings of 5 classes
@@ -64,7 +69,56 @@ def learned_part(reps: int, seed: int = 0) -> dict:
             "reps": reps, "results": out}
 
 
-PARTS = {"learned": learned_part}
+#: Looks of the futility part (runs), a spread of the per-run difference (fraction).
+LOOKS, SD = (5, 10, 15, 20), 0.03
+
+
+def _futility_scene(effect: float, ratio: float, alpha: float, margin: float | None,
+                    paths: int) -> dict:
+    """One scene's rates: the same simulated paths with futility on and off."""
+    from tactbench.runner.analysis import sequential as seq
+    from tactbench.runner.analysis.power import power
+
+    on = seq.simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, margin=margin,
+                            paths=paths, seed=11)
+    off = seq.simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, margin=margin,
+                             paths=paths, seed=11, futility=False)
+    futile_early = np.isin(on[0], seq.OUTCOMES_FUTILE) & (on[1] < LOOKS[-1])
+    decided_off = np.isin(off[0], seq.DECIDED_CODES)
+    given_up = futile_early & decided_off
+    return {"effect_points": round(100 * effect, 3), "ratio": ratio, "alpha": round(alpha, 5),
+            "margin_points": None if margin is None else 100 * margin,
+            "fixed_power_20": round(power(effect, SD, ratio, LOOKS[-1], alpha=alpha), 4),
+            "futile_at_first_look": _rate(futile_early & (on[1] == LOOKS[0])),
+            "futile_early": _rate(futile_early),
+            "gave_up_on_decided": _rate(given_up),
+            "gave_up_share_of_decided": round(float(given_up.sum() / max(1, decided_off.sum())), 4),
+            "decided_without_futility": _rate(decided_off),
+            "expected_runs": round(float(on[1].mean()), 2)}
+
+
+def futility_part(reps: int) -> dict:
+    """Futility's error rates over scenes: overlap ratios 0.1–0.8, a comparison's level
+    (α, α/3, α/4 of 0.05), true differences from none to 95 % fixed-design power."""
+    from tactbench.runner.analysis.power import detectable_effect
+
+    out = []
+    for ratio in (0.1, 0.25, 0.5, 0.8):
+        for alpha in (0.05, 0.05 / 3, 0.05 / 4):
+            effects = list(dict.fromkeys(  # at α = 0.05, 5 % power is no difference
+                [0.0] + [detectable_effect(SD, ratio, LOOKS[-1], alpha=alpha, target=t)
+                         for t in (0.05, 0.2, 0.5, 0.8, 0.95)]))
+            for effect in effects:
+                out.append(_futility_scene(effect, ratio, alpha, None, reps))
+            for effect in (0.0, 0.01):
+                out.append(_futility_scene(effect, ratio, alpha, 0.02, reps))
+    return {"what": f"futility of the sequential looks {list(LOOKS)}, per-run sd "
+                    f"{100 * SD:.0f} points; rates over {reps} simulated paths a scene "
+                    "(futility on and off on the same paths)",
+            "paths": reps, "scenes": out}
+
+
+PARTS = {"learned": learned_part, "futility": futility_part}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -80,7 +80,7 @@ def test_a_look_goes_on_from_the_earlier_looks_without_computing_them_again(monk
     the work of a look does not grow with the looks before it; the result is the same."""
     from tactbench.runner.analysis import answering
 
-    rows = _rows(range(10), 0.0)
+    rows = _rows(range(10), 0.03)  # open at both looks (a null would stop futile at 5)
     looks = schedule(20, 5)
     first = replay(rows[:10], seed_order=list(range(20)), looks=looks, primary=PRIMARY)
     calls = []

@@ -115,7 +115,7 @@ def test_a_ceiling_stops_at_its_first_look_instead_of_running_to_the_budget():
     assert res.decision == "futile" and "ceiling" in res.why
     state = FamilyState(0.05, ["ceiling", "open"])
     seen = family_look(state, {"ceiling": np.zeros(5),
-                               "open": np.array([0.01, -0.02, 0.03, 0.0, 0.01])},
+                               "open": np.array([0.03, 0.01, 0.05, 0.02, 0.04])},
                        {"ceiling": RATIO, "open": RATIO}, looks=[5], max_runs=20)
     assert seen["ceiling"].decision == "futile" and "ceiling" in state.closed
     assert seen["open"].decision == "continue" and "open" not in state.closed
@@ -168,3 +168,68 @@ def test_a_question_no_number_of_runs_can_decide_stops_at_its_first_look():
     res = look(d, 1.0, looks=[5], max_runs=10, alpha=0.025)
     assert res.decision == "futile"
     assert "no number of runs up to 10" in res.why and "recordings" in res.why
+
+
+# ------------------------------------------------------------------ futility (issue 48)
+
+
+def test_futility_uses_the_t_at_the_looks_degrees_of_freedom():
+    """The runs to come move the mean by s·sqrt(1/J − 1/J_max)·T_{J−1} (not z = 1.96,
+    an 88 % interval at 4 degrees of freedom), and the boundary at the last look is
+    scaled by the spread's lower chi-square limit on J − 1 degrees of freedom."""
+    from scipy import stats
+
+    from tactbench.runner.analysis.sequential import (FUTILITY_LEVEL, SPREAD_LEVEL,
+                                                      favourable_sd, futility_reach)
+
+    assert float(futility_reach(4.0, 5, 20)) == pytest.approx(
+        2 * stats.t.isf(FUTILITY_LEVEL, 4) * math.sqrt(1 / 5 - 1 / 20), rel=1e-12)
+    assert float(futility_reach(4.0, 20, 20)) == 0.0  # nothing left to come
+    assert float(favourable_sd(4.0, 5)) == pytest.approx(
+        2 * math.sqrt(4 / stats.chi2.isf(SPREAD_LEVEL, 4)), rel=1e-12)
+
+
+def test_the_recordings_a_futile_look_names_are_where_it_would_go_on():
+    """Under the rule's own model (spread ∝ 1/√recordings), the multiple of the test
+    recordings the note gives is where the same look stops being futile."""
+    from tactbench.runner.analysis.sequential import recordings_to_reach
+
+    d = np.array([0.004, -0.05, 0.06, -0.03, 0.025])
+    res = look(d, 1.0, looks=[5], max_runs=10, alpha=0.025)
+    assert res.decision == "futile"
+    said = float(res.why.split("about ")[1].split("×")[0])
+    k = recordings_to_reach(d.mean(), *_reach_and_needed(d, 1.0, 10, 0.025), None)
+    assert said == pytest.approx(k, abs=0.05)
+    for factor, decision in ((0.98, "futile"), (1.02, "continue")):
+        scaled = d.mean() + (d - d.mean()) / math.sqrt(k * factor)
+        assert look(scaled, 1.0, looks=[5], max_runs=10, alpha=0.025).decision == decision
+
+
+def _reach_and_needed(d, ratio, max_runs, alpha):
+    from tactbench.runner.analysis.sequential import _bounds, favourable_sd, futility_reach
+
+    var = float(np.var(d, ddof=1))
+    _, c_last = _bounds([len(d)], max_runs, ratio, alpha)
+    return (float(futility_reach(var, len(d), max_runs)),
+            math.sqrt(1 / max_runs + ratio) * float(favourable_sd(var, len(d))) * c_last)
+
+
+def test_futility_stops_a_powerless_design_early_and_rarely_gives_up_an_answer():
+    """Same paths with futility on and off (1500 each, looks 5 and 20, overlap 0.8 as on
+    a small real data set, a family's α/3): with no difference most paths stop at the
+    first look; with a difference a fixed design of 20 runs finds 80 % of the time, at
+    most 1 % of paths (+3 Monte Carlo standard errors) stop futile where a later look
+    would have decided. The benchmark measures both over many scenes."""
+    from tactbench.runner.analysis.power import detectable_effect
+    from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE,
+                                                      simulate_paths)
+
+    looks, sd, ratio, alpha, n = [5, 20], 0.03, 0.8, 0.05 / 3, 1500
+    code, stop = simulate_paths(0.0, sd, ratio, looks, alpha=alpha, paths=n, seed=3)
+    assert np.mean(np.isin(code, OUTCOMES_FUTILE) & (stop == 5)) >= 0.75
+    effect = detectable_effect(sd, ratio, 20, alpha=alpha)
+    on = simulate_paths(effect, sd, ratio, looks, alpha=alpha, paths=n, seed=3)
+    off = simulate_paths(effect, sd, ratio, looks, alpha=alpha, paths=n, seed=3,
+                         futility=False)
+    given_up = np.isin(on[0], OUTCOMES_FUTILE) & (on[1] < 20) & np.isin(off[0], DECIDED_CODES)
+    assert given_up.mean() <= 0.01 + 3 * math.sqrt(0.01 * 0.99 / n)

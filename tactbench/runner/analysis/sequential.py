@@ -20,9 +20,12 @@ At each look a comparison stops when it is
 
 - ``B better`` / ``A better``: the corrected |t| reaches the look's boundary;
 - ``equivalent``: with a margin, both one-sided t's of the two one-sided tests reach it;
-- ``futile``: neither can happen by the last planned look even for a true difference at
-  the favourable edge of the look's own 95 % interval (from the second look on;
-  futility stopping is non-binding: it never raises the false-verdict rate);
+- ``futile``: neither can happen by the last planned look even where the runs still to
+  come land at the favourable edge of their one-sided 80 % predictive interval (the
+  Student t at the look's J − 1 degrees of freedom, :func:`futility_reach`) and the
+  spread is at its lower 80 % confidence limit (:func:`favourable_sd`), at any look
+  the first included (futility stopping is non-binding: it never raises the
+  false-verdict rate; its error rates, by simulation, are in docs/statistics.md);
 - otherwise it goes on.
 
 A family of primary comparisons shares α by Holm's procedure carried over to
@@ -51,8 +54,40 @@ from tactbench.runner.analysis.statistics import A_BETTER, B_BETTER, EQUIVALENT,
 #: or go on to the next look.
 FUTILE, CONTINUE = "futile", "continue"
 DECISIONS = (B_BETTER, A_BETTER, EQUIVALENT, FUTILE, CONTINUE, NOT_LEARNED)
-#: The interval a futility check gives the benefit of the doubt (two-sided 95 %).
-FUTILITY_Z = 1.959964
+#: The one-sided level of the predictive interval a futility check gives the benefit of
+#: the doubt: the runs still to come land beyond its favourable edge with this chance;
+#: and of the lower confidence limit of the per-run spread the last look's boundary is
+#: scaled by (the spread of a handful of runs is uncertain: a spread overestimated now
+#: would make a question look out of reach that the runs to come would decide). Both
+#: 0.2, chosen by simulation (docs/statistics.md, "Futility"): at 0.1 and the sample
+#: spread, 1–2.5 % of the paths a later look decides were given up; at 0.2 / 0.2, ≤ 1 %.
+FUTILITY_LEVEL = 0.20
+SPREAD_LEVEL = 0.20
+
+
+def favourable_sd(var, j: int):
+    """The one-sided lower ``1 − SPREAD_LEVEL`` confidence limit of the per-run spread
+    from ``j`` runs' sample variance ``var`` (chi-square on ``j − 1`` degrees of
+    freedom): the smallest spread the runs so far plausibly have."""
+    import numpy as np
+    from scipy import stats
+
+    df = max(1, j - 1)
+    return np.sqrt(np.asarray(var, dtype=float) * df / float(stats.chi2.isf(SPREAD_LEVEL, df)))
+
+
+def futility_reach(var, j: int, max_runs: int):
+    """How far the mean difference can still move by the last planned look, at the
+    favourable edge of a one-sided ``1 − FUTILITY_LEVEL`` predictive interval: the runs
+    ``j+1…max_runs`` replace the mean of ``j`` by that of ``max_runs``, which differ by
+    ``s · sqrt(1/j − 1/max_runs) · T_{j−1}`` (``s²`` = ``var``, the runs' sample
+    variance, estimated on ``j − 1`` degrees of freedom: Student's t, not the normal
+    z). The part of the difference every run shares (the data set's) does not move."""
+    import numpy as np
+    from scipy import stats
+
+    q = float(stats.t.isf(FUTILITY_LEVEL, max(1, j - 1)))
+    return q * np.sqrt(max(0.0, 1 / j - 1 / max_runs) * np.asarray(var, dtype=float))
 
 
 def spent(t: float, alpha: float) -> float:
@@ -184,10 +219,11 @@ def _bounds(looks: Sequence[int], max_runs: int, ratio: float, alpha: float
 
 
 def _decide(mean, var, j: int, ratio: float, c: float, c_last: float, max_runs: int,
-            margin: float | None):
+            margin: float | None, futility: bool = True):
     """The decision codes of a look at ``j`` runs (arrays of means and sample variances
     of the per-run differences, or scalars): what :func:`look` says, and what
-    :func:`procedure` simulates — one rule for both."""
+    :func:`procedure` simulates — one rule for both (``futility`` False: never futile
+    before the last look, to measure what futility gives up)."""
     import numpy as np
 
     mean, var = np.asarray(mean, dtype=float), np.asarray(var, dtype=float)
@@ -196,14 +232,16 @@ def _decide(mean, var, j: int, ratio: float, c: float, c_last: float, max_runs: 
         z = np.where(se > 0, mean / se, np.where(mean == 0, 0.0, np.sign(mean) * np.inf))
         eq = (se > 0) & (np.minimum((mean + (margin or 0)) / se,
                                     ((margin or 0) - mean) / se) >= c) & bool(margin)
-    # futile: even a difference at the near edge of today's 95 % interval (the most
-    # favourable one the runs so far allow) would not cross the last look's boundary,
-    # nor (with a margin) the worst edge fit inside it
-    se_last = np.sqrt((1 / max_runs + ratio) * var)
-    best = np.abs(mean) + FUTILITY_Z * se
-    worst = np.maximum(0.0, np.abs(mean) - FUTILITY_Z * se)
+    # futile: even where the runs to come move the mean to the favourable edge of their
+    # predictive interval it would not cross the last look's boundary, nor (with a
+    # margin) would the interval fit inside the margin at its least favourable
+    se_last = np.sqrt(1 / max_runs + ratio) * favourable_sd(var, j)
+    move = futility_reach(var, j, max_runs)
+    best = np.abs(mean) + move
+    worst = np.maximum(0.0, np.abs(mean) - move)
     hopeless = ~(best >= c_last * se_last) & ~(bool(margin) & (worst + c_last * se_last
                                                              <= (margin or 0)))
+    hopeless = hopeless & futility
     return np.select([np.abs(z) >= c, eq, np.full(z.shape, j >= max_runs), se == 0,
                       hopeless], [np.where(z > 0, _B, _A), _EQ, _LAST, _FLAT, _REACH], _GO)
 
@@ -228,7 +266,9 @@ def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: in
     code = int(_decide(mean, var, j, ratio, c, c_last, max_runs, margin))
     if code == _REACH:
         return Look(j, mean, se, z, c, alpha, FUTILE, _out_of_reach(
-            mean, se, math.sqrt((1 / max_runs + ratio) * var) * c_last, max_runs, margin))
+            mean, float(futility_reach(var, j, max_runs)),
+            math.sqrt(1 / max_runs + ratio) * float(favourable_sd(var, j)) * c_last,
+            max_runs, margin))
     decision = {_B: B_BETTER, _A: A_BETTER, _EQ: EQUIVALENT, _GO: CONTINUE}
     why = {_LAST: "the last planned look",
            _FLAT: "every run gave the same difference, 0: nothing varies to test (a "
@@ -237,19 +277,43 @@ def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: in
     return Look(j, mean, se, z, c, alpha, decision.get(code, FUTILE), why.get(code, ""))
 
 
-def _out_of_reach(mean: float, se: float, needed: float, max_runs: int,
+def _out_of_reach(mean: float, move: float, needed: float, max_runs: int,
                   margin: float | None) -> str:
-    """Why a look is futile before the last, and what data would change that: the
+    """Why a look is futile before the last, and what data would change that. The
     per-run spread of a difference is mostly test sampling, which shrinks as
-    1/√recordings, so about (needed / reach)² times the recordings (or people, where they
-    are the unit) would bring the boundary within reach of the interval's edge."""
-    best = abs(mean) + FUTILITY_Z * se
-    more = (f"; more data would, not more runs: about {(needed / best) ** 2:.0f}× the "
-            f"test recordings (people, where they are the unit)"
-            if best > 0 and (needed / best) ** 2 < 1e4 else "")
+    1/√recordings: with ``k`` times the recordings (people, where they are the unit) the
+    boundary ``needed`` and the runs' reach ``move`` both shrink by √k while the
+    difference stays, so a difference is within reach once ``|mean| + move/√k ≥
+    needed/√k`` and equivalence once ``max(0, |mean| − move/√k) + needed/√k ≤ margin``
+    (:func:`recordings_to_reach`)."""
+    best = abs(mean) + move
+    k = recordings_to_reach(mean, move, needed, margin)
+    more = (f"; more data would, not more runs: about {k:.1f}× the test recordings "
+            f"(people, where they are the unit)" if k is not None else "")
     return (f"no number of runs up to {max_runs} can decide it: at {max_runs} runs the "
             f"boundary ±{needed * 100:.1f} points is beyond the reach of {best * 100:.1f}"
             + (" and the margin out of reach" if margin else "") + more)
+
+
+def recordings_to_reach(mean: float, move: float, needed: float, margin: float | None
+                        ) -> float | None:
+    """The fewest multiples ``k`` of the test recordings at which a look like this one
+    would not be futile (see :func:`_out_of_reach`; the smaller of a difference's and,
+    with a margin, equivalence's), None where none up to 10 000 is."""
+    options = []
+    if abs(mean) > 0:
+        options.append(max(1.0, ((needed - move) / abs(mean)) ** 2))
+    if margin:
+        low, high = 1.0, 1e4
+        fits = lambda k: max(0.0, abs(mean) - move / math.sqrt(k)) + needed / math.sqrt(k) \
+            <= margin  # noqa: E731
+        if fits(high):
+            for _ in range(60):  # fits(k) is monotone in k while |mean| < margin
+                mid = math.sqrt(low * high)
+                low, high = (low, mid) if fits(mid) else (mid, high)
+            options.append(high)
+    best = min(options, default=None)
+    return best if best is not None and best <= 1e4 else None
 
 
 #: Paths :func:`procedure` simulates: its shares are off by at most ``0.5/√paths``
@@ -264,13 +328,15 @@ class Procedure:
     simulation's standard error on a share (``mc_error``)."""
 
     power: float  # the true difference found (better, on its side)
-    futile: float  # stopped without a verdict (the last look included)
+    futile: float  # no verdict: stopped_futile + undecided_at_max
     equivalent: float
     wrong_side: float  # declared better on the other side
     expected_runs: float
     max_runs: int
     paths: int
     mc_error: float
+    stopped_futile: float = 0.0  # stopped early, no number of runs up to the max could decide
+    undecided_at_max: float = 0.0  # reached the maximum runs undecided (or the last look)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -278,7 +344,7 @@ class Procedure:
 
 def procedure(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
               alpha: float, margin: float | None = None, paths: int = FORECAST_PATHS,
-              seed: int = 37) -> Procedure:
+              seed: int = 37, futility: bool = True) -> Procedure:
     """The whole sequential procedure for a true difference ``effect`` (per-run sd
     ``sd`` within a data set, both as fractions), looks after ``looks`` runs (the last the
     maximum), this comparison's level ``alpha`` (a family's: its Holm share at the first
@@ -286,7 +352,38 @@ def procedure(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
     correction assumes (a shared part of variance ``ratio · sd²``, each run its own of
     ``sd²``, so the fixed-design :func:`tactbench.runner.analysis.power.power` is this at one
     look) and meets the boundaries of :func:`boundaries` and the rule of :func:`look`.
-    Deterministic (a fixed seed)."""
+    Deterministic (a fixed seed). ``futility`` False: never stopped futile before the
+    last look (the same paths: what futility gives up is the difference)."""
+    import numpy as np
+
+    looks = [int(j) for j in looks]
+    max_runs = looks[-1]
+    code, stop = simulate_paths(effect, sd, ratio, looks, alpha=alpha, margin=margin,
+                                paths=paths, seed=seed, futility=futility)
+    right = _B if effect >= 0 else _A
+    futile = np.isin(code, (_LAST, _FLAT, _REACH, _GO))
+    early = np.isin(code, (_FLAT, _REACH)) & (stop < max_runs)
+    return Procedure(power=float(np.mean(code == right)), futile=float(futile.mean()),
+                     stopped_futile=float(early.mean()),
+                     undecided_at_max=float(np.mean(futile & ~early)),
+                     equivalent=float(np.mean(code == _EQ)),
+                     wrong_side=float(np.mean(code == (_A if right == _B else _B))),
+                     expected_runs=float(stop.mean()), max_runs=max_runs, paths=paths,
+                     mc_error=0.5 / math.sqrt(paths))
+
+
+#: What a simulated path of :func:`simulate_paths` ended with, by its code; the codes
+#: of a stop without a verdict before the last look, and of a verdict.
+OUTCOMES = {_B: B_BETTER, _A: A_BETTER, _EQ: EQUIVALENT, _LAST: "last look",
+            _FLAT: "no variation", _REACH: FUTILE, _GO: CONTINUE}
+OUTCOMES_FUTILE, DECIDED_CODES = (_FLAT, _REACH), (_B, _A, _EQ)
+
+
+def simulate_paths(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
+                   alpha: float, margin: float | None = None, paths: int = FORECAST_PATHS,
+                   seed: int = 37, futility: bool = True):
+    """Each simulated path of :func:`procedure`: its outcome code (:data:`OUTCOMES`) and
+    the runs at which it stopped, as two arrays; the paths depend on ``seed`` only."""
     import numpy as np
 
     looks = [int(j) for j in looks]
@@ -306,18 +403,12 @@ def procedure(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
         var = np.maximum(squares - total * total / j, 0.0) / (j - 1)
         c, c_last = _bounds(looks[:k + 1], max_runs, ratio, alpha)
         going = code == _GO
-        now = _decide(mean, var, j, ratio, c, c_last, max_runs, margin)
+        now = _decide(mean, var, j, ratio, c, c_last, max_runs, margin, futility)
         code = np.where(going, now, code)
         stop = np.where(going & (now != _GO), j, stop)
         if not (code == _GO).any():
             break
-    right = _B if effect >= 0 else _A
-    futile = np.isin(code, (_LAST, _FLAT, _REACH, _GO))
-    return Procedure(power=float(np.mean(code == right)), futile=float(futile.mean()),
-                     equivalent=float(np.mean(code == _EQ)),
-                     wrong_side=float(np.mean(code == (_A if right == _B else _B))),
-                     expected_runs=float(stop.mean()), max_runs=max_runs, paths=paths,
-                     mc_error=0.5 / math.sqrt(paths))
+    return code, stop
 
 
 @dataclass
