@@ -253,15 +253,17 @@ def _gather(out: Table, table, internal: list[str], roles: list[str],
                 raise InputError(f"{out.where(row)}: empty {r}")
             out.numbers[r] = col.to_numpy().astype(np.int64, copy=False)
     channels = [c for c, r in zip(internal, roles) if r not in labels and r not in numbers]
-    values = np.empty((n, CHANNELS), dtype=np.float32)
+    by_channel = np.empty((CHANNELS, n), dtype=np.float32)  # filled a column at a time
     for k, c in enumerate(channels):
         col = table.column(c)
         if col.null_count:
             row = int(np.flatnonzero(pc.is_null(col).to_numpy(zero_copy_only=False))[0])
             raise InputError(f"{out.where(row)}: ch{k + 1} is empty or NaN (every reading "
                              f"is a number)")
-        values[:, k] = col.to_numpy()
+        by_channel[k] = col.to_numpy()
     del table
+    values = np.ascontiguousarray(by_channel.T)  # (F, 64): one blocked copy
+    del by_channel
     if not np.isfinite(values).all():
         row, k = (int(i) for i in np.argwhere(~np.isfinite(values))[0])
         raise InputError(f"{out.where(row)}: ch{k + 1} is {values[row, k]} (readings must be "
