@@ -92,6 +92,12 @@ def files_in(folder: Path) -> list[Path]:
     return out
 
 
+def is_haart_folder(folder: Path) -> bool:
+    """Whether ``folder`` holds both challenge files (names matched without case)."""
+    names = {p.name.lower() for p in Path(folder).iterdir()}
+    return all(name.lower() in names for name, _ in FILES)
+
+
 def _captures(table: Table, frames: int) -> np.ndarray:
     """``(C + 1,)`` row offsets: a new capture wherever a label changes; each of
     ``frames`` rows (any ≥ 2 when 0), else refused naming the capture."""

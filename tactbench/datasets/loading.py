@@ -15,6 +15,7 @@ from tactbench.can.logs import read_log
 from tactbench.data.dataset import Dataset
 from tactbench.data.store import MANIFEST
 from tactbench.datasets.cost import CoST
+from tactbench.datasets.haart import HAART, is_haart_folder
 from tactbench.datasets.cyskin_text import read_cyskin_folder
 from tactbench.datasets.folder import looks_like_folder, read_folder
 from tactbench.errors import ContractError, InputError, MissingFileError
@@ -26,11 +27,14 @@ CAN_LOG_SUFFIXES = (".blf", ".asc", ".log", ".trc")
 
 
 def detect_format(path: Path) -> str:
-    """``"dataset"`` (tactbench folder), ``"folder"`` (class folders of arrays),
-    ``"cyskin-text"``, ``"cost"`` or ``"can-log"``."""
+    """``"dataset"`` (tactbench folder), ``"haart"`` (HAART's two challenge files),
+    ``"folder"`` (class folders of arrays), ``"cyskin-text"``, ``"cost"`` or
+    ``"can-log"``."""
     if path.is_dir():
         if (path / MANIFEST).is_file():
             return "dataset"
+        if is_haart_folder(path):
+            return "haart"
 
         if looks_like_folder(path):
             return "folder"
@@ -55,7 +59,7 @@ def detect_format(path: Path) -> str:
 
 def load_path(path: str | Path, *, progress: Callable[..., None] | None = None) -> Dataset:
     """Load a dataset folder, a folder of recordings (class folders of .npy/.npz/.csv),
-    a CySkin text file or folder, a CoST CSV file or a CAN log."""
+    a CySkin text file or folder, a CoST CSV file, HAART's folder or a CAN log."""
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such file or folder")
@@ -64,6 +68,8 @@ def load_path(path: str | Path, *, progress: Callable[..., None] | None = None) 
         return Dataset.load(path if path.is_dir() else path.parent)
     if kind == "folder":
         return read_folder(path, progress=progress)
+    if kind == "haart":  # converted once into the store, then read from there
+        return HAART(str(path)).load()
     if kind == "cyskin-text":
         return read_cyskin_folder(path)
     if kind == "can-log":  # CySkin traffic recorded by `tactbench can record`

@@ -148,3 +148,12 @@ def test_no_header_and_any_length(tmp_path):
     ds = read_haart(folder, frames=0)
     assert ds.lengths().tolist() == [3, 5, 2] and ds.classes == ("pat", "rub")
     assert np.array_equal(ds[2].recording.values[1], np.arange(1, 65, dtype=np.float32))
+
+
+def test_a_haart_folder_is_loaded_by_its_path(tmp_path):
+    from tactbench.datasets.loading import detect_format, load_dataset
+
+    folder = haart_folder(tmp_path, capture("1", "a", "b", "pat", 432),
+                          capture("2", "a", "b", "pat", 432))
+    assert detect_format(folder) == "haart"
+    assert load_dataset(folder).attributes["set"] == ["training", "test"]
