@@ -91,6 +91,9 @@ def info_cmd(path: str, as_json: bool) -> None:
         shown = ", ".join(f"{u or '(none)'}: {n}" for u, n in list(users.items())[:40])
         more = f" … ({len(users)} users)" if len(users) > 40 else f" ({len(users)} users)"
         console.print(f"samples per user: {shown}{more}")
+    for name, counts in summary.get("attributes", {}).items():  # a corpus's variant, cover
+        console.print(f"samples per {name}: "
+                      + ", ".join(f"{v or '(none)'}: {n}" for v, n in counts.items()))
 
 
 @data_group.command("synth")

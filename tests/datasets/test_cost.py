@@ -216,3 +216,15 @@ def test_without_pyarrow_one_line_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pyarrow", None)
     with pytest.raises(ImportError, match=r'pip install "tactbench\[export\]"'):
         read_cost_csv(cost_file(tmp_path, ok()))
+
+
+def test_data_info_shows_the_variants(tmp_path):
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    path = cost_file(tmp_path, capture("1", "gentle", "pat", 3) + capture("2", "rough", "pat", 3))
+    res = CliRunner().invoke(cli, ["data", "info", f"cost:path={path}"])
+    assert res.exit_code == 0, res.output
+    assert "samples per variant: gentle: 1, rough: 1" in res.output
+    assert "rate: 135.0 Hz" in res.output and "samples per user: 1: 1, 2: 1" in res.output
