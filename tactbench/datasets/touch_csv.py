@@ -35,12 +35,16 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tactbench.data.dataset import Dataset
+from tactbench.budget import check_budget, human_bytes
 from tactbench.errors import BudgetError, InputError, require
 from tactbench.integrity import check_regular_file
 from tactbench.paths import atomic_folder, cache_dir
 
 #: Pressure channels of both corpora: the 8 × 8 grid.
 CHANNELS = 64
+#: Peak memory of reading a file, as a multiple of its size (with room above the 4.4×
+#: measured at the real CoST file's size).
+READ_FACTOR = 5
 #: Bumped when what a reader makes of the same file changes: it keys the store's cache.
 READER_VERSION = 1
 _CHANNEL_NAME = re.compile(r"ch(\d+)")
@@ -163,7 +167,10 @@ def read_table(path: str | Path, *, labels: Sequence[str], numbers: Sequence[str
     pacsv = require("pyarrow.csv", "export")
     pc = require("pyarrow.compute", "export")
     path = Path(path)
-    check_regular_file(path)  # a FIFO or a device: one line, never opened
+    size = check_regular_file(path)  # a FIFO or a device: one line, never opened
+    # the engine's columns, the float32 readings and their copy: measured 4.4× the file
+    # (benchmarks/corpora.py: 936 MiB for 213 MB); refused before reading when over budget
+    check_budget(READ_FACTOR * size, f"reading {path} ({human_bytes(size)} of CSV)")
     roles, header = _columns(path, _first_line(path), labels, numbers, aliases or {}, corpus)
     internal = [f"c{i}" for i in range(len(roles))]  # the file's own names may repeat
     types = {c: (pa.string() if r in labels else pa.int64() if r in numbers

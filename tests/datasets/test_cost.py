@@ -228,3 +228,9 @@ def test_data_info_shows_the_variants(tmp_path):
     assert res.exit_code == 0, res.output
     assert "samples per variant: gentle: 1, rough: 1" in res.output
     assert "rate: 135.0 Hz" in res.output and "samples per user: 1: 1, 2: 1" in res.output
+
+
+def test_a_file_beyond_the_memory_budget_is_refused_before_reading(tmp_path, monkeypatch):
+    monkeypatch.setenv("TACTBENCH_MEMORY_MIB", "0.001")
+    with pytest.raises(ValueError, match=r"reading .*cost.csv \(.* of CSV\) would need about"):
+        read_cost_csv(cost_file(tmp_path, ok()))
