@@ -10,7 +10,8 @@ to the middle 8 s (432 frames) and to the centre 8 × 8 of the grid (for consist
 CoST), readings 0–1023. The challenge split them by participant into ``training.csv``
 (7 participants, 578 captures) and ``testWITHLABELS.csv`` (3 participants, 251). One row
 per frame: ``ParticipantID, Substrate, Cover, Gesture, ch1, …, ch64`` (header optional;
-names compared without case or stray spaces).
+names compared without case or stray spaces; a copy whose header adds a ``Frame`` column
+is read as CoST's is: a capture also ends where ``frame`` does not follow).
 
 What the reader makes of ``haart:path=FOLDER`` (the folder holding both files):
 
@@ -99,9 +100,12 @@ def is_haart_folder(folder: Path) -> bool:
 
 
 def _captures(table: Table, frames: int) -> np.ndarray:
-    """``(C + 1,)`` row offsets: a new capture wherever a label changes; each of
+    """``(C + 1,)`` row offsets: a new capture wherever a label changes (or, in a file
+    with a ``frame`` column, where it does not follow the previous row's); each of
     ``frames`` rows (any ≥ 2 when 0), else refused naming the capture."""
     new = np.zeros(max(table.n_rows - 1, 0), dtype=bool)
+    if "frame" in table.numbers:
+        new |= np.diff(table.numbers["frame"]) != 1
     for name in LABELS:
         new |= np.diff(table.labels[name][0]) != 0
     offsets = captures_at(np.concatenate([[0], np.flatnonzero(new) + 1]), table.n_rows)
@@ -128,7 +132,8 @@ def read_haart(folder: str | Path, *, frames: int = FRAMES, pitch_mm: float = 10
                               name="haart-8x8")
     found: list[tuple[tuple[str, ...], str, Path, int, Recording]] = []
     for path, (_, set_name) in zip(files_in(Path(folder)), FILES):
-        table = read_table(path, labels=LABELS, aliases=_HEADER_ALIASES, corpus="HAART")
+        table = read_table(path, labels=LABELS, optional=("frame",), aliases=_HEADER_ALIASES,
+                           corpus="HAART")
         codes, names = table.labels["gesture"]
         for k, text in enumerate(names):
             if gesture_name(text) is None:
@@ -137,7 +142,9 @@ def read_haart(folder: str | Path, *, frames: int = FRAMES, pitch_mm: float = 10
         offsets = _captures(table, frames)
         for c, (a, b) in enumerate(zip(offsets[:-1].tolist(), offsets[1:].tolist())):
             key = tuple(table.labels[n][1][table.labels[n][0][a]] for n in LABELS)
-            rec = Recording(table.values[a:b], np.arange(b - a) / RATE_HZ, layout.ids)
+            frame = table.numbers.get("frame")
+            ticks = np.arange(b - a) if frame is None else frame[a:b] - frame[a]
+            rec = Recording(table.values[a:b], ticks / RATE_HZ, layout.ids)
             found.append((key, set_name, path, c + 1, rec))
     _refuse_repeats(found)
     present = {gesture_name(k[3]) for k, *_ in found}

@@ -117,10 +117,11 @@ def _is_number(text: str) -> bool:
 
 
 def _columns(path: Path, first: list[str], labels: Sequence[str], numbers: Sequence[str],
-             aliases: dict[str, str], corpus: str) -> tuple[list[str], int]:
+             aliases: dict[str, str], corpus: str, optional: Sequence[str] = ()
+             ) -> tuple[list[str], int]:
     """Each column's role (a label's or number's name, or ``chK``) and the header's line
     count (0 or 1), from the first line; refused, naming what is wrong, unless it holds
-    every named column and 64 channels."""
+    every named column and 64 channels (a header may add the ``optional`` numbers)."""
     named = [*labels, *numbers]
     expected = len(named) + CHANNELS
     want = ", ".join(named) + ", ch1, …, ch64"
@@ -133,6 +134,7 @@ def _columns(path: Path, first: list[str], labels: Sequence[str], numbers: Seque
                              f"a header has {expected} ({want})")
         return [*named, *(f"ch{k}" for k in range(1, CHANNELS + 1))], 0
     names = [aliases.get(clean_name(c), clean_name(c)) for c in first]
+    named += [n for n in optional if n in names]
     seen: set[str] = set()
     for n in names:
         if n in seen:
@@ -158,11 +160,13 @@ def _columns(path: Path, first: list[str], labels: Sequence[str], numbers: Seque
 
 
 def read_table(path: str | Path, *, labels: Sequence[str], numbers: Sequence[str] = (),
-               aliases: dict[str, str] | None = None, corpus: str = "corpus") -> Table:
+               optional: Sequence[str] = (), aliases: dict[str, str] | None = None,
+               corpus: str = "corpus") -> Table:
     """Read a corpus CSV (module docstring): ``labels`` are text columns, ``numbers``
-    whole-number columns (CoST's ``frame``), then the 64 channels; ``aliases`` maps other
-    spellings of a header name (cleaned) to its name. Refused, one line naming the line,
-    when the file is not what it claims."""
+    whole-number columns (CoST's ``frame``), ``optional`` whole-number columns a header
+    may name (they are then in :attr:`Table.numbers`), then the 64 channels; ``aliases``
+    maps other spellings of a header name (cleaned) to its name. Refused, one line naming
+    the line, when the file is not what it claims."""
     pa = require("pyarrow", "export")
     pacsv = require("pyarrow.csv", "export")
     pc = require("pyarrow.compute", "export")
@@ -171,7 +175,9 @@ def read_table(path: str | Path, *, labels: Sequence[str], numbers: Sequence[str
     # the engine's columns, the float32 readings and their copy: measured 4.4× the file
     # (benchmarks/corpora.py: 936 MiB for 213 MB); refused before reading when over budget
     check_budget(READ_FACTOR * size, f"reading {path} ({human_bytes(size)} of CSV)")
-    roles, header = _columns(path, _first_line(path), labels, numbers, aliases or {}, corpus)
+    roles, header = _columns(path, _first_line(path), labels, numbers, aliases or {}, corpus,
+                             optional)
+    numbers = [*numbers, *(n for n in optional if n in roles)]
     internal = [f"c{i}" for i in range(len(roles))]  # the file's own names may repeat
     types = {c: (pa.string() if r in labels else pa.int64() if r in numbers
                  else pa.float32()) for c, r in zip(internal, roles)}

@@ -157,3 +157,22 @@ def test_a_haart_folder_is_loaded_by_its_path(tmp_path):
                           capture("2", "a", "b", "pat", 432))
     assert detect_format(folder) == "haart"
     assert load_dataset(folder).attributes["set"] == ["training", "test"]
+
+
+def with_frames(rows, frames):
+    return [",".join(r.split(",")[:4] + [str(f)] + r.split(",")[4:]) for f, r in zip(frames, rows)]
+
+
+def test_a_copy_with_a_frame_column(tmp_path):
+    header = HEADER.replace("Gesture,", "Gesture, Frame,")
+    training = with_frames(capture("1", "a", "b", "pat", 3) + capture("1", "a", "b", "rub", 3),
+                           [1, 2, 3, 1, 2, 3])
+    test = with_frames(capture("2", "a", "b", "pat", 3, value=9), [6, 7, 8])
+    ds = read_haart(haart_folder(tmp_path, training, test, header=header), frames=3)
+    assert ds.lengths().tolist() == [3, 3, 3] and ds.classes == ("pat", "rub")
+    assert ds[2].recording.values[0].tolist() == [9 + k for k in range(64)]
+    assert ds[2].recording.timestamps.tolist() == pytest.approx([0, 1 / 54, 2 / 54])
+    # the frame restarts inside one participant, substrate, cover and gesture: two captures
+    again = with_frames(capture("1", "a", "b", "pat", 6), [1, 2, 3, 1, 2, 3])
+    with pytest.raises(ValueError, match="training.csv, capture 2: participant 1.*again"):
+        read_haart(haart_folder(tmp_path, again, test, header=header), frames=3)
