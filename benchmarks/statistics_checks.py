@@ -12,6 +12,9 @@ entries are kept), with the command, the machine and the date:
   plan`` forecasts with), each scene's paths run with futility on and off: how often it
   stops at the first look, and how often it gives up on a path that, continued, a later
   look would have decided (better, worse or equivalent).
+- ``alpha``: the family-wise error of a family of 3 or 4 primaries when α passes on
+  after a rejection (Holm over what remains, futility on and off), with 0 to m − 1 of
+  them carrying a real difference.
 - ``learned``: "not learned" (:func:`tactbench.runner.execution.learning.cell_learning`'s
   pooled test over a cell's runs) against the rule before it (any one run within noise of
   chance). A cell of J runs (5, 10, 20), 150 or 400 balanced test recordings of 5 classes
@@ -118,7 +121,48 @@ def futility_part(reps: int) -> dict:
             "paths": reps, "scenes": out}
 
 
-PARTS = {"learned": learned_part, "futility": futility_part}
+def _family_error(m: int, real: int, families: int, futility: bool, seed: int) -> dict:
+    """One family of ``m`` primaries, the first ``real`` with a difference found at 95 %
+    power by a fixed design of 20 runs at α/m, the others none: the share of families
+    declaring any of the others better or worse (the family-wise error), through the
+    package's own looks (:func:`~tactbench.runner.analysis.sequential.family_look`)."""
+    from tactbench.runner.analysis.power import detectable_effect
+    from tactbench.runner.analysis.sequential import A_BETTER, B_BETTER, FamilyState, family_look
+
+    rng, ratio, alpha = np.random.default_rng(seed), 0.25, 0.05
+    effect = detectable_effect(SD, ratio, LOOKS[-1], alpha=alpha / m, target=0.95)
+    names = [f"q{i}" for i in range(m)]
+    wrong = np.zeros(families, dtype=bool)
+    for f in range(families):
+        shared = rng.standard_normal(m) * SD * np.sqrt(ratio)
+        runs = rng.standard_normal((m, LOOKS[-1])) * SD
+        d = {n: (effect if i < real else 0.0) + shared[i] + runs[i] for i, n in enumerate(names)}
+        state = FamilyState(alpha, list(names))
+        for k, j in enumerate(LOOKS):
+            family_look(state, {n: d[n][:j] for n in names}, dict.fromkeys(names, ratio),
+                        looks=LOOKS[:k + 1], max_runs=LOOKS[-1], futility=futility)
+            if len(state.closed) == m:
+                break
+        wrong[f] = any(state.closed.get(n) is not None and state.closed[n].decision in
+                       (B_BETTER, A_BETTER) for n in names[real:])
+    return {"primaries": m, "with_difference": real, "futility": futility,
+            "effect_points": round(100 * effect, 2), "family_wise_error": _rate(wrong)}
+
+
+def alpha_part(reps: int) -> dict:
+    """The family-wise error of α passed on after a rejection (Holm over what remains),
+    with 3 and 4 primaries, futility on and off on the same draws."""
+    out = []
+    for m in (3, 4):
+        for real in range(m):
+            for futility in (True, False):
+                out.append(_family_error(m, real, reps, futility, seed=100 * m + real))
+    return {"what": f"family-wise error under partial nulls, looks {list(LOOKS)}, per-run sd "
+                    f"{100 * SD:.0f} points, overlap 0.25, α 0.05; {reps} families each",
+            "families": reps, "results": out}
+
+
+PARTS = {"learned": learned_part, "futility": futility_part, "alpha": alpha_part}
 
 
 def main(argv: list[str] | None = None) -> int:

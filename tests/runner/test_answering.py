@@ -159,3 +159,27 @@ def test_questions_no_run_count_can_decide_stop_at_the_first_look_unanswered():
     assert h.answered  # the run stops here
     assert "stopped unanswered" in h.stopped_because()
     assert "every primary question is answered" not in h.stopped_because()
+
+
+def test_a_look_applies_the_fixed_designs_minimum_of_discordant_recordings():
+    """farneback right where raw is wrong on 1–3 of the same 3 recordings in every run
+    (the CySkin case: "equivalent" or "better" on 3 discordant recordings): no look
+    decides it, as no fixed design would."""
+    from tactbench.runner.analysis.comparisons import comparisons
+
+    rng = np.random.default_rng(2)
+    truth = [i % 2 for i in range(200)]
+    rows = []
+    for seed in range(10):
+        wrong = set(rng.choice(3, rng.integers(1, 4), replace=False).tolist())
+        rows.append(_row("raw", seed, truth, [1 - t if i in wrong else t
+                                              for i, t in enumerate(truth)]))
+        rows.append(_row("farneback", seed, truth, truth))
+    [fixed] = comparisons(rows, primary=PRIMARY)
+    assert fixed.discordant_recordings == 3 and fixed.verdict == "unresolved"
+    h = replay(rows, seed_order=list(range(10)), looks=[5, 10], primary=PRIMARY,
+               margin=2.0)
+    decisions = [lk.decision for seen in h.seen for lk in seen.values()]
+    assert decisions[-1] == "futile" and not set(decisions) & {"B better", "equivalent"}
+    [last] = h.seen[-1].values()  # its boundary crossed at 10 runs: no verdict below 10
+    assert last.t > last.boundary and "disagree on 3 distinct" in last.why

@@ -233,3 +233,47 @@ def test_futility_stops_a_powerless_design_early_and_rarely_gives_up_an_answer()
                          futility=False)
     given_up = np.isin(on[0], OUTCOMES_FUTILE) & (on[1] < 20) & np.isin(off[0], DECIDED_CODES)
     assert given_up.mean() <= 0.01 + 3 * math.sqrt(0.01 * 0.99 / n)
+
+
+def test_alpha_passes_to_every_hypothesis_not_rejected_holm_over_what_remains():
+    """Three primaries: one closed futile at the first look, one declared better at the
+    second: its α/3 passes half to the open one and half to the futile one (kept
+    unused), so the open one tests at α/2 — Holm's level with one of three rejected —
+    not at 2α/3."""
+    from tactbench.runner.analysis.sequential import Look
+
+    state = FamilyState(0.05, ["better", "futile", "open"])
+    state.closed["futile"] = Look(5, 0.0, 0.01, 0.0, 4.0, 0.05 / 3, "futile")
+    rng = np.random.default_rng(0)
+    diffs = {"better": 0.10 + 0.01 * rng.standard_normal(10),
+             "futile": np.zeros(10),
+             "open": 0.005 + 0.03 * rng.standard_normal(10)}
+    seen = family_look(state, diffs, dict.fromkeys(diffs, RATIO), looks=[5, 10],
+                       max_runs=20)
+    assert seen["better"].decision == "B better" and "futile" not in seen
+    assert state.shares["open"] == pytest.approx(0.05 / 2)
+    assert state.shares["futile"] == pytest.approx(0.05 / 2)  # kept, never used
+    assert seen["open"].alpha == pytest.approx(0.05 / 2)  # looked at again at α/2
+
+
+def test_the_minimum_of_evidence_holds_at_every_look_as_in_a_fixed_design():
+    """A difference every run agrees on, on 3 discordant recordings: a fixed design gives
+    no verdict below 10 (statistics.verdict), and neither does a look — it goes on, and
+    at the last look stops without one, saying why."""
+    from tactbench.runner.analysis.statistics import MIN_DISCORDANT_RECORDINGS, verdict
+
+    d = np.array([0.02, 0.021, 0.019, 0.02, 0.02, 0.022, 0.018, 0.02, 0.021, 0.019])
+    assert verdict(0.01, 0.03, 0.001, 10, discordant_recordings=3)[0] == "unresolved"
+    for looks, said in (([5, 10], "continue"), ([5, 10, 20], "futile")):
+        state = FamilyState(0.05, ["q"])
+        runs = np.resize(d, looks[-1])
+        free = family_look(FamilyState(0.05, ["q"]), {"q": runs}, {"q": RATIO},
+                           looks=looks, max_runs=20)
+        assert free["q"].decision == "B better"  # without the minimum: decided
+        seen = family_look(state, {"q": runs}, {"q": RATIO}, looks=looks, max_runs=20,
+                           discordant={"q": 3})
+        assert seen["q"].decision == said and "disagree on 3 distinct" in seen["q"].why
+        assert f"no verdict below {MIN_DISCORDANT_RECORDINGS}" in seen["q"].why
+    ok = family_look(FamilyState(0.05, ["q"]), {"q": d}, {"q": RATIO}, looks=[5, 10],
+                     max_runs=20, discordant={"q": MIN_DISCORDANT_RECORDINGS})
+    assert ok["q"].decision == "B better"

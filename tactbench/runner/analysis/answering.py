@@ -20,16 +20,16 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.analysis.comparisons import Comparison, comparisons
+from tactbench.runner.analysis.comparisons import Comparison, comparisons, pair_name
 from tactbench.runner.execution.results import ok_rows
 from tactbench.runner.analysis.sequential import FUTILE, FamilyState, Look, family_look
 from tactbench.runner.analysis.statistics import NOT_LEARNED
 
 
 def comparison_name(c: Comparison) -> str:
-    """A primary comparison's name in the looks: ``raw → farneback (L=5, small-cnn-lstm)``."""
-    where = ", ".join(f"{k}={v}" if k == "L" else str(v) for k, v in c.where.items())
-    return f"{c.a} → {c.b}" + (f" ({where})" if where else "")
+    """A primary comparison's name in the looks: ``raw → farneback (L=5, small-cnn-lstm)``
+    (:func:`tactbench.runner.analysis.comparisons.pair_name`, the plan's too)."""
+    return pair_name(c.a, c.b, c.where)
 
 
 @dataclass
@@ -117,7 +117,9 @@ def _look(history: History, prim: Sequence[Comparison], looks: Sequence[int],
                        max_runs=history.max_runs,
                        margin=None if margin is None else margin / 100,
                        not_learned={comparison_name(c): c.note for c in prim
-                                    if c.verdict == NOT_LEARNED})
+                                    if c.verdict == NOT_LEARNED},
+                       discordant={comparison_name(c): c.discordant_recordings
+                                   for c in prim})
 
 
 def first_look_to_run(stored_seeds: set[int], seed_order: Sequence[int],

@@ -30,7 +30,8 @@ At each look a comparison stops when it is
 
 A family of primary comparisons shares α by Holm's procedure carried over to
 group-sequential designs (Maurer & Bretz 2013): each starts with α/m; when one is
-declared better or worse, its α passes in equal shares to those still open, whose
+declared better or worse, its α passes in equal shares to every hypothesis not rejected
+(those closed futile keep theirs unused: :func:`family_look`), and the open ones'
 boundaries are computed again at the larger level. Both steps are hand-written (no
 maintained Python library computes spending-function boundaries; statsmodels has none);
 ``tests/runner/test_sequential.py`` checks the family-wise error under no difference and
@@ -47,7 +48,8 @@ from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.analysis.statistics import A_BETTER, B_BETTER, EQUIVALENT, NOT_LEARNED
+from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, EQUIVALENT,
+                                                  MIN_DISCORDANT_RECORDINGS, NOT_LEARNED)
 
 #: What :func:`look` may decide, and :data:`NOT_LEARNED` (:func:`family_look`).
 #: A look's own words: stop unanswered (no number of runs up to the maximum can decide),
@@ -247,12 +249,12 @@ def _decide(mean, var, j: int, ratio: float, c: float, c_last: float, max_runs: 
 
 
 def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: int,
-         alpha: float, margin: float | None = None) -> Look:
+         alpha: float, margin: float | None = None, futility: bool = True) -> Look:
     """The decision at the last of ``looks`` (run counts of every look so far, the last
     being ``len(d)``) for per-run differences ``d``, with looks planned up to
     ``max_runs`` and this comparison's level ``alpha``. A question no number of runs up
     to ``max_runs`` can decide (futile) stops at any look, the first included: stopping
-    without a verdict spends no α."""
+    without a verdict spends no α (``futility`` False: only at the last look)."""
     import numpy as np
 
     d = np.asarray(d, dtype=np.float64)
@@ -263,7 +265,7 @@ def look(d: Sequence[float], ratio: float, *, looks: Sequence[int], max_runs: in
     mean, var = float(d.mean()), float(d.var(ddof=1))
     se = math.sqrt((1 / j + ratio) * var)
     z = mean / se if se > 0 else (0.0 if mean == 0 else math.copysign(math.inf, mean))
-    code = int(_decide(mean, var, j, ratio, c, c_last, max_runs, margin))
+    code = int(_decide(mean, var, j, ratio, c, c_last, max_runs, margin, futility))
     if code == _REACH:
         return Look(j, mean, se, z, c, alpha, FUTILE, _out_of_reach(
             mean, float(futility_reach(var, j, max_runs)),
@@ -425,16 +427,53 @@ class FamilyState:
             self.shares = {n: self.alpha / len(self.names) for n in self.names}
 
 
+def _minimum(res: Look, discordant: int | None, max_runs: int) -> Look:
+    """``res`` with a verdict taken back where the cells disagree on fewer distinct test
+    recordings than a verdict needs (None: not known, as before): it goes on, or at the
+    last look stops without one."""
+    if discordant is None or discordant >= MIN_DISCORDANT_RECORDINGS or \
+            res.decision not in (B_BETTER, A_BETTER, EQUIVALENT):
+        return res
+    why = (f"the cells disagree on {discordant} distinct test recording(s): no verdict "
+           f"below {MIN_DISCORDANT_RECORDINGS}")
+    return replace(res, decision=FUTILE if res.runs >= max_runs else CONTINUE, why=why)
+
+
+def _rejected(state: FamilyState, name: str) -> bool:
+    """Whether the family has declared ``name`` better or worse (its hypothesis rejected)."""
+    closed = state.closed.get(name)
+    return closed is not None and closed.decision in (B_BETTER, A_BETTER)
+
+
 def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: dict[str, float],
                 *, looks: Sequence[int], max_runs: int, margin: float | None = None,
-                not_learned: Mapping[str, str] | None = None) -> dict[str, Look]:
+                not_learned: Mapping[str, str] | None = None, futility: bool = True,
+                discordant: Mapping[str, int] | None = None) -> dict[str, Look]:
     """One look at every open comparison of a family; decided ones close, and the α of
-    one declared better or worse passes in equal shares to those still open (which are
-    looked at again at their new level). Returns the look of each comparison open before.
+    one declared better or worse passes in equal shares to **every hypothesis not
+    rejected** — those still open (looked at again at their new level) and those closed
+    without a verdict (futile, equivalent, not learned), whose share is kept unused.
+    This is Holm over what remains: after r rejections of m, each hypothesis not
+    rejected holds α/(m − r), whether or not it is still being tested. It is the
+    graphical procedure of Bretz et al. (2009) with the Holm graph (equal weights to
+    every other node), whose family-wise error is proven for any dependence given a
+    valid level-share test per hypothesis (here the group-sequential boundaries,
+    Maurer & Bretz 2013); stopping a hypothesis for futility is non-binding — it
+    rejects nothing the full procedure would not — so the bound holds with futility on.
+    (Passing the share to open comparisons only, as before issue 48, gave the last
+    open one α/3 + α/3 where Holm gives α/2.) Returns the look of each comparison open
+    before.
 
-    ``not_learned`` (name → why): comparisons a run of whose cells did not learn; they
+    ``not_learned`` (name → why): comparisons one of whose cells did not learn; they
     close as :data:`NOT_LEARNED`, a stop without a verdict, whatever their t: no α passes
-    from them, so the family's error stays bounded as for a futile stop."""
+    from them, so the family's error stays bounded as for a futile stop.
+
+    ``discordant`` (name → the distinct test recordings the cells disagree on so far):
+    the one minimum of evidence a fixed design applies
+    (:data:`~tactbench.runner.analysis.statistics.MIN_DISCORDANT_RECORDINGS`,
+    :func:`~tactbench.runner.analysis.statistics.verdict`) applies at every look too:
+    below it a boundary crossed decides nothing — the look goes on, and at the last it
+    stops without a verdict, saying why."""
     out: dict[str, Look] = {}
     not_learned = not_learned or {}
     changed = True
@@ -443,16 +482,17 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
         open_now = [n for n in state.names if n not in state.closed]
         for name in open_now:
             res = look(diffs[name], ratios[name], looks=looks, max_runs=max_runs,
-                       alpha=state.shares[name], margin=margin)
+                       alpha=state.shares[name], margin=margin, futility=futility)
             if name in not_learned:
                 res = replace(res, decision=NOT_LEARNED, why=not_learned[name])
+            res = _minimum(res, (discordant or {}).get(name), max_runs)
             out[name] = res
             if res.decision in (B_BETTER, A_BETTER):
                 state.closed[name] = res
-                rest = [n for n in open_now if n != name]
+                rest = [n for n in state.names if n != name and not _rejected(state, n)]
                 for n in rest:
                     state.shares[n] += state.shares[name] / len(rest)
-                changed = bool(rest)
+                changed = any(n not in state.closed for n in rest)
                 break
     for name, res in out.items():
         if name not in state.closed and res.decision in (EQUIVALENT, FUTILE, NOT_LEARNED):

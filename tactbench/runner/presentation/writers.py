@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
+from tactbench.kernels import DEFAULT_KERNELS
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
 from tactbench.runner.analysis.answering import History, comparison_name, replay
@@ -124,18 +125,31 @@ class Report:
 LEARNING_COLUMNS = ("train_accuracy", "chance_accuracy", "learning")
 
 
+#: An identity field left out of a row at its default (:func:`~tactbench.runner.execution.
+#: planning.row_identity`) → the value its column shows, so that every identity field is
+#: a column of every row (two cells differing in one never look like one cell twice).
+IDENTITY_COLUMN_DEFAULTS = {"test_window": UNNAMED_TEST_WINDOW, "precision": "float32",
+                            "init_seed": None, "input": None, "run_dataset": None,
+                            INDEPENDENT_RUNS: False, "threads": 1,
+                            "cpu_kernels": DEFAULT_KERNELS}
+
+
 def csv_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
-    """The columns of results.csv (and of :meth:`Report.table`) for ``rows``: the cell,
-    its status and accuracy (and, where a row records them, :data:`LEARNING_COLUMNS`),
-    ``acc_<class>`` for every class of any row, the costs."""
+    """The columns of results.csv (and of :meth:`Report.table`) for ``rows``: the cell
+    (every field of its identity, :data:`~tactbench.runner.execution.planning.
+    IDENTITY_FIELDS` and ``COMPUTE_FIELDS``, ``imaging`` as compact JSON), its status and
+    accuracy (and, where a row records them, :data:`LEARNING_COLUMNS`), ``acc_<class>``
+    for every class of any row, the costs."""
     classes = list(dict.fromkeys(c for r in rows for c in r.get("classes", ())))
     learning = [c for c in LEARNING_COLUMNS if any(c in r for r in rows)]
-    return ["dataset", "dataset_hash", "split", "split_seed", "encoder", "encoder_version",
-            "classifier", "profile", "L", "seed", "status", "accuracy", *learning,
+    return ["dataset", "dataset_hash", "split", "split_seed", "test_window",
+            "test_per_class", "imaging", "encoder", "encoder_version", "precision",
+            "classifier", "profile", "L", "seed", "init_seed", "input", "run_dataset",
+            INDEPENDENT_RUNS, "status", "accuracy", *learning,
             *[f"acc_{c}" for c in classes],
             "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb",
-            "peak_step", "n_train_windows", "n_test", "device", "threads", "finished", "key",
-            "error"]
+            "peak_step", "n_train_windows", "n_test", "device", "threads", "cpu_kernels",
+            "finished", "key", "schema", "error"]
 
 
 def flat_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -145,7 +159,9 @@ def flat_rows(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     columns = csv_columns(rows)
     flat = []
     for r in rows:
-        line = {**r, "status": row_status(r)}
+        line = {**IDENTITY_COLUMN_DEFAULTS, **r, "status": row_status(r)}
+        if isinstance(r.get("imaging"), dict):
+            line["imaging"] = json.dumps(r["imaging"], sort_keys=True, separators=(",", ":"))
         for c, accuracy in (r.get("per_class_accuracy") or {}).items():
             line[f"acc_{c}"] = accuracy
         if "error" in r:
@@ -226,6 +242,8 @@ def sequential_verdict(c: Comparison, looks: dict[str, Any]) -> Comparison:
             f"{len(seen)} look(s)"))
     why = (f"futile after {runs} runs" + (f" ({last['why']})" if last.get("why") else "")
            if last["decision"] == FUTILE
+           else f"no verdict in {len(seen)} look(s) up to {runs} runs ({last['why']})"
+           if last.get("why")  # a boundary crossed below the minimum of evidence
            else f"no boundary crossed in {len(seen)} look(s) up to {runs} runs")
     return dataclasses.replace(c, verdict=UNRESOLVED, note=f"group-sequential: {why}")
 
