@@ -57,20 +57,22 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
         click.echo(f"warning: {line}")
     for p in f.primaries:
         high = ("" if p.power_at_sd_high is None else
-                f" ({p.power_at_sd_high:.0%} if the spread is at its interval's upper end, "
-                f"{p.sd_high:.1f} points)")
+                f" ({p.power_at_sd_high:.0%} if the spread is at the pilot's 95 % upper "
+                f"limit, {p.sd_high:.1f} points)")
         click.echo(f"primary {p.name}: one fixed test of {p.runs} runs at the family's "
-                   f"level α = {p.level:.4g}: power {p.power:.0%} for {points(p.effect)} points"
+                   f"level α = {p.level:.4g} ({len(f.primaries)} primary comparison(s)): "
+                   f"power {p.power:.0%} for {points(p.effect)} points"
                    f"{high}; 80 % power from {p.detectable:.1f} points; per-run sd "
                    f"{p.sd:.1f} points ({p.sd_source})")
         if p.sequential:
             s = p.sequential
             click.echo(f"  run --until answered (looks after {', '.join(map(str, s['looks']))}"
-                       f" runs): power {s['power']:.0%} for {points(p.effect)} points, "
-                       f"{s['expected_runs']:.1f} runs expected of at most {s['max_runs']}, "
-                       f"ends futile {s['futile']:.0%}" + (
-                           f", equivalent {s['equivalent']:.0%}" if p.margin else "")
-                       + f" (simulated: {s['paths']} paths, ±{s['mc_error']:.3f})")
+                       f" runs): {points(p.effect)} points found {s['power']:.0%}"
+                       + (f", equivalent {s['equivalent']:.0%}" if p.margin else "")
+                       + f", the other side {s['wrong_side']:.0%}; stopped early as futile "
+                       f"{s['stopped_futile']:.0%}; reached {s['max_runs']} runs undecided "
+                       f"{s['undecided_at_max']:.0%}; {s['expected_runs']:.1f} runs expected"
+                       f" (simulated: {s['paths']} paths, ±{s['mc_error']:.3f})")
         if f.independent:
             click.echo("  no floor: every run draws its own data set (independent "
                        "replications of the simulator's population), so more runs resolve "
@@ -87,6 +89,10 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                 f"{p.recordings}) would bring it to {points(p.effect)[1:]}")
         click.echo(f"  floor: no number of runs of these {p.recordings} recordings "
                    f"resolves less than {p.floor:.1f} points{more}")
+    if f.family_answered is not None and len(f.primaries) > 1:
+        click.echo(f"family: every one of the {len(f.primaries)} primary comparisons "
+                   f"answered with chance {f.family_answered:.0%} (were they independent; "
+                   f"α passed on after a rejection only raises it)")
     if not f.primaries:
         click.echo("no primary comparison (give --primary A..B)", file=sys.stderr)
 

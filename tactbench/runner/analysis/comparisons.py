@@ -339,8 +339,7 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     for (dataset, split), keys in blocks.items():
         cells = [dict(zip(FACTORS, key[2:])) for key in keys]
         for i, j, factor, value_a, value_b, family in _pairs(cells, contrasts, primary):
-            named = set(parse_contrast_factors(factor, value_a))
-            where = {k: v for k, v in cells[i].items() if k != factor and k not in named}
+            where = pair_where(cells, i, factor, value_a)
             res = compare_cells(groups[keys[i]], groups[keys[j]], margin=margin,
                                 users=users, confidence=confidence,
                                 names={"dataset": dataset, "split": split, "factor": factor,
@@ -354,17 +353,19 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     return out
 
 
-def _pairs(cells: list[dict[str, Any]], contrasts: Sequence[str], primary: Sequence[str]
-           ) -> list[tuple]:
-    """(index of A, index of B, factor, value of A, value of B, family) of every pair of
-    ``cells`` compared: the primary ones first, then those differing in one factor and
-    the contrasts' (a pair already primary is not repeated)."""
+def primary_family(cells: Sequence[Mapping[str, Any]], primary: Sequence[str]
+                   ) -> list[tuple]:
+    """The primary family ``primary`` (contrasts) expands to over ``cells`` (each a
+    mapping of :data:`FACTORS`, in the run's order): (index of A, index of B, factor,
+    value of A, value of B, family "primary") of each comparison, in the run's order.
+    The one place the family is decided: the run (:func:`comparisons`) and the plan
+    (:func:`tactbench.runner.analysis.forecast.forecast`) both call it, so a question
+    over three classifiers is three primaries in both, each at the family's level."""
     labels = spec_labels(c["classifier"] for c in cells)
     todo: list[tuple] = []
-    seen: set[frozenset] = set()
     for text in primary:
         a_side, b_side = parse_contrast(text)
-        for i, j in contrast_pairs(text, cells):
+        for i, j in contrast_pairs(text, list(cells)):
             differ = [f for f in FACTORS if cells[i][f] != cells[j][f]]
             if len(differ) == 1:  # shown as that factor's comparison, A and B as asked
                 f = differ[0]
@@ -372,7 +373,32 @@ def _pairs(cells: list[dict[str, Any]], contrasts: Sequence[str], primary: Seque
             else:
                 todo.append((i, j, "contrast", _side_label(cells[i], a_side, labels),
                              _side_label(cells[j], b_side, labels), "primary"))
-            seen.add(frozenset((i, j)))
+    return todo
+
+
+def pair_where(cells: Sequence[Mapping[str, Any]], i: int, factor: str, value_a: Any
+               ) -> dict[str, Any]:
+    """The factors both cells of a pair share (a comparison's ``where``)."""
+    named = set(parse_contrast_factors(factor, value_a))
+    return {k: v for k, v in cells[i].items() if k != factor and k not in named}
+
+
+def pair_name(a: Any, b: Any, where: Mapping[str, Any]) -> str:
+    """A comparison's name in the looks and the plan: ``raw → farneback (L=5,
+    small-cnn-lstm)``."""
+    shared = ", ".join(f"{k}={v}" if k == "L" else str(v) for k, v in where.items())
+    return f"{a} → {b}" + (f" ({shared})" if shared else "")
+
+
+def _pairs(cells: list[dict[str, Any]], contrasts: Sequence[str], primary: Sequence[str]
+           ) -> list[tuple]:
+    """(index of A, index of B, factor, value of A, value of B, family) of every pair of
+    ``cells`` compared: the primary ones first (:func:`primary_family`), then those
+    differing in one factor and the contrasts' (a pair already primary is not
+    repeated)."""
+    labels = spec_labels(c["classifier"] for c in cells)
+    todo = primary_family(cells, primary)
+    seen: set[frozenset] = {frozenset((t[0], t[1])) for t in todo}
     for p in pairs_differing_in_one_factor(cells):
         if frozenset((p.a, p.b)) not in seen:
             todo.append((p.a, p.b, p.factor, p.value_a, p.value_b, "exploratory"))

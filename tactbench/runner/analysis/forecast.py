@@ -18,11 +18,15 @@ comparison's per-run spread is an **assumption**, said with its value: test samp
 alone with the models disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordings — on
 the stored primaries the observed disagreement was 0–26 %, so it is no bound either way.
 
-Power is at the family's level (Holm's first step, α/m for m primaries) and exact
-(:func:`tactbench.runner.analysis.power.power`). For a run ``--until answered`` the forecast is of
-the sequential procedure itself (:func:`tactbench.runner.analysis.sequential.procedure`: power,
-expected and largest runs, chance of ending futile, by the simulation and rule the looks
-use, at that level and with the margin). :attr:`PrimaryForecast.warnings` says, a line
+Every comparison of the primary family the run makes is forecast (the family decided by
+:func:`tactbench.runner.analysis.comparisons.primary_family`, the run's own), each at the
+family's level (Holm's first step, α/m for m primary comparisons), exactly
+(:func:`tactbench.runner.analysis.power.power`); :func:`family_answered` gives the
+family's chance of every one being answered. For a run ``--until answered`` the forecast
+is of the sequential procedure itself
+(:func:`tactbench.runner.analysis.sequential.procedure`: found, equivalent, the other
+side, stopped early as futile, reached the maximum undecided, expected and largest
+runs, by the simulation and rule the looks use, at that level and with the margin). :attr:`PrimaryForecast.warnings` says, a line
 each, an effect inside the margin and a design short of 80 % power at its runs.
 """
 
@@ -38,7 +42,8 @@ from typing import Any
 
 from tactbench.data.splits import SplitData, split_design
 from tactbench.plugins import load_registry
-from tactbench.runner.analysis.comparisons import comparisons
+from tactbench.runner.analysis.comparisons import (Comparison, comparisons, pair_name,
+                                                   pair_where, primary_family)
 from tactbench.runner.execution.planning import (
     Cell,
     Plan,
@@ -124,6 +129,7 @@ class Forecast:
     workers: int = 1
     cache_bytes: int = 0  # the new encodings the run writes to the cache (its first data set's)
     cache_free: int | None = None  # free on the cache's disk (None: it cannot say)
+    family_answered: float | None = None  # every primary answered (family_answered)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -171,21 +177,38 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     wall = _walls(p, p.cells + others, cells, looks, missing,
                   load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
-    primaries = scene.design.primary
-    level = alpha / max(1, len(primaries))  # Holm's first step: the Bonferroni level
+    family = _family(p.cells, scene.design.primary, pilot)
+    level = alpha / max(1, len(family))  # Holm's first step over the family the run makes
+    primaries = [_primary(name, found, runs, effect / 100, ratio, n_test, level,
+                          len(p.dataset.labels), margin=scene.margin, looks=looks)
+                 for name, found in family]
     return Forecast(
         cells=cells, seconds=sum(known) if known else None,
         unknown=sum(c.seconds is None for c in cells),
         peak_mb=max((float(r["peak_rss_mb"]) for r in pilot if r.get("peak_rss_mb")),
                     default=None),
-        primaries=[_primary(text, pilot, runs, effect / 100, ratio, n_test, level,
-                            len(p.dataset.labels), margin=scene.margin,
-                            looks=looks) for text in primaries],
+        primaries=primaries, family_answered=family_answered(primaries),
+
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
         design=design,
         runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
         workers=scene.resolved_workers(), cache_bytes=entries_bytes(p, missing),
         cache_free=_free_bytes(cache.root))
+
+
+def family_answered(primaries: list[PrimaryForecast]) -> float | None:
+    """The chance that every comparison of the primary family is answered (declared
+    better either way, or equivalent; sequential: the procedure's, else the fixed
+    design's power), were the comparisons independent: the product of each one's, each
+    at its first Holm level — α passed on after a rejection only raises it. None
+    without primaries."""
+    if not primaries:
+        return None
+    out = 1.0
+    for f in primaries:
+        s = f.sequential
+        out *= (s["power"] + s["wrong_side"] + s["equivalent"]) if s else f.power
+    return out
 
 
 def _free_bytes(root: Path) -> int | None:
@@ -276,15 +299,33 @@ def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]
     return out
 
 
-def _spread(text: str, pilot: list[dict[str, Any]], n_test: int, effect: float,
+def _family(cells: list[Cell], primary: tuple[str, ...] | list[str],
+            pilot: list[dict[str, Any]]) -> list[tuple[str, Comparison | None]]:
+    """Each comparison of the primary family, by the one function the run decides it
+    with (:func:`~tactbench.runner.analysis.comparisons.primary_family`), named as the
+    looks name it, with the pilot's comparison of that pair (None without one)."""
+    grid = list({(c.encoder, c.classifier, c.L): {"encoder": c.encoder,
+                                                  "classifier": c.classifier, "L": c.L}
+                 for c in cells}.values())
+    stored = {pair_name(c.a, c.b, c.where): c for c in comparisons(pilot, primary=primary)
+              if c.family == "primary"} if pilot and primary else {}
+    out = []
+    for i, _, factor, value_a, value_b, _ in primary_family(grid, primary):
+        name = pair_name(value_a, value_b, pair_where(grid, i, factor, value_a))
+        out.append((name, stored.get(name)))
+    return out
+
+
+def _spread(found: Comparison | None, n_test: int, effect: float,
             ratio: float) -> tuple[float, float | None, float, str]:
-    """The per-run spread a forecast uses: ``(sd, upper end of its 95 % interval or None,
-    ratio, where it comes from)`` (fractions): a pilot's, never below the test sampling
-    of its own disagreement; without one, the assumption, said with its value."""
+    """The per-run spread a forecast uses: ``(sd, the upper end of the pilot's 95 %
+    interval where the plan uses the pilot's own spread, else None; ratio, where it
+    comes from)`` (fractions): a pilot's as it gives it, raised — and said so, with the
+    reason — only to the test sampling of its own disagreement; without one, the
+    assumption, said with its value."""
     from scipy import stats
 
-    found = [c for c in comparisons(pilot, primary=[text]) if c.family == "primary"]
-    if not (found and found[0].runs >= 2):
+    if not (found is not None and found.runs >= 2):
         sd = sampling_sd(n_test, ASSUMED_DISCORDANCE,
                          min(effect, ASSUMED_DISCORDANCE ** 0.5))
         return sd, None, ratio, (
@@ -292,7 +333,7 @@ def _spread(text: str, pilot: list[dict[str, Any]], n_test: int, effect: float,
             f"{n_test} test recordings and the spread is test sampling alone; training "
             f"variability adds to it, less disagreement takes from it (on the stored "
             f"primaries 0–26 %): a pilot of 2–3 runs replaces the assumption")
-    c = found[0]
+    c = found
     d = list(c.per_run.values())
     df = c.runs - 1
     pilot_sd = statistics.stdev(d)
@@ -309,23 +350,30 @@ def _spread(text: str, pilot: list[dict[str, Any]], n_test: int, effect: float,
             f"assumed instead: they disagree on {ASSUMED_DISCORDANCE:.0%} of the test "
             f"recordings, test sampling alone")
     sd = max(pilot_sd, least)
-    high = sd * (df / float(stats.chi2.ppf(0.025, df))) ** 0.5
-    low = sd * (df / float(stats.chi2.isf(0.025, df))) ** 0.5
-    said = (f"pilot: {c.runs} stored runs, spread {100 * pilot_sd:.2f} points (95 % "
+    # the interval is the pilot's spread's, whatever the plan then uses
+    high = pilot_sd * (df / float(stats.chi2.ppf(0.025, df))) ** 0.5
+    low = pilot_sd * (df / float(stats.chi2.isf(0.025, df))) ** 0.5
+    said = (f"pilot: {c.runs} stored runs, spread {100 * pilot_sd:.2f} points (its 95 % "
             f"interval {100 * low:.2f} to {100 * high:.2f}, from {df} degree(s) of freedom)")
-    if least > pilot_sd:
-        said += (f", raised to {100 * least:.2f}: the test sampling of the pilot's own "
-                 f"disagreement ({pi:.0%} of the recordings), which no real spread is below")
-    return sd, high, c.run_ratio, said
+    if least <= pilot_sd:
+        return sd, high, c.run_ratio, said
+    said += (f"; planned with {100 * least:.2f}, raised to the test sampling of the "
+             f"pilot's own disagreement ({pi:.0%} of the recordings), which no real "
+             f"spread is below")
+    if least > high:
+        said += (f" — above the pilot's own 95 % upper limit ({100 * high:.2f}): the pilot's "
+                 f"runs varied less than their test sets alone would make them")
+    return sd, None, c.run_ratio, said
 
 
-def _primary(text: str, pilot: list[dict[str, Any]], runs: int, effect: float,
+def _primary(text: str, found: Comparison | None, runs: int, effect: float,
              ratio: float, n_test: int, level: float, recordings: int, *,
              margin: float | None = None, looks: list[int] | None = None
              ) -> PrimaryForecast:
-    """One primary comparison's forecast at ``runs`` runs for a true ``effect``; with
-    ``looks`` (a run ``--until answered``), the sequential procedure's too."""
-    sd, high, ratio, source = _spread(text, pilot, n_test, effect, ratio)
+    """One primary comparison's forecast at ``runs`` runs for a true ``effect`` at the
+    family's ``level``; with ``looks`` (a run ``--until answered``), the sequential
+    procedure's too."""
+    sd, high, ratio, source = _spread(found, n_test, effect, ratio)
     floor = effect_floor(sd, ratio, alpha=level)
     runs = max(2, runs)
     f = PrimaryForecast(
