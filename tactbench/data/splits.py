@@ -19,8 +19,9 @@ and seed and recomputed anywhere:
   pools their test predictions;
 - ``group:KEY`` (``group:KEY:folds=K``, ``group:KEY:test=A|B``): the same over any
   recording metadata a dataset has (:func:`dataset_groups`: ``user``, ``position``,
-  ``repetition``, and the samples' attributes, such as CoST's ``variant``): a random fifth of its values, ``K`` folds of them, or the named values
-  as the test set (``group:position:test=side`` trains on the front, tests on the side).
+  ``repetition``, and the samples' attributes, such as CoST's ``variant``): a random
+  fifth of its values, ``K`` folds of them, or the named values as the test set
+  (``group:position:test=side`` trains on the front, tests on the side).
   ``group:user`` is ``users`` (same spec in a cell's identity, same split);
 - ``kfold:folds=K``: repeated stratified K-fold over recordings: for each run seed the
   recordings of each class are shuffled and dealt into ``K`` folds, each fold tested
