@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 from tactbench.errors import InputError
-from tactbench.runner.analysis.comparisons import Comparison, comparisons, pair_name
+from tactbench.runner.analysis.comparisons import Comparison, comparisons
+from tactbench.runner.analysis.family import pair_name
 from tactbench.runner.execution.results import ok_rows
 from tactbench.runner.analysis.sequential import FUTILE, FamilyState, Look, family_look
 from tactbench.runner.analysis.statistics import NOT_LEARNED
@@ -28,7 +29,7 @@ from tactbench.runner.analysis.statistics import NOT_LEARNED
 
 def comparison_name(c: Comparison) -> str:
     """A primary comparison's name in the looks: ``raw → farneback (L=5, small-cnn-lstm)``
-    (:func:`tactbench.runner.analysis.comparisons.pair_name`, the plan's too)."""
+    (:func:`tactbench.runner.analysis.family.pair_name`, the plan's too)."""
     return pair_name(c.a, c.b, c.where)
 
 

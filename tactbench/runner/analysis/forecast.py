@@ -19,7 +19,7 @@ alone with the models disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordin
 the stored primaries the observed disagreement was 0–26 %, so it is no bound either way.
 
 Every comparison of the primary family the run makes is forecast (the family decided by
-:func:`tactbench.runner.analysis.comparisons.primary_family`, the run's own), each at the
+:func:`tactbench.runner.analysis.family.primary_family`, the run's own), each at the
 family's level (Holm's first step, α/m for m primary comparisons), exactly
 (:func:`tactbench.runner.analysis.power.power`); :func:`family_answered` gives the
 family's chance of every one being answered. For a run ``--until answered`` the forecast
@@ -42,8 +42,8 @@ from typing import Any
 
 from tactbench.data.splits import SplitData, split_design
 from tactbench.plugins import load_registry
-from tactbench.runner.analysis.comparisons import (Comparison, comparisons, pair_name,
-                                                   pair_where, primary_family)
+from tactbench.runner.analysis.comparisons import Comparison, comparisons
+from tactbench.runner.analysis.family import pair_name, pair_where, primary_family
 from tactbench.runner.execution.planning import (
     Cell,
     Plan,
@@ -302,7 +302,7 @@ def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]
 def _family(cells: list[Cell], primary: tuple[str, ...] | list[str],
             pilot: list[dict[str, Any]]) -> list[tuple[str, Comparison | None]]:
     """Each comparison of the primary family, by the one function the run decides it
-    with (:func:`~tactbench.runner.analysis.comparisons.primary_family`), named as the
+    with (:func:`~tactbench.runner.analysis.family.primary_family`), named as the
     looks name it, with the pilot's comparison of that pair (None without one)."""
     grid = list({(c.encoder, c.classifier, c.L): {"encoder": c.encoder,
                                                   "classifier": c.classifier, "L": c.L}
