@@ -14,6 +14,21 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Every slow test says in one line why it cannot be fast: ``@pytest.mark.slow("…")``.
+    (The default command leaves slow tests out; ``pytest -m slow`` and CI run them.)"""
+    for item in items:
+        mark = item.get_closest_marker("slow")
+        if mark is None:
+            continue
+        reason = mark.args[0] if mark.args else mark.kwargs.get("reason")
+        if not isinstance(reason, str) or not reason.strip() or "\n" in reason.strip():
+            raise pytest.UsageError(
+                f"{item.nodeid}: @pytest.mark.slow needs a one-line reason why the test "
+                f"cannot be fast, e.g. @pytest.mark.slow(\"trains a full-size cell\")")
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _private_cache(tmp_path_factory):
     """Tests never read or write the user's cache."""

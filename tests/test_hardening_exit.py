@@ -64,7 +64,7 @@ def test_a_forced_ascii_terminal_does_not_crash_on_the_times_sign(tmp_path):
     assert b"\\xd7" in done.stdout  # "×" as an escape, not a UnicodeEncodeError
 
 
-@pytest.mark.slow
+@pytest.mark.slow("a real run with two worker processes is interrupted mid-training")
 def test_ctrl_c_with_two_workers_exits_130_without_worker_tracebacks(tmp_path):
     out = tmp_path / "out"
     env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}

@@ -66,7 +66,7 @@ def test_a_kernel_level_the_cpu_lacks_is_refused():
     assert out.returncode == 2 and out.stderr.startswith("Error: TACTBENCH_CPU_KERNELS")
 
 
-@pytest.mark.slow
+@pytest.mark.slow("two fresh tactbench processes train the same cell, one beside a CPU-bound load")
 def test_one_cell_gives_identical_predictions_in_fresh_processes_under_load(tmp_path):
     """The guarantee the docs state: one machine, one thread count, whatever runs
     beside it. Two fresh processes (own caches), the second beside a CPU-bound load."""

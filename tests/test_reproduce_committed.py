@@ -26,7 +26,7 @@ def _committed_raw_seed0() -> dict:
     pytest.fail(f"no committed raw seed-0 cell in {COMMITTED}")
 
 
-@pytest.mark.slow
+@pytest.mark.slow("trains a full quick-profile cell of the main job (minutes) to compare every prediction")
 @pytest.mark.timeout(1200)
 def test_a_committed_cell_of_the_main_job_trains_again_to_the_same_predictions(tmp_path):
     flags = _cpu_flags()

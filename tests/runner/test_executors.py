@@ -34,7 +34,7 @@ def test_worker_processes_use_the_planned_plugins_and_record_failures(
     assert {r["error"]["type"] for r in result.failed} == {"RuntimeError"}
 
 
-@pytest.mark.slow
+@pytest.mark.slow("starts a dask LocalCluster of two worker processes and trains the grid twice")
 def test_dask_uses_the_planned_plugins_and_records_failures(tiny_scene, cache, fake_registry,
                                                             monkeypatch, tmp_path):
     pytest.importorskip("distributed")
@@ -48,7 +48,7 @@ def test_dask_uses_the_planned_plugins_and_records_failures(tiny_scene, cache, f
     assert _by_cell(dask.rows) == _by_cell(local.rows)  # same cells, same confusions
 
 
-@pytest.mark.slow
+@pytest.mark.slow("starts a dask LocalCluster of two worker processes and trains the grid twice")
 def test_dask_local_cluster_gives_the_same_results_as_local(tmp_path, tiny_scene, cache):
     pytest.importorskip("distributed")
     local = run(tiny_scene(out=str(tmp_path / "a")), progress=False, cache=cache)

@@ -202,7 +202,7 @@ def test_saved_models_of_multi_value_taxel_vectors_are_reused(tiny_scene, cache)
     assert (again.computed, again.skipped) == (0, 1)
 
 
-@pytest.mark.slow
+@pytest.mark.slow("a real tactbench process is killed mid-grid and resumed (two process starts)")
 def test_a_killed_run_loses_only_the_cell_in_progress(tmp_path):
     out = tmp_path / "out"
     env = {**os.environ, "TACTBENCH_CACHE": str(tmp_path / "cache")}

@@ -103,7 +103,7 @@ def test_logreg_still_takes_images_where_there_is_a_layout(tiny_scene):
     assert list(p.input_kind.values()) == ["images"]
 
 
-@pytest.mark.slow
+@pytest.mark.slow("loads and trains on the real cyskin-fingers recordings (shared data)")
 def test_logreg_on_the_real_fingers_set_without_layout(shared_data, tmp_path, cache):
     from tactbench.runner import Scene
 
