@@ -89,7 +89,7 @@ def _workers_module(tmp_path, monkeypatch):
 
 def test_workers_that_cannot_start_are_an_error_naming_the_fix(tmp_path, monkeypatch):
     helpers = _workers_module(tmp_path, monkeypatch)
-    monkeypatch.setattr(executors, "ignore_interrupts", helpers.die_at_start)
+    monkeypatch.setattr(executors, "start_worker", helpers.die_at_start)
     stored: list = []
     with pytest.raises(WorkerError, match=r"cannot start here \(a worker exit status 3\).*"
                                           r"--workers 1"):
@@ -130,3 +130,71 @@ def test_the_api_from_a_plain_script_or_stdin_computes_every_cell(tmp_path, how)
     assert "computed 2 ['ok', 'ok']" in done.stdout
     assert "run one at a time in this process" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+KILLED_PARENT = """\
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, {helpers!r})
+
+
+def write_and_wait(folder):  # a cell half-way through writing its output
+    from tactbench.paths import atomic_folder
+
+    with atomic_folder(Path(folder) / "entry") as tmp:
+        (tmp / "frames").write_text("partial")
+        (Path(folder) / f"pid-{{os.getpid()}}").write_text("")
+        time.sleep(120)
+
+
+if __name__ == "__main__":
+    from tactbench.runner.execution import executors
+
+    import parent_main
+    executors.run_cell = parent_main.write_and_wait
+    executors.run_processes([{a!r}, {b!r}], print, workers=2)
+"""
+
+
+def _gone(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return True
+    return state in ("Z", "X")  # a zombie no init has reaped yet holds no memory
+
+
+@pytest.mark.slow("starts a parent process and two spawned workers, then kills the parent")
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_workers_of_a_killed_run_end_and_leave_no_temporaries(tmp_path):
+    import time
+
+    folders = [tmp_path / "a", tmp_path / "b"]
+    for f in folders:
+        f.mkdir()
+    (tmp_path / "parent_main.py").write_text(KILLED_PARENT.format(
+        helpers=str(tmp_path), a=str(folders[0]), b=str(folders[1])))
+    log = tmp_path / "stderr.txt"
+    with log.open("w") as err:
+        parent = subprocess.Popen([sys.executable, str(tmp_path / "parent_main.py")],
+                                  cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=err)
+    try:
+        deadline = time.monotonic() + 120
+        while sum(1 for f in folders for _ in f.glob("pid-*")) < 2:
+            assert parent.poll() is None, log.read_text()
+            assert time.monotonic() < deadline, "the workers did not start"
+            time.sleep(0.2)
+        workers = [int(p.name[4:]) for f in folders for p in f.glob("pid-*")]
+        assert any(p.name.startswith(".entry.tmp-") for f in folders for p in f.iterdir())
+    finally:
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+    deadline = time.monotonic() + 10
+    while not all(_gone(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert all(_gone(pid) for pid in workers), "workers outlived their run"
+    left = [p.name for f in folders for p in f.iterdir() if not p.name.startswith("pid-")]
+    assert left == [], log.read_text()  # each removed its temporary on its way out

@@ -14,6 +14,8 @@ interpreter) stop the run with a :class:`~tactbench.errors.WorkerError` naming t
 and the fix, the finished cells stored; a script that calls tactbench at its top level
 without ``if __name__ == "__main__":``, or one read from standard input, runs its cells in
 this process instead, said in one warning line (:func:`~tactbench.runner.execution.system.main_reimport_problem`).
+A local worker ends soon after its parent dies, however it dies
+(:func:`~tactbench.runner.execution.system.end_with_parent`), removing what it was writing.
 On dask, a worker that dies gives its cell a failed row. Ctrl-C stops at once: cells not started are
 dropped, finished ones were already handed to ``finish``.
 """
@@ -30,8 +32,8 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 from tactbench.errors import InputError, WorkerError
 from tactbench.runner.execution.cell import CellJob, failed_row, run_cell
 from tactbench.runner.execution.questions import spec_labels
-from tactbench.runner.execution.system import (BEFORE, MemoryTracker, ignore_interrupts,
-                                               main_reimport_problem, stop_workers)
+from tactbench.runner.execution.system import (BEFORE, MemoryTracker, main_reimport_problem,
+                                               start_worker, stop_workers)
 
 if TYPE_CHECKING:
     from tactbench.runner.execution.scene import Scene
@@ -93,7 +95,7 @@ def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
 
 def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
     """``workers`` cells at once in local processes (spawned: torch and fork do not mix)."""
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts,
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=start_worker,
                                mp_context=multiprocessing.get_context("spawn"))
     stored = 0
     try:

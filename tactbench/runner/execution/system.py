@@ -9,6 +9,7 @@ import os
 import re
 import signal
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -147,6 +148,68 @@ def main_reimport_problem() -> str | None:
     return (f"{path} calls tactbench at its top level, outside `if __name__ == "
             f"\"__main__\":`, so every worker process would run it again; put the call "
             f"under that guard to run cells side by side")
+
+
+#: Seconds a worker whose run has died has to clean up (its temporaries) before it ends.
+ENDING_GRACE_S = 2.0
+#: ``prctl`` option: the signal a process gets when its parent dies (Linux).
+_PR_SET_PDEATHSIG = 1
+
+
+def start_worker() -> None:
+    """Initializer of a local worker process: Ctrl-C is the parent's
+    (:func:`ignore_interrupts`), and the worker ends soon after its parent dies
+    (:func:`end_with_parent`)."""
+    ignore_interrupts()
+    end_with_parent()
+
+
+def _ending(signum: int, frame: object) -> None:
+    """SIGTERM in a worker (its parent died, or stopped it): unwind, so that what is
+    being written removes its temporary, and end within :data:`ENDING_GRACE_S` however
+    the unwinding goes (a pool's worker loop catches the exit and would wait on)."""
+    # ignore those that follow: the parent-death signal comes again each time the dying
+    # parent's threads end one by one (the kernel re-parents the worker to each)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    timer = threading.Timer(ENDING_GRACE_S, os._exit, (128 + signum,))
+    timer.daemon = True
+    timer.start()
+    raise SystemExit(128 + signum)
+
+
+def _watch_parent(parent: int) -> None:
+    """Where no parent-death signal exists: SIGTERM to this process once its parent is
+    gone (it is then a child of another process)."""
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os.kill(os.getpid(), signal.SIGTERM)
+
+
+def end_with_parent() -> None:
+    """Make this (worker) process end soon after its parent dies, however it dies (the
+    out-of-memory killer, ``kill -9``, a scheduler's preemption), instead of living on
+    under init with its memory: SIGTERM on the parent's death (Linux ``prctl
+    PR_SET_PDEATHSIG``; elsewhere a thread watching the parent), handled by unwinding
+    (temporaries removed) and ending."""
+    import multiprocessing
+
+    parent_process = multiprocessing.parent_process()
+    parent = parent_process.pid if parent_process is not None else os.getppid()
+    signal.signal(signal.SIGTERM, _ending)
+    armed = False
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if not armed:
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                         name="tactbench-parent-watch").start()
+    if os.getppid() != parent:  # it died before the signal was asked for
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 def ignore_interrupts() -> None:
