@@ -98,8 +98,9 @@ def replay(rows: Sequence[dict[str, Any]], *, seed_order: Sequence[int],
         subset = [r for r in rows if int(r["seed"]) in seeds]
         prim = [c for c in comparisons(subset, primary=primary, margin=margin,
                                        confidence=1 - alpha) if c.family == "primary"]
-        if not prim or any(c.runs < looks[k] for c in prim):
-            break  # this look's runs are not all there yet
+        if not prim or any(len({s.split("/")[0] for s in c.mcnemar_per_seed}) < looks[k]
+                           for c in prim):
+            break  # this look's runs are not all there yet (repeated splits count too)
         history.seen.append(_look(history, prim, looks[:k + 1], margin, alpha))
     return history
 

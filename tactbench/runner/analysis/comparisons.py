@@ -32,10 +32,12 @@ from tactbench.runner.analysis.pairing import (
     UserGains,
     aligned,
     difference_components,
+    distinct_splits,
     fold_differences,
     per_class_gains,
     per_user_gains,
     recordings,
+    repeats_note,
     sampling_share,
 )
 from tactbench.runner.analysis.power import (
@@ -491,6 +493,13 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
     splits: dict[int, list[tuple]] = {}  # the unit: a split seed (its init seeds averaged)
     for key in per_seed:
         splits.setdefault(key[0], []).append(key)
+    repeats: dict[int, int] = {}
+    if kind == "resampled" and names["split"] != "paper":
+        # over groups (sessions, people), a seed can draw a split already drawn: no new
+        # evidence (a random split of recordings, ``paper``, never repeats in practice)
+        splits, repeats = distinct_splits(splits, runs_a)
+        if repeats:
+            method += "; " + repeats_note(repeats, len(splits))
     d_run = np.array([np.mean([(per_seed[k].cb.mean() - per_seed[k].ca.mean()) for k in ks])
                       for ks in splits.values()])
     d_t, run_ratio = d_run, ratio

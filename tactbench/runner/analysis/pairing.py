@@ -233,3 +233,39 @@ def per_user_gains(per_seed: Mapping[tuple, Run], users: Sequence[str]) -> UserG
     return UserGains(users=len(per_user), helped=int(np.sum(values > 0)),
                      hurt=int(np.sum(values < 0)), median=float(q50), q25=float(q25),
                      q75=float(q75), gains=per_user)
+
+
+def distinct_splits(splits: Mapping[int, list[tuple]], rows: Mapping[tuple, dict[str, Any]]
+                    ) -> tuple[dict[int, list[tuple]], dict[int, int]]:
+    """The split seeds of ``splits`` (split seed → its run keys) grouped by the split
+    they drew — the same test recordings (``test_predictions.indices``) and training
+    size — so that seeds that repeat a split count once, their runs averaged like init
+    seeds of one split (few sessions or people allow few distinct splits: 4 sessions,
+    one left out, give 4). Returns the grouped splits (keyed by each split's first seed)
+    and ``repeats``: seed → the earlier seed whose split it repeats."""
+    first: dict[tuple, int] = {}
+    out: dict[int, list[tuple]] = {}
+    repeats: dict[int, int] = {}
+    for seed, keys in splits.items():
+        row = rows[keys[0]]
+        indices = (row.get("test_predictions") or {}).get("indices")
+        if not isinstance(indices, list):
+            out[seed] = list(keys)
+            continue
+        identity = (tuple(sorted(int(i) for i in indices)), row.get("n_train"))
+        seen = first.setdefault(identity, seed)
+        if seen != seed:
+            repeats[seed] = seen
+        out.setdefault(seen, []).extend(keys)
+    return out, repeats
+
+
+def repeats_note(repeats: Mapping[int, int], distinct: int) -> str:
+    """``4 distinct splits of 6 runs: runs 4, 5 repeat the splits of runs 0, 1, each
+    split's runs averaged as one``."""
+    seeds = sorted(repeats)
+    return (f"{distinct} distinct splits of {distinct + len(repeats)} runs: run"
+            f"{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))} repeat"
+            f"{'' if len(seeds) > 1 else 's'} the split{'s' if len(seeds) > 1 else ''} of "
+            f"run{'s' if len(seeds) > 1 else ''} "
+            f"{', '.join(str(repeats[k]) for k in seeds)}, each split's runs averaged as one")

@@ -427,6 +427,27 @@ class FamilyState:
             self.shares = {n: self.alpha / len(self.names) for n in self.names}
 
 
+def _look_distinct(d: Sequence[float], ratio: float, looks: Sequence[int], max_runs: int,
+                   alpha: float, margin: float | None, futility: bool) -> Look:
+    """:func:`look` at ``looks``, where ``d`` holds one difference per **distinct** split:
+    fewer than the look's runs when seeds repeated a split (few sessions or people allow
+    few). Then no more runs can add evidence: the look is the last, at the distinct
+    splits there are, and says so."""
+    j = len(d)
+    if j >= looks[-1]:
+        return look(d, ratio, looks=looks, max_runs=max_runs, alpha=alpha, margin=margin,
+                    futility=futility)
+    why = (f"the data allow only {j} distinct split(s) for {looks[-1]} runs: more runs "
+           f"repeat splits already drawn and add no evidence")
+    if j < 2:
+        return Look(j, float(d[0]) if j else 0.0, math.nan, math.nan, math.inf, alpha,
+                    FUTILE, why)
+    res = look(d, ratio, looks=[x for x in looks[:-1] if x < j] + [j], max_runs=j,
+               alpha=alpha, margin=margin, futility=futility)
+    return res if res.decision not in (FUTILE, CONTINUE) else replace(
+        res, decision=FUTILE, why=why + (f"; {res.why}" if res.why else ""))
+
+
 def _minimum(res: Look, discordant: int | None, max_runs: int) -> Look:
     """``res`` with a verdict taken back where the cells disagree on fewer distinct test
     recordings than a verdict needs (None: not known, as before): it goes on, or at the
@@ -481,8 +502,8 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
         changed = False
         open_now = [n for n in state.names if n not in state.closed]
         for name in open_now:
-            res = look(diffs[name], ratios[name], looks=looks, max_runs=max_runs,
-                       alpha=state.shares[name], margin=margin, futility=futility)
+            res = _look_distinct(diffs[name], ratios[name], looks, max_runs,
+                                 state.shares[name], margin, futility)
             if name in not_learned:
                 res = replace(res, decision=NOT_LEARNED, why=not_learned[name])
             res = _minimum(res, (discordant or {}).get(name), max_runs)

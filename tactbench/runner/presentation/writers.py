@@ -351,6 +351,15 @@ def _facts(report: Report) -> list[str]:
     ]
 
 
+def test_set_sizes(rows: Iterable[dict[str, Any]]) -> str:
+    """The test-set sizes of ``rows``' seeds: ``150``, or ``19–157`` where seeds differ
+    ("" without any)."""
+    sizes = sorted({int(r["n_test"]) for r in rows if isinstance(r.get("n_test"), int)})
+    if not sizes:
+        return ""
+    return str(sizes[0]) if len(sizes) == 1 else f"{sizes[0]}–{sizes[-1]}"
+
+
 def markdown_report(report: Report, figures: dict[str, Path]) -> str:
     """report.md: run facts, the accuracy/cost table, per-class accuracy, paired
     comparisons over runs (with per-class and per-user gains), the variance
@@ -366,8 +375,8 @@ def markdown_report(report: Report, figures: dict[str, Path]) -> str:
         REPORT_HEADER, "", *_facts(report), "",
         *primary_section(comps, report.looks, labels),
         "Accuracy is mean ± standard deviation over seeds, with a 95 % t-interval of the "
-        "mean over seeds (test set: "
-        f"{first.get('n_test', '?')} sequences per seed). Encode cost is per frame on one "
+        f"mean over seeds (test set: {test_set_sizes(done) or first.get('n_test', '?')} "
+        "sequences per seed). Encode cost is per frame on one "
         "core; train seconds are wall time; inference is per test sequence, batched. "
         "Peak MB is the peak resident memory of the process that ran the cell; peak step "
         "is the step that set it (load encoding, windows, fit, predict, save model, or "
