@@ -47,8 +47,7 @@ from tactbench import machine as facts
 from tactbench.runner import render_folder
 from tactbench.runner.analysis.comparisons import Comparison, plain_t
 from tactbench.runner.execution.scene import DEFAULT_PRIMARY
-from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
-                                                  TOO_FEW_RUNS, UNRESOLVED)
+from tactbench.runner.analysis.statistics import A_BETTER, B_BETTER, DECIDED, EQUIVALENT
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.execution.questions import short_name
 from tactbench.runner.presentation.plots import check_reference
@@ -400,7 +399,7 @@ def study(root: Path, m: dict) -> str:
               "accuracies are not comparable with the study's, only the direction and "
               "rough size of differences. "
               + converged_note(),
-              f"- {_runs_note(by['paper'])}", ""]
+              f"- {_runs_note(*parts, lengths)}", ""]
     return "\n".join(lines)
 
 
@@ -588,33 +587,50 @@ def _class_gain(results: dict, cls: str) -> str:
     return f"{100 * g['difference']:+.1f} [{100 * g['low']:+.1f}, {100 * g['high']:+.1f}]"
 
 
-def _runs_note(results: dict) -> str:
-    """What the number of runs allows, from the comparisons of one run (their own
-    ``runs_for_power`` and ``detectable_effect``, at each family's Holm level)."""
-    comps = results["comparisons"]
+#: The start of :func:`_runs_note`'s sentence naming the runs it counts.
+RUNS_NOTE = "Counted over "
+
+
+def _runs_note(*parts: dict) -> str:
+    """What the number of runs allows, from the comparisons of **every** run of a report
+    (``parts``: each run as :func:`run_grid` gives it; their own ``runs_for_power`` and
+    ``detectable_effect``, at each family's Holm level), naming the runs' folders. Every
+    count and range is over all of them (tests/test_report_sentences.py checks each
+    against their results.json)."""
+    names = ", ".join(f"`{p['out'].relative_to(p['out'].parents[1]).as_posix()}`"
+                      for p in parts)
+    comps = [c for p in parts for c in p["results"]["comparisons"]]
     runs = max(c["runs"] for c in comps)
     families = sorted({(c.get("family") or "exploratory", c["family_size"]) for c in comps})
-    text = (f"Up to {runs} runs per cell; verdicts rest on the corrected resampled t over "
+    text = (f"{RUNS_NOTE}{names}: up to {runs} runs per cell; verdicts rest on the "
+            "corrected resampled t over "
             "runs (which assumes the per-run differences roughly normal), Holm-adjusted "
-            "within each family (" + ", ".join(f"{name}: {size}" for name, size in families)
-            + "). ")
-    open_ = [c for c in comps if c["verdict"] in (UNRESOLVED, TOO_FEW_RUNS)]
+            "within each family of each run (" + ", ".join(
+                f"{name}: {size}" for name, size in families) + "). ")
+    open_ = [c for c in comps if c["verdict"] not in DECIDED]  # not learned included
+    across = " in these runs" if len(parts) > 1 else ""
     if not open_:
-        return text + "Every comparison here is resolved."
+        return text + f"Every comparison here{across} is resolved."
     reachable = [c["runs_for_power"] for c in open_ if c["runs_for_power"] is not None]
     detectable = [c["detectable_effect"] for c in open_ if c["detectable_effect"] is not None]
-    text += (f"Of the {len(open_)} unresolved, {len(reachable)} would reach 80 % power at "
-             "their observed difference with "
-             + (f"{min(reachable)}–{max(reachable)} runs" if len(set(reachable)) > 1 else
-                f"{reachable[0]} runs" if reachable else "no number of runs")
-             + f"; for {len(open_) - len(reachable)} no number of runs of these data would "
-             "(the observed difference is below the floor that the overlap of training "
-             "sets or the test-set size sets, or zero)")
+    text += f"Of the {len(open_)} comparisons{across} without a verdict, "
+    if reachable:
+        text += (f"{len(reachable)} would reach 80 % power at their observed difference "
+                 f"with {_span(reachable, '{}')} runs; for {len(open_) - len(reachable)} ")
+    else:
+        text += "for every one "
+    text += ("no number of runs of these data would (the observed difference is below the "
+             "floor that the overlap of training sets or the test-set size sets, or zero)")
     if detectable:
-        text += (f". At the runs made, differences of {min(detectable):.1f}–"
-                 f"{max(detectable):.1f} points were detectable with 80 % power")
+        text += (f". At the runs made, differences of {_span(detectable, '{:.1f}')} points "
+                 "were detectable with 80 % power")
     return text + "."
 
+
+def _span(values: list, form: str) -> str:
+    """``3–7`` of the values, or one value where they are all one."""
+    low, high = form.format(min(values)), form.format(max(values))
+    return low if low == high else f"{low}–{high}"
 
 
 def which_flow(root: Path, m: dict) -> str:
@@ -676,7 +692,7 @@ def which_flow(root: Path, m: dict) -> str:
     lines += ["", "## What it does not show", "", f"- {SHORT_NOTE}",
               "- One window length (L = 5) and one classifier budget; encoders that need "
               "longer windows or more training may rank differently.",
-              f"- {_runs_note(results)}", ""]
+              f"- {_runs_note(part)}", ""]
     return "\n".join(lines)
 
 
@@ -743,7 +759,7 @@ def which_classifier(root: Path, m: dict) -> str:
               "converged; its rows are stored from an earlier run.",
               "- Full classifier specs (every option) are in "
               "`which-classifier/*/results.json`.",
-              f"- {_runs_note(res)}", ""]
+              f"- {_runs_note(images, vectors)}", ""]
     return "\n".join(lines)
 
 
@@ -885,7 +901,7 @@ def real_data(root: Path, m: dict) -> str:
               "- The test sets are small (cyskin-fingers: 6 classes × up to 30; icub-grasp: "
               "half of ~20 trials per class), so intervals are wide; a comparison whose "
               "cells disagree on fewer than 10 distinct recordings gets no verdict.",
-              f"- {_runs_note(parts[0]['results'])}", ""]
+              f"- {_runs_note(*parts)}", ""]
     return "\n".join(lines)
 
 
@@ -1211,12 +1227,27 @@ def findings_text(root: Path) -> str:
     primary, exploratory = findings(root)
     return "\n".join(
         ["**Primary questions**, each named before its run and answered by adding runs "
-         "until it was decided or its budget was spent (α = 0.05 per report over its looks; "
+         "until it was decided or its budget was spent (α = 0.05 per run: each run's "
+         "primary family shares it over its looks, so a report of several runs holds "
+         f"several families, each at 0.05 — {_families_per_report(root)}; "
          "[docs/statistics.md](docs/statistics.md)):", "",
          *(_wrap("- " + f) for f in primary), "",
          "**Exploratory** (every other comparison of the reports: leads for a next "
          "question, not answers; their verdicts are Holm-adjusted within their own "
          "family):", "", *(_wrap("- " + f) for f in exploratory)])
+
+
+def _families_per_report(root: Path) -> str:
+    """``study: 8 primary families, ...``: per report under ``root``, the runs whose
+    results.json holds a primary comparison (each such run a family at α = 0.05)."""
+    out = []
+    for report in sorted(p for p in root.iterdir() if p.is_dir()):
+        n = sum(any(c.get("family") == "primary" for c in
+                    json.loads(f.read_text())["comparisons"])
+                for f in report.glob("*/results.json"))
+        if n:
+            out.append(f"{report.name}: {n}")
+    return "primary families per report " + ", ".join(out)
 
 
 def readme_findings(readme: Path = REPO / "README.md") -> str:
