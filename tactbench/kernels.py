@@ -93,6 +93,7 @@ def pin_cpu_kernels(environ: "dict[str, str] | None" = None) -> str:
     env = os.environ if environ is None else environ
     level = env.get(KERNELS_ENV, "").strip().lower() or default_kernels()
     check_choice(level, KERNELS_ENV, [*KERNEL_LEVELS, NATIVE])
+    _normalise_aten(env)
     env[KERNELS_ENV] = level
     if environ is None and _imported_before_pin is None:
         _imported_before_pin = tuple(m for m in PINNED_LIBRARIES if m in sys.modules)
@@ -107,6 +108,53 @@ def pin_cpu_kernels(environ: "dict[str, str] | None" = None) -> str:
         if value:
             env.setdefault(name, value)
     return level
+
+
+#: The values of ``ATEN_CPU_CAPABILITY`` torch takes (lower case, exactly); any other it
+#: ignores with a warning and computes with the widest kernels the CPU has.
+ATEN_LEVELS = {"default": None, "avx2": "avx2", "avx512": "avx512f", "zvector": None,
+               "vsx": None}
+
+
+def _normalise_aten(env) -> None:
+    """``ATEN_CPU_CAPABILITY`` as torch reads it, before any key is made from it: a value
+    torch would take but for its case or spaces (``AVX2``) is written as torch takes it
+    (``avx2``); one it would ignore (another word, a level this CPU lacks, which torch
+    also passes over for the widest it has) is refused in one line, since a key would
+    name kernels torch does not use."""
+    given = env.get("ATEN_CPU_CAPABILITY")
+    if given is None:
+        return
+    value = given.strip().lower()
+    if value not in ATEN_LEVELS:
+        raise InputError(f"ATEN_CPU_CAPABILITY={given!r} is not a level torch takes "
+                         f"({', '.join(ATEN_LEVELS)}): torch would ignore it and use "
+                         f"{_widest_isa()}; unset it, or set {KERNELS_ENV} (avx2, default, "
+                         f"avx512, native)")
+    flags = _cpu_flags()
+    flag = ATEN_LEVELS[value]
+    if flag is not None and flags is not None and flag not in flags:
+        raise InputError(f"ATEN_CPU_CAPABILITY={given}: this CPU ({cpu_model()}) has no "
+                         f"{flag}, so torch would ignore it and use {_widest_isa()}; unset "
+                         f"it, or use a level this CPU has")
+    env["ATEN_CPU_CAPABILITY"] = value
+
+
+def aten_level(identity_kernels: str) -> str | None:
+    """The ATen level (``avx2``) that a cell identity's ``cpu_kernels`` says torch
+    computes with; None when it names none (an unpinned process)."""
+    if identity_kernels in KERNEL_LEVELS:
+        return KERNEL_LEVELS[identity_kernels][0]
+    if identity_kernels.startswith("custom "):
+        for part in identity_kernels[len("custom "):].split(", "):
+            name, _, value = part.partition("=")
+            if name == "ATEN_CPU_CAPABILITY":
+                return value
+        return None
+    if identity_kernels.startswith("native ") and identity_kernels.endswith(")"):
+        widest = identity_kernels.rsplit("(", 1)[-1][:-1]
+        return widest if widest in ATEN_LEVELS else None  # another architecture: no level
+    return None
 
 
 def kernels_identity(environ: "dict[str, str] | None" = None) -> str:

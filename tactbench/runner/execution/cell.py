@@ -51,7 +51,7 @@ from tactbench.runner.execution.learning import TRAIN_SAMPLE, chance_level, lear
 from tactbench.runner.execution.planning import Cell, Plan
 from tactbench.runner.execution.results import FAILED, OK
 from tactbench.runner.execution.scene import Scene
-from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNELS_ENV, torch_kernels
+from tactbench.kernels import DEFAULT_KERNELS, KERNELS_ENV, aten_level, torch_kernels
 from tactbench.machine import host, machine, versions
 from tactbench.runner.execution.system import MemoryTracker, now
 from tactbench.seeds import derive_seed
@@ -292,9 +292,9 @@ def check_kernels(identity: dict[str, Any]) -> None:
     compute with (a dask worker started without the pin, torch imported before it): its
     numbers would be stored under a key that promises others."""
     wanted = identity.get("cpu_kernels", DEFAULT_KERNELS)
-    level = KERNEL_LEVELS.get(wanted)
+    level = aten_level(wanted)  # a level, a custom ATEN_CPU_CAPABILITY, native's widest
     here = torch_kernels()
-    if level is not None and here is not None and here != level[0].upper():
+    if level is not None and here is not None and here.lower() != level.lower():
         raise RuntimeError(f"this worker's torch computes with {here} kernels, the cell's "
                            f"identity says {wanted}: start the worker with "
                            f"{KERNELS_ENV}={wanted} in its environment (docs/reliability.md)")
