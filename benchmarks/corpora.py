@@ -2,7 +2,8 @@
 peak memory, beside the CoST reader of before (issue 49).
 
     python benchmarks/corpora.py [--json docs/benchmarks/corpora.json] [--before REV]
-                                 [--skip-before] [--keep DIR]
+                                 [--skip-before | --before-from JSON] [--skip-plan]
+                                 [--keep DIR]
 
 Generates, in a temporary folder, a CoST-format CSV of the corpus's real size (31
 subjects × 14 gestures × 3 variants × 6 repetitions = 7 812 captures of 40–160 frames,
@@ -14,7 +15,9 @@ and reading the process's peak resident memory (``wait4``'s ``ru_maxrss``):
   segmented, converted into the store);
 - ``cost cached``: the same again (the file's SHA-256, then the store, verified);
 - ``cost before``: the reader of ``--before`` (default: the commit before issue 49's
-  rewrite), run once, as it was (a Python list per row); ``--skip-before`` leaves it out;
+  rewrite), run once, as it was (a Python list per row); ``--skip-before`` leaves it out,
+  ``--before-from JSON`` takes its row from an earlier run's JSON (said so in the JSON:
+  it is slow, and it does not change);
 - ``haart first`` and ``haart cached``: ``HAART(folder).load()``, the same way.
 
 Then ``tactbench plan`` of the study's flow question (``encoder=raw..encoder=farneback``,
@@ -158,6 +161,7 @@ def main() -> None:
     parser.add_argument("--before", default=BEFORE)
     parser.add_argument("--skip-before", action="store_true")
     parser.add_argument("--skip-plan", action="store_true")
+    parser.add_argument("--before-from", help="take the reader before's row from this JSON")
     parser.add_argument("--keep", help="write the generated files here and keep them")
     args = parser.parse_args()
 
@@ -181,7 +185,11 @@ def main() -> None:
         specs = {"cost": f"cost:path={tmp / 'CoST.csv'}", "haart": f"haart:path={tmp / 'haart'}"}
         plans = [] if args.skip_plan else [plan(specs[c], o, env, tmp / "plan-out")
                                            for c, o in PLANS]
-        if not args.skip_before:
+        if args.before_from:
+            earlier = json.loads(Path(args.before_from).read_text())
+            rows += [{**r, "from": f"{args.before_from} of {earlier['date']}"}
+                     for r in earlier["rows"] if r["what"] == "cost before"]
+        elif not args.skip_before:
             old = subprocess.run(["git", "show", f"{args.before}:tactbench/datasets/cost.py"],
                                  cwd=REPO, capture_output=True, text=True, check=True).stdout
             (tmp / "before").mkdir(exist_ok=True)
@@ -200,6 +208,7 @@ def main() -> None:
            "processor": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
            "python": sys.version.split()[0], "date": time.strftime("%Y-%m-%d"),
            "before": None if args.skip_before else args.before,
+           "before_from": args.before_from,
            "files": {"cost": cost, "haart": haart}, "goals": GOALS, "met": verdict,
            "rows": rows, "plans": plans, "self_peak_rss_mib":
            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}

@@ -13,7 +13,8 @@ other than 64, a row with another number of fields, a reading that is not a numb
 :func:`cached_dataset` converts a file once into tactbench's store
 (:mod:`tactbench.data.store`) under ``cache_dir("datasets")``, keyed by the SHA-256 of
 the files' bytes and the reader's options, so a second load reads the store (verified
-against its content hash) instead of the CSV.
+against its content hash) instead of the CSV. A file's SHA-256 is computed once per
+version of it (:func:`file_digest`: path, size, modification time).
 
 Column names are compared without case and stray spaces (``" ch1"`` is ``ch1``); the
 header row is optional (without one the columns are in the documented order).
@@ -38,7 +39,7 @@ from tactbench.data.dataset import Dataset
 from tactbench.budget import check_budget, human_bytes
 from tactbench.errors import BudgetError, InputError, require
 from tactbench.integrity import check_regular_file
-from tactbench.paths import atomic_folder, cache_dir
+from tactbench.paths import atomic_folder, atomic_write_text, cache_dir
 
 #: Pressure channels of both corpora: the 8 × 8 grid.
 CHANNELS = 64
@@ -179,7 +180,8 @@ def read_table(path: str | Path, *, labels: Sequence[str], numbers: Sequence[str
                              optional)
     numbers = [*numbers, *(n for n in optional if n in roles)]
     internal = [f"c{i}" for i in range(len(roles))]  # the file's own names may repeat
-    types = {c: (pa.string() if r in labels else pa.int64() if r in numbers
+    # whole numbers are read as float64 so that a copy writing 12.0 (MATLAB's export) reads
+    types = {c: (pa.string() if r in labels else pa.float64() if r in numbers
                  else pa.float32()) for c, r in zip(internal, roles)}
     convert = pacsv.ConvertOptions(column_types=types, strings_can_be_null=False,
                                    quoted_strings_can_be_null=False)
@@ -264,7 +266,13 @@ def _gather(out: Table, table, internal: list[str], roles: list[str],
             if col.null_count:
                 row = int(np.flatnonzero(pc.is_null(col).to_numpy(zero_copy_only=False))[0])
                 raise InputError(f"{out.where(row)}: empty {r}")
-            out.numbers[r] = col.to_numpy().astype(np.int64, copy=False)
+            number = col.to_numpy()
+            whole = np.isfinite(number) & (number == np.round(number))
+            if not whole.all():
+                row = int(np.flatnonzero(~whole)[0])
+                raise InputError(f"{out.where(row)}: {r} value {number[row]:g} is not a whole "
+                                 f"number")
+            out.numbers[r] = number.astype(np.int64)
     channels = [c for c, r in zip(internal, roles) if r not in labels and r not in numbers]
     by_channel = np.empty((CHANNELS, n), dtype=np.float32)  # filled a column at a time
     for k, c in enumerate(channels):
@@ -302,16 +310,47 @@ def first_repeat(keys: np.ndarray) -> tuple[int, int] | None:
 
 
 def content_key(paths: Sequence[Path], options: dict) -> str:
-    """SHA-256 of the files' bytes, the reader's version and its options (hex)."""
+    """SHA-256 of the files' bytes (:func:`file_digest`), the reader's version and its
+    options (hex)."""
     h = hashlib.sha256(json.dumps({"reader": READER_VERSION, **options},
                                   sort_keys=True).encode())
     for p in paths:
-        one = hashlib.sha256()
-        with Path(p).open("rb") as fh:
-            for block in iter(lambda: fh.read(1 << 22), b""):
-                one.update(block)
-        h.update(one.digest())
+        h.update(bytes.fromhex(file_digest(Path(p))))
     return h.hexdigest()
+
+
+def file_digest(path: Path) -> str:
+    """The SHA-256 of ``path``'s bytes (hex), computed once per version of the file: it
+    is kept under ``cache_dir("datasets")/digests``, named by the file's absolute path,
+    size, modification time (ns), inode, device and its first and last MiB, so a file
+    changed in any of them is hashed again; an unreadable or damaged record is computed
+    anew."""
+    st = path.stat()
+    with path.open("rb") as fh:
+        ends = hashlib.sha256(fh.read(1 << 20))
+        if st.st_size > 1 << 20:
+            fh.seek(max(1 << 20, st.st_size - (1 << 20)))
+            ends.update(fh.read(1 << 20))
+    stamp = (f"{path.resolve()}\0{st.st_size}\0{st.st_mtime_ns}\0{st.st_ino}\0{st.st_dev}"
+             f"\0{ends.hexdigest()}")
+    record = cache_dir("datasets") / "digests" / hashlib.sha256(stamp.encode()).hexdigest()[:32]
+    try:
+        known = record.read_text(encoding="ascii").strip()
+        if re.fullmatch(r"[0-9a-f]{64}", known):
+            return known
+    except (OSError, UnicodeDecodeError):
+        pass
+    one = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 22), b""):
+            one.update(block)
+    digest = one.hexdigest()
+    try:
+        record.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(record, digest + "\n")
+    except OSError:  # a read-only cache: hashed again next time, nothing lost
+        pass
+    return digest
 
 
 def cached_dataset(kind: str, paths: Sequence[Path], options: dict,

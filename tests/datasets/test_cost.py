@@ -4,6 +4,7 @@ the header, subjects as users, the store's cache, and every refusal naming its l
 
 from __future__ import annotations
 
+import hashlib
 import logging
 
 import numpy as np
@@ -82,6 +83,12 @@ def test_a_capture_is_a_run_of_consecutive_frames(tmp_path):
     assert ds.repetitions.tolist() == [1, 2, 3]
 
 
+def test_gestures_and_frames_as_a_matlab_export_writes_them(tmp_path):
+    lines = [row("3", "normal", "2.0", f"{f}.0") for f in (1, 2)]
+    ds = read_cost_csv(cost_file(tmp_path, lines))
+    assert ds.classes == ("hit",) and ds.lengths().tolist() == [2]
+
+
 def test_gestures_as_numbers_are_the_corpus_names_in_order(tmp_path):
     lines = [r for g in (14, 2, 1) for r in capture("3", "normal", str(g), 2)]
     ds = read_cost_csv(cost_file(tmp_path, lines))
@@ -120,6 +127,11 @@ def test_converted_once_then_read_from_the_store(tmp_path, monkeypatch, caplog):
     assert not caplog.records  # said once
     assert again.content_hash() == first.content_hash()
     assert again.attributes == first.attributes and again.users == first.users
+    digests = list((tmp_path / "cache" / "datasets" / "digests").iterdir())
+    assert len(digests) == 1  # the file's SHA-256, kept for the next load
+    assert digests[0].read_text().strip() == hashlib.sha256(path.read_bytes()).hexdigest()
+    digests[0].write_text("damaged")  # a damaged record is computed anew
+    assert CoST(path=str(path)).load().content_hash() == first.content_hash()
     path.write_text(path.read_text().replace(",gentle,", ",normal,"))  # other content
     assert CoST(path=str(path)).load().attributes["variant"] == ["normal", "rough"]
     assert len(list((tmp_path / "cache" / "datasets").glob("cost-*"))) == 2
@@ -164,6 +176,8 @@ def ok(n=2, **kw):
      HEADER, "line 3: ch2 is inf"),
     ([row("1", "g", "pat", 1), row("1", "g", "pat", "two")], HEADER,
      "line 3: frame value 'two' is not a whole number"),
+    ([row("1", "g", "pat", 1), row("1", "g", "pat", "2.5")], HEADER,
+     "line 3: frame value 2.5 is not a whole number"),
     ([row("1", "g", "pat", 1), row(" ", "g", "pat", 2)], HEADER, "line 3: empty subject"),
     (ok() + capture("1", "g", "cuddle", 2), HEADER,
      "line 4: gesture 'cuddle' is not one of CoST's 14"),
