@@ -83,6 +83,14 @@ def cell_finished(row, out):
 
 
 @hookspec
+def run_finished(report, out):
+    """A run ended and wrote its report (``tactbench run``, :func:`tactbench.runner.run`,
+    and each look's batch of ``run --until answered``): ``report`` is the folder's
+    :class:`~tactbench.runner.presentation.writers.Report` as written, ``out`` the run
+    folder. The place to close what ``cell_finished`` opened (a tracking run)."""
+
+
+@hookspec
 def look_finished(report, out):
     """A look of ``run --until answered`` ended: ``report`` is the folder's
     :class:`~tactbench.runner.presentation.writers.Report` after it, ``out`` the run folder."""

@@ -36,7 +36,7 @@ from tactbench.registry import KIND_HOOKS, Component, PluginInfo, PluginProblem,
 
 ENTRY_POINT_GROUP = "tactbench"
 #: The hooks called while a benchmark runs (:mod:`tactbench.hookspecs`, "events").
-EVENT_HOOKS = ("cell_finished", "look_finished")
+EVENT_HOOKS = ("cell_finished", "run_finished", "look_finished")
 STRICT_ENV = "TACTBENCH_STRICT_PLUGINS"
 
 log = logging.getLogger("tactbench.plugins")

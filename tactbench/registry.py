@@ -127,6 +127,11 @@ class Registry:
         if self._events is not None:
             self._events(event, **arguments)
 
+    def without_events(self) -> "Registry":
+        """This registry's components and plugins, calling no event hook: for work that
+        is not a result to report (``tactbench reproduce``'s check of stored cells)."""
+        return Registry(self.components(), self.plugins, self.problems)
+
     def settle(self) -> None:
         """Wait for the event hooks notified so far, each within its bound, and warn
         about what they did wrong (:mod:`tactbench.events`); nothing for a registry made

@@ -180,6 +180,7 @@ def test_hook_register_commands(plugin_dist):
 
 def _events_plugin(seen):
     return namespace(cell_finished=lambda row, out: seen.append(("cell", row["key"], out)),
+                     run_finished=lambda report, out: seen.append(("run", report, out)),
                      look_finished=lambda report, out: seen.append(("look", report, out)))
 
 
@@ -197,6 +198,14 @@ def test_hook_look_finished(tmp_path):
     reg.notify("look_finished", report="R", out=tmp_path)
     reg.settle()
     assert seen == [("look", "R", tmp_path)]
+
+
+def test_hook_run_finished(tmp_path):
+    seen = []
+    reg = registry_with(("events", _events_plugin(seen)))
+    reg.notify("run_finished", report="R", out=tmp_path)
+    reg.settle()
+    assert seen == [("run", "R", tmp_path)]
 
 
 def test_an_event_hook_that_raises_is_a_warning_and_the_others_still_hear(tmp_path, caplog):
@@ -226,7 +235,7 @@ def hook_names():
 
 def test_every_hook_has_its_own_test():
     hooks = hook_names()
-    assert len(hooks) == 9
+    assert len(hooks) == 10
     missing = [h for h in hooks if f"test_hook_{h}" not in globals()]
     assert not missing, f"hooks without a test: {missing}"
 

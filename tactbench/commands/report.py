@@ -7,7 +7,7 @@ import click
 from tactbench.cli import get_registry
 from tactbench.commands.run import print_report
 from tactbench.errors import require
-from tactbench.runner import render_folder, write_parquet
+from tactbench.runner import render_folder
 from tactbench.runner.presentation.frames import EXTRA
 
 
@@ -42,10 +42,8 @@ def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...],
         require("pandas", EXTRA)
         require("pyarrow", EXTRA)
     report = render_folder(folder, margin=margin, contrasts=contrasts or None,
-                           primary=primary or None,
-                           plots=not no_plots, registry=get_registry())
-    if parquet:
-        report.paths.update(write_parquet(report, folder))
+                           primary=primary or None, plots=not no_plots,
+                           registry=get_registry(), parquet=parquet)
     print_report(report, as_json=as_json, title=f"{folder} · re-rendered from its cells",
                  done=f"{len(report.rows)} cell row(s) read, none computed. Reports in "
                       f"{folder}/ (report.md, results.csv, results.json, plots"

@@ -39,6 +39,7 @@ import click
 from tactbench.cli import get_registry
 from tactbench.errors import InputError
 from tactbench.paths import check_output_folder
+from tactbench.plugins import load_registry
 from tactbench.runner import OK, ResultStore, Scene, ok_rows, run
 from tactbench.runner.execution.planning import row_identity
 from tactbench.runner.execution.results import (IDENTITY_DEFAULTS, identity_differences,
@@ -181,6 +182,9 @@ def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False
     if out:  # new, empty or an earlier reproduction's; never in FOLDER or the cache
         check_output_folder(out, inputs=[folder], ours=_is_part)
     rows = choose(stored_rows(folder), keys, everything)
+    # a check of stored cells, not results: no plugin's event hook (an MLflow export)
+    # hears of them, nor of the temporary folder they are trained in
+    registry = (registry or load_registry()).without_events()
     root = Path(out) if out else Path(tempfile.mkdtemp(prefix="tactbench-reproduce-"))
     try:
         results = []

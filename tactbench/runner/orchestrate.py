@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from tactbench.datasets.loading import load_dataset
-from tactbench.errors import InputError, MissingFileError, TactbenchError
+from tactbench.errors import InputError, MissingFileError, TactbenchError, require
 from tactbench.events import hook_timeout
 from tactbench.integrity import path_kind
 from tactbench.machine import git_revision
@@ -51,6 +51,7 @@ from tactbench.runner.execution.results import (
 from tactbench.runner.execution.scene import Scene, design_of
 from tactbench.runner.execution.questions import check_contrasts
 from tactbench.runner.execution.system import MemoryTracker
+from tactbench.runner.presentation.frames import EXTRA as EXPORT_EXTRA, refresh_parquet
 from tactbench.runner.presentation.writers import Report, make_report, write_report
 from tactbench.ui import Progress
 
@@ -125,7 +126,8 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
             pending += todo
         memory.step("encode")
         run_meta = {"command": command_line(), "git": git_revision(),
-                    "scene": asdict(scene)}
+                    "scene": asdict(scene),  # its relative paths are from cwd
+                    "cwd": str(Path.cwd())}
 
         def finish(row: dict[str, Any]) -> None:
             row["run"] = run_meta
@@ -138,7 +140,6 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 
         if jobs:
             execute(scene, jobs, finish, bars, memory)
-        plans[0].registry.settle()  # the hooks' calls, each within its bound
     claim.unlink(missing_ok=True)
     report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
                          margin=scene.margin,
@@ -147,15 +148,18 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
                          primary=scene.design.primary, sequential=scene.design,
                          resume=resume)
     write_report(scene.out, report, plots=plots)
+    report.paths.update(refresh_parquet(report, scene.out))  # never left stale
     report.computed, report.skipped = len(pending), len(identities) - len(pending)
     report.seconds = time.perf_counter() - start
+    plans[0].registry.notify("run_finished", report=report, out=Path(scene.out))
+    plans[0].registry.settle()  # the hooks' calls, each within its bound
     return report
 
 
 def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                   margin: float | None = None, plots: bool = True,
                   registry=None, primary: Sequence[str] | None = None,
-                  write: bool = True) -> Report:
+                  write: bool = True, parquet: bool = False) -> Report:
     """The report of the run folder ``out`` again, from the rows of ``OUT/cells`` alone,
     written over its results.json, results.csv, report.md and figures; nothing is
     trained, and results.json is not read.
@@ -168,6 +172,9 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     ``registry``) and used when its content hash is the rows'; otherwise they are left
     out and report.md says why. With ``write=False`` nothing is written: the report of
     a folder read as it is (a notebook's, an export's; the folder may be read-only).
+    With ``parquet`` cells.parquet and comparisons.parquet are written too; without it,
+    those already there are written again (or removed where pandas or pyarrow is
+    missing), never left stale (:func:`~tactbench.runner.presentation.frames.refresh_parquet`).
     """
     out = Path(out)
     if not out.is_dir():  # a file, a FIFO, a dangling link: said as what it is
@@ -196,6 +203,9 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     if foreign:
         raise InputError(f"run folder {out} holds a {foreign[0]} tactbench did not write; "
                          f"move it away first (nothing was written)")
+    if write and parquet:  # a missing library: one line before any file is written
+        require("pandas", EXPORT_EXTRA)
+        require("pyarrow", EXPORT_EXTRA)
     scene = latest_scene(rows)
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin
@@ -211,6 +221,7 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                                          if missing else ""))
     if write:
         write_report(out, report, plots=plots)
+        report.paths.update(refresh_parquet(report, out, write=parquet))
     return report
 
 

@@ -401,6 +401,18 @@ def mixed_grids(rows: list[Mapping[str, Any]]) -> str | None:
     return None
 
 
+def grid_identity(row: Mapping[str, Any]) -> dict[str, Any]:
+    """What every cell of the grid of ``row`` shares, read from that one row: its identity
+    fields that are no grid axis (:data:`GRID_AXES`) and take one value across a whole
+    grid (:func:`mixed_grids`; not those of one encoder, classifier, imaging kind or run),
+    each at its default where the row leaves it out. Two grids that one folder held one
+    after the other (its cells removed between them) differ in it unless they differ only
+    in an encoder's version, an input or the imaging."""
+    identity = row_identity(row)
+    return {f: identity.get(f, IDENTITY_DEFAULTS.get(f)) for f in IDENTITY_FIELDS
+            + COMPUTE_FIELDS if f not in GRID_AXES and _scope(f, row) is None}
+
+
 def _row_label(row: Mapping[str, Any]) -> str:
     return (f"{row.get('encoder')} × {str(row.get('classifier')).split(':')[0]} "
             f"L={row.get('L')} seed={row.get('seed')}")

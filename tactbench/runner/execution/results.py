@@ -504,8 +504,9 @@ def run_folder_entries(out: str | Path) -> Callable[[Path], bool]:
 
 def is_run_output(path: Path) -> bool:
     """Whether ``path``, at the top of an out folder, is one a run writes (and may write
-    again): ``cells/``, ``models/``, :data:`OUT_FILES`, ``confusion_*.png``; a report.md
-    only when it begins with :data:`REPORT_HEADER`."""
+    again): ``cells/``, ``models/``, :data:`OUT_FILES`, ``confusion_*.png`` (a file by
+    such a name, never a folder); a report.md only when it begins with
+    :data:`REPORT_HEADER`."""
     name = path.name
     if name in OUT_FOLDERS:
         return path.is_dir() or not path.exists()
@@ -514,4 +515,6 @@ def is_run_output(path: Path) -> bool:
             return False
         with open(path, "rb") as fh:
             return fh.read(len(REPORT_HEADER)) == REPORT_HEADER.encode()
-    return name in OUT_FILES or bool(_CONFUSION.fullmatch(name))
+    if name in OUT_FILES or _CONFUSION.fullmatch(name):
+        return not path.is_dir()  # a folder by a file's name is not what a run wrote
+    return False

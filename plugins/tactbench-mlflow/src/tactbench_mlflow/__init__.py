@@ -2,9 +2,11 @@
 
 - ``tactbench mlflow OUT``: a finished run folder into MLflow (``exporter.export_folder``);
 - while a run runs, with ``TACTBENCH_MLFLOW_URI`` set (a tracking URI): each finished
-  cell (``cell_finished``) and, with ``--until answered``, each look's comparisons
-  (``look_finished``). Without it the hooks do nothing: nothing is logged, and nothing
-  leaves the machine, unless the user names a tracking URI.
+  cell (``cell_finished``), and when the run ends its comparisons, then its parent run
+  ended FINISHED (FAILED where a cell could not be logged) (``run_finished``; with
+  ``--until answered`` each look's too, ``look_finished``). Without it the hooks do
+  nothing: nothing is logged, and nothing leaves the machine, unless the user names a
+  tracking URI.
 """
 
 from __future__ import annotations
@@ -26,17 +28,47 @@ def register_commands(cli):
 
 @hookimpl
 def cell_finished(row, out):
-    uri = os.environ.get(URI_ENV)
-    if uri:
-        from tactbench_mlflow.exporter import Exporter
+    exporter = _live()
+    if exporter is not None:
+        try:
+            exporter.log_cell(out, row)
+        except BaseException:
+            exporter.live_failed = True  # the parent ends FAILED, not FINISHED
+            raise
 
-        Exporter.connect(uri).log_cell(out, row)
+
+@hookimpl
+def run_finished(report, out):
+    """The run's comparisons and each cell's learning judged over its runs, then its
+    parent ended: FINISHED, or FAILED where a cell could not be logged (never left
+    RUNNING)."""
+    _log_report(report, out, cells=True)
 
 
 @hookimpl
 def look_finished(report, out):
-    uri = os.environ.get(URI_ENV)
-    if uri:
-        from tactbench_mlflow.exporter import Exporter
+    _log_report(report, out, cells=False)
 
-        Exporter.connect(uri).log_report(out, report, cells=False)
+
+def _live():
+    """The exporter of ``TACTBENCH_MLFLOW_URI``, or None when it is not set."""
+    uri = os.environ.get(URI_ENV)
+    if not uri:
+        return None
+    from tactbench_mlflow.exporter import Exporter
+
+    return Exporter.connect(uri)
+
+
+def _log_report(report, out, *, cells):
+    exporter = _live()
+    if exporter is None:
+        return
+    try:
+        exporter.log_report(out, report, cells=cells)
+    except BaseException:
+        exporter.live_failed = True
+        raise
+    finally:
+        exporter.end("FAILED" if exporter.live_failed else "FINISHED")
+        exporter.live_failed = False

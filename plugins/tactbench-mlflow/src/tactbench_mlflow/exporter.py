@@ -1,13 +1,18 @@
 """A tactbench run folder as MLflow runs, through MLflow's own client.
 
-One *parent* run per run folder (tag ``tactbench.folder``); under it one run per cell
-(params: the cell's spec; metrics: accuracy, per-class accuracy and costs; tags: the cell
-key, git revision, machine) and one run per paired comparison (metrics: the difference
-B − A, its interval ends, p, Holm p, runs, and the verdict as ``verdict_code``: +1 B
-better, −1 A better, 0 equivalent, NaN unresolved; tags: the verdict and the keys of the
-cells compared). Runs are found again by their keys, so exporting twice adds nothing;
-a cell or comparison whose content changed (a failed cell computed again, a comparison
-with more runs) replaces its run.
+One *parent* run per grid of a run folder (tags ``tactbench.folder`` and
+``tactbench.grid_id``, the digest of :func:`~tactbench.runner.execution.planning.
+grid_identity`: a new grid in a reused folder gets a parent of its own); under it one run
+per cell (params: every field of the cell's identity and its learning status; metrics:
+accuracy, per-class accuracy (:func:`metric_class`), train accuracy, the chance levels
+and costs; tags: the cell key, git revision, machine, the cell's learning judged over its
+runs) and one run per paired comparison (metrics: the difference B − A, its interval
+ends, p, Holm p, runs, and the verdict as ``verdict_code``: +1 B better, −1 A better, 0
+equivalent, NaN unresolved; tags: the verdict and the keys of the cells compared). Runs
+are found again by their keys, so exporting twice adds nothing; a cell or comparison
+whose content changed (a failed cell computed again, a comparison with more runs)
+replaces its run. A parent is RUNNING only while an export or a live-logged run writes
+under it: the end of either, or its failure, ends it (FINISHED, or FAILED).
 """
 
 from __future__ import annotations
@@ -16,25 +21,41 @@ import hashlib
 import json
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any
 
 from tactbench.errors import TactbenchError, require
 from tactbench.machine import describe_machines
 from tactbench.runner import render_folder
-from tactbench.runner.presentation.frames import comparison_record
+from tactbench.runner.execution.learning import cell_learning, row_evidence
+from tactbench.runner.execution.planning import grid_identity, row_identity
 from tactbench.runner.execution.results import row_status
+from tactbench.runner.presentation.frames import comparison_record
+from tactbench.runner.presentation.writers import flat_rows
 
 #: The experiment runs go to unless another is named.
 EXPERIMENT = "tactbench"
 #: What installs the library when it is missing.
 INSTALL = "tactbench-mlflow (with its dependency mlflow-skinny)"
-#: The cell's fields logged as MLflow params.
-CELL_PARAMS = ("dataset", "split", "test_window", "encoder", "classifier", "L", "seed",
-               "profile", "device", "threads", "status", "n_test")
+#: The cell's fields logged as MLflow params (with every identity field of results.csv,
+#: :data:`IDENTITY_PARAMS`).
+CELL_PARAMS = ("device", "status", "n_test", "learning")
+#: Every identity field, as results.csv has it (a field left out at its default shows
+#: the default): cells differing in one (an init seed) never look alike.
+IDENTITY_PARAMS = ("dataset", "dataset_hash", "split", "test_window", "test_per_class",
+                   "imaging", "encoder", "encoder_version", "precision", "classifier",
+                   "profile", "L", "seed", "init_seed", "input", "run_dataset",
+                   "independent_runs", "threads", "cpu_kernels", "schema")
 #: The row's numbers logged as MLflow metrics.
-CELL_METRICS = ("accuracy", "encode_ms_per_frame", "train_s", "inference_ms_per_sequence",
-                "peak_rss_mb")
+CELL_METRICS = ("accuracy", "train_accuracy", "train_chance", "chance_accuracy",
+                "encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "peak_rss_mb")
+#: The tag of a cell's run holding the cell's learning judged over all its runs (the
+#: report's †: learned, did not learn, did not transfer, not above chance).
+CELL_LEARNING_TAG = "tactbench.cell_learning"
+#: What a class name keeps as it is in a metric name (``accuracy_<class>``); every other
+#: character, and ``.``, is written ``.XX`` per UTF-8 byte (:func:`metric_class`).
+_KEPT = re.compile(r"[A-Za-z0-9_\- ]")
 #: The comparison's numbers logged as metrics.
 COMPARISON_METRICS = ("difference", "low", "high", "p", "p_holm", "runs", "accuracy_a",
                       "accuracy_b", "equivalence_p")
@@ -55,6 +76,28 @@ def _digest(value: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def metric_class(name: str) -> str:
+    """A class name as MLflow takes it in a metric name, reversibly
+    (:func:`class_of_metric`): letters, digits, ``_``, ``-`` and spaces kept; every other
+    character, ``.`` included, written ``.XX``, the hex of each of its UTF-8 bytes
+    (``tap+hold`` → ``tap.2Bhold``, ``swipe (left)`` → ``swipe .28left.29``)."""
+    return "".join(ch if _KEPT.fullmatch(ch) else "".join(f".{b:02X}" for b in ch.encode())
+                   for ch in str(name))
+
+
+def class_of_metric(text: str) -> str:
+    """The class name :func:`metric_class` wrote as ``text``."""
+    raw, i = bytearray(), 0
+    while i < len(text):
+        if text[i] == ".":
+            raw.append(int(text[i + 1:i + 3], 16))
+            i += 3
+        else:
+            raw += text[i].encode()
+            i += 1
+    return raw.decode()
+
+
 def _number(value: Any) -> float | None:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return None
@@ -66,7 +109,8 @@ class Exporter:
 
     def __init__(self, client: Any, uri: str, experiment_id: str) -> None:
         self.client, self.uri, self.experiment_id = client, uri, experiment_id
-        self._parents: dict[str, str] = {}
+        self._parents: dict[tuple[str, str], str] = {}
+        self.live_failed = False  # a live-logged cell was refused: its parent ends FAILED
 
     @classmethod
     def connect(cls, uri: str, experiment: str = EXPERIMENT) -> "Exporter":
@@ -91,6 +135,12 @@ class Exporter:
         except Exception as exc:  # MLflow raises many kinds: each is this one line
             raise TrackingError(f"MLflow tracking URI {uri} cannot be used: "
                                 f"{_first_line(exc)}") from None
+        if found is not None and found.lifecycle_stage == "deleted":
+            raise TrackingError(
+                f"MLflow experiment {experiment!r} at {uri} is deleted (id "
+                f"{found.experiment_id}), and a deleted experiment takes no runs: restore it "
+                f"(mlflow experiments restore --experiment-id {found.experiment_id}) or "
+                f"name another experiment; nothing was logged")
         _CONNECTED[key] = cls(client, uri, experiment_id)
         return _CONNECTED[key]
 
@@ -101,17 +151,35 @@ class Exporter:
         return self.client.search_runs([self.experiment_id], filter_string=where,
                                        max_results=1000)
 
-    def parent(self, out: str | Path) -> str:
-        """The id of the parent run of the run folder ``out`` (made when missing)."""
+    def parent(self, out: str | Path, row: dict[str, Any]) -> str:
+        """The id of the parent run of the grid of ``row`` in the run folder ``out``,
+        found by the folder and the grid's identity (made, RUNNING, when missing; found
+        ended, it is RUNNING again while this exporter writes under it)."""
         folder = str(Path(out).resolve())
-        if folder not in self._parents:
-            found = self._find(**{"tactbench.kind": "folder",
-                                  "tactbench.folder_id": _digest(folder)})
-            self._parents[folder] = found[0].info.run_id if found else self._new_run(
-                None, {"mlflow.runName": Path(folder).name, "tactbench.kind": "folder",
-                       "tactbench.folder": folder, "tactbench.folder_id": _digest(folder)},
-                {}, {}, "RUNNING")
-        return self._parents[folder]
+        grid = grid_identity(row)
+        keys = {"tactbench.kind": "folder", "tactbench.folder_id": _digest(folder),
+                "tactbench.grid_id": _digest(grid)}
+        place = (folder, keys["tactbench.grid_id"])
+        if place not in self._parents:
+            found = self._find(**keys)
+            if found:
+                run_id = found[0].info.run_id
+                if found[0].info.status != "RUNNING":
+                    self.client.update_run(run_id, status="RUNNING")
+            else:
+                run_id = self._new_run(None, {
+                    "mlflow.runName": Path(folder).name, "tactbench.folder": folder,
+                    "tactbench.grid": json.dumps(grid, sort_keys=True, default=str)[:5000],
+                    **keys}, {}, {}, "RUNNING")
+            self._parents[place] = run_id
+        return self._parents[place]
+
+    def end(self, status: str = "FINISHED") -> None:
+        """End every parent run this exporter made or found RUNNING (``status``:
+        FINISHED, or FAILED after a refused write), so that none is left RUNNING."""
+        for run_id in self._parents.values():
+            self.client.set_terminated(run_id, status=status)
+        self._parents.clear()
 
     def _new_run(self, parent: str | None, tags: dict[str, str], params: dict[str, Any],
                  metrics: dict[str, float], status: str = "FINISHED") -> str:
@@ -133,51 +201,88 @@ class Exporter:
             raise
         return run_id
 
-    def _upsert(self, parent: str, key_tags: dict[str, str], digest: str, make) -> bool:
+    def _upsert(self, parent: str, key_tags: dict[str, str], digest: str, make
+                ) -> tuple[bool, Any]:
         """Log the run ``make()`` gives ``(tags, params, metrics, status)`` unless a run
         with ``key_tags`` and this ``digest`` is there already; an older one (another
-        digest) is deleted first. Whether a run was logged."""
+        digest) is deleted first. ``(True, None)`` when a run was logged, ``(False, the
+        run there)`` when not."""
         found = self._find(**key_tags, **{"mlflow.parentRunId": parent})
-        if any(r.data.tags.get("tactbench.digest") == digest for r in found):
-            return False
+        same = [r for r in found if r.data.tags.get("tactbench.digest") == digest]
+        if same:
+            return False, same[0]
         for old in found:
             self.client.delete_run(old.info.run_id)
         tags, params, metrics, status = make()
         self._new_run(parent, {**tags, **key_tags, "tactbench.digest": digest}, params,
                       metrics, status)
-        return True
+        return True, None
 
     # ------------------------------------------------------------------ what is logged
 
-    def log_cell(self, out: str | Path, row: dict[str, Any]) -> bool:
-        """The cell ``row`` of the run folder ``out`` as a run under its parent; False
-        when it was logged already (same key, same content)."""
-        parent = self.parent(out)
-        return self._upsert(parent, {"tactbench.kind": "cell",
-                                     "tactbench.cell_key": str(row["key"])},
-                            str(row.get("checksum") or _digest(row)),
-                            lambda: cell_run(row))
+    def log_cell(self, out: str | Path, row: dict[str, Any],
+                 judged: str | None = None) -> bool:
+        """The cell ``row`` of the run folder ``out`` as a run under its grid's parent
+        (``judged``: the cell's learning over all its runs, where known); False when it
+        was logged already (same key, same content)."""
+        parent = self.parent(out, row)
+        logged, there = self._upsert(parent, {"tactbench.kind": "cell",
+                                              "tactbench.cell_key": str(row["key"])},
+                                     str(row.get("checksum") or _digest(row)),
+                                     lambda: cell_run(row, judged))
+        if there is not None and judged is not None \
+                and there.data.tags.get(CELL_LEARNING_TAG) != judged:
+            # the row is the same; the judgement over the cell's runs grew with them
+            self.client.set_tag(there.info.run_id, CELL_LEARNING_TAG, judged)
+        return logged
 
-    def log_comparison(self, out: str | Path, record: dict[str, Any]) -> bool:
-        """One comparison (:func:`tactbench.runner.presentation.frames.comparison_record`) as a run."""
+    def log_comparison(self, out: str | Path, record: dict[str, Any],
+                       row: dict[str, Any]) -> bool:
+        """One comparison (:func:`tactbench.runner.presentation.frames.comparison_record`)
+        as a run under the parent of the grid of ``row``."""
         identity = {k: record[k] for k in ("family", "dataset", "split", "factor", "a",
                                            "b", "encoder", "classifier", "L")}
-        return self._upsert(self.parent(out), {"tactbench.kind": "comparison",
-                                               "tactbench.comparison_key": _digest(identity)},
-                            _digest(record), lambda: comparison_run(record))
+        return self._upsert(self.parent(out, row),
+                            {"tactbench.kind": "comparison",
+                             "tactbench.comparison_key": _digest(identity)},
+                            _digest(record), lambda: comparison_run(record))[0]
 
     def log_report(self, out: str | Path, report: Any, *, cells: bool = True
                    ) -> dict[str, int]:
         """Every row (with ``cells``) and every comparison of ``report``: counts of
         runs ``logged`` and ``unchanged``."""
-        done = [self.log_cell(out, row) for row in report.rows] if cells else []
-        done += [self.log_comparison(out, comparison_record(c, report.rows))
+        if not report.rows:
+            return {"logged": 0, "unchanged": 0}
+        judged = cells_learning(report.rows)
+        done = [self.log_cell(out, row, judged.get(_cell_of(row))) for row in report.rows
+                ] if cells else []
+        done += [self.log_comparison(out, comparison_record(c, report.rows), report.rows[0])
                  for c in report.comparisons]
         return {"logged": sum(done), "unchanged": len(done) - sum(done)}
 
 
-def cell_run(row: dict[str, Any]) -> tuple[dict, dict, dict, str]:
-    """``(tags, params, metrics, status)`` of a cell's run."""
+def _cell_of(row: dict[str, Any]) -> tuple:
+    """The cell a row is a run of (one per seed): its identity but the seed."""
+    return tuple(sorted((k, json.dumps(v, sort_keys=True, default=str))
+                        for k, v in row_identity(row).items() if k != "seed"))
+
+
+def cells_learning(rows: list[dict[str, Any]]) -> dict[tuple, str]:
+    """Each cell's learning judged over all its runs (the report's †:
+    :func:`~tactbench.runner.execution.learning.cell_learning`), by :func:`_cell_of`."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(_cell_of(row), []).append(row)
+    judged = {cell: cell_learning(group) for cell, group in groups.items()}
+    return {cell: j.status for cell, j in judged.items() if j is not None}
+
+
+def cell_run(row: dict[str, Any], judged: str | None = None
+             ) -> tuple[dict, dict, dict, str]:
+    """``(tags, params, metrics, status)`` of a cell's run: params every identity field
+    (as results.csv has it) and the run's learning status, metrics its accuracy, train
+    accuracy, chance levels, ``accuracy_<class>`` (:func:`metric_class`) and costs;
+    ``judged``: the cell's learning over all its runs (tag ``tactbench.cell_learning``)."""
     run = row.get("run") if isinstance(row.get("run"), dict) else {}
     tags = {"mlflow.runName": f"{row.get('encoder')} × {row.get('classifier')} "
                               f"L={row.get('L')} seed={row.get('seed')}",
@@ -186,11 +291,18 @@ def cell_run(row: dict[str, Any]) -> tuple[dict, dict, dict, str]:
             "tactbench.command": str(run.get("command"))[:5000]}
     if "error" in row:
         tags["tactbench.error"] = f"{row['error'].get('type')}: {row['error'].get('message')}"[:5000]
-    params = {k: row[k] for k in CELL_PARAMS if row.get(k) is not None}
+    if judged is not None:
+        tags[CELL_LEARNING_TAG] = judged
+    flat = flat_rows([row])[0]
+    params = {k: flat.get(k) for k in IDENTITY_PARAMS}  # each one, None too: "None"
+    params.update({k: v for k in CELL_PARAMS if (v := flat.get(k, row.get(k))) is not None})
     metrics = {k: v for k in CELL_METRICS if (v := _number(row.get(k))) is not None}
+    evidence = row_evidence(row) if "chance_accuracy" not in metrics else None
+    if evidence is not None:  # a row made before it recorded its chance level
+        metrics["chance_accuracy"] = evidence[2]
     for name, value in (row.get("per_class_accuracy") or {}).items():
         if (number := _number(value)) is not None:
-            metrics[f"accuracy_{name}"] = number
+            metrics[f"accuracy_{metric_class(name)}"] = number
     status = "FINISHED" if row_status(row) == "ok" else "FAILED"
     return tags, params, metrics, status
 
@@ -221,13 +333,23 @@ def export_folder(out: str | Path, uri: str, experiment: str = EXPERIMENT,
     exporter = Exporter.connect(uri, experiment)
     try:
         counts = exporter.log_report(out, report)
-        exporter.client.set_terminated(exporter.parent(out), status="FINISHED")
-    except TactbenchError:
-        raise
-    except Exception as exc:
-        raise TrackingError(f"MLflow tracking URI {uri} refused a run: "
-                            f"{_first_line(exc)}; exporting again finishes it") from None
+    except BaseException as exc:
+        failure = _end_failed(exporter)
+        if isinstance(exc, TactbenchError) or not isinstance(exc, Exception):
+            raise
+        raise TrackingError(f"MLflow tracking URI {uri} refused a run: {_first_line(exc)}; "
+                            f"the runs logged before it are kept, {failure}") from None
+    exporter.end("FINISHED")
     return counts
+
+
+def _end_failed(exporter: Exporter) -> str:
+    """End the exporter's parents FAILED after a refused write; what became of them."""
+    try:
+        exporter.end("FAILED")
+    except Exception as exc:  # the store refuses that too: say so, never that it ended
+        return f"and the folder's parent run could not be ended ({_first_line(exc)})"
+    return "and the folder's parent run is marked FAILED"
 
 
 def _first_line(exc: BaseException) -> str:
