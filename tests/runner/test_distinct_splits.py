@@ -24,6 +24,7 @@ def _rows(seeds=range(6), sessions=4, per=30):
             rows.append(prediction_row(enc, seed, truth, [t if ok else 1 - t for t, ok in
                                                           zip(truth, right)],
                                        indices=indices, split="group:session"))
+            rows[-1]["test_predictions"]["groups"] = [str(session)] * per
     return rows
 
 

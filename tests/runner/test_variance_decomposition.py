@@ -121,7 +121,10 @@ def test_shapes_that_cannot_be_decomposed_are_refused(args, match):
 
 
 def _row(encoder, seed, truth, predicted):
-    return prediction_row(encoder, seed, truth, predicted, split="users", n_train=120)
+    # each split seed tests recordings of its own (a seed repeating a split's test set
+    # would be the same split, counted once: pairing.distinct_splits)
+    return prediction_row(encoder, seed, truth, predicted, split="users", n_train=120,
+                          indices=range(seed * len(truth), (seed + 1) * len(truth)))
 
 
 def _rows(inits, splits=3, users=None):

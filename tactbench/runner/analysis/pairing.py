@@ -241,15 +241,18 @@ def distinct_splits(splits: Mapping[int, list[tuple]], rows: Mapping[tuple, dict
     they drew — the same test recordings (``test_predictions.indices``) and training
     size — so that seeds that repeat a split count once, their runs averaged like init
     seeds of one split (few sessions or people allow few distinct splits: 4 sessions,
-    one left out, give 4). Returns the grouped splits (keyed by each split's first seed)
+    one left out, give 4). Rows that record no test groups are each a split of their
+    own, as before. Returns the grouped splits (keyed by each split's first seed)
     and ``repeats``: seed → the earlier seed whose split it repeats."""
     first: dict[tuple, int] = {}
     out: dict[int, list[tuple]] = {}
     repeats: dict[int, int] = {}
     for seed, keys in splits.items():
         row = rows[keys[0]]
-        indices = (row.get("test_predictions") or {}).get("indices")
-        if not isinstance(indices, list):
+        predictions = row.get("test_predictions") or {}
+        indices = predictions.get("indices")
+        if not isinstance(indices, list) or not isinstance(predictions.get("groups"), list):
+            # rows that record no test groups (made before they did) read as before
             out[seed] = list(keys)
             continue
         identity = (tuple(sorted(int(i) for i in indices)), row.get("n_train"))
