@@ -182,6 +182,19 @@ def test_a_live_logged_run_ends_its_parent_and_carries_learning(live):
         assert logged.data.params["cpu_kernels"] == "avx2"
 
 
+def test_a_live_run_that_never_ends_has_its_parent_ended_at_exit(live, tmp_path,
+                                                                 monkeypatch):
+    out, _, report = live
+    uri = (tmp_path / "mlruns").as_uri()
+    monkeypatch.setenv(URI_ENV, uri)
+    tactbench_mlflow.cell_finished(report.rows[0], out)  # then Ctrl-C: no run_finished
+    (parent,) = runs_of(uri, "folder")
+    assert parent.info.status == "RUNNING"
+    tactbench_mlflow.end_live_parents()  # what the process does at exit
+    (parent,) = runs_of(uri, "folder")
+    assert parent.info.status == "KILLED"
+
+
 def test_a_new_grid_in_a_reused_folder_gets_a_parent_of_its_own(live, tmp_path):
     out, uri, _ = live
     reused = tmp_path / "out"

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import atexit
 import os
 
 from tactbench import hookimpl
@@ -51,13 +52,34 @@ def look_finished(report, out):
 
 
 def _live():
-    """The exporter of ``TACTBENCH_MLFLOW_URI``, or None when it is not set."""
+    """The exporter of ``TACTBENCH_MLFLOW_URI``, or None when it is not set; the first
+    one also has the process end, at exit, what a run that never ended left open."""
     uri = os.environ.get(URI_ENV)
     if not uri:
         return None
     from tactbench_mlflow.exporter import Exporter
 
-    return Exporter.connect(uri)
+    exporter = Exporter.connect(uri)
+    if exporter not in _OPENED:
+        _OPENED.append(exporter)
+        if len(_OPENED) == 1:
+            atexit.register(end_live_parents)
+    return exporter
+
+
+#: The exporters live logging used in this process (see :func:`end_live_parents`).
+_OPENED: list = []
+
+
+def end_live_parents(status: str = "KILLED") -> None:
+    """End, ``status`` (KILLED: the run stopped before it ended: Ctrl-C, an error), every
+    parent a live-logged run opened and did not end (run_finished never came); called
+    at the process's exit. A store that refuses is left as it is: the process is ending."""
+    for exporter in _OPENED:
+        try:
+            exporter.end(status)
+        except Exception:  # noqa: BLE001 — at exit there is no one to tell
+            pass
 
 
 def _log_report(report, out, *, cells):
