@@ -8,7 +8,8 @@ it; planned again from that scene, a cell trained with the default pinned kernel
 the same key on any x86-64 machine with AVX2, and must give the same predictions. Each
 chosen cell ends as one of:
 
-- ``identical``: the same key, every test prediction and the accuracy the same;
+- ``identical``: the same key and every test prediction the same (a row of an older
+  format, without the folds and groups of its predictions, is judged by those it has);
 - ``differs``: the same key, other predictions (how many, and the accuracy before and
   now): this machine does not keep the promise for this cell;
 - ``other identity``: planned here, the cell has another identity, so another key, and
@@ -26,11 +27,12 @@ encoding cache with every other run. Exit status 0 when every chosen cell is ide
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import shutil
 import tempfile
-from dataclasses import fields
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
@@ -41,7 +43,9 @@ from tactbench.errors import InputError
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.runner import OK, ResultStore, Scene, ok_rows, run
-from tactbench.runner.execution.planning import row_identity
+from tactbench.datasets.loading import is_path_spec
+from tactbench.runner.execution.cell import PREDICTION_LISTS
+from tactbench.runner.execution.planning import digest, row_identity
 from tactbench.runner.execution.results import (IDENTITY_DEFAULTS, identity_differences,
                                                 row_scene)
 
@@ -51,9 +55,11 @@ from tactbench.runner.execution.results import (IDENTITY_DEFAULTS, identity_diff
 PLAIN_RUN = {"until": None, "primary": None, "contrasts": None, "margin": None,
              "budget": None, "rerun": True, "save_models": False, "executor": "local",
              "scheduler": None}
-#: The run folders a reproduction makes in ``--out``: part1, part2, ...
+#: The run folders a reproduction makes in ``--out``: ``part-<digest of its scene>``, so
+#: that a later reproduction into the same ``--out`` (other ``--cell`` choices) trains
+#: each grid in its own folder (``part1``, ``part2``, ...: the names of before).
 PART_PREFIX = "part"
-PART = re.compile(PART_PREFIX + r"[1-9][0-9]*")
+PART = re.compile(PART_PREFIX + r"(?:[1-9][0-9]*|-[0-9a-f]{12})")
 IDENTICAL, DIFFERS, OTHER_IDENTITY, CELL_FAILED = ("identical", "differs", "other identity",
                                                    "failed")
 
@@ -113,8 +119,10 @@ def scenes_for(rows: Sequence[dict[str, Any]], out: Path,
         axes = [sorted({c[i] for c in grid}, key=str) for i in range(3)]
         whole = len(grid) == len(axes[0]) * len(axes[1]) * len(axes[2])
         for part in ([group] if whole else [[r] for r in group]):
-            scenes.append((_scene(part, out / f"{PART_PREFIX}{len(scenes) + 1}", workers),
-                           part))
+            scene = _scene(part, out / PART_PREFIX, workers)
+            named = {k: v for k, v in asdict(scene).items() if k not in ("out", "workers")}
+            folder = out / f"{PART_PREFIX}-{digest(named, 12)}"
+            scenes.append((dataclasses.replace(scene, out=str(folder)), part))
     return scenes
 
 
@@ -125,12 +133,39 @@ def _scene(rows: Sequence[dict[str, Any]], out: Path, workers: int | None) -> Sc
     init = rows[0].get("init_seed")
     # the threads the row trained with (a scene of before kept None: "this machine's")
     values.update(PLAIN_RUN, out=str(out), workers=workers,
+                  dataset=dataset_here(rows[0]),
                   threads=rows[0].get("threads") or 1,
                   encoders=_distinct(r["encoder"] for r in rows),
                   classifiers=_distinct(r["classifier"] for r in rows),
                   L=_distinct(r["L"] for r in rows), seeds=[rows[0]["seed"]],
                   init_seeds=None if init is None else [init])
     return Scene.of(values)
+
+
+def dataset_here(row: dict[str, Any]) -> str:
+    """The data set of ``row``'s stored scene as this process can read it: a registered
+    data set's spec as it is; a relative path resolved against the folder its run was
+    started in (``run.cwd``), else against this working folder; else one line saying
+    exactly why it cannot be found."""
+    spec = str(row["run"]["scene"].get("dataset", ""))
+    if not is_path_spec(spec):
+        return spec
+    path = Path(spec).expanduser()
+    started = (row.get("run") or {}).get("cwd")
+    if path.is_absolute():
+        if path.exists():
+            return spec
+        raise InputError(f"cell {row['key']}: its data set {spec} is not on this machine "
+                         f"(no such file or folder); copy it there, or reproduce where it is")
+    for base in ([Path(started)] if isinstance(started, str) else []) + [Path.cwd()]:
+        if (base / path).exists():
+            return str((base / path).resolve())
+    where = (f"the folder its run was started in, {started}" if isinstance(started, str)
+             else "the folder its run was started in, which the row does not record "
+                  "(written before rows kept it)")
+    raise InputError(f"cell {row['key']}: its data set {spec} is a path relative to "
+                     f"{where}, and is found neither there nor from here ({Path.cwd()}); "
+                     f"run reproduce from that folder")
 
 
 def _distinct(values: Iterable[Any]) -> list[Any]:
@@ -158,8 +193,19 @@ def compare(old: dict[str, Any], new: dict[str, Any] | None) -> dict[str, Any]:
     if new["key"] != old["key"]:
         return {**out, "outcome": OTHER_IDENTITY,
                 "identity_differs": identity_difference(old, new)}
-    identical = before == now and old["accuracy"] == new["accuracy"]
-    return {**out, "outcome": IDENTICAL if identical else DIFFERS}
+    return {**out, "outcome": IDENTICAL if same_predictions(before, now) else DIFFERS}
+
+
+def same_predictions(before: dict[str, Any], now: dict[str, Any]) -> bool:
+    """Whether two rows' ``test_predictions`` are the same, test recording by test
+    recording, whatever format each row was stored in: the lists both hold
+    (:data:`~tactbench.runner.execution.cell.PREDICTION_LISTS`; rows of before lack
+    folds and groups) are compared, and indices, labels and predictions must be there."""
+    needed = ("indices", "labels", "predictions")
+    if any(k not in before or k not in now for k in needed):
+        return False
+    return all(list(before[k]) == list(now[k]) for k in PREDICTION_LISTS
+               if k in before and k in now)
 
 
 def identity_difference(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
