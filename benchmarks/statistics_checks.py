@@ -15,6 +15,8 @@ entries are kept), with the command, the machine and the date:
 - ``alpha``: the family-wise error of a family of 3 or 4 primaries when α passes on
   after a rejection (Holm over what remains, futility on and off), with 0 to m − 1 of
   them carrying a real difference.
+- ``disagreement``: the per-run disagreement of the stored reports' primary
+  comparisons (no simulation), beside the no-pilot assumption of ``tactbench plan``.
 - ``learned``: "not learned" (:func:`tactbench.runner.execution.learning.cell_learning`'s
   pooled test over a cell's runs) against the rule before it (any one run within noise of
   chance). A cell of J runs (5, 10, 20), 150 or 400 balanced test recordings of 5 classes
@@ -162,7 +164,28 @@ def alpha_part(reps: int) -> dict:
             "families": reps, "results": out}
 
 
-PARTS = {"learned": learned_part, "futility": futility_part, "alpha": alpha_part}
+def disagreement_part(reps: int) -> dict:
+    """The share of test recordings the two models of each stored primary comparison
+    disagree on, per run (``(a_only + b_only) / (runs · n_test)``, ``n_test`` the runs'
+    largest test set, as ``tactbench plan`` reads a pilot's): what the no-pilot
+    assumption of 30 % is compared with. ``reps`` is unused (no simulation)."""
+    shares = []
+    for path in sorted((REPO / "docs" / "reports").glob("*/*/results.json")):
+        doc = json.loads(path.read_text())
+        n_test = max((r["n_test"] for r in doc["rows"] if r.get("status") == "ok"), default=0)
+        for c in doc["comparisons"]:
+            if c.get("family") == "primary" and n_test and c["runs"]:
+                shares.append({"results": path.relative_to(REPO).as_posix(),
+                               "comparison": f"{c['a']} → {c['b']}",
+                               "share": round((c["a_only"] + c["b_only"])
+                                              / (c["runs"] * n_test), 4)})
+    values = [x["share"] for x in shares]
+    return {"what": "per-run disagreement of the stored primary comparisons",
+            "min": min(values), "max": max(values), "comparisons": shares}
+
+
+PARTS = {"learned": learned_part, "futility": futility_part, "alpha": alpha_part,
+         "disagreement": disagreement_part}
 
 
 def main(argv: list[str] | None = None) -> int:

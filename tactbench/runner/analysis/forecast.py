@@ -16,7 +16,8 @@ the pilot's own disagreement gives (a pilot of identical differences is not "pow
 100 %"). Without one, a cell's time is unknown (said so, with the pilot to run) and a
 comparison's per-run spread is an **assumption**, said with its value: test sampling
 alone with the models disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordings — on
-the stored primaries the observed disagreement was 0–26 %, so it is no bound either way.
+the stored primaries the observed per-run disagreement was 0–32 %, so it is no bound
+either way (`python benchmarks/statistics_checks.py --part disagreement`).
 
 Every comparison of the primary family the run makes is forecast (the family decided by
 :func:`tactbench.runner.analysis.family.primary_family`, the run's own), each at the
@@ -332,7 +333,7 @@ def _spread(found: Comparison | None, n_test: int, effect: float,
             f"assumed, no pilot: the models disagree on {ASSUMED_DISCORDANCE:.0%} of the "
             f"{n_test} test recordings and the spread is test sampling alone; training "
             f"variability adds to it, less disagreement takes from it (on the stored "
-            f"primaries 0–26 %): a pilot of 2–3 runs replaces the assumption")
+            f"primaries 0–32 %): a pilot of 2–3 runs replaces the assumption")
     c = found
     d = list(c.per_run.values())
     df = c.runs - 1
