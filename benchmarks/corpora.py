@@ -165,6 +165,7 @@ def main() -> None:
     parser.add_argument("--keep", help="write the generated files here and keep them")
     args = parser.parse_args()
 
+    load_before = os.getloadavg()  # other jobs on the machine: said beside the numbers
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(args.keep or tmp_name)
         tmp.mkdir(parents=True, exist_ok=True)
@@ -202,11 +203,14 @@ def main() -> None:
     verdict = {"cost_first_s": first["load_s"] <= GOALS["cost_first_s"],
                "cost_first_peak_gib": first["peak_rss_mib"] / 1024 <= GOALS["cost_first_peak_gib"],
                "cost_cached_s": cached["load_s"] <= GOALS["cost_cached_s"]}
+    print(f"load average (1, 5, 15 min) at the start {load_before}, at the end "
+          f"{os.getloadavg()}")
     print("goals: " + ", ".join(f"{k} {'met' if ok else 'MISSED'}" for k, ok in verdict.items()))
     doc = {"benchmark": "corpora", "command": "python benchmarks/corpora.py --json "
            "docs/benchmarks/corpora.json", "machine": platform.platform(),
            "processor": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
            "python": sys.version.split()[0], "date": time.strftime("%Y-%m-%d"),
+           "load_average_1_5_15_min": {"start": load_before, "end": os.getloadavg()},
            "before": None if args.skip_before else args.before,
            "before_from": args.before_from,
            "files": {"cost": cost, "haart": haart}, "goals": GOALS, "met": verdict,
