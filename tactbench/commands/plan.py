@@ -53,6 +53,11 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                    f"runs' are made when they run (their making and encoding is not in the "
                    f"time), and a cell of theirs counts as finished where a stored row of "
                    f"its run's data set has its identity")
+    if f.distinct_splits is not None and f.distinct_splits < f.runs_asked:
+        click.echo(f"warning: the data allow only {f.distinct_splits} distinct splits for "
+                   f"{f.runs_asked} runs: the seeds beyond repeat splits already drawn and "
+                   f"add no evidence (a run counts each split once); the power below is "
+                   f"that of {f.distinct_splits} runs")
     for line in (w for p in f.primaries for w in p.warnings):
         click.echo(f"warning: {line}")
     for p in f.primaries:
@@ -126,7 +131,9 @@ def _print_cache(f) -> None:
         click.echo("cache: every encoding the run needs is already there")
         return
     free = "" if f.cache_free is None else f" ({human_bytes(f.cache_free)} free on its disk)"
-    click.echo(f"cache: about {human_bytes(f.cache_bytes)} of new encodings{free}")
+    runs = (f" (a data set per run: {f.runs_not_made + 1} runs' entries, each sized as the "
+            f"first run's)" if f.independent and f.runs_not_made else "")
+    click.echo(f"cache: about {human_bytes(f.cache_bytes)} of new encodings{runs}{free}")
     if f.cache_free is not None and f.cache_bytes > f.cache_free:
         click.echo("warning: the cache's disk is too small for them, and the run would be "
                    "refused: make room (tactbench cache prune --max-size SIZE) or set "

@@ -86,3 +86,28 @@ def test_the_familys_chance_of_being_answered_is_the_product_of_its_members():
     seq = {"power": 0.3, "wrong_side": 0.0, "equivalent": 0.2}
     assert family_answered([one(0.9, seq), one(0.5)]) == pytest.approx(0.25)
     assert family_answered([]) is None and math.isfinite(family_answered([one(0.0)]))
+
+
+def test_plan_says_when_the_data_allow_fewer_distinct_splits_than_runs(tmp_path, monkeypatch):
+    """Two simulated people, one left out per run: two distinct splits for six runs. The
+    plan says so and forecasts the two the run will count."""
+    import json
+
+    from click.testing import CliRunner
+
+    from tactbench.cli import cli
+
+    monkeypatch.setenv("TACTBENCH_CACHE", str(tmp_path / "cache"))
+    scene = tmp_path / "scene.toml"
+    scene.write_text("test_per_class = 1\n")
+    args = ["plan", "--dataset", "synthetic-forearm:users=2,repetitions=1", "--encoder",
+            "raw", "--encoder", "frame-diff", "--classifier", "logreg:max_iter=20", "-L",
+            "3", "--pixel-mm", "10", "--threads", "1", "--primary",
+            "encoder=raw..encoder=frame-diff", "--split", "users", "--seed", "0-5",
+            "--out", str(tmp_path / "out")]
+    res = CliRunner().invoke(cli, [*args, str(scene)], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    assert "the data allow only 2 distinct splits for 6 runs" in res.output
+    doc = json.loads(CliRunner().invoke(cli, [*args, "--json", str(scene)]).output)
+    assert (doc["distinct_splits"], doc["runs_asked"]) == (2, 6)
+    assert [p["runs"] for p in doc["primaries"]] == [2]

@@ -49,6 +49,7 @@ from tactbench.runner.execution.planning import (
     Cell,
     Plan,
     digest,
+    imaging_identity,
     other_run_identity,
     plan_runs,
     run_datasets,
@@ -131,6 +132,8 @@ class Forecast:
     cache_bytes: int = 0  # the new encodings the run writes to the cache (its first data set's)
     cache_free: int | None = None  # free on the cache's disk (None: it cannot say)
     family_answered: float | None = None  # every primary answered (family_answered)
+    distinct_splits: int | None = None  # the distinct splits the planned seeds draw
+    runs_asked: int = 0  # the runs (seeds) planned
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -159,8 +162,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     planned_s = time.perf_counter() - t0
     pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
     runs = len(scene.seeds)
-    splits = p.split.split(SplitData.of(p.dataset, test_per_class=scene.test_per_class),
-                           seed=scene.seeds[0])
+    data = SplitData.of(p.dataset, test_per_class=scene.test_per_class)
+    splits = p.split.split(data, seed=scene.seeds[0])
     n_test = sum(len(s.test) for s in splits)
     n_train = len(splits[0].train)
     independent = p.run_dataset is not None  # each run its own data set: no overlap
@@ -178,10 +181,15 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     wall = _walls(p, p.cells + others, cells, looks, missing,
                   load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
+    distinct = (_distinct_splits(p, data, scene.seeds) if design == "resampled"
+                and scene.split != "paper" else runs)
     family = _family(p.cells, scene.design.primary, pilot)
     level = alpha / max(1, len(family))  # Holm's first step over the family the run makes
-    primaries = [_primary(name, found, runs, effect / 100, ratio, n_test, level,
-                          len(p.dataset.labels), margin=scene.margin, looks=looks)
+    usable = min(runs, distinct)  # repeated splits add no evidence: the looks stop there
+    capped = None if not looks else [x for x in looks if x < usable] + [usable]
+    primaries = [_primary(name, found, usable, effect / 100, ratio, n_test, level,
+                          len(p.dataset.labels), margin=scene.margin,
+                          looks=capped if capped and capped[0] >= 2 else None)
                  for name, found in family]
     return Forecast(
         cells=cells, seconds=sum(known) if known else None,
@@ -189,12 +197,24 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         peak_mb=max((float(r["peak_rss_mb"]) for r in pilot if r.get("peak_rss_mb")),
                     default=None),
         primaries=primaries, family_answered=family_answered(primaries),
+        distinct_splits=distinct, runs_asked=runs,
 
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
         design=design,
         runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
-        workers=scene.resolved_workers(), cache_bytes=entries_bytes(p, missing),
+        workers=scene.resolved_workers(),
+        cache_bytes=entries_bytes(p, missing) + _other_runs_bytes(p, others, pilot, cache),
         cache_free=_free_bytes(cache.root))
+
+
+def _distinct_splits(p: Plan, data: SplitData, seeds: list[int]) -> int:
+    """How many distinct splits (test recordings of every fold) the planned seeds draw:
+    over few groups (sessions, people) seeds repeat splits, and a run counts a repeated
+    one once (:func:`tactbench.runner.analysis.pairing.distinct_splits`), so the power is
+    that of the distinct splits."""
+    drawn = {tuple(tuple(sorted(int(i) for i in s.test)) for s in p.split.split(data, seed=seed))
+             for seed in seeds}
+    return len(drawn)
 
 
 def family_answered(primaries: list[PrimaryForecast]) -> float | None:
@@ -272,6 +292,31 @@ def _other_runs(first: Plan, specs: dict[int, str], pilot: list[dict[str, Any]]
             out.append(dataclasses.replace(cell, seed=int(seed),
                                            key=min(keys & stored, default="")))
     return out
+
+
+def _other_runs_bytes(first: Plan, others: list[Cell], pilot: list[dict[str, Any]],
+                      cache: EncodingCache) -> int:
+    """The bytes of new encodings the runs after ``first`` add where every run draws its
+    own data set (each run's entries are its own): each run's entries sized as the first
+    run's (its data set is not made here), less those the cache holds for a run's data
+    set a stored row names."""
+    hashes: dict[int, set[str]] = {}
+    for r in pilot:
+        if r.get("run_dataset") and r.get("dataset_hash"):
+            hashes.setdefault(int(r["seed"]), set()).add(r["dataset_hash"])
+    pending: dict[int, dict[tuple[str, str], None]] = {}
+    for c in others:
+        if not c.key:  # not yet computed: its run needs the entry
+            pending.setdefault(c.seed, {})[(c.encoder, first.input_kind[c.classifier])] = None
+    precision = first.scene.resolved_precision()
+    total = 0
+    for seed, pairs in pending.items():
+        missing = [(enc, kind) for enc, kind in pairs
+                   if not any(cache.has(cache.key(h, imaging_identity(first.scene, kind), enc,
+                                                  first.encoder_versions[enc], precision))
+                              for h in hashes.get(seed, ()))]
+        total += entries_bytes(first, missing)
+    return total
 
 
 def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]:
