@@ -214,6 +214,20 @@ def test_a_new_grid_in_a_reused_folder_gets_a_parent_of_its_own(live, tmp_path):
     assert {r.data.tags["tactbench.cell_key"] for r in under} == set(ResultStore(reused).keys())
 
 
+def test_a_parent_logged_before_grids_is_adopted_not_doubled(live, tmp_path):
+    out, _, _ = live
+    uri = (tmp_path / "mlruns").as_uri()
+    exporter.export_folder(out, uri)
+    (parent,) = runs_of(uri, "folder")
+    client = MlflowClient(tracking_uri=uri)
+    for tag in ("tactbench.grid_id", "tactbench.grid"):  # as an earlier version logged it
+        client.delete_tag(parent.info.run_id, tag)
+    exporter.Exporter.connect(uri)._parents.clear()
+    assert exporter.export_folder(out, uri) == {"logged": 0, "unchanged": 5}
+    (again,) = runs_of(uri, "folder")
+    assert again.info.run_id == parent.info.run_id and "tactbench.grid_id" in again.data.tags
+
+
 @pytest.mark.parametrize("name", ["tap+hold", "swipe (left)", "v1.2", "a/b", "..", "ü",
                                   "x%2E", " lead", "tap.2Bhold"])
 def test_class_names_mlflow_refuses_are_mapped_reversibly(name):

@@ -25,6 +25,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import TactbenchError, require
 from tactbench.machine import describe_machines
 from tactbench.runner import render_folder
@@ -161,7 +162,7 @@ class Exporter:
                 "tactbench.grid_id": _digest(grid)}
         place = (folder, keys["tactbench.grid_id"])
         if place not in self._parents:
-            found = self._find(**keys)
+            found = self._find(**keys) or self._legacy_parent(keys, grid)
             if found:
                 run_id = found[0].info.run_id
                 if found[0].info.status != "RUNNING":
@@ -173,6 +174,25 @@ class Exporter:
                     **keys}, {}, {}, "RUNNING")
             self._parents[place] = run_id
         return self._parents[place]
+
+    def _legacy_parent(self, keys: dict[str, str], grid: dict[str, Any]) -> list[Any]:
+        """A parent of this folder logged before parents had a grid (no
+        ``tactbench.grid_id``) whose cell runs are all of ``grid`` (their dataset, split,
+        test window, profile and threads), adopted (given the grid's tags), so that
+        exporting again after an upgrade adds nothing; ``[]`` when there is none."""
+        folder_only = {k: v for k, v in keys.items() if k != "tactbench.grid_id"}
+        for parent in self._find(**folder_only):
+            if "tactbench.grid_id" in parent.data.tags:
+                continue
+            cells = self._find(**{"tactbench.kind": "cell",
+                                  "mlflow.parentRunId": parent.info.run_id})
+            if cells and all(_of_grid(c.data.params, grid) for c in cells):
+                self.client.set_tag(parent.info.run_id, "tactbench.grid_id",
+                                    keys["tactbench.grid_id"])
+                self.client.set_tag(parent.info.run_id, "tactbench.grid",
+                                    json.dumps(grid, sort_keys=True, default=str)[:5000])
+                return [parent]
+        return []
 
     def end(self, status: str = "FINISHED") -> None:
         """End every parent run this exporter made or found RUNNING (``status``:
@@ -259,6 +279,13 @@ class Exporter:
         done += [self.log_comparison(out, comparison_record(c, report.rows), report.rows[0])
                  for c in report.comparisons]
         return {"logged": sum(done), "unchanged": len(done) - sum(done)}
+
+
+def _of_grid(params: dict[str, str], grid: dict[str, Any]) -> bool:
+    """Whether a cell run's params (as logged before parents had a grid) are of ``grid``."""
+    logged = {"test_window": UNNAMED_TEST_WINDOW, "threads": "1", **params}
+    return all(logged.get(f) == str(grid.get(f)) for f in ("dataset", "split", "test_window",
+                                                           "profile", "threads"))
 
 
 def _cell_of(row: dict[str, Any]) -> tuple:
