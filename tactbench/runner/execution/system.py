@@ -5,6 +5,8 @@ memory, host, versions, git revision) are :mod:`tactbench.machine`."""
 from __future__ import annotations
 
 import ast
+import ctypes
+import multiprocessing
 import os
 import re
 import signal
@@ -191,15 +193,11 @@ def end_with_parent() -> None:
     under init with its memory: SIGTERM on the parent's death (Linux ``prctl
     PR_SET_PDEATHSIG``; elsewhere a thread watching the parent), handled by unwinding
     (temporaries removed) and ending."""
-    import multiprocessing
-
     parent_process = multiprocessing.parent_process()
     parent = parent_process.pid if parent_process is not None else os.getppid()
     signal.signal(signal.SIGTERM, _ending)
     armed = False
     if sys.platform.startswith("linux"):
-        import ctypes
-
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             armed = libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) == 0
