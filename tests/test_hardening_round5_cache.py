@@ -166,3 +166,63 @@ def test_the_cache_variable_expands_home_and_variables(tmp_path, monkeypatch):
     out = CliRunner().invoke(cli, ["cache", "ls"])
     assert out.exit_code != 0 and "Traceback" not in out.output
     assert "NO_SUCH_TB_VARIABLE" in out.output and not list(tmp_path.glob("$*"))
+
+
+# -- plans and the room check with a data set per run -----------------------------------
+
+PER_RUN = "synthetic-forearm:users=2,repetitions=1,positions=1,people=per-run"
+
+
+def _per_run_scene(tmp_path, seeds):
+    from tactbench.runner import Scene
+
+    return Scene(dataset=PER_RUN, encoders=["raw"], classifiers=["logreg:max_iter=20"],
+                 L=[3], seeds=seeds, split="users", pixel_mm=15.0, test_per_class=1,
+                 workers=1, out=str(tmp_path / "out"))
+
+
+def _written(cache: EncodingCache) -> int:
+    return sum(e["bytes"] for e in cache.entries())
+
+
+def test_plan_counts_every_runs_data_set(cache, tmp_path):
+    from tactbench.runner.analysis.forecast import forecast
+
+    one = forecast(_per_run_scene(tmp_path, [0])).cache_bytes
+    two = forecast(_per_run_scene(tmp_path, [0, 1])).cache_bytes
+    assert one > 0 and two == 2 * one  # was: the first run's alone
+
+
+@pytest.mark.slow("plans, then runs a grid of three runs, each on a data set of its own")
+def test_a_per_run_grid_writes_what_plan_said(cache, tmp_path):
+    from tactbench.runner import run
+    from tactbench.runner.analysis.forecast import forecast
+
+    said = forecast(_per_run_scene(tmp_path, [0, 1, 2])).cache_bytes
+    run(_per_run_scene(tmp_path, [0, 1, 2]), progress=False, plots=False, cache=cache)
+    assert len(cache.entries()) == 3
+    assert abs(_written(cache) - said) < 0.25 * said  # each run's people differ a little
+
+
+def test_the_room_check_counts_every_runs_data_set_before_writing(cache, tmp_path,
+                                                                  monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    from tactbench.errors import StorageError
+    from tactbench.runner import run
+    from tactbench.runner.analysis.forecast import forecast
+
+    one = forecast(_per_run_scene(tmp_path, [0])).cache_bytes
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 12, 0, int(1.5 * one)))
+    said = CliRunner().invoke(cli, ["plan", "--dataset", PER_RUN, "--encoder", "raw",
+                                    "--classifier", "logreg:max_iter=20", "-L", "3",
+                                    "--seed", "0-2", "--split", "users", "--pixel-mm", "15",
+                                    "--out", str(tmp_path / "out")])
+    assert said.exit_code == 0, said.output
+    assert "a data set per run: 3 runs' entries" in said.output
+    assert "warning: the cache's disk is too small for them" in said.output
+    with pytest.raises(StorageError, match="for 3 runs \\(a data set each\\) need about"):
+        run(_per_run_scene(tmp_path, [0, 1, 2]), progress=False, plots=False, cache=cache)
+    assert cache.entries() == [] and cache.temporaries() == []  # nothing written

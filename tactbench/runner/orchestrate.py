@@ -28,7 +28,8 @@ from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.plugins import load_registry
 from tactbench.runner.analysis.answering import History, first_look_to_run
-from tactbench.runner.execution.cache import EncodingCache, ensure_encodings
+from tactbench.runner.execution.cache import (EncodingCache, check_room_runs,
+                                              ensure_encodings)
 from tactbench.runner.execution.cell import make_jobs, model_problem
 from tactbench.runner.execution.estimate import packed
 from tactbench.runner.execution.executors import execute
@@ -117,9 +118,10 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         identities = {k: v for p in plans for k, v in p.identities.items()}
         claim = store.claim(identities, identities)  # one grid per folder
         models = Path(scene.out) / "models" if scene.save_models else None
+        todos = [(p, _pending(p, store, models, made)) for p in plans]
+        check_room_runs(cache, todos)  # every run's data set, before any entry is written
         pending, jobs = [], []
-        for p in plans:  # one plan, or one per run where each run draws its data set
-            todo = _pending(p, store, models, made)
+        for p, todo in todos:  # one plan, or one per run where each run draws its data set
             if todo or p.dataset is not None:
                 p = with_dataset(p, progress=made)
                 jobs += make_jobs(p, todo, ensure_encodings(p, cache, todo, bars), models)

@@ -469,10 +469,10 @@ def entry_layout(plan_: Plan, enc: str, kind: str) -> tuple[tuple[int, ...], Sto
     (``"images"``: ``(channels, h, w)`` at the scene's imaging; ``"vectors"``:
     ``(C·N,)``), as the run writes it."""
     encoder, precision = plan_.encoders[enc], plan_.scene.resolved_precision()
+    data = _sized(plan_)
     if kind == "vectors":
-        return (vector_width(encoder, plan_.dataset.n_taxels),), \
-            vector_storage(encoder, precision)
-    h, w = plan_.dataset.image_shape(plan_.scene.resolved_pixel_mm(), plan_.scene.imaging)
+        return (vector_width(encoder, data.n_taxels),), vector_storage(encoder, precision)
+    h, w = data.image_shape(plan_.scene.resolved_pixel_mm(), plan_.scene.imaging)
     return (len(tuple(ENCODER.get(encoder, "channels"))), h, w), \
         image_storage(encoder, precision)
 
@@ -480,24 +480,50 @@ def entry_layout(plan_: Plan, enc: str, kind: str) -> tuple[tuple[int, ...], Sto
 def entries_bytes(plan_: Plan, pairs: Sequence[tuple[str, str]]) -> int:
     """Bytes the entries of ``pairs`` ((encoder, input kind)) take on disk (their frames;
     the offsets and ``meta.json`` are a few kB)."""
-    frames = sum(plan_.dataset.lengths())
+    frames = int(sum(_sized(plan_).lengths()))
     return sum(frames * math.prod(shape) * storage.dtype.itemsize
                for shape, storage in (entry_layout(plan_, *pair) for pair in pairs))
 
 
-def check_room(root: Path, plan_: Plan, pairs: Sequence[tuple[str, str]]) -> None:
-    """Refuse before any encoding when the entries of ``pairs`` would not fit on the disk
-    of ``root``: a :class:`StorageError` naming what they need, what is free and how to
-    make room. A disk that cannot say how much is free is not refused here (the write
-    itself says so, as when space runs out meanwhile)."""
-    need = entries_bytes(plan_, pairs)
+def _sized(plan_: Plan) -> Any:
+    """What answers the sizes of ``plan_``'s data set: the data set, or the
+    :class:`~tactbench.runner.execution.planning.DatasetSizes` kept when it was let go."""
+    return plan_.dataset if plan_.dataset is not None else plan_.sizes
+
+
+def check_room_runs(cache: EncodingCache, todo: Sequence[tuple[Plan, Sequence[Cell]]]
+                    ) -> None:
+    """:func:`check_room` for every run of a scene at once (``(plan, its pending cells)``
+    each; one plan a run where every run draws its own data set), before any entry is
+    written: a run is refused whole, not after its first runs' entries."""
+    need: list[tuple[Plan, list[tuple[str, str]]]] = []
+    for p, cells in todo:
+        pairs = dict.fromkeys((c.encoder, p.input_kind[c.classifier]) for c in cells)
+        missing = [pair for pair in pairs if not cache.has(entry_key(p, cache, *pair))]
+        if missing and _sized(p) is not None:
+            need.append((p, missing))
+    if need:
+        check_room(cache.root, need[0][0], [], extra=need)
+
+
+def check_room(root: Path, plan_: Plan, pairs: Sequence[tuple[str, str]], *,
+               extra: Sequence[tuple[Plan, Sequence[tuple[str, str]]]] = ()) -> None:
+    """Refuse before any encoding when the entries of ``pairs`` (and of each plan's pairs
+    in ``extra``: other runs' data sets) would not fit on the disk of ``root``: a
+    :class:`StorageError` naming what they need, what is free and how to make room. A
+    disk that cannot say how much is free is not refused here (the write itself says
+    so, as when space runs out meanwhile)."""
+    need = entries_bytes(plan_, pairs) + sum(entries_bytes(p, ps) for p, ps in extra)
     try:
         free = shutil.disk_usage(root).free
     except OSError:
         return
     if need > free:
+        names = dict.fromkeys(enc for _, ps in [(plan_, pairs), *extra] for enc, _ in ps)
+        runs = len(extra) + bool(pairs)
         raise StorageError(
-            f"the encodings of {', '.join(enc for enc, _ in pairs)} need about "
+            f"the encodings of {', '.join(names)}"
+            f"{f' for {runs} runs (a data set each)' if runs > 1 else ''} need about "
             f"{human_bytes(need)} in {root}, and its disk has {human_bytes(free)} free; "
             f"make room (tactbench cache prune --max-size SIZE) or set TACTBENCH_CACHE to "
             f"a folder on another disk")

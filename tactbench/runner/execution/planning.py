@@ -90,10 +90,44 @@ class Plan:
     split: Any = None  # the scene's split, built (a strategy: tactbench.contracts.SPLIT)
     test_window: Any = None  # the scene's test window, built (TEST_WINDOW)
     run_dataset: str | None = None  # the spec of the run's own data set (plan_runs)
+    #: the sizes of a let-go data set (:class:`DatasetSizes`): what its cache entries take
+    sizes: Any = None
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
         return self.registry.get("classifier", parse_spec(spec)[0])
+
+
+@dataclass(frozen=True)
+class DatasetSizes:
+    """What a data set's cache entries take, kept when a run's own data set is let go
+    (:func:`plan_runs`), so that a run's room check counts every run's entries before
+    any is written: the frames of each sample, the taxels and the image shape at the
+    scene's imaging (None where it has no layout), answered as the data set answers."""
+
+    frames: tuple[int, ...]
+    taxels: int
+    image: tuple[int, int] | None
+
+    @classmethod
+    def of(cls, dataset: Any, scene: Scene) -> "DatasetSizes":
+        try:
+            image = tuple(dataset.image_shape(scene.resolved_pixel_mm(), scene.imaging))
+        except Exception:  # noqa: BLE001 — no layout (vectors only): no image entries
+            image = None
+        return cls(tuple(int(n) for n in dataset.lengths()), int(dataset.n_taxels), image)
+
+    def lengths(self) -> list[int]:
+        return list(self.frames)
+
+    @property
+    def n_taxels(self) -> int:
+        return self.taxels
+
+    def image_shape(self, pixel_mm: float, method: str) -> tuple[int, int]:
+        if self.image is None:
+            raise InputError("this data set has no taxel layout: it has no tactile images")
+        return self.image
 
 
 def digest(obj: Any, n: int = 16) -> str:
@@ -521,9 +555,13 @@ def plan_runs(scene: Scene, registry=None, *, progress=None,
                      run_dataset=spec)]
     # each run's data set is let go once planned (a run's may be hundreds of MB): the
     # step that needs it loads it again from the simulator's cache (with_dataset)
-    return [dataclasses.replace(plan(dataclasses.replace(scene, seeds=[seed]), registry,
-                                     progress=progress, run_dataset=spec), dataset=None)
-            for seed, spec in specs.items()]
+    plans = []
+    for seed, spec in specs.items():
+        p = plan(dataclasses.replace(scene, seeds=[seed]), registry, progress=progress,
+                 run_dataset=spec)
+        plans.append(dataclasses.replace(p, dataset=None,
+                                         sizes=DatasetSizes.of(p.dataset, p.scene)))
+    return plans
 
 
 def other_run_identity(identity: dict[str, Any], seed: int, run_dataset: str,
