@@ -53,11 +53,7 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                    f"runs' are made when they run (their making and encoding is not in the "
                    f"time), and a cell of theirs counts as finished where a stored row of "
                    f"its run's data set has its identity")
-    if f.distinct_splits is not None and f.distinct_splits < f.runs_asked:
-        click.echo(f"warning: the data allow only {f.distinct_splits} distinct splits for "
-                   f"{f.runs_asked} runs: the seeds beyond repeat splits already drawn and "
-                   f"add no evidence (a run counts each split once); the power below is "
-                   f"that of {f.distinct_splits} runs")
+    _print_distinct(f)
     for line in (w for p in f.primaries for w in p.warnings):
         click.echo(f"warning: {line}")
     for p in f.primaries:
@@ -100,6 +96,15 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
                    f"α passed on after a rejection only raises it)")
     if not f.primaries:
         click.echo("no primary comparison (give --primary A..B)", file=sys.stderr)
+
+
+def _print_distinct(f) -> None:
+    """A warning where the data allow fewer distinct splits than the runs planned."""
+    if f.distinct_splits is not None and f.distinct_splits < f.runs_asked:
+        click.echo(f"warning: the data allow only {f.distinct_splits} distinct splits for "
+                   f"{f.runs_asked} runs: the seeds beyond repeat splits already drawn and "
+                   f"add no evidence (a run counts each split once); the power below is "
+                   f"that of {f.distinct_splits} runs")
 
 
 def _print_time(f, out: str) -> None:
