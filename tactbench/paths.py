@@ -41,7 +41,14 @@ def cache_root() -> Path:
     if root:
         return expand_env_path(root, CACHE_ENV)
     xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "tactbench"
+    if xdg:
+        return expand_env_path(xdg, "XDG_CACHE_HOME") / "tactbench"
+    try:
+        home = Path.home()
+    except (RuntimeError, KeyError):  # no HOME and no password entry (a bare container)
+        raise InputError(f"this process has no home folder to keep its cache in (HOME "
+                         f"is not set); set {CACHE_ENV} to a folder") from None
+    return home / ".cache" / "tactbench"
 
 
 def expand_env_path(text: str, name: str) -> Path:

@@ -12,6 +12,7 @@ the functions that use it.
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any, Callable, Iterable, Sequence
 
@@ -143,8 +144,9 @@ def bank_budget_bytes() -> int:
         mib = float(text)
     except ValueError:
         mib = -1.0
-    if not mib >= 0:
-        raise InputError(f"TACTBENCH_BANK_MIB must be a number of MiB ≥ 0, got {text!r}")
+    if not (math.isfinite(mib) and mib >= 0):  # inf, nan: no number of bytes
+        raise InputError(f"TACTBENCH_BANK_MIB must be a finite number of MiB ≥ 0 (unset: "
+                         f"{BANK_BUDGET_BYTES // 2 ** 20}), got {text!r}")
     return int(mib * 2 ** 20)
 
 
@@ -262,6 +264,10 @@ def streamed_mean_std(chunks: Iterable[Any]) -> tuple[Any, Any]:
     return mean, torch.sqrt(m2 / max(n - 1, 1))
 
 
+#: At most this many loader processes (more is a typo, and would start that many).
+MAX_LOADER_WORKERS = 64
+
+
 def loader_workers(device) -> int:
     """DataLoader worker processes that read ahead during a per-batch fit:
     ``$TACTBENCH_LOADER_WORKERS`` when set, else 0 on the CPU (where torch's own
@@ -273,7 +279,8 @@ def loader_workers(device) -> int:
         except ValueError:
             raise InputError(f"TACTBENCH_LOADER_WORKERS must be an integer ≥ 0, "
                              f"got {text!r}") from None
-        return check_positive_int(value, "TACTBENCH_LOADER_WORKERS", minimum=0)
+        return check_positive_int(value, "TACTBENCH_LOADER_WORKERS", minimum=0,
+                                  maximum=MAX_LOADER_WORKERS)
     if getattr(device, "type", "cpu") != "cuda":
         return 0
     return max(0, min(4, (os.cpu_count() or 1) - 1))

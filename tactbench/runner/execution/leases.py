@@ -81,18 +81,34 @@ class Lease:
         self.path: Path | None = None
         self.keys: set[str] = set()
         self._fd: int | None = None
+        self._failed = False
+        self._started = time.time()
 
     def open(self) -> "Lease":
+        """Start the lease; its file is made at the first :meth:`hold` (a run refused
+        before it uses the cache leaves nothing there)."""
+        self._started = time.time()
+        return self
+
+    def _make(self) -> None:
         folder = self.root / LEASES
         name = f"{os.getpid()}-{host_tag()}-{uuid.uuid4().hex[:8]}"
         tmp = folder / f".{name}.tmp"
-        header = {"pid": os.getpid(), "host": host_tag(), "started": time.time(),
+        header = {"pid": os.getpid(), "host": host_tag(), "started": self._started,
                   "command": " ".join(sys.argv)[:500]}
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
-        except OSError:
-            return self  # a read-only cache: nothing can be pruned from it
+        for _ in range(5):  # the folder of leases is removed by the last lease to close
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+                break
+            except FileNotFoundError:
+                continue
+            except OSError:
+                self._failed = True
+                return  # a read-only cache: nothing can be pruned from it
+        else:
+            self._failed = True
+            return
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -100,12 +116,15 @@ class Lease:
         os.write(fd, (json.dumps(header) + "\n").encode())
         os.rename(tmp, folder / f"{name}{_SUFFIX}")  # locked before any pruner sees it
         self._fd, self.path = fd, folder / f"{name}{_SUFFIX}"
-        return self
 
     def hold(self, keys: Iterable[str]) -> None:
         """Add ``keys`` to the lease (call before the entries are checked or written)."""
         new = sorted(set(keys) - self.keys)
-        if self._fd is None or not new:
+        if not new:
+            return
+        if self._fd is None and not self._failed:
+            self._make()
+        if self._fd is None:
             return
         with cache_lock(self.root, exclusive=False):
             os.write(self._fd, "".join(f"{k}\n" for k in new).encode())
@@ -118,6 +137,8 @@ class Lease:
             self.path.unlink(missing_ok=True)
         os.close(self._fd)
         self._fd = None
+        with contextlib.suppress(OSError):  # the last lease: no folder left behind
+            (self.root / LEASES).rmdir()
 
 
 def _lock_free(fd: int) -> bool | None:

@@ -40,7 +40,8 @@ from tactbench.kernels import DEFAULT_KERNELS, kernels_identity, pin_cpu_kernels
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import canonical_classifier
-from tactbench.budget import check_budget
+from tactbench.budget import check_budget, memory_budget_bytes
+from tactbench.classifiers.batching import bank_budget_bytes, loader_workers
 from tactbench.runner.execution.results import IDENTITY_DEFAULTS, INDEPENDENT_RUNS, ROW_MAX_BYTES
 from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
@@ -128,6 +129,16 @@ class DatasetSizes:
         if self.image is None:
             raise InputError("this data set has no taxel layout: it has no tactile images")
         return self.image
+
+
+def check_environment() -> None:
+    """Read now every environment value a run reads later (a cell's memory budget, frame
+    bank and loader workers, in a worker), so that a hostile one (``inf``, ``nan``, a
+    negative, a word) is one line before anything is planned or written, not a
+    traceback or a failed cell after."""
+    memory_budget_bytes()
+    bank_budget_bytes()
+    loader_workers("cpu")
 
 
 def digest(obj: Any, n: int = 16) -> str:
@@ -465,6 +476,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
     """
     registry = registry or load_registry()
     pin_cpu_kernels()  # the kernels every cell of the plan computes with (in its identity)
+    check_environment()  # what cells read later, before anything is written
     # The scene checked itself when it was made; here what needs the plugins and the disk.
     check_output_folder(scene.out, option="out folder", ours=run_folder_entries(scene.out))
     _check_statistics(scene)
