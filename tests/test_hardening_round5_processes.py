@@ -60,6 +60,32 @@ def test_a_notebook_or_python_c_is_not_imported_again(monkeypatch):
     assert main_reimport_problem() is None
 
 
+def _job(thing):
+    from tactbench.runner.execution.planning import Cell
+
+    return types.SimpleNamespace(cell=Cell("raw", "logreg", 3, 0, "k"), thing=thing)
+
+
+def test_a_job_a_worker_could_not_receive_runs_in_this_process(monkeypatch):
+    """A component defined in a notebook (its ``__main__`` has no file to import again)
+    or one that does not pickle: the cells run here instead of failing in workers."""
+    notebook = types.ModuleType("__main__")
+
+    class Encoder:  # as if defined in a notebook cell
+        pass
+
+    Encoder.__module__, Encoder.__qualname__ = "__main__", "Encoder"
+    notebook.Encoder = Encoder
+    monkeypatch.setitem(sys.modules, "__main__", notebook)
+    said = executors.unsendable_problem([_job(Encoder())])
+    assert "defined in this notebook or prompt" in said and "raw × logreg" in said
+    said = executors.unsendable_problem([_job(lambda x: x)])
+    assert "cannot be sent to a worker process" in said
+    assert executors.unsendable_problem([_job(3)]) is None
+    notebook.__file__ = "/somewhere/script.py"  # a script's main is imported again
+    assert executors.unsendable_problem([_job(Encoder())]) is None
+
+
 WORKERS = """\
 import os
 import signal

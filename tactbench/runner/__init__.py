@@ -64,7 +64,8 @@ script that calls ``run`` at its top level without ``if __name__ == "__main__":`
 read from standard input (``python - < script.py``), would run again in every worker (or
 cannot be read again): there the cells run one at a time in the calling process, said in
 one warning line naming the fix; a notebook, ``python -c`` and a guarded script get
-workers. Workers that cannot start, or one that dies while cells run (killed for
+workers (but for cells using something defined in the notebook itself, or that does not
+pickle, which a worker cannot receive: those run in the calling process too, said so). Workers that cannot start, or one that dies while cells run (killed for
 memory), stop the run with a :class:`~tactbench.errors.WorkerError` naming the cause and
 the fix (``workers=1``, fewer workers); the cells finished before are stored, and a run
 again computes the others.

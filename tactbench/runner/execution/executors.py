@@ -27,6 +27,9 @@ from concurrent.futures.process import BrokenProcessPool
 import logging
 import multiprocessing
 import os
+import pickle
+import sys
+import time
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.errors import InputError, WorkerError
@@ -66,12 +69,32 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         run_dask(jobs, finished, workers=workers, scheduler=scene.scheduler)
     elif min(workers, len(jobs)) == 1:
         run_serial(jobs, finished, bars, memory)
-    elif problem:
+    elif problem or (problem := unsendable_problem(jobs)):  # a job no worker could take
         log.warning("tactbench: warning: the %d cells run one at a time in this process, "
                     "not %d at once: %s", len(jobs), min(workers, len(jobs)), problem)
         run_serial(jobs, finished, bars, memory)
     else:
         run_processes(jobs, finished, workers=min(workers, len(jobs)))
+
+
+def unsendable_problem(jobs: Iterable[CellJob]) -> str | None:
+    """Why a job cannot go to a spawned worker process, or None: it does not pickle, or
+    it names an object of a main module the worker cannot import (a class or function
+    defined in a notebook, at a prompt or in ``python -c``: a worker imports a main
+    module only from its file)."""
+    main_file = getattr(sys.modules.get("__main__"), "__file__", None)
+    for job in jobs:
+        try:
+            data = pickle.dumps(job)
+        except Exception as exc:  # noqa: BLE001 — what cannot be pickled varies
+            return (f"cell {job.cell.label()} cannot be sent to a worker process "
+                    f"({type(exc).__name__}: {str(exc)[:120]}); a component that pickles "
+                    f"(defined in a module) runs in workers")
+        if main_file is None and b"__main__" in data:
+            return (f"cell {job.cell.label()} uses something defined in this notebook or "
+                    f"prompt, which a worker process cannot import; define it in a module "
+                    f"to run cells side by side")
+    return None
 
 
 def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
@@ -127,8 +150,11 @@ def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
 
 def _deaths(processes: dict[int, Any]) -> str:
     """How a pool's worker ``processes`` (pid → process) ended, as far as it can be told."""
-    for p in processes.values():
-        p.join(timeout=1)  # a dead worker's exit status is known once it is reaped
+    deadline = time.monotonic() + 2
+    for p in processes.values():  # a dead worker's status is known once it is reaped
+        # (by the pool's own thread, maybe: then it shows once that thread has it)
+        while p.exitcode is None and time.monotonic() < deadline:
+            p.join(timeout=0.05)
     codes = sorted({p.exitcode for p in processes.values() if p.exitcode not in (None, 0)})
     said = [f"killed by signal {-c}" + (" (SIGKILL: the out-of-memory killer?)" if c == -9
                                         else "") if c < 0 else f"exit status {c}"
