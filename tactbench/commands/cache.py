@@ -60,7 +60,8 @@ def cache_ls(as_json: bool) -> None:
 @click.option("--yes", is_flag=True, help="Do not ask.")
 def cache_clear(yes: bool) -> None:
     """Delete every cached encoding and orphaned temporary folder (results in run folders
-    are kept; folders that a running process is writing are left to it)."""
+    are kept; entries a running run uses and folders a running process is writing are
+    left to it)."""
     cache = EncodingCache()
     if not yes and not click.confirm(f"Delete cached encodings in {cache.root}?"):
         return
@@ -87,8 +88,9 @@ def cache_prune(max_size: str | None, unused_for: str | None, dry_run: bool,
                 yes: bool) -> None:
     """Remove the cached encodings a run is least likely to need, least recently used
     first: damaged ones, those unused for --unused-for, then as many as --max-size asks;
-    and orphaned temporary folders. An entry a run used in the last 15 minutes is kept (it
-    may be reading it). A later run that needs a removed entry encodes it again."""
+    and orphaned temporary folders. An entry a running run holds a lease on, or one a run
+    used in the last 15 minutes, is kept (it may be reading it). A later run that needs a
+    removed entry encodes it again."""
     if max_size is None and unused_for is None:
         raise InputError("say what to prune: --max-size SIZE, --unused-for DURATION, "
                          "or both")
