@@ -60,6 +60,21 @@ def test_a_notebook_or_python_c_is_not_imported_again(monkeypatch):
     assert main_reimport_problem() is None
 
 
+def test_python_m_tactbench_is_not_imported_again(monkeypatch):
+    """A package's ``__main__`` calls at its top level, unguarded, but a spawned worker
+    never runs it again (multiprocessing skips ``*.__main__``)."""
+    import importlib.util
+
+    main = types.ModuleType("__main__")
+    main.__spec__ = importlib.util.find_spec("tactbench.__main__")
+    main.__file__ = main.__spec__.origin
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    seen: list = []
+    main.probe = lambda: seen.append(main_reimport_problem())
+    exec(compile("probe()\n", main.__file__, "exec"), vars(main))
+    assert seen == [None]
+
+
 def _job(thing):
     from tactbench.runner.execution.planning import Cell
 

@@ -130,9 +130,12 @@ def main_reimport_problem() -> str | None:
     again; a call from a function or a guarded block is safe."""
     main = sys.modules.get("__main__")
     spec = getattr(main, "__spec__", None)
+    name = getattr(spec, "name", None)
+    if name is not None and (name == "__main__" or name.endswith(".__main__")):
+        return None  # a package's __main__ (python -m tactbench): never imported again
     path = getattr(spec, "origin", None) or getattr(main, "__file__", None)
-    if path is None:
-        return None
+    if path is None or os.path.splitext(os.path.basename(path))[0] == "ipython":
+        return None  # nothing to import again (the ipython launcher: skipped too)
     if not os.path.isfile(path):
         return (f"the main program was read from {path} (standard input?), which a "
                 f"worker process cannot read again; save it to a file, with the call "
