@@ -49,6 +49,8 @@ def test_prune_and_clear_keep_what_a_live_run_holds_a_lease_on(cache):
         assert pruned.exit_code == 0, pruned.output
         assert "kept: inuse" in pruned.output and "in use by a running run" in pruned.output
         assert f"pid {os.getpid()} on this machine" in pruned.output
+        listed = CliRunner().invoke(cli, ["cache", "ls", "--json"])
+        assert '"inuse": "pid' in listed.output and '"idle": "pid' not in listed.output
         assert [e["key"] for e in cache.entries()] == ["inuse"]
         cleared = CliRunner().invoke(cli, ["cache", "clear", "--yes"])
         assert cleared.exit_code == 0, cleared.output

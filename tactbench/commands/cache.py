@@ -24,14 +24,17 @@ def cache_group() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def cache_ls(as_json: bool) -> None:
     """List cached encodings: encoder, dataset, imaging, storage precision, frames, size,
-    state (ok, or damaged: rebuilt by the next run that needs it); then temporary folders
+    state (ok, or damaged: rebuilt by the next run that needs it; and whether a running
+    run uses it, which prune and clear leave alone); then temporary folders
     (being written, or orphaned by a killed process: removed by the next run)."""
     cache = EncodingCache()
     entries = cache.entries()
     temporaries = cache.temporaries()
+    leased = cache.leased()  # key → the running run that uses it
     if as_json:
         click.echo(json_text({"root": str(cache.root), "entries": entries,
-                               "temporaries": temporaries}, indent=2, default=str))
+                               "temporaries": temporaries, "leased": leased},
+                              indent=2, default=str))
         return
     from rich.console import Console
     from rich.table import Table
@@ -46,6 +49,8 @@ def cache_ls(as_json: bool) -> None:
                if imaging.get("kind") == "images" else str(imaging.get("kind", "?")))
         seconds = e.get("encode_seconds", 0)
         state = e["state"] if e["state"] == "ok" else f"damaged: {e.get('problem', '')}"
+        if e["key"] in leased:
+            state += f"; in use by a running run ({leased[e['key']]})"
         table.add_row(e["key"][:12], str(e.get("encoder", "?")), str(e.get("dataset", "?")),
                       img, str(e["precision"]), str(e.get("frames", "?")),
                       f"{e['bytes'] / 2**20:.1f}",
