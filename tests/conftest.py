@@ -14,6 +14,21 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
+def pytest_configure(config):
+    """Under pytest-xdist each worker owns its share of the cores (CPU affinity), so the
+    tests of one worker never slow another's, and a run that sizes itself to this
+    process's cores (``usable_cores``: the default workers, the room check) sees the share
+    it really has, as under a scheduler's CPU limit. Tests that need a process pool ask for
+    one (``workers=2``); the subprocesses of a test inherit its share."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    if not worker.startswith("gw") or count < 2 or not hasattr(os, "sched_setaffinity"):
+        return
+    cores = sorted(os.sched_getaffinity(0))
+    if len(cores) >= count:
+        os.sched_setaffinity(0, cores[int(worker[2:]) % count::count])
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Every slow test says in one line why it cannot be fast: ``@pytest.mark.slow("…")``.

@@ -167,7 +167,31 @@ def check_command(line: str) -> None:
                 raise
 
 
+#: An example that trains (a grid through ``run``, a classifier's ``fit``) takes seconds
+#: to a minute: it runs with the slow tests; every example compiles in the fast suite.
+TRAINS = re.compile(r"(?<![\w.])run\(|\.fit\(")
+
+
+def _example(block: Block):
+    if block.not_run is None and TRAINS.search(block.code):
+        return pytest.param(block, id=block.id, marks=pytest.mark.slow(
+            "the example trains models (a grid or a classifier) in a fresh interpreter"))
+    return pytest.param(block, id=block.id)
+
+
 @pytest.mark.parametrize("block", PYTHON, ids=lambda b: b.id)
+def test_every_python_example_compiles(block):
+    assert compile(block.code, block.id, "exec") is not None
+
+
+def test_the_training_examples_are_told_apart():
+    """The rule that sends an example to the slow tests sees a grid and a fit, not
+    ``plan(`` or a method named ``rerun(``."""
+    assert TRAINS.search("report = run(scene)") and TRAINS.search("clf.fit(x, y)")
+    assert not TRAINS.search("p = plan(scene)") and not TRAINS.search("x.rerun(1)")
+
+
+@pytest.mark.parametrize("block", [_example(b) for b in PYTHON])
 def test_python_example_runs(block, tmp_path):
     code = compile(block.code, block.id, "exec")
     assert code is not None

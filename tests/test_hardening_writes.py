@@ -116,11 +116,20 @@ def _row(key: str, classes: int) -> dict:
             "test_predictions": {"indices": [], "labels": [], "predictions": []}}
 
 
-def test_a_row_too_large_to_read_back_is_a_failed_cell_not_a_gap(tmp_path):
+@pytest.mark.parametrize("limit", [
+    pytest.param(None, id="the-real-limit", marks=pytest.mark.slow(
+        "builds and serialises a confusion matrix over the real 16 MiB row limit")),
+    pytest.param(1 << 16, id="a-64-KiB-limit"),  # the same path at a size that is fast
+])
+def test_a_row_too_large_to_read_back_is_a_failed_cell_not_a_gap(tmp_path, monkeypatch, limit):
+    from tactbench.runner.execution import results
+
+    if limit is not None:
+        monkeypatch.setattr(results, "ROW_MAX_BYTES", limit)
     store = ResultStore(tmp_path)
     small = store.put(_row("k1", 3))
     assert small["status"] == "ok" and store.read("k1")["accuracy"] == 0.5
-    classes = int((ROW_MAX_BYTES / 2) ** 0.5) + 50  # a confusion beyond the limit
+    classes = int((results.ROW_MAX_BYTES / 2) ** 0.5) + 50  # a confusion beyond the limit
     stored = store.put(_row("k2", classes))
     assert stored["status"] == "failed" and "limit" in stored["error"]["message"]
     back = store.read("k2")  # read back sound: reported as a failed cell, retried next

@@ -7,6 +7,8 @@ import json
 import re
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -31,6 +33,7 @@ def test_install_pins_the_cpu_torch():
     assert '"torch==2.13.0"' in readme_commands()["install"]
 
 
+@pytest.mark.slow("recomputes every look of the committed main job from its stored cells (half a minute)")
 def test_the_readmes_main_job_paragraph_is_written_from_the_committed_run():
     """The README states the main job's answer and runs as benchmarks/runner.py writes
     them from docs/results/study-quick: a stale sentence fails here."""

@@ -126,6 +126,7 @@ def test_a_budget_stops_between_looks_and_the_report_says_so(tmp_path, monkeypat
     assert "no batch begun past 1s" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow("adds runs look by look until answered, each run drawing and encoding its own people")
 def test_until_answered_over_runs_that_each_draw_their_people(tmp_path, monkeypatch):
     """people=per-run, two workers: the looks test with ratio 0 (the plain paired t),
     the runs are the looks' seeds, each on a data set of its own, and the same command

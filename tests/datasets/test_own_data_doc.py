@@ -19,6 +19,7 @@ def blocks(kind: str) -> list[str]:
     return re.findall(rf"```{kind}\n(.*?)```", DOC.read_text(), re.S)
 
 
+@pytest.mark.slow("runs the own-data page's worked example as written: several tactbench commands that train")
 def test_the_worked_example_runs_as_written(tmp_path):
     script = blocks("python")[0]
     name = re.match(r"# (\S+\.py)\n", script).group(1)

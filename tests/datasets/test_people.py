@@ -73,6 +73,7 @@ def _logreg(x, y, train, test):
     return LogisticRegression(max_iter=500).fit(z[train], y[train]).predict(z[test])
 
 
+@pytest.mark.slow("trains enough cells on both splits for an accuracy difference to show")
 def test_leaving_people_out_costs_accuracy(reduced):
     ds, x = reduced
     y, users = ds.labels, np.asarray(ds.users)

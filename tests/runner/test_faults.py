@@ -23,7 +23,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 # the tiny grid of tests/runner/conftest.py, with a fast classifier
 SCENE = dict(dataset="synthetic-forearm:users=2,repetitions=1", encoders=["raw", "frame-diff"],
              classifiers=["logreg:max_iter=20"], L=[3], seeds=[0], test_per_class=1,
-             pixel_mm=10.0, threads=1, save_models=True)
+             pixel_mm=10.0, threads=1, workers=1, save_models=True)
 
 
 def _results(rows):
