@@ -239,3 +239,49 @@ def test_workers_of_a_killed_run_end_and_leave_no_temporaries(tmp_path):
     assert all(_gone(pid) for pid in workers), "workers outlived their run"
     left = [p.name for f in folders for p in f.iterdir() if not p.name.startswith("pid-")]
     assert left == [], log.read_text()  # each removed its temporary on its way out
+
+
+WATCHED = """\
+import subprocess, sys, time
+import os
+child = subprocess.Popen([sys.executable, "-c", {child!r}, str(os.getpid())])
+print(child.pid, flush=True)
+time.sleep(60)
+"""
+WATCHER = """\
+import os, signal, sys, threading, time
+from tactbench.runner.execution import system
+parent = int(sys.argv[1])
+def ended(signum, frame):
+    open({marker!r}, "w").write("ended")
+    os._exit(0)
+signal.signal(signal.SIGTERM, ended)
+threading.Thread(target=system._watch_parent, args=(parent,), daemon=True).start()
+print("watching", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_the_watchdog_ends_a_worker_whose_parent_died(tmp_path):
+    """Where no parent-death signal exists, a thread watching the parent ends the worker."""
+    import time
+
+    marker = tmp_path / "ended"
+    parent = subprocess.Popen(
+        [sys.executable, "-c", WATCHED.format(child=WATCHER.format(marker=str(marker)))],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(parent.stdout.readline())
+        assert parent.stdout.readline().strip() == "watching"
+    finally:
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+    deadline = time.monotonic() + 10
+    while not marker.exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert marker.read_text() == "ended"
+    deadline = time.monotonic() + 5
+    while not _gone(child) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _gone(child)
