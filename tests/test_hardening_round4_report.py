@@ -20,6 +20,7 @@ from click.testing import CliRunner
 from tactbench.cli import cli
 from tactbench.encoders.encoding import Storage
 from tactbench.runner.analysis.answering import History
+from tactbench.runner.analysis.comparisons import comparisons
 from tactbench.runner.analysis.forecast import _primary
 from tactbench.runner.execution.planning import digest, mixed_grids, row_identity, row_key_problem
 from tactbench.runner.analysis.power import recordings_for
@@ -157,7 +158,9 @@ def test_a_pilot_of_one_difference_in_every_run_is_no_power_of_100(worse, said):
     a = {"all": [1 - t for t in truth], "none": truth, "two": [1, 0, *truth[2:]]}[worse]
     rows = [prediction_row("raw", s, truth, a) for s in range(3)] + \
         [prediction_row("farneback", s, truth, truth) for s in range(3)]
-    f = _primary("encoder=raw..encoder=farneback", rows, 5, 0.05, 0.25, 10, 0.05, 50)
+    primary = "encoder=raw..encoder=farneback"
+    (found,) = [c for c in comparisons(rows, primary=[primary]) if c.family == "primary"]
+    f = _primary(primary, found, 5, 0.05, 0.25, 10, 0.05, 50)
     assert said in f.sd_source and f.sd > 0 and f.power < 1 and f.detectable > 1
 
 
