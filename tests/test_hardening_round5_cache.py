@@ -59,6 +59,7 @@ def test_prune_and_clear_keep_what_a_live_run_holds_a_lease_on(cache):
     assert cache.prune(max_bytes=0)["removed"][0]["key"] == "inuse"
 
 
+@pytest.mark.slow("runs a two-cell grid (~3 s) and prunes between its cells")
 def test_a_lease_outlives_the_used_mark_through_the_whole_run(cache, tmp_path):
     """A run's entries are leased for its whole life: a prune between its cells (marks
     aged past the recent-use guard) keeps every entry the run uses."""
@@ -69,7 +70,8 @@ def test_a_lease_outlives_the_used_mark_through_the_whole_run(cache, tmp_path):
     def prune_now(row):  # as a neighbour's `cache prune` while the run goes on
         seen.append(cache.prune(max_bytes=0, now=time.time() + 10 * KEEP_RECENT_S))
 
-    scene = Scene(dataset="synthetic-forearm:users=2,repetitions=1", encoders=["raw"],
+    scene = Scene(dataset="synthetic-forearm:users=2,repetitions=1,positions=1",
+                  encoders=["raw"],
                   classifiers=["logreg:max_iter=20"], L=[3], seeds=[0, 1], pixel_mm=10,
                   test_per_class=1, workers=1, out=str(tmp_path / "out"))
     report = run(scene, progress=False, plots=False, on_row=prune_now, cache=cache)
