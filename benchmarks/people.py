@@ -49,7 +49,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from tactbench.machine import benchmark_meta  # noqa: E402
-from tactbench.runner.analysis.statistics import corrected_t  # noqa: E402
+from tactbench.runner import corrected_t  # noqa: E402
 
 from typing import Sequence  # noqa: E402
 

@@ -23,8 +23,7 @@ from pathlib import Path
 
 from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNEL_VARIABLES, KERNELS_ENV
 from tactbench.paths import discard
-from tactbench.runner.execution.planning import digest, row_identity
-from tactbench.runner.execution.results import ResultStore
+from tactbench.runner import ResultStore, digest, row_identity
 
 
 def old_identity(row: dict) -> dict:

@@ -44,16 +44,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from tactbench import machine as facts
-from tactbench.runner import render_folder
-from tactbench.runner.analysis.comparisons import Comparison, plain_t
-from tactbench.runner.execution.scene import DEFAULT_PRIMARY
-from tactbench.runner.analysis.statistics import A_BETTER, B_BETTER, DECIDED, EQUIVALENT
-from tactbench.runner.analysis.summaries import failed_cells
-from tactbench.runner.execution.questions import short_name
-from tactbench.runner.presentation.plots import check_reference
-from tactbench.runner.presentation.tables import (answer_text, comparisons_markdown,
-                                                  looks_markdown, markdown_table)
-from tactbench.runner.presentation.writers import write_report
+from tactbench.runner import (A_BETTER, B_BETTER, Comparison, DECIDED, DEFAULT_PRIMARY, EQUIVALENT,
+                              answer_text, check_reference, comparisons_markdown, failed_cells,
+                              looks_markdown, markdown_table, plain_t, render_folder, short_name,
+                              write_report)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))

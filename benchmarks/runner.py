@@ -112,8 +112,7 @@ def main_job_text(folder: Path) -> str:
     """The README's sentences on the committed main job in ``folder``: its primary
     answer first (the package's own words), the runs it took, each encoding's accuracy,
     the wall time, machine and date."""
-    from tactbench.runner import render_folder
-    from tactbench.runner.presentation.tables import answer_text
+    from tactbench.runner import answer_text, render_folder
 
     report = render_folder(folder, write=False, plots=False)
     [primary] = [c for c in report.comparisons if c.family == "primary"]

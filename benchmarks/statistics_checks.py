@@ -52,7 +52,7 @@ def _rate(hits: np.ndarray) -> dict[str, float]:
 
 def learned_part(reps: int, seed: int = 0) -> dict:
     """Marked-not-learned rates of the pooled rule and the one-run rule it replaces."""
-    from tactbench.runner.execution.learning import pooled_p, within_noise
+    from tactbench.runner import pooled_p, within_noise
 
     rng = np.random.default_rng(seed)
     chance, out = 0.2, []
@@ -81,15 +81,14 @@ LOOKS, SD = (5, 10, 15, 20), 0.03
 def _futility_scene(effect: float, ratio: float, alpha: float, margin: float | None,
                     paths: int) -> dict:
     """One scene's rates: the same simulated paths with futility on and off."""
-    from tactbench.runner.analysis import sequential as seq
-    from tactbench.runner.analysis.power import power
+    from tactbench.runner import DECIDED_CODES, OUTCOMES_FUTILE, power, simulate_paths
 
-    on = seq.simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, margin=margin,
-                            paths=paths, seed=11)
-    off = seq.simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, margin=margin,
-                             paths=paths, seed=11, futility=False)
-    futile_early = np.isin(on[0], seq.OUTCOMES_FUTILE) & (on[1] < LOOKS[-1])
-    decided_off = np.isin(off[0], seq.DECIDED_CODES)
+    on = simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, margin=margin, paths=paths,
+                        seed=11)
+    off = simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, margin=margin, paths=paths,
+                         seed=11, futility=False)
+    futile_early = np.isin(on[0], OUTCOMES_FUTILE) & (on[1] < LOOKS[-1])
+    decided_off = np.isin(off[0], DECIDED_CODES)
     given_up = futile_early & decided_off
     return {"effect_points": round(100 * effect, 3), "ratio": ratio, "alpha": round(alpha, 5),
             "margin_points": None if margin is None else 100 * margin,
@@ -105,7 +104,7 @@ def _futility_scene(effect: float, ratio: float, alpha: float, margin: float | N
 def futility_part(reps: int) -> dict:
     """Futility's error rates over scenes: overlap ratios 0.1–0.8, a comparison's level
     (α, α/3, α/4 of 0.05), true differences from none to 95 % fixed-design power."""
-    from tactbench.runner.analysis.power import detectable_effect
+    from tactbench.runner import detectable_effect
 
     out = []
     for ratio in (0.1, 0.25, 0.5, 0.8):
@@ -128,8 +127,7 @@ def _family_error(m: int, real: int, families: int, futility: bool, seed: int) -
     power by a fixed design of 20 runs at α/m, the others none: the share of families
     declaring any of the others better or worse (the family-wise error), through the
     package's own looks (:func:`~tactbench.runner.analysis.sequential.family_look`)."""
-    from tactbench.runner.analysis.power import detectable_effect
-    from tactbench.runner.analysis.sequential import A_BETTER, B_BETTER, FamilyState, family_look
+    from tactbench.runner import A_BETTER, B_BETTER, FamilyState, detectable_effect, family_look
 
     rng, ratio, alpha = np.random.default_rng(seed), 0.25, 0.05
     effect = detectable_effect(SD, ratio, LOOKS[-1], alpha=alpha / m, target=0.95)

@@ -69,9 +69,7 @@ import numpy as np
 
 from tactbench.plugins import load_registry
 from tactbench.profiles import canonical_classifier
-from tactbench.runner import ResultStore, ok_rows
-from tactbench.runner.analysis.comparisons import comparisons
-from tactbench.runner.presentation.writers import training_cpu_seconds
+from tactbench.runner import ResultStore, comparisons, ok_rows, training_cpu_seconds
 
 GESTURES = ("grasp", "2h-grasp", "twist", "push", "pull")
 

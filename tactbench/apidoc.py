@@ -7,9 +7,9 @@ a name changes nothing here): the hooks (:mod:`tactbench.hookspecs`), the compon
 contracts (:mod:`tactbench.contracts`), the conformance suites (:mod:`tactbench.testing`)
 and the data types a dataset or sensor builds (:mod:`tactbench.data.recording`,
 :mod:`tactbench.data.normalisation`, :mod:`tactbench.data.dataset`); and, beside them,
-what a researcher types in a notebook (:data:`NOTEBOOK`: a few names of
-:mod:`tactbench.runner`, with the example of its docstring, which
-``tests/test_doc_examples.py`` runs).
+the runner's public face (:data:`FACADE`: every name of :mod:`tactbench.runner`'s
+``__all__``, what a notebook, a command, a benchmark script or a plugin uses, with the
+example of its docstring, which ``tests/test_doc_examples.py`` runs).
 
 What is documented, per module: its docstring; then each public name (``__all__`` when
 the module has one, else every function and class defined there whose name has no
@@ -45,11 +45,10 @@ MODULES: tuple[tuple[str, str], ...] = (
     ("tactbench.data.dataset", "the labelled set a dataset plugin returns"),
 )
 
-#: The notebook API: the module, what it is for, and the names documented (its
-#: docstring's ``.. code-block:: python`` example is run by tests/test_doc_examples.py).
-NOTEBOOK = ("tactbench.runner", "the notebook API, a benchmark from Python",
-            ("Scene", "run", "Report", "render_folder", "cells_frame", "comparisons_frame",
-             "write_parquet"))
+#: The runner's public face, documented whole (its ``__all__``): the module and what it is
+#: for (its docstring's ``.. code-block:: python`` example is run by
+#: tests/test_doc_examples.py).
+FACADE = ("tactbench.runner", "the runner's public API, a benchmark from Python")
 
 #: The line before each example fence, by which tests/test_doc_examples.py finds it.
 EXAMPLE_MARK = "<!-- example: a docstring's, run by tests/test_doc_examples.py -->"
@@ -59,8 +58,9 @@ HEADER = """# API reference for plugin authors
 Generated from the docstrings by `python -m tactbench.apidoc --write`; the test suite
 fails when this file is stale. How to write and package a plugin is in
 [plugins.md](plugins.md); this page is the reference for the names it uses. The last
-section is for a researcher in a notebook: a benchmark run from Python, its report and
-its rows as a table.
+section is the runner's public face: a benchmark run from Python (in a notebook), its
+report and its rows as a table, and every runner name the commands, the benchmark
+scripts and plugins use.
 """
 
 
@@ -324,14 +324,13 @@ def _indent_more(text: str) -> str:
 def render() -> str:
     """The whole reference as Markdown."""
     toc, sections = [], []
-    for name, purpose, only in [(*m, None) for m in MODULES] + [NOTEBOOK]:
+    for name, purpose in [*MODULES, FACADE]:
         module = importlib.import_module(name)
         title = f"`{name}`: {purpose}"
         toc.append(f"- [{title}](#{_slug(title)})")
         parts = [f"## {title}", "", markdown(module.__doc__), ""]
         for item, obj, comment in public_names(module):
-            if only is None or item in only:
-                parts += _item(name, item, obj, comment)
+            parts += _item(name, item, obj, comment)
         sections.append("\n".join(parts).rstrip() + "\n")
     text = "\n".join([HEADER, "\n".join(toc) + "\n", *sections])
     return re.sub(r"\n{3,}", "\n\n", text)

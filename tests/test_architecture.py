@@ -361,3 +361,51 @@ def test_the_room_rule_sees_a_wrong_arrow():
     assert room_of("tactbench.runner.execution.cell") == "execution"
     assert room_of("tactbench.runner.orchestrate") is None
     assert "presentation" not in ROOM_MAY_IMPORT["analysis"]
+
+
+# ------------------------------------------------------------------ the public face
+
+#: Code outside the runner that is held to its public face: the package's other modules,
+#: the benchmark scripts and the plugins shipped beside it (the tests of the rooms may
+#: reach inside them).
+OUTSIDE_THE_RUNNER = sorted(
+    [p for m, p in MODULES.items() if stage_of(m) != "runner"] + BENCHMARKS
+    + list((REPO / "plugins").glob("*/src/**/*.py")))
+
+
+def deep_runner_imports(path: Path) -> list[str]:
+    """``line: module`` for each import of ``path`` that reaches inside the runner (any
+    module under ``tactbench.runner`` but the package, its public face)."""
+    return [f"{line}: {target}" for target, _, line in imports_of(path)
+            if target.startswith("tactbench.runner.")]
+
+
+def test_the_deep_import_finder_sees_one(tmp_path):
+    (tmp_path / "m.py").write_text(
+        "from tactbench.runner import Scene, run\n"
+        "def f():\n    from tactbench.runner.analysis.power import power\n"
+        "from tactbench.runner import orchestrate\n")
+    assert deep_runner_imports(tmp_path / "m.py") == [
+        "3: tactbench.runner.analysis.power", "4: tactbench.runner.orchestrate"]
+
+
+def test_nothing_outside_the_runner_imports_a_room():
+    """Commands, benchmarks, plugins and the package's other modules import the runner's
+    names from ``tactbench.runner`` (its ``__all__``), never from a room's module, so the
+    rooms can be rearranged behind that face."""
+    assert any(p.parts[-2] == "tactbench_mlflow" for p in OUTSIDE_THE_RUNNER)
+    assert REPO / "tactbench" / "commands" / "run.py" in OUTSIDE_THE_RUNNER
+    wrong = [f"{path.relative_to(REPO).as_posix()}:{hit}" for path in OUTSIDE_THE_RUNNER
+             for hit in deep_runner_imports(path)]
+    assert not wrong, "a runner room imported from outside the runner (import it from " \
+                      "tactbench.runner, adding it to __all__): " + "; ".join(wrong)
+
+
+def test_the_public_face_exports_what_it_imports():
+    """Every name of ``tactbench.runner.__all__`` is there, once (docs/api.md documents
+    them all: tactbench.apidoc)."""
+    import tactbench.runner as runner
+
+    assert len(set(runner.__all__)) == len(runner.__all__)
+    missing = [n for n in runner.__all__ if not hasattr(runner, n)]
+    assert not missing, missing

@@ -9,9 +9,7 @@ import click
 from tactbench.budget import human_bytes, parse_bytes
 from tactbench.cli import json_text
 from tactbench.errors import InputError
-from tactbench.runner import EncodingCache
-from tactbench.runner.execution.cache import KEEP_RECENT_S
-from tactbench.runner.execution.scene import parse_duration, show_duration
+from tactbench.runner import EncodingCache, KEEP_RECENT_S, parse_duration, show_duration
 
 
 @click.group("cache")

@@ -9,7 +9,7 @@ import click
 from tactbench.budget import human_bytes
 from tactbench.cli import get_registry, json_text
 from tactbench.commands.run import scene_from, scene_options
-from tactbench.runner.analysis.forecast import forecast, points
+from tactbench.runner import forecast, points
 
 
 @click.command("plan")

@@ -39,15 +39,12 @@ from typing import Any, Iterable, Sequence
 import click
 
 from tactbench.cli import get_registry
+from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
-from tactbench.runner import OK, ResultStore, Scene, ok_rows, run
-from tactbench.datasets.loading import is_path_spec
-from tactbench.runner.execution.cell import PREDICTION_LISTS
-from tactbench.runner.execution.planning import digest, row_identity
-from tactbench.runner.execution.results import (IDENTITY_DEFAULTS, identity_differences,
-                                                row_scene)
+from tactbench.runner import (IDENTITY_DEFAULTS, OK, PREDICTION_LISTS, ResultStore, Scene, digest,
+                              identity_differences, ok_rows, row_identity, row_scene, run)
 
 #: The stored scene's fields a reproduction sets itself: one plain run of the chosen
 #: cells, in its own folder, with no question asked of them.

@@ -10,20 +10,10 @@ import click
 
 from tactbench.cli import get_registry, json_text
 from tactbench.profiles import PRECISIONS, PROFILE_NAMES, get_profile
-from tactbench.runner import Report, Scene, load_scene_file, run, run_until
-from tactbench.runner.execution.scene import (
-    DEFAULT_PRIMARY,
-    EXECUTORS,
-    FIRST_LOOK,
-    INPUT_KINDS,
-    UNTIL,
-    parse_lengths,
-    parse_seeds,
-    show_duration,
-)
-from tactbench.runner.analysis.summaries import failed_cells
-from tactbench.runner.presentation.tables import (answer_text, labels_for, print_comparisons,
-                                                  print_table)
+from tactbench.runner import (DEFAULT_PRIMARY, EXECUTORS, FIRST_LOOK, INPUT_KINDS, Report, Scene,
+                              UNTIL, answer_text, failed_cells, labels_for, load_scene_file,
+                              parse_lengths, parse_seeds, print_comparisons, print_table, run,
+                              run_until, show_duration)
 
 
 #: Scene fields that only mean something with ``--until``.
@@ -169,6 +159,10 @@ SCENE_OPTIONS = [
                  help="A confirmatory comparison (contrast syntax), repeatable: the primary "
                       "questions form their own family (Holm) and lead the report; the "
                       "other comparisons are exploratory."),
+    scene_option("--paired-test", field="paired_test", metavar="NAME", none="corrected-t",
+                 help="The paired test every comparison's p and interval come from (a "
+                      "registered one, `tactbench list`); refused for designs it does not "
+                      "declare (wilcoxon: fixed splits and independent runs, no --until)."),
     scene_option("--until", field="until", type=click.Choice(UNTIL),
                  none="the seeds given, once",
                  help=f"answered: run the seeds in batches (the first look after "

@@ -77,27 +77,71 @@ sequential looks; it reads execution's records) and :mod:`tactbench.runner.prese
 (tables, figures, report files, data frames; it reads both). Beside them,
 :mod:`~tactbench.runner.orchestrate` composes the three into :func:`run`,
 :func:`run_until` and :func:`render_folder`.
+
+This package is the runner's one public face: the names below (``__all__``) are what
+the commands, the benchmark scripts, plugins and notebooks use, and the only runner
+names they import (``tests/test_architecture.py`` fails on an import of a room's module
+from outside the runner), so the rooms can be rearranged behind them. What an event
+hook receives is a plain record, documented with the hooks (:mod:`tactbench.hookspecs`):
+a cell's row as stored, a look's comparisons (:func:`comparison_record` each), a run's
+summary.
 """
 
 from tactbench.machine import git_revision
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
-from tactbench.runner.execution.cache import EncodingCache, ensure_encodings
-from tactbench.runner.execution.cell import CellJob, failed_row, make_jobs, run_cell
+from tactbench.runner.analysis.comparisons import Comparison, comparisons, plain_t
+from tactbench.runner.analysis.forecast import forecast, points
+from tactbench.runner.analysis.power import detectable_effect, power
+from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
+                                                  family_look, simulate_paths)
+from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
+                                                  corrected_t)
+from tactbench.runner.analysis.summaries import failed_cells
+from tactbench.runner.execution.cache import KEEP_RECENT_S, EncodingCache, ensure_encodings
+from tactbench.runner.execution.cell import (PREDICTION_LISTS, CellJob, failed_row, make_jobs,
+                                             run_cell)
 from tactbench.runner.execution.entries import load_encoding
-from tactbench.runner.presentation.frames import cells_frame, comparisons_frame, write_parquet
+from tactbench.runner.execution.learning import cell_learning, pooled_p, row_evidence, within_noise
+from tactbench.runner.execution.planning import (ROW_SCHEMA, Cell, Plan, digest, grid_identity,
+                                                 plan, row_identity)
+from tactbench.runner.execution.questions import short_name
+from tactbench.runner.execution.results import (FAILED, IDENTITY_DEFAULTS, OK, ResultStore,
+                                                failed_rows, identity_differences, ok_rows,
+                                                row_scene, row_status)
+from tactbench.runner.execution.scene import (DEFAULT_PRIMARY, EXECUTORS, FIRST_LOOK,
+                                              INPUT_KINDS, UNTIL, Scene, load_scene_file,
+                                              parse_duration, parse_lengths, parse_seeds,
+                                              show_duration)
 from tactbench.runner.orchestrate import render_folder, run, run_until
-from tactbench.runner.execution.planning import ROW_SCHEMA, Cell, Plan, plan
-from tactbench.runner.execution.results import (FAILED, OK, ResultStore, failed_rows, ok_rows,
-                                                row_status)
-from tactbench.runner.execution.scene import EXECUTORS, Scene, load_scene_file, parse_lengths
-from tactbench.runner.presentation.writers import Report
+from tactbench.runner.presentation.frames import (EXTRA as EXPORT_EXTRA, cells_frame,
+                                                  comparison_record, comparisons_frame,
+                                                  write_parquet)
+from tactbench.runner.presentation.plots import check_reference
+from tactbench.runner.presentation.tables import (answer_text, comparisons_markdown, labels_for,
+                                                  looks_markdown, markdown_table,
+                                                  print_comparisons, print_table, verdict_text)
+from tactbench.runner.presentation.writers import (Report, flat_rows, training_cpu_seconds,
+                                                   write_report)
 
 __all__ = [
-    "Scene", "EXECUTORS", "load_scene_file", "parse_lengths",
-    "plan", "Plan", "Cell", "ROW_SCHEMA",
-    "EncodingCache", "ensure_encodings", "load_encoding",
-    "CellJob", "make_jobs", "run_cell", "failed_row",
-    "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows",
+    # a run: its scene, its plan, running it, its report again
+    "Scene", "EXECUTORS", "UNTIL", "FIRST_LOOK", "INPUT_KINDS", "DEFAULT_PRIMARY",
+    "load_scene_file", "parse_lengths", "parse_seeds", "parse_duration", "show_duration",
+    "plan", "Plan", "Cell", "ROW_SCHEMA", "forecast", "points",
+    "EncodingCache", "KEEP_RECENT_S", "ensure_encodings", "load_encoding",
+    "CellJob", "make_jobs", "run_cell", "failed_row", "PREDICTION_LISTS",
     "run", "run_until", "render_folder", "Report", "git_revision",
-    "cells_frame", "comparisons_frame", "write_parquet",
+    # the rows: the store, a row's status, identity and learning
+    "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows", "failed_cells",
+    "digest", "row_identity", "grid_identity", "IDENTITY_DEFAULTS", "identity_differences",
+    "row_scene", "cell_learning", "row_evidence", "pooled_p", "within_noise",
+    # the statistics: comparisons, their verdicts, power and the sequential looks
+    "Comparison", "comparisons", "plain_t", "corrected_t", "A_BETTER", "B_BETTER",
+    "EQUIVALENT", "DECIDED", "power", "detectable_effect", "FamilyState", "family_look",
+    "simulate_paths", "OUTCOMES_FUTILE", "DECIDED_CODES",
+    # what a report shows: names, words, tables, files, data frames
+    "short_name", "labels_for", "verdict_text", "answer_text", "markdown_table",
+    "comparisons_markdown", "looks_markdown", "print_table", "print_comparisons",
+    "write_report", "check_reference", "flat_rows", "training_cpu_seconds",
+    "comparison_record", "cells_frame", "comparisons_frame", "write_parquet", "EXPORT_EXTRA",
 ]

@@ -28,12 +28,8 @@ from typing import Any
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import TactbenchError, require
 from tactbench.machine import describe_machines
-from tactbench.runner import render_folder
-from tactbench.runner.execution.learning import cell_learning, row_evidence
-from tactbench.runner.execution.planning import grid_identity, row_identity
-from tactbench.runner.execution.results import row_status
-from tactbench.runner.presentation.frames import comparison_record
-from tactbench.runner.presentation.writers import flat_rows
+from tactbench.runner import (cell_learning, comparison_record, flat_rows, grid_identity,
+                              render_folder, row_evidence, row_identity, row_status)
 
 #: The experiment runs go to unless another is named.
 EXPERIMENT = "tactbench"
