@@ -46,7 +46,9 @@ from tactbench.data.splits import (
 from tactbench.data.windows import UNNAMED_TEST_WINDOW, Windows, check_windows
 from tactbench.errors import TactbenchError
 from tactbench.plugins import Registry
+from tactbench.runner.execution.devices import cell_device, check_device
 from tactbench.runner.execution.entries import load_encoding
+from tactbench.runner.execution.identity import DEFAULT_DEVICE
 from tactbench.runner.execution.learning import TRAIN_SAMPLE, chance_level, learning_fields
 from tactbench.runner.execution.planning import Cell, Plan
 from tactbench.runner.execution.results import FAILED, OK
@@ -200,7 +202,7 @@ def failed_row(job: CellJob, exc: BaseException,
         "error": {"type": type(exc).__name__, "message": str(exc) or repr(exc),
                   "traceback": "".join(frames)},
         "classes": list(job.data.classes),
-        "device": job.scene.device,
+        "device": job.identity.get("device", DEFAULT_DEVICE),  # its kind, in its identity
         "threads": job.threads,
         "peak_rss_mb": memory.peak_mb,
         "peak_step": memory.peak_step,
@@ -225,6 +227,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
 
     memory = memory if memory is not None else MemoryTracker()
     check_kernels(job.identity)
+    device = check_device(job.identity, cell_device(job.identity, job.scene.device))
     torch.set_num_threads(job.threads)
     cell, scene = job.cell, job.scene
     with memory.track("load encoding"):
@@ -237,7 +240,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
     strategy = build_split(scene.split, registry)
     splits = draw_splits(strategy, data, cell.seed, f"split {scene.split!r}")
     tested = _train_and_predict(job, registry, sequences, data.labels, splits, progress,
-                                memory)
+                                memory, device)
     truth, predicted = tested["labels"], tested["predictions"]
     if job.model_path:  # planning allows saving only with one split (one model per cell)
         with memory.track("save model"):
@@ -278,7 +281,8 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                           train_recordings=min(len(s.train) for s in splits),
                           truth=truth, predicted=predicted, k=len(job.data.classes)),
         "fit": _jsonable(tested["fits"][0] if len(splits) == 1 else tested["fits"]),
-        "device": scene.device,
+        "device": job.identity.get("device", DEFAULT_DEVICE),  # its kind, in its identity
+        "device_used": device,  # the one this process owned (cuda:1)
         "threads": job.threads,
         "versions": versions(),
         "host": host(),
@@ -309,8 +313,9 @@ PREDICTION_LISTS = ("indices", "labels", "predictions", "folds", "groups")
 def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any],
                        labels: "np.ndarray", splits: Sequence[Split],
                        progress: Callable[..., None] | None,
-                       memory: MemoryTracker) -> dict[str, Any]:
-    """Fit a model on each split's training windows and predict its test recordings:
+                       memory: MemoryTracker, device: str) -> dict[str, Any]:
+    """Fit a model on each split's training windows (on ``device``) and predict its test
+    recordings:
     the :data:`PREDICTION_LISTS` pooled over folds (arrays), the last model, each fit's
     report, times and the memory before the first fit."""
     import numpy as np
@@ -339,7 +344,7 @@ def _train_and_predict(job: CellJob, registry: Registry, sequences: Sequence[Any
                            *(() if cell.init_seed is None else (f"init {cell.init_seed}",)))
         with memory.track("fit"):
             t0 = time.perf_counter()
-            out["fits"].append(clf.fit(train, None, seed=seed, device=scene.device,
+            out["fits"].append(clf.fit(train, None, seed=seed, device=device,
                                        progress=progress))
             out["train_s"] += time.perf_counter() - t0
         with memory.track("predict"):

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.errors import InputError, WorkerError
 from tactbench.runner.execution.cell import CellJob, failed_row, run_cell
+from tactbench.runner.execution.devices import own_device, owned_devices, start_owning
 from tactbench.runner.execution.questions import spec_labels
 from tactbench.runner.execution.system import (BEFORE, MemoryTracker, main_reimport_problem,
                                                start_worker, stop_workers)
@@ -66,7 +67,8 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         if problem and not scene.scheduler:  # a local cluster spawns its workers too
             raise InputError(f"the local dask cluster cannot start its workers: {problem} "
                              f"(or give --scheduler)")
-        run_dask(jobs, finished, workers=workers, scheduler=scene.scheduler)
+        run_dask(jobs, finished, workers=workers, scheduler=scene.scheduler,
+                 devices=None if scene.scheduler else owned_devices(scene.device, "dask"))
     elif min(workers, len(jobs)) == 1:
         run_serial(jobs, finished, bars, memory)
     elif problem or (problem := unsendable_problem(jobs)):  # a job no worker could take
@@ -74,7 +76,8 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
                     "not %d at once: %s", len(jobs), min(workers, len(jobs)), problem)
         run_serial(jobs, finished, bars, memory)
     else:
-        run_processes(jobs, finished, workers=min(workers, len(jobs)))
+        run_processes(jobs, finished, workers=min(workers, len(jobs)),
+                      devices=owned_devices(scene.device))
 
 
 def unsendable_problem(jobs: Iterable[CellJob]) -> str | None:
@@ -116,10 +119,28 @@ def run_serial(jobs: Iterable[CellJob], finish: Finish, bars: "Progress",
         finish(row)
 
 
-def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int) -> None:
-    """``workers`` cells at once in local processes (spawned: torch and fork do not mix)."""
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=start_worker,
-                               mp_context=multiprocessing.get_context("spawn"))
+def _start_local_worker(devices: Any) -> None:
+    """Initializer of a local worker: :func:`start_worker`, then the next device of the
+    run's queue ``devices`` is this worker's own (none for CPU workers)."""
+    start_worker()
+    start_owning(devices)
+
+
+def run_processes(jobs: list[CellJob], finish: Finish, *, workers: int,
+                  devices: list[str] | None = None) -> None:
+    """``workers`` cells at once in local processes (spawned: torch and fork do not mix),
+    each owning one of ``devices`` (one each: never more workers than devices) where
+    given."""
+    context = multiprocessing.get_context("spawn")
+    queue = None
+    if devices is not None:
+        if workers > len(devices):
+            raise ValueError(f"{workers} workers for {len(devices)} devices")
+        queue = context.Queue()
+        for device in devices[:workers]:
+            queue.put(device)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_start_local_worker,
+                               initargs=(queue,), mp_context=context)
     stored = 0
     try:
         probe = pool.submit(os.getpid)  # one worker started, before any cell is sent
@@ -179,10 +200,23 @@ def _connect(client_class: Any, scheduler: str) -> Any:
                          f"address") from None
 
 
+def _dask_cell(job: CellJob, devices: list[str] | None) -> dict[str, Any]:
+    """:func:`run_cell` in a worker of the run's local dask cluster, on the device of
+    ``devices`` that the worker owns (its name is its place: 0, 1 ...)."""
+    if devices:
+        from distributed import get_worker
+
+        name = get_worker().name
+        own_device(devices[name % len(devices)] if isinstance(name, int) else None)
+    return run_cell(job)
+
+
 def run_dask(jobs: list[CellJob], finish: Finish, *, workers: int,
-             scheduler: str | None) -> None:
-    """Cells on a dask cluster: the one at ``scheduler``, else a local one of ``workers``
-    single-threaded processes bound to 127.0.0.1."""
+             scheduler: str | None, devices: list[str] | None = None) -> None:
+    """Cells on a dask cluster: the one at ``scheduler`` (each of its workers computes on
+    the device its cluster gave it: start one per GPU), else a local one of ``workers``
+    single-threaded processes bound to 127.0.0.1, each owning one of ``devices`` where
+    given."""
     from distributed import Client, LocalCluster
     from distributed import as_completed as dask_completed
 
@@ -194,7 +228,7 @@ def run_dask(jobs: list[CellJob], finish: Finish, *, workers: int,
                                host="127.0.0.1", dashboard_address=None)
         client = Client(cluster)
     try:
-        futures = client.map(run_cell, jobs, pure=False)
+        futures = client.map(_dask_cell, jobs, devices=devices, pure=False)
         by_key = {fut.key: job for fut, job in zip(futures, jobs)}
         for fut in dask_completed(futures):
             finish(_row(fut, by_key[fut.key]))

@@ -23,7 +23,6 @@ which would hide a submodule of the same name.)
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -32,17 +31,20 @@ from typing import Any, Mapping
 from tactbench.contracts import CLASSIFIER, DATASET, ENCODER
 from tactbench.data.imaging import image_shape, imager_build_bytes
 from tactbench.data.splits import SplitData, build_split, draw_splits, split_spec
-from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.datasets.loading import check_informative, is_path_spec, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import BudgetError, InputError
-from tactbench.kernels import DEFAULT_KERNELS, kernels_identity, pin_cpu_kernels
+from tactbench.kernels import pin_cpu_kernels
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import canonical_classifier
 from tactbench.budget import check_budget, memory_budget_bytes
 from tactbench.classifiers.batching import bank_budget_bytes, loader_workers
-from tactbench.runner.execution.results import IDENTITY_DEFAULTS, INDEPENDENT_RUNS, ROW_MAX_BYTES
+from tactbench.runner.execution.devices import resolve_kind
+from tactbench.runner.execution.identity import (  # noqa: F401 — digest and the row's
+    COMPUTE_FIELDS, IDENTITY_DEFAULTS, IDENTITY_FIELDS, INDEPENDENT_RUNS,  # identity: said
+    compute_identity, digest, row_identity, without_defaults)  # there, read here too
+from tactbench.runner.execution.results import ROW_MAX_BYTES
 from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.execution.scene import Scene
@@ -141,12 +143,6 @@ def check_environment() -> None:
     loader_workers("cpu")
 
 
-def digest(obj: Any, n: int = 16) -> str:
-    """The first ``n`` hex digits of the SHA-256 of ``obj`` as sorted JSON."""
-    text = json.dumps(obj, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:n]
-
-
 def imaging_identity(scene: Scene, kind: str) -> dict[str, Any]:
     """What decides a classifier's input frames: vectors, or images at a pixel size."""
     if kind == "vectors":
@@ -157,7 +153,7 @@ def imaging_identity(scene: Scene, kind: str) -> dict[str, Any]:
 def storage_identity(precision: str) -> dict[str, Any]:
     """What the storage precision adds to a cell identity or cache key: nothing for
     ``float32`` (so keys made before precisions existed stay valid), else ``precision``."""
-    return {} if precision == "float32" else {"precision": precision}
+    return without_defaults({"precision": precision})
 
 
 def input_kind(frame_rank: int | None, has_layout: bool) -> str:
@@ -332,64 +328,26 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
     other cell keeps its key. ``run_dataset``: the spec of the run's own data set, where
     every run draws one (:func:`plan_runs`); such a cell's identity records it and
     :data:`INDEPENDENT_RUNS`, every other cell's neither."""
-    return {
+    return without_defaults({  # each field left out at its default (identity.py)
         "schema": ROW_SCHEMA,
         "dataset": dataset.name,
         "dataset_hash": dataset_hash,
         "split": split,
-        # the study's test window keeps the keys cells always had
-        **({} if test_window == UNNAMED_TEST_WINDOW else {"test_window": test_window}),
+        "test_window": test_window,
         "test_per_class": scene.test_per_class,
         "imaging": imaging_identity(scene, kind),
         "encoder": encoder,
         "encoder_version": encoder_version,
-        **storage_identity(scene.resolved_precision()),
+        "precision": scene.resolved_precision(),
         "classifier": classifier,
         "profile": scene.profile,
         "L": int(L),
         "seed": int(seed),
-        **({} if init_seed is None else {"init_seed": int(init_seed)}),
-        **({"input": kind} if scene.input and either_input else {}),
-        **({} if run_dataset is None else {"run_dataset": run_dataset,
-                                           INDEPENDENT_RUNS: True}),
-        **compute_identity(scene.threads),
-    }
-
-
-def compute_identity(threads: int) -> dict[str, Any]:
-    """What the computation adds to a cell's identity: the torch threads and the CPU
-    kernels (:func:`~tactbench.machine.kernels_identity`), each only when it is not the
-    default (1 thread, kernels pinned to AVX2), so that cells trained so keep their keys;
-    both change the numbers a cell gives (docs/reliability.md, "Numbers across machines")."""
-    kernels = kernels_identity()
-    return {**({} if threads == 1 else {"threads": int(threads)}),
-            **({} if kernels == DEFAULT_KERNELS else {"cpu_kernels": kernels})}
-
-
-#: The fields of a cell identity (:func:`cell_identity`): those a stored row holds that
-#: its key hashes. ``threads`` and ``cpu_kernels`` (:func:`compute_identity`) came last
-#: (issue 36); a row keyed before them is keyed by the rest (``compute=False``).
-IDENTITY_FIELDS = ("schema", "dataset", "dataset_hash", "split", "test_window",
-                   "test_per_class", "imaging", "encoder", "encoder_version", "precision",
-                   "classifier", "profile", "L", "seed", "init_seed", "input", "run_dataset",
-                   INDEPENDENT_RUNS)
-COMPUTE_FIELDS = ("threads", "cpu_kernels")
-
-
-def row_identity(row: Mapping[str, Any], *, compute: bool = True) -> dict[str, Any]:
-    """The identity a stored ``row`` holds, as :func:`cell_identity` made it: its
-    :data:`IDENTITY_FIELDS` (and, with ``compute``, :data:`COMPUTE_FIELDS`), each left
-    out where ``cell_identity`` leaves it out (at its default: the study's test window,
-    float32, 1 thread, AVX2 kernels, no init seed or input). ``digest`` of it is the row's
-    key unless the row was copied under another name or edited and re-sealed."""
-    fields = IDENTITY_FIELDS + (COMPUTE_FIELDS if compute else ())
-    identity = {k: row[k] for k in fields if k in row}
-    for field, default in (("test_window", UNNAMED_TEST_WINDOW), ("precision", "float32"),
-                           ("threads", 1), ("cpu_kernels", DEFAULT_KERNELS),
-                           ("init_seed", None), ("input", None)):
-        if field in identity and identity[field] == default:
-            del identity[field]
-    return identity
+        "init_seed": None if init_seed is None else int(init_seed),
+        "input": kind if scene.input and either_input else None,
+        "run_dataset": run_dataset, INDEPENDENT_RUNS: True if run_dataset else None,
+        **compute_identity(scene.threads, resolve_kind(scene.device, scene.executor)),
+    })
 
 
 def row_key_problem(row: Mapping[str, Any]) -> str | None:

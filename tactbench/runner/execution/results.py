@@ -38,6 +38,7 @@ from typing import Any, Callable, Iterable, Sequence
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.errors import CorruptArtefactError, InputError, is_finite_number
 from tactbench.integrity import hash_bytes, read_regular_bytes
+from tactbench.runner.execution.identity import IDENTITY_DEFAULTS, INDEPENDENT_RUNS  # noqa: F401
 from tactbench.specs import POSITIONAL, parse_spec
 from tactbench.paths import (
     Temporary,
@@ -47,10 +48,6 @@ from tactbench.paths import (
     temp_name,
 )
 
-#: The row field (and identity field) of a cell whose run trained and tested on a data set
-#: of its own, drawn independently of every other run's (``synthetic-forearm:people=per-run``):
-#: comparisons over such runs need no overlap correction (docs/statistics.md).
-INDEPENDENT_RUNS = "independent_runs"
 
 log = logging.getLogger("tactbench.runner.execution.results")
 
@@ -63,10 +60,6 @@ COST_FIELDS = ("encode_ms_per_frame", "train_s", "inference_ms_per_sequence", "p
 #: A cell file larger than this is not a row tactbench wrote (rows are a few kB).
 ROW_MAX_BYTES = 16 << 20
 
-#: Identity fields that a cell's identity leaves out at their default (see
-#: :func:`tactbench.runner.execution.planning.cell_identity`), with that default.
-IDENTITY_DEFAULTS = {"test_window": UNNAMED_TEST_WINDOW, "precision": "float32",
-                     "init_seed": None, "input": None, "threads": 1, "cpu_kernels": "avx2"}
 
 
 def row_status(row: dict[str, Any]) -> str:
