@@ -2,15 +2,15 @@
 
     python benchmarks/pin_identities.py FOLDER [FOLDER ...]   (run folders or docs/)
 
-A cell's identity now holds its torch thread count and its CPU kernels (see
-:func:`tactbench.runner.execution.planning.compute_identity`), each left out at its default (1
-thread, kernels pinned to AVX2). Rows trained before that recorded both facts (``threads``,
-``machine``) but their keys did not: a row trained with 2 threads, or with the unpinned
-kernels of its machine, would otherwise be taken for a pinned 1-thread cell. This gives
-each such row the identity it was trained with — ``threads`` as it records, and
-``cpu_kernels`` as its ``machine`` says (``native <cpu> (<isa>)`` for unpinned kernels,
-``not recorded`` for rows older than the machine record) — under its new key, re-sealed;
-the results are untouched. A row whose identity does not hash to its key is refused
+A cell's identity now holds its torch thread count, its CPU kernels and its device kind
+(see :func:`tactbench.runner.execution.identity.compute_identity`), each left out at its
+default (1 thread, kernels pinned to AVX2, the CPU). Rows trained before that recorded
+these facts (``threads``, ``machine``, ``device``) but their keys did not: a row trained
+with 2 threads, with the unpinned kernels of its machine, or on a GPU, would otherwise be
+taken for a pinned 1-thread CPU cell. This gives each such row the identity it was
+trained with, under its new key, re-sealed; the results are untouched. The rule is the
+package's (:func:`tactbench.runner.execution.identity.migrated_row`, tested there); this
+script only walks the folders. A row whose identity does not hash to its key is refused
 (nothing is moved). Run ``tactbench report`` on each folder afterwards.
 """
 
@@ -21,57 +21,24 @@ import json
 import sys
 from pathlib import Path
 
-from tactbench.kernels import DEFAULT_KERNELS, KERNEL_LEVELS, KERNEL_VARIABLES, KERNELS_ENV
 from tactbench.paths import discard
-from tactbench.runner import ResultStore, digest, row_identity
-
-
-def old_identity(row: dict) -> dict:
-    """The identity a row was keyed by before threads and kernels entered it
-    (:func:`~tactbench.runner.execution.planning.row_identity` without them)."""
-    return row_identity(row, compute=False)
-
-
-def recorded_kernels(row: dict) -> str:
-    """The CPU kernels a row's ``machine`` record says it computed with."""
-    facts = row.get("machine")
-    if not isinstance(facts, dict):
-        return "not recorded"
-    pinned = facts.get("pinned") or {}
-    level = str(pinned.get(KERNELS_ENV, "")).lower()
-    if level in KERNEL_LEVELS and all(
-            pinned.get(name, "") == value
-            for name, value in zip(KERNEL_VARIABLES, KERNEL_LEVELS[level][:-1])):
-        return level
-    isa = str(facts.get("cpu_kernels") or "unknown").lower()
-    return f"native {facts.get('cpu') or 'unknown CPU'} ({isa})"
-
-
-def new_identity(row: dict) -> dict:
-    """``old_identity`` with the row's threads and kernels where not the defaults."""
-    threads, kernels = int(row.get("threads") or 1), recorded_kernels(row)
-    return {**old_identity(row), **({} if threads == 1 else {"threads": threads}),
-            **({} if kernels == DEFAULT_KERNELS else {"cpu_kernels": kernels})}
+from tactbench.runner.execution.identity import migrated_row
+from tactbench.runner.execution.results import ResultStore
 
 
 def rekey(folder: Path) -> tuple[int, int]:
-    """Re-key the rows of one run folder; (rows moved, rows kept)."""
+    """Re-key the rows of one run folder (:func:`~tactbench.runner.execution.identity.
+    migrated_row`, the package's migration); (rows moved, rows kept)."""
     store = ResultStore(folder)
     rows = store.stored_rows()
-    for row in rows:  # every row checked before any is moved
-        if digest(old_identity(row)) != row["key"]:
-            sys.exit(f"{folder}: row {row['key']} is not keyed by its identity; nothing moved")
-    moved = 0
-    for row in rows:
-        identity = new_identity(row)
-        key = digest(identity)
-        if key == row["key"]:
-            continue
-        old = store.path(row["key"])
-        store.put({**row, **identity, "key": key})
-        discard(old)
-        moved += 1
-    return moved, len(rows) - moved
+    try:  # every row checked before any is moved
+        moving = [(row["key"], new) for row in rows if (new := migrated_row(row)) is not None]
+    except ValueError as exc:
+        sys.exit(f"{folder}: {exc}; nothing moved")
+    for old, row in moving:
+        store.put(row)
+        discard(store.path(old))
+    return len(moving), len(rows) - len(moving)
 
 
 def main() -> None:

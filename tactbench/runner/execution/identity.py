@@ -84,6 +84,22 @@ def row_identity(row: Mapping[str, Any], *, compute: bool = True) -> dict[str, A
     return without_defaults({k: row[k] for k in fields if k in row})
 
 
+#: The compute fields each earlier form of a key hashed: before issue 50 (no device),
+#: before issue 36 (none of them).
+EARLIER_KEYS = (("threads", "cpu_kernels"), ())
+
+
+def row_keys(row: Mapping[str, Any]) -> list[str]:
+    """The keys a stored ``row`` may rightly have: :func:`digest` of its identity now,
+    then of each earlier form (:data:`EARLIER_KEYS`): a row keyed before a field entered
+    identities is its cell's until it is migrated (:func:`migrated_row`)."""
+    base = row_identity(row, compute=False)
+    compute = row_identity(row)
+    return [digest(compute), *(digest({**base, **{k: compute[k] for k in fields
+                                                   if k in compute}})
+                               for fields in EARLIER_KEYS)]
+
+
 # ------------------------------------------------------------------ migration of old rows
 
 def recorded_kernels(row: Mapping[str, Any]) -> str:
@@ -117,14 +133,17 @@ def recorded_device(row: Mapping[str, Any]) -> str:
 
 
 def migrated_identity(row: Mapping[str, Any]) -> dict[str, Any]:
-    """The identity of a row keyed before the computation entered identities (its key
-    is :func:`digest` of ``row_identity(row, compute=False)``): that identity with the
-    threads, kernels and device the row records it was trained with, each left out at
-    its default. Its digest is the row's key from now on; the results are untouched."""
-    return without_defaults({**row_identity(row, compute=False),
-                             "threads": int(row.get("threads") or 1),
-                             "cpu_kernels": recorded_kernels(row),
-                             "device": recorded_device(row)})
+    """The identity of a row keyed before the computation (or the device) entered
+    identities (its key is one of the earlier :func:`row_keys`): ``row_identity(row,
+    compute=False)`` with the threads, kernels and device the row records it was
+    trained with, each left out at its default. Its digest is the row's key from now
+    on; the results are untouched."""
+    base, now = row_identity(row, compute=False), row_identity(row)
+    threads = {k: now[k] for k in EARLIER_KEYS[0] if k in now}
+    if row.get("key") not in row_keys(row)[:2]:  # keyed before issue 36 too
+        threads = {"threads": int(row.get("threads") or 1),
+                   "cpu_kernels": recorded_kernels(row)}
+    return without_defaults({**base, **threads, "device": recorded_device(row)})
 
 
 def migrated_row(row: Mapping[str, Any]) -> dict[str, Any] | None:
@@ -137,7 +156,7 @@ def migrated_row(row: Mapping[str, Any]) -> dict[str, Any] | None:
     new = digest(identity)
     if key == new:
         return None
-    if key != digest(row_identity(row, compute=False)):
+    if key not in row_keys(row)[1:]:
         raise ValueError(f"row {str(key)[:40]!r} is not keyed by its identity")
     kind = identity.get("device", DEFAULT_DEVICE)
     used = {"device_used": row["device"]} if row.get("device") not in (None, kind) else {}

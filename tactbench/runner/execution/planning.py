@@ -43,7 +43,7 @@ from tactbench.classifiers.batching import bank_budget_bytes, loader_workers
 from tactbench.runner.execution.devices import resolve_kind
 from tactbench.runner.execution.identity import (  # noqa: F401 — digest and the row's
     COMPUTE_FIELDS, IDENTITY_DEFAULTS, IDENTITY_FIELDS, INDEPENDENT_RUNS,  # identity: said
-    compute_identity, digest, row_identity, without_defaults)  # there, read here too
+    compute_identity, digest, row_identity, row_keys, without_defaults)  # there, read here too
 from tactbench.runner.execution.results import ROW_MAX_BYTES
 from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
@@ -353,11 +353,11 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
 def row_key_problem(row: Mapping[str, Any]) -> str | None:
     """Why ``row`` is not the row of the cell its ``key`` names (its identity hashes to
     another key: a row copied under another name, or edited and re-sealed), or None.
-    A row keyed before threads and kernels entered identities (``compute=False``) is
-    its cell's."""
+    A row keyed before threads, kernels or the device entered identities (an earlier
+    form of :func:`~tactbench.runner.execution.identity.row_keys`) is its cell's."""
     key = row.get("key")
-    found = digest(row_identity(row))
-    if key == found or key == digest(row_identity(row, compute=False)):
+    found, *earlier = row_keys(row)
+    if key == found or key in earlier:
         return None
     return (f"is keyed {str(key)[:40]!r}, and the identity it holds is cell {found}'s "
             f"(copied under another name, or edited and re-sealed)")

@@ -22,12 +22,12 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
-from tactbench.kernels import DEFAULT_KERNELS
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
 from tactbench.runner.analysis.answering import History, comparison_name, replay
 from tactbench.runner.analysis.comparisons import Comparison, comparisons
 from tactbench.runner.presentation.plots import caption, check_reference, write_plots
+from tactbench.runner.execution.identity import IDENTITY_DEFAULTS
 from tactbench.runner.execution.results import (
     INDEPENDENT_RUNS,
     REPORT_HEADER,
@@ -125,13 +125,10 @@ class Report:
 LEARNING_COLUMNS = ("train_accuracy", "chance_accuracy", "learning")
 
 
-#: An identity field left out of a row at its default (:func:`~tactbench.runner.execution.
-#: planning.row_identity`) → the value its column shows, so that every identity field is
+#: An identity field left out of a row at its default (:data:`~tactbench.runner.execution.
+#: identity.IDENTITY_DEFAULTS`) → the value its column shows, so that every identity field is
 #: a column of every row (two cells differing in one never look like one cell twice).
-IDENTITY_COLUMN_DEFAULTS = {"test_window": UNNAMED_TEST_WINDOW, "precision": "float32",
-                            "init_seed": None, "input": None, "run_dataset": None,
-                            INDEPENDENT_RUNS: False, "threads": 1,
-                            "cpu_kernels": DEFAULT_KERNELS}
+IDENTITY_COLUMN_DEFAULTS = {**IDENTITY_DEFAULTS, INDEPENDENT_RUNS: False}
 
 
 def csv_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
