@@ -15,6 +15,11 @@ entries are kept), with the command, the machine and the date:
 - ``alpha``: the family-wise error of a family of 3 or 4 primaries when α passes on
   after a rejection (Holm over what remains, futility on and off), with 0 to m − 1 of
   them carrying a real difference.
+- ``family``: a primary family's chance of every comparison being answered, the run's
+  own procedure path by path (cells drawn, differences taken, ``family_look`` or the
+  fixed design's Holm) against ``tactbench plan``'s forecast
+  (:func:`tactbench.runner.analysis.sequential.family_forecast`) and the product of
+  independent comparisons it printed before.
 - ``disagreement``: the per-run disagreement of the stored reports' primary
   comparisons (no simulation), beside the no-pilot assumption of ``tactbench plan``.
 - ``learned``: "not learned" (:func:`tactbench.runner.execution.learning.cell_learning`'s
@@ -182,8 +187,99 @@ def disagreement_part(reps: int) -> dict:
             "min": min(values), "max": max(values), "comparisons": shares}
 
 
+#: The family part's scenes: (name, comparisons as (A, B) cells, the true effect of each
+#: (points), a margin, looks or None for a fixed design of FAMILY_FIXED_RUNS runs).
+FAMILY_FIXED_RUNS = 10
+FAMILY_SCENES = (
+    ("raw→frame-diff over 3 classifiers, --until", (("raw1", "fd1"), ("raw2", "fd2"),
+                                                  ("raw3", "fd3")), (6.0, 6.0, 6.0), None, LOOKS),
+    ("3 encoders against raw, --until", (("raw", "fd"), ("raw", "flow"), ("raw", "far")),
+     (6.0, 6.0, 6.0), None, LOOKS),
+    ("3 encoders against raw, --until, ±2 margin, one at 0", (("raw", "fd"), ("raw", "flow"),
+                                                              ("raw", "far")),
+     (0.0, 6.0, 7.0), 2.0, LOOKS),
+    ("3 encoders against raw, fixed 10 runs", (("raw", "fd"), ("raw", "flow"),
+                                              ("raw", "far")), (7.0, 7.0, 7.0), None, None),
+    ("2 encoders against raw, fixed 10 runs, ±2 margin", (("raw", "fd"), ("raw", "flow")),
+     (0.0, 7.0), 2.0, None),
+)
+
+
+def _family_scene(name: str, pairs, effects, margin, looks, paths: int, seed: int) -> dict:
+    """One family scene through the run's own code, path by path: every *cell*'s
+    accuracy drawn (a part every run shares, of variance ``ratio · sd²/2``, and each
+    run's own, ``sd²/2``: a difference of two cells has the per-run sd ``SD``), the
+    differences taken, and the looks made by ``family_look`` (``--until``) or the
+    fixed design's corrected t with Holm and TOST (``comparisons``' rule, via
+    ``statistics.verdict``) — a construction of its own, not ``draw_family``; beside it,
+    the plan's forecast (``sequential.family_forecast``, its default paths) and the
+    product of the comparisons' own forecasts the plan printed before."""
+    from tactbench.runner.analysis.sequential import (FamilyState, family_forecast,
+                                                      family_look, procedure)
+    from tactbench.runner.analysis.power import power
+    from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, EQUIVALENT,
+                                                      corrected_t, holm, tost_p, verdict)
+
+    ratio, alpha, m = 0.25, 0.05, len(pairs)
+    cells = sorted({c for pair in pairs for c in pair})
+    mu = {c: 0.0 for c in cells}
+    for (a, b), e in zip(pairs, effects):
+        mu[b] = mu[a] + e / 100
+    runs = looks[-1] if looks else FAMILY_FIXED_RUNS
+    rng = np.random.default_rng(seed)
+    cell_sd = SD / np.sqrt(2)
+    answered = np.zeros(paths, dtype=bool)
+    names = [f"c{i}" for i in range(m)]
+    marg = None if margin is None else margin / 100
+    for p in range(paths):
+        acc = {c: mu[c] + cell_sd * (np.sqrt(ratio) * rng.standard_normal()
+                                     + rng.standard_normal(runs)) for c in cells}
+        d = {n: acc[b] - acc[a] for n, (a, b) in zip(names, pairs)}
+        if looks:
+            state = FamilyState(alpha, names)
+            for k, j in enumerate(looks):
+                family_look(state, {n: d[n][:j] for n in names}, dict.fromkeys(names, ratio),
+                            looks=looks[:k + 1], max_runs=looks[-1], margin=marg)
+                if len(state.closed) == m:
+                    break
+            said = [state.closed[n].decision if n in state.closed else "" for n in names]
+        else:
+            t = [corrected_t(d[n], ratio) for n in names]
+            p_holm = holm([float(x["p"]) for x in t])
+            eq = holm([float(tost_p(d[n], ratio, marg)) for n in names]) if marg else [None] * m
+            said = [verdict(float(x["low"]), float(x["high"]), float(ph), runs,
+                            equivalence_p_adjusted=None if e is None else float(e))[0]
+                    for x, ph, e in zip(t, p_holm, eq)]
+        answered[p] = all(v in (B_BETTER, A_BETTER, EQUIVALENT) for v in said)
+    plan = family_forecast([e / 100 for e in effects], [SD] * m, [ratio] * m, pairs,
+                           runs=runs, looks=looks, alpha=alpha, margin=marg)
+    product = 1.0
+    for e in effects:
+        if looks:
+            s = procedure(e / 100, SD, ratio, looks, alpha=alpha / m, margin=marg)
+            product *= s.power + s.wrong_side + s.equivalent
+        else:
+            product *= power(e / 100, SD, ratio, runs, alpha=alpha / m)
+    return {"scene": name, "pairs": [list(x) for x in pairs], "effects_points": list(effects),
+            "margin_points": margin, "looks": list(looks) if looks else None, "runs": runs,
+            "sd_points": 100 * SD, "ratio": ratio, "alpha": alpha,
+            "answered": _rate(answered), "plan_answered": round(plan.answered, 4),
+            "plan_paths": plan.paths, "product_of_each": round(product, 4)}
+
+
+def family_part(reps: int) -> dict:
+    """A primary family's chance of every comparison being answered: the run's own
+    procedure path by path (``reps`` paths a scene) against ``tactbench plan``'s
+    vectorised forecast of it and the product it printed before (issue 48)."""
+    out = [_family_scene(*scene, paths=reps, seed=500 + i)
+           for i, scene in enumerate(FAMILY_SCENES)]
+    return {"what": f"family answered: run's own looks / fixed Holm, per-run sd "
+                    f"{100 * SD:.0f} points, overlap 0.25, α 0.05; {reps} paths a scene",
+            "paths": reps, "results": out}
+
+
 PARTS = {"learned": learned_part, "futility": futility_part, "alpha": alpha_part,
-         "disagreement": disagreement_part}
+         "disagreement": disagreement_part, "family": family_part}
 
 
 def main(argv: list[str] | None = None) -> int:

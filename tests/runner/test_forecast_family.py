@@ -41,11 +41,12 @@ def test_the_plan_forecasts_the_family_the_run_makes():
              for enc in ("raw", "frame-diff")]
     planned = _family(cells, PRIMARY, [])
     run = [c for c in comparisons(_rows(), primary=PRIMARY) if c.family == "primary"]
-    assert [name for name, _ in planned] == [comparison_name(c) for c in run]
+    assert [name for name, _, _ in planned] == [comparison_name(c) for c in run]
     assert len(planned) == 3 and {c.family_size for c in run} == {3}
-    assert all(found is None for _, found in planned)  # no pilot
+    assert all(found is None for _, found, _ in planned)  # no pilot
+    assert len({cell for _, _, pair in planned for cell in pair}) == 6  # no cell shared
     with_pilot = _family(cells, PRIMARY, _rows())
-    assert [found.runs for _, found in with_pilot] == [3, 3, 3]
+    assert [found.runs for _, found, _ in with_pilot] == [3, 3, 3]
 
 
 def test_a_pilot_spread_is_given_as_the_pilot_gives_it_and_a_raise_is_named():
@@ -74,18 +75,99 @@ def test_the_sequential_forecast_names_its_outcomes_apart():
     assert procedure(0.0, 0.03, 0.8, [5, 10], alpha=0.05 / 3, paths=2000).stopped_futile > 0.5
 
 
-def test_the_familys_chance_of_being_answered_is_the_product_of_its_members():
-    from tactbench.runner.analysis.forecast import PrimaryForecast, family_answered
+def test_comparisons_sharing_a_baseline_are_drawn_correlated():
+    """raw → frame-diff and raw → flow share raw's runs: their differences correlate by
+    0.5 (equal cell spreads); a comparison with no cell in common is independent, and
+    one against the other's B in the other role anticorrelates."""
+    from tactbench.runner.analysis.sequential import arm_correlation, draw_family
 
-    def one(power, seq=None):
-        return PrimaryForecast(name="q", runs=5, effect=5, sd=3, sd_source="", ratio=0.25,
-                               power=power, detectable=1, floor=1, recordings=100,
-                               recordings_for_effect=None, sequential=seq)
+    corr = arm_correlation([("raw", "fd"), ("raw", "flow"), ("knn", "svc"), ("fd", "x")])
+    assert corr[0][1] == 0.5 and corr[0][2] == 0.0 and corr[0][3] == -0.5
+    d = draw_family([0.0, 0.0, 0.0, 0.0], [0.03] * 4, [0.25] * 4, corr, 20, paths=4000,
+                    seed=1)
+    own = d - d.mean(axis=2, keepdims=True)  # each path's shared part removed
+    got = np.corrcoef(own[:, :, 0].T)
+    assert np.allclose(got, corr, atol=4 / math.sqrt(4000))
+    assert np.std(d[:, 0].mean(axis=1)) == pytest.approx(
+        0.03 * math.sqrt(0.25 + 1 / 20), rel=0.05)
 
-    assert family_answered([one(0.5), one(0.8)]) == pytest.approx(0.4)
-    seq = {"power": 0.3, "wrong_side": 0.0, "equivalent": 0.2}
-    assert family_answered([one(0.9, seq), one(0.5)]) == pytest.approx(0.25)
-    assert family_answered([]) is None and math.isfinite(family_answered([one(0.0)]))
+
+def _run_family(d, looks, margin):
+    """The run's own looks (family_look) over one path's differences, name by name."""
+    from tactbench.runner.analysis.sequential import FamilyState, family_look
+
+    names = [f"c{i}" for i in range(d.shape[0])]
+    state = FamilyState(0.05, names)
+    for k, j in enumerate(looks):
+        family_look(state, {n: d[i, :j] for i, n in enumerate(names)},
+                    dict.fromkeys(names, 0.25), looks=looks[:k + 1], max_runs=looks[-1],
+                    margin=margin)
+        if len(state.closed) == len(names):
+            break
+    return [state.closed[n].decision if n in state.closed else "continue" for n in names]
+
+
+def test_the_familys_forecast_follows_the_runs_looks_path_by_path():
+    """The plan's vectorised family (Holm carried over the looks, α of a rejection passed
+    on) ends every path exactly as the run's family_look does, recycled α included."""
+    from tactbench.runner.analysis.sequential import (A_BETTER, B_BETTER, OUTCOMES,
+                                                      arm_correlation, draw_family,
+                                                      family_codes)
+
+    looks = [5, 10]
+    corr = arm_correlation([("raw", "fd"), ("raw", "flow"), ("raw", "far")])
+    d = draw_family([0.05, 0.03, 0.0], [0.03] * 3, [0.25] * 3, corr, 10, paths=80, seed=3)
+    code, _ = family_codes(d, [0.25] * 3, looks, alpha=0.05, margin=0.02)
+    plain = {"last look": "futile", "no variation": "futile"}
+    want = [[plain.get(OUTCOMES[int(c)], OUTCOMES[int(c)]) for c in row] for row in code]
+    got = [_run_family(d[p], looks, 0.02) for p in range(len(d))]
+    assert got == want
+    # the α passed on mattered: some path rejected two (the second at α/2 or more)
+    assert max(sum(x in (B_BETTER, A_BETTER) for x in row) for row in got) >= 2
+
+
+def test_the_fixed_familys_forecast_is_the_runs_verdicts():
+    from tactbench.runner.analysis.sequential import (OUTCOMES, arm_correlation, draw_family,
+                                                      fixed_family_codes)
+    from tactbench.runner.analysis.statistics import corrected_t, holm, tost_p, verdict
+
+    corr = arm_correlation([("raw", "fd"), ("raw", "flow")])
+    d = draw_family([0.06, 0.0], [0.03] * 2, [0.25] * 2, corr, 8, paths=60, seed=4)
+    code = fixed_family_codes(d, [0.25] * 2, alpha=0.05, margin=0.02)
+    for p in range(len(d)):
+        t = [corrected_t(d[p, i], 0.25) for i in range(2)]
+        p_holm = holm([float(x["p"]) for x in t])
+        eq = holm([float(tost_p(d[p, i], 0.25, 0.02)) for i in range(2)])
+        said = [verdict(float(x["low"]), float(x["high"]), float(ph), 8,
+                        equivalence_p_adjusted=float(e))[0] for x, ph, e in zip(t, p_holm, eq)]
+        assert [{"last look": "unresolved"}.get(OUTCOMES[int(c)], OUTCOMES[int(c)])
+                for c in code[p]] == said
+
+
+@pytest.mark.slow("the boundaries of three Holm levels at four looks take about 3 s")
+def test_the_familys_forecast_agrees_with_the_benchmarks_simulation():
+    """Each stored scene of benchmarks/statistics_checks.py --part family (the run's own
+    looks path by path over drawn cells) against the plan's forecast, within four
+    standard errors of the two simulations' difference."""
+    import json
+    from pathlib import Path
+
+    from tactbench.runner.analysis.sequential import family_forecast
+
+    doc = json.loads((Path(__file__).parents[2] / "docs" / "benchmarks"
+                      / "statistics-checks.json").read_text())["family"]
+    for s in doc["results"]:
+        m = len(s["pairs"])
+        f = family_forecast([e / 100 for e in s["effects_points"]], [s["sd_points"] / 100] * m,
+                            [s["ratio"]] * m, [tuple(x) for x in s["pairs"]], runs=s["runs"],
+                            looks=s["looks"], alpha=s["alpha"],
+                            margin=None if s["margin_points"] is None
+                            else s["margin_points"] / 100)
+        bench = s["answered"]["rate"]
+        p = (bench + f.answered) / 2
+        se = math.sqrt(p * (1 - p) * (1 / doc["paths"] + 1 / f.paths))
+        assert abs(f.answered - bench) <= 4 * se + 1e-9, (s["scene"], f.answered, bench)
+        assert f.answered == pytest.approx(s["plan_answered"], abs=1e-4)  # deterministic
 
 
 def test_plan_says_when_the_data_allow_fewer_distinct_splits_than_runs(tmp_path, monkeypatch):

@@ -23,7 +23,10 @@ Every comparison of the primary family the run makes is forecast (the family dec
 :func:`tactbench.runner.analysis.family.primary_family`, the run's own), each at the
 family's level (Holm's first step, α/m for m primary comparisons), exactly
 (:func:`tactbench.runner.analysis.power.power`); :func:`family_answered` gives the
-family's chance of every one being answered. For a run ``--until answered`` the forecast
+family's chance of every one being answered, simulated through the run's own procedure
+(Holm as the run spends it, the looks with ``--until``, comparisons sharing a cell
+correlated: :func:`tactbench.runner.analysis.sequential.family_forecast`). For a run
+``--until answered`` the forecast
 is of the sequential procedure itself
 (:func:`tactbench.runner.analysis.sequential.procedure`: found, equivalent, the other
 side, stopped early as futile, reached the maximum undecided, expected and largest
@@ -66,7 +69,7 @@ from tactbench.runner.analysis.power import (
 )
 from tactbench.runner.execution.cache import EncodingCache, entries_bytes
 from tactbench.runner.execution.estimate import estimate_run, missing_entries
-from tactbench.runner.analysis.sequential import procedure
+from tactbench.runner.analysis.sequential import family_forecast, procedure
 from tactbench.runner.execution.results import ResultStore, ok_rows
 from tactbench.runner.execution.scene import Scene
 
@@ -132,6 +135,7 @@ class Forecast:
     cache_bytes: int = 0  # the new encodings the run writes to the cache (its first data set's)
     cache_free: int | None = None  # free on the cache's disk (None: it cannot say)
     family_answered: float | None = None  # every primary answered (family_answered)
+    family: dict[str, Any] | None = None  # sequential.family_forecast's, as a dict
     distinct_splits: int | None = None  # the distinct splits the planned seeds draw
     runs_asked: int = 0  # the runs (seeds) planned
 
@@ -187,16 +191,19 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     level = alpha / max(1, len(family))  # Holm's first step over the family the run makes
     usable = min(runs, distinct)  # repeated splits add no evidence: the looks stop there
     capped = None if not looks else [x for x in looks if x < usable] + [usable]
+    capped = capped if capped and capped[0] >= 2 else None
     primaries = [_primary(name, found, usable, effect / 100, ratio, n_test, level,
-                          len(p.dataset.labels), margin=scene.margin,
-                          looks=capped if capped and capped[0] >= 2 else None)
-                 for name, found in family]
+                          len(p.dataset.labels), margin=scene.margin, looks=capped)
+                 for name, found, _ in family]
+    together = family_answered(primaries, [pair for _, _, pair in family], alpha=alpha,
+                               looks=capped, margin=scene.margin)
     return Forecast(
         cells=cells, seconds=sum(known) if known else None,
         unknown=sum(c.seconds is None for c in cells),
         peak_mb=max((float(r["peak_rss_mb"]) for r in pilot if r.get("peak_rss_mb")),
                     default=None),
-        primaries=primaries, family_answered=family_answered(primaries),
+        primaries=primaries, family=together,
+        family_answered=None if together is None else together["answered"],
         distinct_splits=distinct, runs_asked=runs,
 
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
@@ -217,19 +224,23 @@ def _distinct_splits(p: Plan, data: SplitData, seeds: list[int]) -> int:
     return len(drawn)
 
 
-def family_answered(primaries: list[PrimaryForecast]) -> float | None:
+def family_answered(primaries: list[PrimaryForecast], pairs: list[tuple], *,
+                    alpha: float, looks: list[int] | None = None,
+                    margin: float | None = None) -> dict[str, Any] | None:
     """The chance that every comparison of the primary family is answered (declared
-    better either way, or equivalent; sequential: the procedure's, else the fixed
-    design's power), were the comparisons independent: the product of each one's, each
-    at its first Holm level — α passed on after a rejection only raises it. None
-    without primaries."""
+    better either way, or equivalent), simulated through the run's own procedure
+    (:func:`tactbench.runner.analysis.sequential.family_forecast`): each comparison at
+    the plan's effect and spread, the comparisons correlated by the cells they share
+    (``pairs``: each comparison's two cells), Holm as the run spends it (α passed on
+    after a rejection), and with ``looks`` (``--until``) the sequential looks, else one
+    fixed test at the planned runs. None without primaries."""
     if not primaries:
         return None
-    out = 1.0
-    for f in primaries:
-        s = f.sequential
-        out *= (s["power"] + s["wrong_side"] + s["equivalent"]) if s else f.power
-    return out
+    f = family_forecast([p.effect / 100 for p in primaries], [p.sd / 100 for p in primaries],
+                        [p.ratio for p in primaries], pairs, runs=primaries[0].runs,
+                        looks=looks, alpha=alpha,
+                        margin=None if margin is None else margin / 100)
+    return f.as_dict()
 
 
 def _free_bytes(root: Path) -> int | None:
@@ -346,19 +357,21 @@ def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]
 
 
 def _family(cells: list[Cell], primary: tuple[str, ...] | list[str],
-            pilot: list[dict[str, Any]]) -> list[tuple[str, Comparison | None]]:
+            pilot: list[dict[str, Any]]
+            ) -> list[tuple[str, Comparison | None, tuple[int, int]]]:
     """Each comparison of the primary family, by the one function the run decides it
     with (:func:`~tactbench.runner.analysis.family.primary_family`), named as the
-    looks name it, with the pilot's comparison of that pair (None without one)."""
+    looks name it, with the pilot's comparison of that pair (None without one) and its
+    two cells (indices into the grid: comparisons sharing a cell are correlated)."""
     grid = list({(c.encoder, c.classifier, c.L): {"encoder": c.encoder,
                                                   "classifier": c.classifier, "L": c.L}
                  for c in cells}.values())
     stored = {pair_name(c.a, c.b, c.where): c for c in comparisons(pilot, primary=primary)
               if c.family == "primary"} if pilot and primary else {}
     out = []
-    for i, _, factor, value_a, value_b, _ in primary_family(grid, primary):
+    for i, j, factor, value_a, value_b, _ in primary_family(grid, primary):
         name = pair_name(value_a, value_b, pair_where(grid, i, factor, value_a))
-        out.append((name, stored.get(name)))
+        out.append((name, stored.get(name), (i, j)))
     return out
 
 
