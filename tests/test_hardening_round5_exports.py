@@ -228,6 +228,38 @@ def test_a_parent_logged_before_grids_is_adopted_not_doubled(live, tmp_path):
     assert again.info.run_id == parent.info.run_id and "tactbench.grid_id" in again.data.tags
 
 
+def test_grids_differing_only_in_pixel_size_get_two_parents_more_seeds_keep_one(tmp_path,
+                                                                               monkeypatch):
+    from tactbench.runner import grid_identity
+
+    reused, store = tmp_path / "out", (tmp_path / "mlruns").as_uri()
+    one = scene(reused, encoders=["raw"], seeds=[0])
+    first = run(one, progress=False, plots=False)
+    exporter.export_folder(reused, store)
+    monkeypatch.setenv(URI_ENV, store)  # the next runs logged live, then exported again
+    more = run(scene(reused, encoders=["raw"], seeds=[0, 1]), registry=mlflow_registry(),
+               progress=False, plots=False)  # adds a seed: the same grid
+    (parent,) = runs_of(store, "folder")
+    assert {r.data.tags["mlflow.parentRunId"] for r in runs_of(store, "cell")} == {
+        parent.info.run_id} and len(runs_of(store, "cell")) == 2
+    for path in (reused / "cells").glob("*.json"):  # the folder is cleared ...
+        path.unlink()
+    other = run(scene(reused, encoders=["raw"], seeds=[0, 1], pixel_mm=5),
+                registry=mlflow_registry(), progress=False, plots=False)
+    # ... and holds a grid that differs in the pixel size alone (a field of one imaging
+    # kind: its shared identity is the first grid's)
+    assert grid_identity(other.rows[0]) == grid_identity(first.rows[0])
+    assert exporter.export_folder(reused, store)["logged"] == 0  # the live run logged it
+    parents = runs_of(store, "folder")
+    assert len(parents) == 2 and {p.info.status for p in parents} == {"FINISHED"}
+    under = {p.info.run_id: {r.data.tags["tactbench.cell_key"] for r in runs_of(store, "cell")
+                             if r.data.tags["mlflow.parentRunId"] == p.info.run_id}
+             for p in parents}
+    assert under[parent.info.run_id] == {r["key"] for r in more.rows}
+    (new,) = set(under) - {parent.info.run_id}
+    assert under[new] == {r["key"] for r in other.rows} == set(ResultStore(reused).keys())
+
+
 @pytest.mark.parametrize("name", ["tap+hold", "swipe (left)", "v1.2", "a/b", "..", "ü",
                                   "x%2E", " lead", "tap.2Bhold"])
 def test_class_names_mlflow_refuses_are_mapped_reversibly(name):

@@ -31,8 +31,13 @@ def register_commands(cli):
 def cell_finished(row, out):
     exporter = _live()
     if exporter is not None:
+        from tactbench.runner import ResultStore
+
+        # the grid as far as it is known: every cell the folder holds now (a run keeps
+        # each cell already there), which finds the parent (exporter.Exporter.parent)
+        grid = set(ResultStore(out).keys())
         try:
-            exporter.log_cell(out, row)
+            exporter.log_cell(out, row, grid)
         except BaseException:
             exporter.live_failed = True  # the parent ends FAILED, not FINISHED
             raise

@@ -2,7 +2,9 @@
 
 One *parent* run per grid of a run folder (tags ``tactbench.folder`` and
 ``tactbench.grid_id``, the digest of :func:`~tactbench.runner.execution.planning.
-grid_identity`: a new grid in a reused folder gets a parent of its own); under it one run
+grid_identity`), found again only when every cell run under it is a cell of the grid
+(:meth:`Exporter.parent`: a new grid in a reused folder, differing in any identity field of
+any cell, gets a parent of its own; more seeds keep it); under it one run
 per cell (params: every field of the cell's identity and its learning status; metrics:
 accuracy, per-class accuracy (:func:`metric_class`), train accuracy, the chance levels
 and costs; tags: the cell key, git revision, machine, the cell's learning judged over its
@@ -106,7 +108,9 @@ class Exporter:
 
     def __init__(self, client: Any, uri: str, experiment_id: str) -> None:
         self.client, self.uri, self.experiment_id = client, uri, experiment_id
-        self._parents: dict[tuple[str, str], str] = {}
+        # the parent this exporter writes under per (folder, grid id), with its cells' keys
+        self._parents: dict[tuple[str, str], tuple[str, set[str]]] = {}
+        self._opened: set[str] = set()  # the parents it set RUNNING: end() ends them
         self.live_failed = False  # a live-logged cell was refused: its parent ends FAILED
 
     @classmethod
@@ -148,53 +152,73 @@ class Exporter:
         return self.client.search_runs([self.experiment_id], filter_string=where,
                                        max_results=1000)
 
-    def parent(self, out: str | Path, row: dict[str, Any]) -> str:
-        """The id of the parent run of the grid of ``row`` in the run folder ``out``,
-        found by the folder and the grid's identity (made, RUNNING, when missing; found
-        ended, it is RUNNING again while this exporter writes under it)."""
+    def parent(self, out: str | Path, row: dict[str, Any], grid_cells: set[str]) -> str:
+        """The id of the parent run of the grid of ``row`` in the run folder ``out``
+        (made, RUNNING, when missing; found ended, it is RUNNING again while this
+        exporter writes under it). ``grid_cells``: the keys of every cell of the grid (a
+        folder's rows; during a run, the cells its folder holds so far).
+
+        A parent is the grid's when it is of this folder, has the grid's shared identity
+        (:func:`~tactbench.runner.execution.planning.grid_identity`, tag
+        ``tactbench.grid_id``) and every cell run under it is a cell of the grid: a
+        cell's key digests every field of its identity, so a grid that differs in any
+        field of any cell (an encoder's version or option, an input, a pixel size) holds
+        none of the old parent's cells and gets a parent of its own, while a run that
+        only adds cells to the folder's grid (seeds, init seeds: the cells already there
+        stay in it) keeps its parent."""
         folder = str(Path(out).resolve())
         grid = grid_identity(row)
         keys = {"tactbench.kind": "folder", "tactbench.folder_id": _digest(folder),
                 "tactbench.grid_id": _digest(grid)}
-        place = (folder, keys["tactbench.grid_id"])
-        if place not in self._parents:
-            found = self._find(**keys) or self._legacy_parent(keys, grid)
-            if found:
-                run_id = found[0].info.run_id
-                if found[0].info.status != "RUNNING":
-                    self.client.update_run(run_id, status="RUNNING")
-            else:
-                run_id = self._new_run(None, {
+        place, cells = (folder, keys["tactbench.grid_id"]), {*grid_cells, str(row["key"])}
+        held = self._parents.get(place)
+        if held is None or not held[1] <= cells:  # a parent of another grid of the folder
+            held = self._grid_parent(keys, grid, cells)
+            if held is None:
+                held = (self._new_run(None, {
                     "mlflow.runName": Path(folder).name, "tactbench.folder": folder,
                     "tactbench.grid": json.dumps(grid, sort_keys=True, default=str)[:5000],
-                    **keys}, {}, {}, "RUNNING")
-            self._parents[place] = run_id
-        return self._parents[place]
+                    **keys}, {}, {}, "RUNNING"), set())
+            self._parents[place] = held
+            self._opened.add(held[0])
+        held[1].add(str(row["key"]))
+        return held[0]
 
-    def _legacy_parent(self, keys: dict[str, str], grid: dict[str, Any]) -> list[Any]:
-        """A parent of this folder logged before parents had a grid (no
-        ``tactbench.grid_id``) whose cell runs are all of ``grid`` (their dataset, split,
-        test window, profile and threads), adopted (given the grid's tags), so that
-        exporting again after an upgrade adds nothing; ``[]`` when there is none."""
+    def _grid_parent(self, keys: dict[str, str], grid: dict[str, Any], cells: set[str]
+                     ) -> tuple[str, set[str]] | None:
+        """The parent run of this grid already logged (``(run id, keys of its cell
+        runs)``), set RUNNING; None when there is none. A parent logged before parents
+        had a grid (no ``tactbench.grid_id``) is adopted (given the grid's tags) when its
+        cell runs are all of the grid by their params too (dataset, split, test window,
+        profile, threads), so that exporting again after an upgrade adds nothing."""
         folder_only = {k: v for k, v in keys.items() if k != "tactbench.grid_id"}
         for parent in self._find(**folder_only):
-            if "tactbench.grid_id" in parent.data.tags:
+            tags = parent.data.tags
+            legacy = "tactbench.grid_id" not in tags
+            if not legacy and tags["tactbench.grid_id"] != keys["tactbench.grid_id"]:
                 continue
-            cells = self._find(**{"tactbench.kind": "cell",
-                                  "mlflow.parentRunId": parent.info.run_id})
-            if cells and all(_of_grid(c.data.params, grid) for c in cells):
-                self.client.set_tag(parent.info.run_id, "tactbench.grid_id",
-                                    keys["tactbench.grid_id"])
-                self.client.set_tag(parent.info.run_id, "tactbench.grid",
+            runs = self._find(**{"tactbench.kind": "cell",
+                                 "mlflow.parentRunId": parent.info.run_id})
+            held = {r.data.tags.get("tactbench.cell_key") for r in runs}
+            if not held <= cells or legacy and not (
+                    runs and all(_of_grid(r.data.params, grid) for r in runs)):
+                continue
+            run_id = parent.info.run_id
+            if legacy:
+                self.client.set_tag(run_id, "tactbench.grid_id", keys["tactbench.grid_id"])
+                self.client.set_tag(run_id, "tactbench.grid",
                                     json.dumps(grid, sort_keys=True, default=str)[:5000])
-                return [parent]
-        return []
+            if parent.info.status != "RUNNING":
+                self.client.update_run(run_id, status="RUNNING")
+            return run_id, held
+        return None
 
     def end(self, status: str = "FINISHED") -> None:
         """End every parent run this exporter made or found RUNNING (``status``:
         FINISHED, or FAILED after a refused write), so that none is left RUNNING."""
-        for run_id in self._parents.values():
+        for run_id in sorted(self._opened):
             self.client.set_terminated(run_id, status=status)
+        self._opened.clear()
         self._parents.clear()
 
     def _new_run(self, parent: str | None, tags: dict[str, str], params: dict[str, Any],
@@ -236,12 +260,13 @@ class Exporter:
 
     # ------------------------------------------------------------------ what is logged
 
-    def log_cell(self, out: str | Path, row: dict[str, Any],
+    def log_cell(self, out: str | Path, row: dict[str, Any], grid_cells: set[str],
                  judged: str | None = None) -> bool:
         """The cell ``row`` of the run folder ``out`` as a run under its grid's parent
-        (``judged``: the cell's learning over all its runs, where known); False when it
-        was logged already (same key, same content)."""
-        parent = self.parent(out, row)
+        (:meth:`parent`; ``grid_cells``: the keys of the grid's cells; ``judged``: the
+        cell's learning over all its runs, where known); False when it was logged
+        already (same key, same content)."""
+        parent = self.parent(out, row, grid_cells)
         logged, there = self._upsert(parent, {"tactbench.kind": "cell",
                                               "tactbench.cell_key": str(row["key"])},
                                      str(row.get("checksum") or _digest(row)),
@@ -253,12 +278,12 @@ class Exporter:
         return logged
 
     def log_comparison(self, out: str | Path, record: dict[str, Any],
-                       row: dict[str, Any]) -> bool:
+                       row: dict[str, Any], grid_cells: set[str]) -> bool:
         """One comparison (:func:`tactbench.runner.presentation.frames.comparison_record`)
-        as a run under the parent of the grid of ``row``."""
+        as a run under the parent of the grid of ``row`` (:meth:`parent`)."""
         identity = {k: record[k] for k in ("family", "dataset", "split", "factor", "a",
                                            "b", "encoder", "classifier", "L")}
-        return self._upsert(self.parent(out, row),
+        return self._upsert(self.parent(out, row, grid_cells),
                             {"tactbench.kind": "comparison",
                              "tactbench.comparison_key": _digest(identity)},
                             _digest(record), lambda: comparison_run(record))[0]
@@ -270,10 +295,11 @@ class Exporter:
         if not report.rows:
             return {"logged": 0, "unchanged": 0}
         judged = cells_learning(report.rows)
-        done = [self.log_cell(out, row, judged.get(_cell_of(row))) for row in report.rows
-                ] if cells else []
-        done += [self.log_comparison(out, comparison_record(c, report.rows), report.rows[0])
-                 for c in report.comparisons]
+        grid = {str(row["key"]) for row in report.rows}  # the folder's grid: every cell
+        done = [self.log_cell(out, row, grid, judged.get(_cell_of(row)))
+                for row in report.rows] if cells else []
+        done += [self.log_comparison(out, comparison_record(c, report.rows), report.rows[0],
+                                     grid) for c in report.comparisons]
         return {"logged": sum(done), "unchanged": len(done) - sum(done)}
 
 
