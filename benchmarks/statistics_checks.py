@@ -214,11 +214,9 @@ def _family_scene(name: str, pairs, effects, margin, looks, paths: int, seed: in
     ``statistics.verdict``) — a construction of its own, not ``draw_family``; beside it,
     the plan's forecast (``sequential.family_forecast``, its default paths) and the
     product of the comparisons' own forecasts the plan printed before."""
-    from tactbench.runner.analysis.sequential import (FamilyState, family_forecast,
-                                                      family_look, procedure)
-    from tactbench.runner.analysis.power import power
-    from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, EQUIVALENT,
-                                                      corrected_t, holm, tost_p, verdict)
+    from tactbench.runner import (A_BETTER, B_BETTER, EQUIVALENT, FamilyState, corrected_t,
+                                  family_forecast, family_look, holm, power, procedure,
+                                  tost_p, verdict)
 
     ratio, alpha, m = 0.25, 0.05, len(pairs)
     cells = sorted({c for pair in pairs for c in pair})

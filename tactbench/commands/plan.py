@@ -124,9 +124,8 @@ def _print_time(f, out: str) -> None:
         total = f"{f.seconds / 60:.1f} min" + (
             f" for the {len(f.cells) - f.unknown} cells with a timing, {f.unknown} without"
             if f.unknown else "")
-    click.echo(f"{len(f.cells)} cells; time on this machine: {total}"
-               + "; peak memory " + ("unknown without a pilot" if f.peak_mb is None
-                                     else f"{f.peak_mb:.0f} MB (the pilot's)"))
+    click.echo(f"{len(f.cells)} cells; time on this machine: {total}")
+    _print_memory(f)
     if f.wall_s:
         at = (f"{f.wall_s[0] / 60:.1f} min to the first look ({f.looks[0]} runs), "
               f"{f.wall_s[-1] / 60:.1f} min if it runs to {f.looks[-1]}" if f.looks
@@ -134,6 +133,18 @@ def _print_time(f, out: str) -> None:
         click.echo(f"wall time of the run: about {at} ({f.workers} cell(s) at once, one "
                    f"thread each; encoding what the cache lacks included)")
     _print_cache(f)
+
+
+def _print_memory(f) -> None:
+    """The run's workers, what set their number, and the whole run's peak memory."""
+    if f.worker_peak_mb is None:
+        click.echo(f"memory: {f.workers} worker(s) ({f.workers_limit}); peak not forecast")
+        return
+    of = "" if f.memory_mb is None else f" of this machine's {f.memory_mb / 1024:.1f} GiB"
+    click.echo(f"memory: {f.workers} worker(s) at once (set by {f.workers_limit}), each "
+               f"at about {f.worker_peak_mb / 1024:.2f} GiB ({f.worker_peak_source}); "
+               f"the whole run, its own process and every worker, about "
+               f"{f.run_peak_mb / 1024:.2f} GiB{of}")
 
 
 def _print_cache(f) -> None:

@@ -93,9 +93,10 @@ from tactbench.runner.analysis.comparisons import Comparison, comparisons, plain
 from tactbench.runner.analysis.forecast import forecast, points
 from tactbench.runner.analysis.power import detectable_effect, power
 from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
-                                                  family_look, simulate_paths)
+                                                  family_forecast, family_look, procedure,
+                                                  simulate_paths)
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
-                                                  corrected_t)
+                                                  corrected_t, holm, tost_p, verdict)
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.execution.cache import KEEP_RECENT_S, EncodingCache, ensure_encodings
 from tactbench.runner.execution.cell import (PREDICTION_LISTS, CellJob, failed_row, make_jobs,
@@ -139,6 +140,7 @@ __all__ = [
     "Comparison", "comparisons", "plain_t", "corrected_t", "A_BETTER", "B_BETTER",
     "EQUIVALENT", "DECIDED", "power", "detectable_effect", "FamilyState", "family_look",
     "simulate_paths", "OUTCOMES_FUTILE", "DECIDED_CODES",
+    "procedure", "family_forecast", "holm", "tost_p", "verdict",
     # what a report shows: names, words, tables, files, data frames
     "short_name", "labels_for", "verdict_text", "answer_text", "markdown_table",
     "comparisons_markdown", "looks_markdown", "print_table", "print_comparisons",

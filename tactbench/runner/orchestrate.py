@@ -31,6 +31,7 @@ from tactbench.runner.analysis.answering import History, first_look_to_run
 from tactbench.runner.execution.cache import (EncodingCache, check_room_runs,
                                               ensure_encodings)
 from tactbench.runner.execution.cell import make_jobs, model_problem
+from tactbench.runner.execution.workers import run_workers
 from tactbench.runner.execution.estimate import packed
 from tactbench.runner.execution.executors import execute
 from tactbench.runner.execution.planning import (
@@ -140,8 +141,10 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
             if on_row is not None:
                 on_row(row)
 
-        if jobs:
-            execute(scene, jobs, finish, bars, memory)
+        if jobs:  # the worker count, decided once (cores, GPUs, memory: workers.py)
+            workers = run_workers(scene, store.stored_rows(), plan=plans[0],
+                                  parent_peak_mb=memory.peak_mb)
+            execute(scene, jobs, finish, bars, memory, workers)
     claim.unlink(missing_ok=True)
     report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
                          margin=scene.margin,
@@ -322,7 +325,7 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
         batch = time.perf_counter() - t0
         if k + 1 < len(looks):  # a look of stored cells took ~0 s: what the next costs
             batch = max(batch, next_batch_seconds(report.ok, looks[k + 1] - looks[k],
-                                                  scene.resolved_workers()))
+                                                  run_workers(scene, report.ok).count))
         if budget is not None and k + 1 < len(looks) and elapsed + batch > budget:
             report.budget_stop = (f"the budget of {design.budget}: {elapsed / 60:.1f} min "
                                   f"spent, the next batch would take about "

@@ -50,17 +50,6 @@ def test_pixel_size_comes_from_the_profile_unless_given():
     assert Scene(profile="paper", pixel_mm=2.5).resolved_pixel_mm() == 2.5
 
 
-def test_cells_share_the_cores_one_thread_each(monkeypatch):
-    """The thread count is fixed (1, in no identity); the cores go to cells side by side."""
-    import tactbench.runner.execution.scene as scene_module
-
-    monkeypatch.setattr(scene_module, "usable_cores", lambda: 8)
-    assert Scene().threads == 1 and Scene().resolved_workers() == 8
-    assert Scene(threads=2).resolved_workers() == 4  # never more threads than cores
-    assert Scene(workers=3).resolved_workers() == 3
-    assert Scene(threads=16).resolved_workers() == 1
-
-
 def test_precision_comes_from_the_profile_unless_given(tmp_path):
     assert Scene().resolved_precision() == "float32"
     assert Scene(profile="paper").resolved_precision() == "uint8"

@@ -72,6 +72,8 @@ from tactbench.runner.execution.estimate import estimate_run, missing_entries
 from tactbench.runner.analysis.sequential import family_forecast, procedure
 from tactbench.runner.execution.results import ResultStore, ok_rows
 from tactbench.runner.execution.scene import Scene
+from tactbench.runner.execution.workers import run_workers
+from tactbench.machine import memory_mb
 
 #: The share of test recordings two models are assumed to disagree on without a pilot
 #: (two models near 80 % whose errors are independent disagree on about 32 %).
@@ -131,7 +133,12 @@ class Forecast:
     # (cumulative; one entry without): encoding, cells side by side, the run around them
     wall_s: list[float] | None = None
     looks: list[int] | None = None  # runs at each look (with --until)
-    workers: int = 1
+    workers: int = 1  # cells at once (runner.execution.workers), and what set it
+    workers_limit: str = "cores"
+    worker_peak_mb: float | None = None  # one worker's forecast peak, and its source
+    worker_peak_source: str = ""
+    run_peak_mb: float | None = None  # the whole run's: its own process and its workers
+    memory_mb: float | None = None  # this machine's
     cache_bytes: int = 0  # the new encodings the run writes to the cache (its first data set's)
     cache_free: int | None = None  # free on the cache's disk (None: it cannot say)
     family_answered: float | None = None  # every primary answered (family_answered)
@@ -182,7 +189,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     looks = list(scene.design.looks) or None
     cache = EncodingCache()
     missing = missing_entries(p, p.cells + others, cache)
-    wall = _walls(p, p.cells + others, cells, looks, missing,
+    workers = run_workers(scene, pilot, plan=p, parent_peak_mb=memory_mb()[1])
+    wall = _walls(p, p.cells + others, cells, looks, missing, workers.count,
                   load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
     distinct = (_distinct_splits(p, data, scene.seeds) if design == "resampled"
@@ -209,7 +217,9 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
         design=design,
         runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
-        workers=scene.resolved_workers(),
+        workers=workers.count, workers_limit=workers.limit,
+        worker_peak_mb=workers.worker_peak_mb, worker_peak_source=workers.peak_source,
+        run_peak_mb=workers.run_peak_mb, memory_mb=workers.memory_mb,
         cache_bytes=entries_bytes(p, missing) + _other_runs_bytes(p, others, pilot, cache),
         cache_free=_free_bytes(cache.root))
 
@@ -252,7 +262,7 @@ def _free_bytes(root: Path) -> int | None:
 
 
 def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
-           looks: list[int] | None, missing: list[tuple[str, str]], *,
+           looks: list[int] | None, missing: list[tuple[str, str]], workers: int, *,
            load_s: float | None) -> list[float] | None:
     """The run's wall time (:func:`~tactbench.runner.execution.estimate.estimate_run`), cumulative
     at each look (one number without looks); cells without a pilot timing get the
@@ -268,7 +278,8 @@ def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
         seeds = set(order[start:end])
         batch = [c for c, f in zip(planned, cells) if c.seed in seeds
                  and not f.source.startswith("finished")]
-        est = estimate_run(p, batch, missing if i == 0 else [], known=known, memo=memo)
+        est = estimate_run(p, batch, missing if i == 0 else [], known=known, memo=memo,
+                           workers=workers)
         if est.unknown:
             return None
         total += est.seconds if batch or i == 0 else 0.0

@@ -44,7 +44,6 @@ from tactbench.data.splits import parse_split
 from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError, MissingFileError, check_choice
 from tactbench.integrity import check_regular_file, read_regular_bytes
-from tactbench.machine import usable_cores
 from tactbench.profiles import PRECISIONS, get_profile
 from tactbench.runner.execution.system import check_scheduler
 from tactbench.specs import parse_spec
@@ -90,7 +89,7 @@ class Scene:
     # in the cell's identity when not 1); a machine's cores are used by cells side by side
     threads: int = 1
     executor: str = "local"
-    workers: int | None = None  # cells at once; None: this machine's usable cores
+    workers: int | None = None  # cells at once; None: cores, GPUs, memory (workers.py)
     scheduler: str | None = None
     out: str = "tactbench-out"
     rerun: bool = False
@@ -147,13 +146,6 @@ class Scene:
         """What this scene decides once, before any work (:class:`Design`): computed on
         first use and kept; every look and report reads it."""
         return design_of(self)
-
-    def resolved_workers(self) -> int:
-        """Cells at once: the scene's, else this machine's usable cores (one thread each
-        at the default :attr:`threads`, their product at most the cores)."""
-        if self.workers is not None:
-            return int(self.workers)
-        return max(1, usable_cores() // max(1, int(self.threads)))
 
 
 #: At most this many window lengths, or seeds, in one run: a range of more
