@@ -88,8 +88,10 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
         more = ("" if p.recordings_for_effect is None or p.recordings_for_effect
                 <= p.recordings else f"; about {p.recordings_for_effect} recordings (now "
                 f"{p.recordings}) would bring it to {points(p.effect)[1:]}")
+        click.echo(f"  {p.persistent_said}")
         click.echo(f"  floor: no number of runs of these {p.recordings} recordings "
-                   f"resolves less than {p.floor:.1f} points{more}")
+                   f"resolves less than {p.floor:.1f} points ((z_(1−α/2) + z_0.8) × "
+                   f"{p.persistent:.2f}){more}")
     if f.family is not None and len(f.primaries) > 1:
         fam = f.family
         shared = sum(x != 0 for row in fam["corr"] for x in row) > len(f.primaries)

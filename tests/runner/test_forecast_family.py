@@ -193,3 +193,31 @@ def test_plan_says_when_the_data_allow_fewer_distinct_splits_than_runs(tmp_path,
     doc = json.loads(CliRunner().invoke(cli, [*args, "--json", str(scene)]).output)
     assert (doc["distinct_splits"], doc["runs_asked"]) == (2, 6)
     assert [p["runs"] for p in doc["primaries"]] == [2]
+
+
+def test_the_part_more_runs_cannot_remove_is_the_docs_sd_root_ratio():
+    """On the issue's CySkin numbers (pilot sd 3.40 points, 165 test and 208 training
+    recordings of 373): the corrected standard error sd·√(1/J + ratio) tends to
+    sd·√(165/208) = 3.03 points — what docs/statistics.md defines and the floor rests
+    on — not the issue's sd·√(1 − 165/373) = 2.54; plan says it with its formula."""
+    from scipy import stats
+
+    from tactbench.runner.analysis.forecast import PrimaryForecast, _primary, persistent_text
+    from tactbench.runner.analysis.power import effect_floor, persistent_sd, se_factor
+
+    ratio = 165 / 208
+    assert persistent_sd(0.034, ratio) == pytest.approx(0.03028, abs=1e-5)
+    assert 0.034 * se_factor(10 ** 6, ratio) == pytest.approx(persistent_sd(0.034, ratio),
+                                                             rel=1e-5)
+    assert abs(persistent_sd(0.034, ratio) - 0.034 * math.sqrt(1 - 165 / 373)) > 0.004
+    z = stats.norm.ppf(1 - 0.05 / 6) + stats.norm.ppf(0.8)
+    assert effect_floor(0.034, ratio, alpha=0.05 / 3) == pytest.approx(
+        z * persistent_sd(0.034, ratio))
+    f = PrimaryForecast(name="q", runs=5, effect=5, sd=3.40, sd_source="", ratio=ratio,
+                        power=0.5, detectable=1, floor=1, recordings=373,
+                        recordings_for_effect=None, persistent=100 * persistent_sd(0.034, ratio))
+    assert "sd·√(n_test/n_train) = 3.40·√(165/208) = 3.03 points" in persistent_text(f, 165, 208)
+    got = _primary("q", None, 5, 0.05, ratio, 165, 0.05 / 3, 373, n_train=208)
+    assert got.persistent == pytest.approx(got.sd * math.sqrt(ratio))
+    assert got.floor == pytest.approx(z * got.persistent)
+    assert f"= {got.persistent:.2f} points" in got.persistent_said

@@ -61,6 +61,7 @@ from tactbench.runner.analysis.power import (
     TARGET_POWER,
     detectable_effect,
     effect_floor,
+    persistent_sd,
     power,
     recordings_for,
     runs_for_power,
@@ -110,6 +111,9 @@ class PrimaryForecast:
     power_at_sd_high: float | None = None
     margin: float | None = None
     runs_for_effect: int | None = None  # a fixed design's runs for 80 % power at effect
+    # the part of the per-run spread more runs cannot remove: sd·√ratio (points)
+    persistent: float = 0.0
+    persistent_said: str = ""  # it, as plan says it (persistent_text)
     sequential: dict[str, Any] | None = None  # with --until: sequential.procedure's forecast
     warnings: list[str] = dataclasses.field(default_factory=list)
 
@@ -201,7 +205,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     capped = None if not looks else [x for x in looks if x < usable] + [usable]
     capped = capped if capped and capped[0] >= 2 else None
     primaries = [_primary(name, found, usable, effect / 100, ratio, n_test, level,
-                          len(p.dataset.labels), margin=scene.margin, looks=capped)
+                          len(p.dataset.labels), margin=scene.margin, looks=capped,
+                          n_train=n_train)
                  for name, found, _ in family]
     together = family_answered(primaries, [pair for _, _, pair in family], alpha=alpha,
                                looks=capped, margin=scene.margin)
@@ -438,8 +443,8 @@ def _spread(found: Comparison | None, n_test: int, effect: float,
 
 def _primary(text: str, found: Comparison | None, runs: int, effect: float,
              ratio: float, n_test: int, level: float, recordings: int, *,
-             margin: float | None = None, looks: list[int] | None = None
-             ) -> PrimaryForecast:
+             margin: float | None = None, looks: list[int] | None = None,
+             n_train: int = 0) -> PrimaryForecast:
     """One primary comparison's forecast at ``runs`` runs for a true ``effect`` at the
     family's ``level``; with ``looks`` (a run ``--until answered``), the sequential
     procedure's too."""
@@ -456,13 +461,27 @@ def _primary(text: str, found: Comparison | None, runs: int, effect: float,
         sd_high=None if high is None else 100 * high,
         power_at_sd_high=None if high is None else power(effect, high, ratio, runs,
                                                           alpha=level),
-        runs_for_effect=runs_for_power(effect, sd, ratio, alpha=level))
+        runs_for_effect=runs_for_power(effect, sd, ratio, alpha=level),
+        persistent=100 * persistent_sd(sd, ratio))
     if looks:
         proc = procedure(effect, sd, ratio, looks, alpha=level,
                          margin=None if margin is None else margin / 100)
         f.sequential = {"looks": list(looks), **proc.as_dict()}
+    f.persistent_said = persistent_text(f, n_test, n_train)
     f.warnings = warnings(f)
     return f
+
+
+def persistent_text(f: PrimaryForecast, n_test: int, n_train: int) -> str:
+    """The part of the spread more runs cannot remove, as plan says it, with its formula
+    and numbers: ``sd·√(n_test/n_train) = 3.40·√(165/208) = 3.03 points`` (the ratio by
+    its value where it is not n_test/n_train, as for seed means of K folds)."""
+    named = n_train and abs(f.ratio - n_test / n_train) < 1e-12
+    root = f"√({n_test}/{n_train})" if named else f"√{f.ratio:.4g}"
+    return (f"the part of the per-run spread more runs cannot remove: sd·√"
+            f"{'(n_test/n_train)' if named else 'ratio'} = {f.sd:.2f}·{root} = "
+            f"{f.persistent:.2f} points (the corrected standard error sd·√(1/J + ratio) "
+            f"tends to it as the runs J grow, not to 0)")
 
 
 def points(value: float) -> str:
