@@ -324,8 +324,36 @@ TEST_WINDOW = Contract("test-window", (
            default=None),
 ))
 
+#: What a paired test declares, beside the split designs, for the looks of a run
+#: ``--until answered``: a test with a known null distribution at each look.
+SEQUENTIAL = "sequential"
+
+
+def _paired_designs(value: Any) -> str | None:
+    known = {*SPLIT_DESIGNS, SEQUENTIAL}
+    if isinstance(value, (set, frozenset, tuple, list)) and value and set(value) <= known:
+        return None
+    return f"must be a non-empty collection of {', '.join(sorted(known))}, got {value!r}"
+
+
+def _label(value: Any) -> str | None:
+    return None if isinstance(value, str) and value.strip() else \
+        f"must be non-empty text, got {value!r}"
+
+
+#: Paired tests: the test a comparison's p and interval come from (docs/statistics.md,
+#: :mod:`tactbench.runner.analysis.paired_tests`).
+PAIRED_TEST = Contract("paired-test", (
+    Member("test", True, "test(d, *, ratio, confidence) → {'low', 'high', 'p', 'df'}: B − A "
+           "per run (a float array) → the interval and two-sided p, df None where none"),
+    Member("designs", False, "the split designs (SPLIT_DESIGNS) and 'sequential' (the looks "
+           "of --until) it is valid for; refused for the others", check=_paired_designs),
+    Member("label", False, "how report.md names it ('Wilcoxon signed-rank test')",
+           check=_label),
+))
+
 CONTRACTS: dict[str, Contract] = {c.kind: c for c in (ENCODER, CLASSIFIER, SENSOR, DATASET,
-                                                      SPLIT, TEST_WINDOW)}
+                                                      SPLIT, TEST_WINDOW, PAIRED_TEST)}
 
 
 def check(kind: str, obj: Any, *, name: str = "", plugin: str = "") -> Any:

@@ -62,6 +62,12 @@ def register_test_windows(register):
 
 
 @hookspec
+def register_paired_tests(register):
+    """Register paired tests: ``test(d, *, ratio, confidence)`` → interval and p of the
+    per-run differences, valid for the designs it declares (``--paired-test NAME``)."""
+
+
+@hookspec
 def register_commands(cli):
     """Add commands to the ``tactbench`` click group ``cli``."""
 

@@ -48,6 +48,7 @@ BUILTIN_PLUGINS: tuple[str, ...] = (
     "tactbench.datasets",
     "tactbench.sensors",
     "tactbench.classifiers",
+    "tactbench.paired",  # paired tests
     "tactbench.commands",
 )
 

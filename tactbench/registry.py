@@ -27,6 +27,7 @@ KIND_HOOKS: dict[str, str] = {
     "classifier": "register_classifiers",
     "split": "register_splits",
     "test-window": "register_test_windows",
+    "paired-test": "register_paired_tests",
 }
 KINDS: tuple[str, ...] = tuple(KIND_HOOKS)
 

@@ -259,7 +259,7 @@ def test_every_builtin_component_satisfies_its_contract(kind, tmp_path):
                 getattr(obj, "bus", None) and obj.bus.shutdown()
         built += 1
     assert built >= {"sensor": 2, "dataset": 3, "encoder": 3, "classifier": 4, "split": 4,
-                     "test-window": 3}[kind]
+                     "test-window": 3, "paired-test": 2}[kind]
 
 
 def test_sensors_know_their_taxels_when_built():

@@ -233,9 +233,38 @@ def hook_names():
                                                            "tactbench_spec")]
 
 
+def test_hook_register_paired_tests():
+    import numpy as np
+
+    class Median:  # no interval worth the name: the runs' range, p from a sign test
+        label = "median test"
+        designs = ("fixed",)
+
+        def test(self, d, *, ratio, confidence):
+            return {"low": float(np.min(d)), "high": float(np.max(d)), "p": 0.5, "df": None}
+
+    module = types.ModuleType("median_plugin")
+    module.Median = Median
+    sys.modules["median_plugin"] = module
+    try:
+        def register_paired_tests(register):
+            register("median", "median_plugin:Median", summary="a paired test")
+
+        reg = registry_with(("p", namespace(register_paired_tests=register_paired_tests)))
+        assert reg.get("paired-test", "median").plugin == "p"
+        assert {"corrected-t", "wilcoxon"} <= set(reg.names("paired-test"))
+        assert reg.build("paired-test", "median").test(np.array([0.1, 0.3]), ratio=0,
+                                                       confidence=0.95)["high"] == 0.3
+        Median.designs = ("fixed", "daily")
+        with pytest.raises(ContractError, match="paired-test 'median' .*'designs' must be"):
+            reg.build("paired-test", "median")
+    finally:
+        del sys.modules["median_plugin"]
+
+
 def test_every_hook_has_its_own_test():
     hooks = hook_names()
-    assert len(hooks) == 10
+    assert len(hooks) == 11
     missing = [h for h in hooks if f"test_hook_{h}" not in globals()]
     assert not missing, f"hooks without a test: {missing}"
 

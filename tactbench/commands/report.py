@@ -20,6 +20,9 @@ from tactbench.runner import EXPORT_EXTRA as EXTRA, render_folder
 @click.option("--primary", multiple=True, metavar="A..B",
               help="A confirmatory comparison, repeatable (see `tactbench run --primary`). "
                    "[default: the run's]")
+@click.option("--paired-test", metavar="NAME", default=None,
+              help="The paired test of every comparison (see `tactbench run --paired-test`). "
+                   "[default: the run's]")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (the summary).")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.option("--parquet", is_flag=True,
@@ -27,8 +30,8 @@ from tactbench.runner import EXPORT_EXTRA as EXTRA, render_folder
                    "(one per comparison), typed tables for pandas and pyarrow "
                    "(pip install \"tactbench[export]\").")
 def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...],
-               primary: tuple[str, ...], as_json: bool, no_plots: bool,
-               parquet: bool) -> None:
+               primary: tuple[str, ...], paired_test: str | None, as_json: bool,
+               no_plots: bool, parquet: bool) -> None:
     """Render a run folder's report again from its stored cell rows, training nothing.
 
     FOLDER is the --out of a `tactbench run`. Its results.json, results.csv, report.md
@@ -41,7 +44,7 @@ def report_cmd(folder: str, margin: float | None, contrasts: tuple[str, ...],
         require("pandas", EXTRA)
         require("pyarrow", EXTRA)
     report = render_folder(folder, margin=margin, contrasts=contrasts or None,
-                           primary=primary or None, plots=not no_plots,
+                           primary=primary or None, plots=not no_plots, paired_test=paired_test,
                            registry=get_registry(), parquet=parquet)
     print_report(report, as_json=as_json, title=f"{folder} · re-rendered from its cells",
                  done=f"{len(report.rows)} cell row(s) read, none computed. Reports in "

@@ -159,6 +159,10 @@ SCENE_OPTIONS = [
                  help="A confirmatory comparison (contrast syntax), repeatable: the primary "
                       "questions form their own family (Holm) and lead the report; the "
                       "other comparisons are exploratory."),
+    scene_option("--paired-test", field="paired_test", metavar="NAME", none="corrected-t",
+                 help="The paired test every comparison's p and interval come from (a "
+                      "registered one, `tactbench list`); refused for designs it does not "
+                      "declare (wilcoxon: fixed splits and independent runs, no --until)."),
     scene_option("--until", field="until", type=click.Choice(UNTIL),
                  none="the seeds given, once",
                  help=f"answered: run the seeds in batches (the first look after "

@@ -91,6 +91,8 @@ from tactbench.machine import git_revision
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
 from tactbench.runner.analysis.comparisons import Comparison, comparisons, plain_t
 from tactbench.runner.analysis.forecast import forecast, points
+from tactbench.runner.analysis.paired_tests import (DEFAULT_PAIRED_TEST, CorrectedT,
+                                                    PairedTestChoice, choose_paired_test)
 from tactbench.runner.analysis.power import detectable_effect, power
 from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
                                                   family_forecast, family_look, procedure,
@@ -141,6 +143,7 @@ __all__ = [
     "EQUIVALENT", "DECIDED", "power", "detectable_effect", "FamilyState", "family_look",
     "simulate_paths", "OUTCOMES_FUTILE", "DECIDED_CODES",
     "procedure", "family_forecast", "holm", "tost_p", "verdict",
+    "CorrectedT", "PairedTestChoice", "choose_paired_test", "DEFAULT_PAIRED_TEST",
     # what a report shows: names, words, tables, files, data frames
     "short_name", "labels_for", "verdict_text", "answer_text", "markdown_table",
     "comparisons_markdown", "looks_markdown", "print_table", "print_comparisons",

@@ -20,6 +20,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from tactbench.contracts import SPLIT
+from tactbench.data.splits import SplitData, draw_splits, split_design
 from tactbench.datasets.loading import load_dataset
 from tactbench.errors import InputError, MissingFileError, TactbenchError, require
 from tactbench.events import hook_timeout
@@ -28,6 +30,7 @@ from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.plugins import load_registry
 from tactbench.runner.analysis.answering import History, first_look_to_run
+from tactbench.runner.analysis.paired_tests import choose_paired_test
 from tactbench.runner.execution.cache import (EncodingCache, check_room_runs,
                                               ensure_encodings)
 from tactbench.runner.execution.cell import make_jobs, model_problem
@@ -112,6 +115,8 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
         made = bars.callback(f"make dataset {scene.dataset}")
         plans = plan_runs(scene, registry, progress=made)
+        paired = choose_paired_test(scene.paired_test, plans[0].registry)
+        paired.check(planned_design(plans[0]), sequential=scene.until is not None)
         bars.update(task, 1)
         memory.step("plan (load the dataset)")
         store = ResultStore(scene.out)
@@ -151,7 +156,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
                          users=known_users(p.dataset.users) if p.run_dataset is None else None,
                          rendered="at the end of the run, from the rows of cells/",
                          primary=scene.design.primary, sequential=scene.design,
-                         resume=resume)
+                         resume=resume, paired_test=paired)
     write_report(scene.out, report, plots=plots)
     report.paths.update(refresh_parquet(report, scene.out))  # never left stale
     report.computed, report.skipped = len(pending), len(identities) - len(pending)
@@ -164,12 +169,14 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                   margin: float | None = None, plots: bool = True,
                   registry=None, primary: Sequence[str] | None = None,
-                  write: bool = True, parquet: bool = False) -> Report:
+                  write: bool = True, parquet: bool = False,
+                  paired_test: str | None = None) -> Report:
     """The report of the run folder ``out`` again, from the rows of ``OUT/cells`` alone,
     written over its results.json, results.csv, report.md and figures; nothing is
     trained, and results.json is not read.
 
-    ``contrasts``, ``margin`` and ``primary`` (statistics options, which change no cell)
+    ``contrasts``, ``margin``, ``primary`` and ``paired_test`` (statistics options,
+    which change no cell)
     default to those of the scene that computed the folder's latest row
     (:func:`~tactbench.runner.execution.results.latest_scene`), so that a report rendered again
     with no options is the run's own, but for the line saying when and by what. The
@@ -214,6 +221,7 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     scene = latest_scene(rows)
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin
+    paired = choose_paired_test(paired_test or scene.get("paired_test"), registry)
     design = design_of(scene)
     primary = list(design.primary) if primary is None else list(primary)
     check_contrasts([*contrasts, *primary], [{f: r[f] for f in ("encoder", "classifier", "L")}
@@ -221,13 +229,27 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     users, missing = dataset_users(rows, registry)
     how = "re-rendered from the stored rows of cells/ (nothing trained)"
     report = make_report(rows, contrasts=contrasts, margin=margin, users=users,
-                         primary=primary, sequential=design,
+                         primary=primary, sequential=design, paired_test=paired,
                          rendered=how + (f"; per-user results left out: {missing}"
                                          if missing else ""))
     if write:
         write_report(out, report, plots=plots)
         report.paths.update(refresh_parquet(report, out, write=parquet))
     return report
+
+
+def planned_design(p: Plan) -> str:
+    """The design of the runs ``p`` plans, as their rows will record it (what a paired
+    test is checked against before any training): ``independent`` where every run draws
+    its own data set, else the split's declared design, or for an undeclared one the
+    reading of its first draw (:func:`~tactbench.data.splits.split_design`)."""
+    if p.run_dataset is not None:
+        return "independent"
+    declared = SPLIT.get(p.split, "design")
+    if declared is not None or p.dataset is None:
+        return declared or "resampled"
+    data = SplitData.of(p.dataset, test_per_class=p.scene.test_per_class)
+    return split_design(p.split, draw_splits(p.split, data, p.scene.seeds[0], "split"))
 
 
 def _keyed_rows(store: ResultStore) -> list[dict[str, Any]]:

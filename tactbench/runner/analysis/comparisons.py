@@ -40,6 +40,8 @@ from tactbench.runner.analysis.pairing import (
     repeats_note,
     sampling_share,
 )
+from tactbench.runner.analysis.paired_tests import (DEFAULT_CHOICE, DEFAULT_PAIRED_TEST,
+                                                    PairedTestChoice)
 from tactbench.runner.analysis.power import (
     bayes_correlated_t,
     detectable_effect,
@@ -174,6 +176,7 @@ class Comparison:
     ceiling: bool = False
     run_ratio: float = 0.0
     variance_components: dict[str, Any] | None = None
+    paired_test: str = DEFAULT_PAIRED_TEST
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON entry of results.json: every field by name, ``where``'s factors
@@ -183,6 +186,8 @@ class Comparison:
             value = getattr(self, f.name)
             if f.name == "where":
                 out.update(value)
+            elif f.name == "paired_test" and value == DEFAULT_PAIRED_TEST:
+                continue  # left out at its default: every stored report reads the same
             elif f.name == "per_class":
                 out[f.name] = {k: asdict(g) for k, g in value.items()}
             elif f.name == "per_user":
@@ -203,7 +208,8 @@ class Comparison:
         unknown = sorted(set(entry) - set(names) - set(FACTORS))
         if unknown:
             raise CorruptArtefactError(source, f"a comparison with unknown field {unknown[0]!r}")
-        missing = [n for n in names if n not in entry and n not in ADDED_FIELDS]
+        missing = [n for n in names if n not in entry and n not in ADDED_FIELDS
+                   and n != "paired_test"]  # to_dict leaves it out at its default
         if missing:
             raise CorruptArtefactError(source, f"a comparison without {missing[0]!r}")
         values = {name: entry[name] for name in names if name in entry}
@@ -224,7 +230,7 @@ class Comparison:
 ADDED_FIELDS: frozenset[str] = frozenset({
     "family", "run_ratio", "bayes_margin", "bayes_a_better", "bayes_equivalent", "bayes_b_better",
     "runs_for_power", "detectable_effect", "test_sampling_share", "ceiling",
-    "variance_components"})
+    "variance_components", "paired_test"})
 
 
 def _count(v: Any) -> bool:
@@ -278,7 +284,7 @@ def _variance_components(v: Any) -> bool:
 #: What each stored field of a comparison may hold (:meth:`Comparison.from_dict`).
 _STORED_KIND = {
     **{k: lambda v: isinstance(v, str) for k in ("dataset", "split", "factor", "method",
-                                                 "verdict", "note")},
+                                                 "verdict", "note", "paired_test")},
     "family": lambda v: v in FAMILIES, "ceiling": lambda v: isinstance(v, bool),
     **{k: _optional_number for k in ("bayes_margin", "bayes_a_better", "bayes_equivalent",
                                      "bayes_b_better", "detectable_effect",
@@ -314,8 +320,8 @@ def read_comparisons(entries: Iterable[Comparison | Mapping[str, Any]], *,
 
 def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = (),
                 margin: float | None = None, users: Sequence[str] | None = None,
-                confidence: float = CONFIDENCE, primary: Sequence[str] = ()
-                ) -> list[Comparison]:
+                confidence: float = CONFIDENCE, primary: Sequence[str] = (),
+                paired_test: PairedTestChoice = DEFAULT_CHOICE) -> list[Comparison]:
     """Paired comparisons at run level: the pairs ``primary`` names (contrasts,
     :func:`parse_contrast`), then every two cells that differ in one of :data:`FACTORS`,
     and every pair a ``contrasts`` entry names.
@@ -331,7 +337,9 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
     others (exploratory); each family's p-values are Holm-adjusted apart, and the
     verdicts rest on the adjusted ones (:func:`tactbench.runner.analysis.statistics.verdict`).
     ``margin`` (points) adds the equivalence test; ``users`` (the user of each dataset
-    sample, by index) adds per-user gains. See :class:`Comparison` for each field.
+    sample, by index) adds per-user gains; ``paired_test``: the test the p and interval
+    come from (:mod:`~tactbench.runner.analysis.paired_tests`; refused in one line for
+    runs of a design it does not declare). See :class:`Comparison` for each field.
     """
     if margin is not None and not (isinstance(margin, (int, float)) and margin > 0):
         raise InputError(f"margin must be a number of points > 0, got {margin!r}")
@@ -345,7 +353,7 @@ def comparisons(rows: Iterable[dict[str, Any]], *, contrasts: Sequence[str] = ()
         for i, j, factor, value_a, value_b, family in _pairs(cells, contrasts, primary):
             where = pair_where(cells, i, factor, value_a)
             res = compare_cells(groups[keys[i]], groups[keys[j]], margin=margin,
-                                users=users, confidence=confidence,
+                                users=users, confidence=confidence, paired_test=paired_test,
                                 names={"dataset": dataset, "split": split, "factor": factor,
                                        "a": value_a, "b": value_b, "where": where})
             if res is not None:
@@ -471,8 +479,8 @@ def correction(rows: Sequence[dict[str, Any]]) -> tuple[str, float, str]:
 
 def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[str, Any]],
                   *, names: Mapping[str, Any], margin: float | None = None,
-                  users: Sequence[str] | None = None, confidence: float = CONFIDENCE
-                  ) -> Comparison | None:
+                  users: Sequence[str] | None = None, confidence: float = CONFIDENCE,
+                  paired_test: PairedTestChoice = DEFAULT_CHOICE) -> Comparison | None:
     """Two cells compared run by run (``runs_*``: run key → row); None when they share
     no run with a paired test sequence. ``names``: the record's ``dataset``, ``split``,
     ``factor``, ``a``, ``b`` and ``where``.
@@ -490,6 +498,9 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
         return None
     rows_a = [runs_a[k] for k in per_seed]
     kind, ratio, method = correction(rows_a + [runs_b[k] for k in per_seed])
+    paired_test.check(kind)
+    if paired_test.name != DEFAULT_PAIRED_TEST:
+        method = f"{paired_test.test.label} over runs ({kind} design)"
     splits: dict[int, list[tuple]] = {}  # the unit: a split seed (its init seeds averaged)
     for key in per_seed:
         splits.setdefault(key[0], []).append(key)
@@ -511,7 +522,8 @@ def compare_cells(runs_a: dict[tuple, dict[str, Any]], runs_b: dict[tuple, dict[
                    if per_fold is None else f" over {len(per_fold)} fold differences")
     return Comparison(
         **names, **run_level_tests(d_run, d_t, ratio, run_ratio, margin=margin,
-                                   confidence=confidence),
+                                   confidence=confidence, test=paired_test.test),
+        paired_test=paired_test.name,
         method=method, ratio=ratio, run_ratio=run_ratio, runs=len(d_run),
         per_run={str(s): float(v) for s, v in zip(splits, d_run)},
         b_better_runs=int(np.sum(d_run > 0)), a_better_runs=int(np.sum(d_run < 0)),
@@ -545,13 +557,15 @@ def _not_learned(names: Mapping[str, Any], rows_a: Sequence[dict[str, Any]],
 
 
 def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio: float,
-                    *, margin: float | None, confidence: float) -> dict[str, Any]:
+                    *, margin: float | None, confidence: float,
+                    test: Any = DEFAULT_CHOICE.test) -> dict[str, Any]:
     """Every test over a pair's runs, by field of :class:`Comparison` — the one place a
     test of :mod:`tactbench.runner.analysis.statistics` or
     :mod:`tactbench.runner.analysis.power` is called on a comparison.
 
-    ``d_run``: B − A per run (split seed); ``d_t``: the differences the corrected t runs
-    over (per fold for K folds, else ``d_run``); ``ratio``: its correction;
+    ``d_run``: B − A per run (split seed); ``d_t``: the differences ``test`` (the paired
+    test, :mod:`~tactbench.runner.analysis.paired_tests`) runs over (per fold for K
+    folds, else ``d_run``); ``ratio``: its correction;
     ``run_ratio``: the correction of a mean of ``d_run`` (the same but for K folds);
     ``margin`` (points): the equivalence margin, None for none.
     """
@@ -561,11 +575,12 @@ def run_level_tests(d_run: np.ndarray, d_t: np.ndarray, ratio: float, run_ratio:
                            "confidence": confidence, "df": None, "t_p": None,
                            "permutation_p": float(sign_flip_p(d_run)), "p": None}
     if j >= 2:
-        t = corrected_t(d_t, ratio, confidence=confidence)
+        t = test.test(d_t, ratio=ratio, confidence=confidence)
         # a difference of accuracies lies in [−1, 1]; the t-interval of a few runs can pass it
         res.update(low=max(-1.0, float(t["low"])), high=min(1.0, float(t["high"])),
-                   df=int(t["df"]), t_p=float(t["p"]))
-        res["p"] = res["t_p"]  # the one rule: P_RULE
+                   df=t["df"], p=float(t["p"]))
+        res["t_p"] = float(corrected_t(d_t, ratio, confidence=confidence)["p"]) \
+            if test is not DEFAULT_CHOICE.test else res["p"]  # the one rule: P_RULE
     half = (margin / 100) if margin else TARGET_HALF_WIDTH
     sd = float(d_run.std(ddof=1)) if j > 1 else None
     res["equivalence_margin"] = margin

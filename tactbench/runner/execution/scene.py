@@ -94,9 +94,8 @@ class Scene:
     out: str = "tactbench-out"
     rerun: bool = False
     save_models: bool = False  # OUT/models/<cell key>.safetensors, usable by `tactbench live`
-    # statistics and inputs (docs/statistics.md): an equivalence margin in points; paired
-    # contrasts "A..B" of cells differing in several factors; what a classifier taking
-    # either input is fed; initialisation seeds varied apart from the split seeds
+    # statistics and inputs (docs/statistics.md): an equivalence margin in points; contrasts
+    # "A..B"; what a classifier taking either input is fed; init seeds apart from split seeds
     margin: float | None = None
     contrasts: list[str] | None = None
     input: str | None = None  # images or vectors; None: images where there is a layout
@@ -108,6 +107,7 @@ class Scene:
     max_runs: int = 20  # with until: the most runs (seeds) planned
     look_every: int = 5  # with until: the runs added between two looks (the first at 5)
     budget: str | None = None  # with until: no batch begun past this time ("90m", "2h")
+    paired_test: str | None = None  # the test of every comparison; None: corrected-t
 
     def __post_init__(self) -> None:
         checked = check_fields({f.name: getattr(self, f.name) for f in fields(self)})
@@ -225,7 +225,7 @@ _KINDS: dict[str, str] = {
     "out": "text", "rerun": "bool", "save_models": "bool",
     "margin": "number?", "contrasts": "texts?", "input": "text?", "init_seeds": "seeds?",
     "primary": "texts?", "until": "text?", "max_runs": "count", "look_every": "count",
-    "budget": "text?",
+    "budget": "text?", "paired_test": "text?",
 }
 
 

@@ -7,6 +7,7 @@ import re
 from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.analysis.answering import beyond_looks
+from tactbench.runner.analysis.paired_tests import PAIRED_TEST_TEXT, chosen_tests
 from tactbench.runner.analysis.comparisons import (INDEPENDENT_METHOD, P_RULE, Comparison, plain_t,
                                                    read_comparisons)
 from tactbench.runner.execution.learning import accuracy_mark, legend
@@ -15,11 +16,9 @@ from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, E
 from tactbench.runner.analysis.summaries import failed_cells
 from tactbench.runner.execution.questions import FACTORS, short_name, spec_label, spec_labels
 
-#: Classifier spec → the name shown for it
-#: (:func:`tactbench.runner.execution.questions.spec_labels`).
+#: Classifier spec → the name shown for it (``questions.spec_labels``).
 Labels = Mapping[str, str]
-#: Comparisons as records, or as results.json stores them (read through
-#: :func:`tactbench.runner.analysis.comparisons.read_comparisons`, which verifies them).
+#: Comparisons as records, or as results.json stores them (verified by ``read_comparisons``).
 Comparisons = Sequence["Comparison | Mapping[str, Any]"]
 
 
@@ -79,8 +78,7 @@ COMPARISON_HEADER = ["factor", "A", "B", "where", "B − A (points)",
                      "95 % interval over runs (unadjusted)", "runs B>A / A>B / tied",
                      "p (corrected t)", "Holm p (its family)", "P(A better / ≈ / B better)",
                      "runs for 80 % power (one fixed test)", "verdict"]
-#: The p column's name where a table's comparisons are all the plain paired t over
-#: independent runs, or some are and some are corrected (:func:`comparison_header`).
+#: The p column's name where a table's t are all plain, or mixed (:func:`comparison_header`).
 P_COLUMN = {"plain": "p (paired t)", "mixed": "p (t over runs)"}
 
 
@@ -92,11 +90,10 @@ def _t_kind(comps: Sequence[Comparison]) -> str:
 
 
 def comparison_header(comps: Comparisons) -> list[str]:
-    """The header of a table of ``comps``: :data:`COMPARISON_HEADER`, its p column named
-    by the t its comparisons were tested with (never "corrected" for the plain t)."""
-    kind = _t_kind(read_comparisons(comps))
-    return [P_COLUMN.get(kind, col) if col == "p (corrected t)" else col
-            for col in COMPARISON_HEADER]
+    """:data:`COMPARISON_HEADER` of ``comps``, its p column named by their test or t kind."""
+    comps = read_comparisons(comps)
+    column = f"p ({chosen_tests(comps)})" if chosen_tests(comps) else P_COLUMN.get(_t_kind(comps))
+    return [column or col if col == "p (corrected t)" else col for col in COMPARISON_HEADER]
 
 
 def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
@@ -119,9 +116,9 @@ def comparison_rows(comps: Comparisons, labels: Labels | None = None) -> list[li
     labels = labels_for(comps=comps) if labels is None else labels
     return [[*_pair(c, labels), "ceiling" if c.ceiling else f"{100 * c.difference:+.1f}",
              "both 100 %" if c.ceiling else
-             f"[{100 * c.low:+.1f}, {100 * c.high:+.1f}]" if c.df else "-",
+             f"[{100 * c.low:+.1f}, {100 * c.high:+.1f}]" if c.p is not None else "-",
              f"{c.b_better_runs}/{c.a_better_runs}/{c.tied_runs}",
-             _p_value(c.t_p), _p_value(c.p_holm), _bayes(c), _power_runs(c),
+             _p_value(c.p), _p_value(c.p_holm), _bayes(c), _power_runs(c),
              verdict_text(c, labels)]
             for c in comps]
 
@@ -446,6 +443,9 @@ def comparisons_text(comps: Comparisons) -> str:
     """The text above report.md's tables of ``comps``: :data:`COMPARISONS_TEXT` where every
     t is corrected, else naming the plain paired t too (and :data:`INDEPENDENT_TEXT` where
     runs drew their own data sets; a fixed split's plain t is not that)."""
+    if chosen_tests(read_comparisons(comps)):  # --paired-test: named, and in each `method`
+        return COMPARISONS_TEMPLATE.format(test=PAIRED_TEST_TEXT.format(chosen_tests(
+            read_comparisons(comps))), rule=P_RULE.replace("corrected t's", "paired test's"))
     kind = _t_kind(read_comparisons(comps))
     if kind == "corrected":
         return COMPARISONS_TEXT
@@ -540,7 +540,7 @@ def answer_text(c: Comparison, labels: Labels | None = None) -> str:
         return f"{head}: a ceiling — both right on every recording of every run."
     detail = (f"B − A {100 * c.difference:+.1f} points"
               + (f" [{100 * c.low:+.1f}, {100 * c.high:+.1f}] (95 %, unadjusted)"
-                 if c.df else "")
+                 if c.p is not None else "")
               + f", Holm p {_p_value(c.p_holm)} over {c.runs} runs")
     if c.bayes_b_better is not None:
         detail += (f"; P(B better by > {c.bayes_margin:g}) = {c.bayes_b_better:.2f}, "

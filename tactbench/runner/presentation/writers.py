@@ -26,6 +26,8 @@ from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
 from tactbench.runner.analysis.answering import History, comparison_name, replay
 from tactbench.runner.analysis.comparisons import Comparison, comparisons
+from tactbench.runner.analysis.paired_tests import (DEFAULT_CHOICE, DEFAULT_PAIRED_TEST,
+                                                    PairedTestChoice)
 from tactbench.runner.presentation.plots import caption, check_reference, write_plots
 from tactbench.runner.execution.identity import IDENTITY_DEFAULTS
 from tactbench.runner.execution.results import (
@@ -181,7 +183,8 @@ def make_report(rows: Sequence[dict[str, Any]], *,
                 contrasts: Sequence[str] = (), margin: float | None = None,
                 users: Sequence[str] | None = None, rendered: str | None = None,
                 primary: Sequence[str] = (), sequential: Design | None = None,
-                resume: History | None = None) -> Report:
+                resume: History | None = None,
+                paired_test: PairedTestChoice = DEFAULT_CHOICE) -> Report:
     """The :class:`Report` of ``rows`` (every row of a folder, ok and failed, in the
     scene's order: failed cells are listed and left out of summaries and plots).
 
@@ -194,19 +197,23 @@ def make_report(rows: Sequence[dict[str, Any]], *,
     :class:`~tactbench.runner.execution.scene.Design` of a run ``--until answered``, whose
     looks are replayed from the rows (:func:`tactbench.runner.analysis.answering.replay`;
     ``resume``: an earlier report's ``history`` of the same run, whose looks are not
-    computed again).
+    computed again); ``paired_test``: the test every comparison's p and interval come
+    from (:mod:`tactbench.runner.analysis.paired_tests`), recorded in ``statistics``
+    where it is not the default.
     """
     rows = list(rows)
     reference = check_reference(reference)
     looks = history = None
     if sequential is not None and sequential.looks and primary:
+        paired_test.check(None, sequential=True)  # the looks: one line, before any file
         history = replay(rows, seed_order=sequential.seed_order, looks=sequential.looks,
                          primary=primary, margin=margin, resume=resume)
         looks = history.as_dict()
         looks["budget"] = sequential.budget
         looks["train_cpu_seconds"] = training_cpu_seconds(rows)
         looks["runs_stored"] = len({int(r["seed"]) for r in ok_rows(rows)})
-    comps = comparisons(rows, contrasts=contrasts, margin=margin, users=users, primary=primary)
+    comps = comparisons(rows, contrasts=contrasts, margin=margin, users=users, primary=primary,
+                        paired_test=paired_test)
     if looks is not None:
         comps = [sequential_verdict(c, looks) if c.family == "primary" else c for c in comps]
     return Report(looks=looks, history=history,
@@ -214,7 +221,9 @@ def make_report(rows: Sequence[dict[str, Any]], *,
         variance=variance_decomposition(rows),
         statistics={"unit": "run (one split seed)", "contrasts": list(contrasts),
                     "margin": margin, "per_user": users is not None,
-                    **({"primary": list(primary)} if primary else {})},
+                    **({"primary": list(primary)} if primary else {}),
+                    **({"paired_test": paired_test.name}
+                       if paired_test.name != DEFAULT_PAIRED_TEST else {})},
         runs=computed_by(rows), reference=reference,
         rendered={"by": command_line(), "how": rendered or "from the rows of cells/",
                   "at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")})
@@ -317,8 +326,10 @@ def _statistics_text(statistics: dict[str, Any]) -> str:
     margin = statistics.get("margin")
     contrasts = ", ".join(f"`{c}`" for c in statistics.get("contrasts") or ()) or "none"
     primary = ", ".join(f"`{c}`" for c in statistics.get("primary") or ())
+    test = statistics.get("paired_test")
     return (f"- statistics: margin {'none' if margin is None else f'{margin:g} points'}; "
-            f"contrasts {contrasts}" + (f"; primary {primary}" if primary else ""))
+            f"contrasts {contrasts}" + (f"; primary {primary}" if primary else "")
+            + (f"; paired test `{test}` (--paired-test)" if test else ""))
 
 
 def _facts(report: Report) -> list[str]:
