@@ -270,12 +270,40 @@ def test_class_names_mlflow_refuses_are_mapped_reversibly(name):
     assert exporter.class_of_metric(exporter.metric_class(name)) == name
 
 
+@pytest.mark.parametrize("name", ["g" * 300, "+" * 300, "a" + "+" * 299, "ab" + "+" * 298,
+                                  "ü" * 300, "x" * 242, "x" * 300 + "+"])
+def test_class_names_too_long_for_mlflow_are_shortened_reversibly(name):
+    from mlflow.utils.validation import (MAX_ENTITY_KEY_LENGTH, MAX_TAG_VAL_LENGTH,
+                                         path_not_unique, validate_param_and_metric_name)
+
+    assert (exporter.MAX_NAME, exporter.MAX_TAG_VALUE) == (MAX_ENTITY_KEY_LENGTH,
+                                                           MAX_TAG_VAL_LENGTH)
+    metric, tags = exporter.class_metric(name)
+    assert len(metric) <= MAX_ENTITY_KEY_LENGTH and len(metric) >= MAX_ENTITY_KEY_LENGTH - 2
+    assert validate_param_and_metric_name(metric) and not path_not_unique(metric)
+    assert all(len(k) <= MAX_ENTITY_KEY_LENGTH for k in tags)
+    assert exporter.class_of_metric(metric.removeprefix("accuracy_"), tags) == name
+    head = metric.removeprefix("accuracy_").rsplit(exporter.HASHED, 1)[0]
+    assert exporter.metric_class(name).startswith(head)  # readable, no escape cut in half
+    other, _ = exporter.class_metric(name[:-1] + "?")
+    assert other != metric  # a name differing in its last character: another metric
+    with pytest.raises(ValueError, match="tactbench.names."):
+        exporter.class_of_metric(metric.removeprefix("accuracy_"))
+    assert exporter.class_metric("x" * 241) == ("accuracy_" + "x" * 241, {})  # 250: fits
+
+
+def test_a_class_name_longer_than_a_tag_is_one_line():
+    with pytest.raises(exporter.TactbenchError, match="has 8001 characters"):
+        exporter.class_metric("k" * 8001)
+
+
 def test_a_folder_with_such_class_names_is_exported_whole(live, tmp_path):
     out = tmp_path / "out"
     run(scene(out, encoders=["raw"], seeds=[0]), progress=False, plots=False)
     (path,) = (out / "cells").glob("*.json")
     row = json.loads(path.read_text())  # the classes renamed as a folder dataset names them
-    names = ["tap+hold", "swipe (left)", *row["classes"][2:]]
+    long = "press " * 50  # 300 characters: a metric name MLflow refuses (over 250)
+    names = ["tap+hold", "swipe (left)", long, *row["classes"][3:]]
     renamed = dict(zip(row["classes"], names))
     row["classes"] = names
     row["per_class_accuracy"] = {renamed[k]: v for k, v in row["per_class_accuracy"].items()}
@@ -286,6 +314,11 @@ def test_a_folder_with_such_class_names_is_exported_whole(live, tmp_path):
     (cell,) = runs_of(uri, "cell")
     assert cell.data.metrics["accuracy_tap.2Bhold"] == row["per_class_accuracy"]["tap+hold"]
     assert "accuracy_swipe .28left.29" in cell.data.metrics
+    (shortened,) = [m for m in cell.data.metrics if exporter.HASHED in m]
+    assert len(shortened) <= 250 and cell.data.metrics[shortened] == \
+        row["per_class_accuracy"][long]
+    assert exporter.class_of_metric(shortened.removeprefix("accuracy_"),
+                                    cell.data.tags) == long
     assert runs_of(uri, "folder")[0].info.status == "FINISHED"
 
 

@@ -6,7 +6,7 @@ grid_identity`), found again only when every cell run under it is a cell of the 
 (:meth:`Exporter.parent`: a new grid in a reused folder, differing in any identity field of
 any cell, gets a parent of its own; more seeds keep it); under it one run
 per cell (params: every field of the cell's identity and its learning status; metrics:
-accuracy, per-class accuracy (:func:`metric_class`), train accuracy, the chance levels
+accuracy, per-class accuracy (:func:`class_metric`), train accuracy, the chance levels
 and costs; tags: the cell key, git revision, machine, the cell's learning judged over its
 runs) and one run per paired comparison (metrics: the difference B − A, its interval
 ends, p, Holm p, runs, and the verdict as ``verdict_code``: +1 B better, −1 A better, 0
@@ -55,6 +55,16 @@ CELL_LEARNING_TAG = "tactbench.cell_learning"
 #: What a class name keeps as it is in a metric name (``accuracy_<class>``); every other
 #: character, and ``.``, is written ``.XX`` per UTF-8 byte (:func:`metric_class`).
 _KEPT = re.compile(r"[A-Za-z0-9_\- ]")
+#: MLflow's longest metric, param and tag name (``MAX_ENTITY_KEY_LENGTH`` of
+#: ``mlflow.utils.validation``) and its longest tag value kept whole
+#: (``MAX_TAG_VAL_LENGTH``; a longer one is cut).
+MAX_NAME, MAX_TAG_VALUE = 250, 8000
+#: Where a shortened metric name's readable head ends and the hash of its class name
+#: begins: never written by :func:`metric_class`, whose ``.`` is followed by two hex digits.
+HASHED = "._"
+#: The tag of a cell's run that gives back the class name of a shortened metric name:
+#: ``tactbench.names.<hash>`` (:func:`class_metric`).
+NAMES_TAG = "tactbench.names."
 #: The comparison's numbers logged as metrics.
 COMPARISON_METRICS = ("difference", "low", "high", "p", "p_holm", "runs", "accuracy_a",
                       "accuracy_b", "equivalence_p")
@@ -84,8 +94,38 @@ def metric_class(name: str) -> str:
                    for ch in str(name))
 
 
-def class_of_metric(text: str) -> str:
-    """The class name :func:`metric_class` wrote as ``text``."""
+def class_metric(name: str) -> tuple[str, dict[str, str]]:
+    """The metric name of the accuracy of class ``name`` and the tags that read it back:
+    ``accuracy_`` + :func:`metric_class` (no tags), or, where that is longer than MLflow
+    takes (:data:`MAX_NAME` characters), its first characters (never half an escape),
+    :data:`HASHED` and the first 16 hex digits of the SHA-256 of the class name, with the
+    tag ``tactbench.names.<those digits>`` holding the class name
+    (:func:`class_of_metric` reads both). A class name longer than a tag keeps
+    (:data:`MAX_TAG_VALUE`) is one line: its metric could not be read back."""
+    full = f"accuracy_{metric_class(name)}"
+    if len(full) <= MAX_NAME:
+        return full, {}
+    if len(str(name)) > MAX_TAG_VALUE:
+        raise TactbenchError(f"class name {str(name)[:60]!r}... has {len(str(name))} "
+                             f"characters; an MLflow tag keeps {MAX_TAG_VALUE}, so its "
+                             f"accuracy could not be named reversibly: shorten it")
+    hashed = hashlib.sha256(str(name).encode()).hexdigest()[:16]
+    head = full[:MAX_NAME - len(HASHED) - len(hashed)]
+    dot = head.rfind(".", len(head) - 2)  # an escape (.XX) cut short: left out whole
+    head = head[:dot] if dot >= 0 else head
+    return head + HASHED + hashed, {NAMES_TAG + hashed: str(name)}
+
+
+def class_of_metric(text: str, tags: dict[str, str] | None = None) -> str:
+    """The class name :func:`metric_class` wrote as ``text`` (a metric name without its
+    ``accuracy_``), or, for a shortened name (:func:`class_metric`), the one the run's
+    ``tags`` hold for its hash."""
+    if HASHED in text:
+        hashed = text.rsplit(HASHED, 1)[1]
+        if tags is None or NAMES_TAG + hashed not in tags:
+            raise ValueError(f"{text[:60]!r}... is a shortened name: its run's tag "
+                             f"{NAMES_TAG + hashed} holds the class name")
+        return tags[NAMES_TAG + hashed]
     raw, i = bytearray(), 0
     while i < len(text):
         if text[i] == ".":
@@ -330,7 +370,7 @@ def cell_run(row: dict[str, Any], judged: str | None = None
              ) -> tuple[dict, dict, dict, str]:
     """``(tags, params, metrics, status)`` of a cell's run: params every identity field
     (as results.csv has it) and the run's learning status, metrics its accuracy, train
-    accuracy, chance levels, ``accuracy_<class>`` (:func:`metric_class`) and costs;
+    accuracy, chance levels, ``accuracy_<class>`` (:func:`class_metric`) and costs;
     ``judged``: the cell's learning over all its runs (tag ``tactbench.cell_learning``)."""
     run = row.get("run") if isinstance(row.get("run"), dict) else {}
     tags = {"mlflow.runName": f"{row.get('encoder')} × {row.get('classifier')} "
@@ -351,7 +391,9 @@ def cell_run(row: dict[str, Any], judged: str | None = None
         metrics["chance_accuracy"] = evidence[2]
     for name, value in (row.get("per_class_accuracy") or {}).items():
         if (number := _number(value)) is not None:
-            metrics[f"accuracy_{metric_class(name)}"] = number
+            metric, names = class_metric(name)  # too long for MLflow: shortened, tagged
+            metrics[metric] = number
+            tags.update(names)
     status = "FINISHED" if row_status(row) == "ok" else "FAILED"
     return tags, params, metrics, status
 
