@@ -1,8 +1,8 @@
 """Where cells run: in turn in this process, in local worker processes, or on dask.
 
-By default as many cells run side by side as the machine has cores, one torch thread
-each (:meth:`~tactbench.runner.execution.scene.Scene.resolved_workers`): the thread count is part
-of a cell's identity, so parallelism comes from cells, not threads. Spawned workers
+By default as many cells run side by side as the machine's cores, GPUs and memory allow,
+one torch thread each (:func:`~tactbench.runner.execution.workers.run_workers`): the thread
+count is part of a cell's identity, so parallelism comes from cells, not threads. Spawned workers
 inherit the pinned CPU kernels (:func:`~tactbench.machine.pin_cpu_kernels`) from this
 process's environment.
 
@@ -34,10 +34,11 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from tactbench.errors import InputError, WorkerError
 from tactbench.runner.execution.cell import CellJob, failed_row, run_cell
-from tactbench.runner.execution.devices import own_device, owned_devices, start_owning
+from tactbench.runner.execution.devices import own_device, start_owning
 from tactbench.runner.execution.questions import spec_labels
 from tactbench.runner.execution.system import (BEFORE, MemoryTracker, main_reimport_problem,
                                                start_worker, stop_workers)
+from tactbench.runner.execution.workers import Workers, run_workers
 
 if TYPE_CHECKING:
     from tactbench.runner.execution.scene import Scene
@@ -49,9 +50,11 @@ log = logging.getLogger("tactbench.runner.execution.executors")
 
 
 def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress",
-            memory: "MemoryTracker | None" = None) -> None:
-    """Run ``jobs`` on the scene's executor, with an overall bar in ``bars``; ``memory``
-    has the run's steps so far in this process (see :func:`run_serial`)."""
+            memory: "MemoryTracker | None" = None, workers: "Workers | None" = None) -> None:
+    """Run ``jobs`` on the scene's executor, with an overall bar in ``bars``, on
+    ``workers`` (:func:`~tactbench.runner.execution.workers.run_workers`, the run's, made
+    here from the scene alone where None); ``memory`` has the run's steps so far in this
+    process (see :func:`run_serial`)."""
     overall = bars.add("cells", total=len(jobs))
     done = 0
 
@@ -61,14 +64,15 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         done += 1
         bars.update(overall, done)
 
-    workers = scene.resolved_workers()
+    decided = workers or run_workers(scene)
+    workers, devices = decided.count, decided.devices
     problem = main_reimport_problem()  # before the bootstrapping of a spawned worker
     if scene.executor == "dask":
         if problem and not scene.scheduler:  # a local cluster spawns its workers too
             raise InputError(f"the local dask cluster cannot start its workers: {problem} "
                              f"(or give --scheduler)")
         run_dask(jobs, finished, workers=workers, scheduler=scene.scheduler,
-                 devices=None if scene.scheduler else owned_devices(scene.device, "dask"))
+                 devices=None if devices is None else list(devices))
     elif min(workers, len(jobs)) == 1:
         run_serial(jobs, finished, bars, memory)
     elif problem or (problem := unsendable_problem(jobs)):  # a job no worker could take
@@ -77,7 +81,7 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         run_serial(jobs, finished, bars, memory)
     else:
         run_processes(jobs, finished, workers=min(workers, len(jobs)),
-                      devices=owned_devices(scene.device))
+                      devices=None if devices is None else list(devices))
 
 
 def unsendable_problem(jobs: Iterable[CellJob]) -> str | None:

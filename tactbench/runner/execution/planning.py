@@ -95,6 +95,7 @@ class Plan:
     run_dataset: str | None = None  # the spec of the run's own data set (plan_runs)
     #: the sizes of a let-go data set (:class:`DatasetSizes`): what its cache entries take
     sizes: Any = None
+    batch_bytes: int = 0  # the largest batch of windows a cell trains on (bytes)
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
@@ -240,12 +241,13 @@ def _check_lengths(scene: Scene, dataset) -> None:
 
 
 def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[str, str],
-                  batch_sizes: dict[str, int]) -> None:
+                  batch_sizes: dict[str, int]) -> int:
     """Estimate the large steps' memory from the inputs and refuse, before any work, one
     above the budget (:func:`tactbench.budget.check_budget`): building the imaging
     operator, a chunk of images and its encodings (two in flight), and a batch of windows
     of the longest L. The same estimates guard the allocations themselves
     (:class:`~tactbench.data.imaging.Imager`, :meth:`~tactbench.data.windows.Windows.batch`).
+    Returns the largest batch's bytes (a worker's memory forecast reads it).
     """
     channels = {enc: len(tuple(ENCODER.get(obj, "channels"))) for enc, obj in encoders.items()}
     k = len(dataset.classes)  # a row holds a k × k confusion: ≥ 2 bytes a count as JSON
@@ -272,6 +274,7 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
         check_budget(2 * frames * 4 * h * w * (2 + c),
                      f"imaging and encoding {what}, chunks of {frames} frames into {c} "
                      f"channels")
+    largest = 0
     for clf, kind in kinds.items():
         for enc in encoders:
             shape = (channels[enc], *frame_shape["images"]) if kind == "images" \
@@ -281,6 +284,8 @@ def _check_memory(scene: Scene, dataset, encoders: dict[str, Any], kinds: dict[s
             check_budget(batch * length * per_frame,
                          f"a batch of {batch} windows of L={length} frames {shape} "
                          f"({enc} × {clf.split(':')[0]})")
+            largest = max(largest, batch * length * per_frame)
+    return largest
 
 
 def _build_encoders(scene: Scene, registry) -> tuple[dict[str, Any], dict[str, str]]:
@@ -458,7 +463,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
             _check_inputs(clf, enc, kinds[clf], frame_ranks[clf], dataset,
                           vectors_ok=ENCODER.get(encoders[enc], "encode_vectors") is not None)
     _check_lengths(scene, dataset)
-    _check_memory(scene, dataset, encoders, kinds, batch_sizes)
+    batch_bytes = _check_memory(scene, dataset, encoders, kinds, batch_sizes)
     dataset_hash = dataset.content_hash()
     _check_split(scene, split, dataset)
 
@@ -483,7 +488,8 @@ def plan(scene: Scene, registry=None, *, progress=None,
         check_contrasts(named, [{"encoder": c.encoder, "classifier": c.classifier,
                                  "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
-                kinds, cells, identities, registry, split, window, run_dataset)
+                kinds, cells, identities, registry, split, window, run_dataset,
+                batch_bytes=batch_bytes)
 
 
 def run_datasets(scene: Scene, registry) -> dict[int, str] | None:

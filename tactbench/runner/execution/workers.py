@@ -1,0 +1,139 @@
+"""How many cells run at once: decided once, here, from the cores, the GPUs and the memory.
+
+Cells run side by side in worker processes, one torch thread each by default (the thread
+count is part of a cell's identity, so parallelism comes from cells, not threads). The
+count is the scene's ``workers`` where given, else the smallest of:
+
+- **cores**: this process's usable cores ÷ the torch threads of each cell (CPU cells);
+- **GPUs**: one worker per GPU it owns (``--device cuda``: every GPU here;
+  ``cuda:N``: one; :func:`~tactbench.runner.execution.devices.owned_devices`);
+- **memory**: as many workers as fit in this machine's memory beside the run's own
+  process, each at its forecast peak (:func:`worker_peak`): the largest peak a stored
+  cell of the grid measured (a pilot, an earlier look or run), else an estimate from the
+  plan (a worker's imports, the training frame bank, a batch of windows).
+
+:func:`decide_workers` is the rule (no machine read where its caller says the facts);
+:func:`run_workers` reads the machine and the plan and applies it. The executors, the
+look loop, the wall-time estimate and ``tactbench plan`` all read one :class:`Workers`.
+On a remote dask cluster (``--scheduler``) the cluster decides where cells run and how
+much memory each has: the count there is the scene's or the cores' rule, for estimates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Iterable, Mapping
+
+from tactbench.classifiers.batching import bank_budget_bytes
+from tactbench.errors import InputError
+from tactbench.machine import memory_bytes, usable_cores
+from tactbench.runner.execution.devices import owned_devices, resolve_kind
+
+if TYPE_CHECKING:
+    from tactbench.runner.execution.planning import Plan
+    from tactbench.runner.execution.scene import Scene
+
+MIB = float(1 << 20)
+#: A worker process's resident memory before its first cell (MiB): Python with torch,
+#: numpy, scikit-learn and the runner imported; the smallest peak any committed cell row
+#: recorded (a logreg cell, quick profile: docs/results, 406 MiB on the project's VM).
+WORKER_BASE_MB = 406.0
+
+
+@dataclass(frozen=True)
+class Workers:
+    """A run's worker count and why: ``limit`` names what set it (``--workers``,
+    ``cores``, ``GPUs``, ``memory``); ``devices`` the device each worker owns (None:
+    none of its own); the peaks (MiB) are forecasts: one worker's, with its source, and
+    the run's own process's; ``memory_mb`` the machine's."""
+
+    count: int
+    limit: str
+    devices: tuple[str, ...] | None = None
+    worker_peak_mb: float | None = None
+    peak_source: str = "not forecast"
+    parent_peak_mb: float = 0.0
+    memory_mb: float | None = None
+
+    @property
+    def run_peak_mb(self) -> float | None:
+        """The whole run's forecast peak, every process together (MiB): the run's own
+        process and each worker at its peak; with one worker the cells run in the run's
+        own process, adding what a cell takes beyond a worker's imports."""
+        if self.worker_peak_mb is None:
+            return None
+        if self.count == 1:
+            return self.parent_peak_mb + max(0.0, self.worker_peak_mb - WORKER_BASE_MB)
+        return self.parent_peak_mb + self.count * self.worker_peak_mb
+
+
+def decide_workers(scene: "Scene", *, worker_peak_mb: float | None = None,
+                   peak_source: str = "not forecast", parent_peak_mb: float = 0.0,
+                   memory_mb: float | None = None, cores: int | None = None,
+                   devices: list[str] | None = None) -> Workers:
+    """The rule of the module docstring, from the facts given (``cores``: this process's
+    usable cores, read where None; ``devices``: those the workers own, one each)."""
+    here = dict(worker_peak_mb=worker_peak_mb, peak_source=peak_source,
+                parent_peak_mb=parent_peak_mb, memory_mb=memory_mb,
+                devices=None if devices is None else tuple(devices))
+    if scene.workers is not None:
+        count = int(scene.workers)
+        if devices is not None and count > len(devices):
+            raise InputError(f"--workers {count}: each worker owns one GPU, and device "
+                             f"{scene.device!r} gives {len(devices)} here; use --workers "
+                             f"{len(devices)} or fewer")
+        return Workers(count, "--workers", **here)
+    if devices is not None:
+        count, limit = len(devices), "GPUs"
+    else:
+        count = max(1, (usable_cores() if cores is None else cores) // max(1, scene.threads))
+        limit = "cores"
+    if worker_peak_mb and memory_mb and scene.scheduler is None:
+        fit = int((memory_mb - parent_peak_mb) // worker_peak_mb)
+        if fit < count:
+            count, limit = max(1, fit), "memory"
+    return Workers(count, limit, **here)
+
+
+def worker_peak(rows: Iterable[Mapping[str, Any]] = (), p: "Plan | None" = None,
+                ) -> tuple[float | None, str]:
+    """One worker's forecast peak resident memory (MiB) and where it comes from: the
+    largest ``peak_rss_mb`` that a stored ``ok`` row (of the plan's classifiers, given
+    ``p``) measured, else, given ``p``, :data:`WORKER_BASE_MB` + the training frame bank
+    (:func:`~tactbench.classifiers.batching.bank_budget_bytes`) + two batches of windows
+    of the longest L (one being trained on, one being made); else None."""
+    classifiers = None if p is None else set(p.classifier_specs)
+    measured = [float(r["peak_rss_mb"]) for r in rows
+                if r.get("status", "ok") == "ok"
+                and (classifiers is None or r.get("classifier") in classifiers)
+                and isinstance(r.get("peak_rss_mb"), (int, float))
+                and r["peak_rss_mb"] == r["peak_rss_mb"]]
+    if measured:
+        return max(measured), f"measured by {len(measured)} stored cell(s)"
+    if p is None:
+        return None, "not forecast"
+    estimate = WORKER_BASE_MB + (bank_budget_bytes() + 2 * p.batch_bytes) / MIB
+    return estimate, "estimated from the plan (no stored cell measured it)"
+
+
+def run_devices(scene: "Scene") -> list[str] | None:
+    """The devices a run's workers own, one each (:func:`~tactbench.runner.execution.
+    devices.owned_devices`); None on a remote dask cluster, whose workers own what their
+    cluster gave them."""
+    if scene.executor == "dask" and scene.scheduler:
+        resolve_kind(scene.device, scene.executor)  # auto refused there too
+        return None
+    return owned_devices(scene.device, scene.executor)
+
+
+def run_workers(scene: "Scene", rows: Iterable[Mapping[str, Any]] = (), *,
+                plan: "Plan | None" = None, parent_peak_mb: float = 0.0) -> Workers:
+    """The worker count of a run of ``scene`` on this machine (:func:`decide_workers`):
+    its cores, its GPUs, its memory and a worker's forecast peak (:func:`worker_peak`
+    from ``rows``, the stored rows of the run's folder, and the ``plan``) beside the run's
+    own process at ``parent_peak_mb``. The one place the count is worked out: the
+    executors, the looks, the estimate and ``tactbench plan`` read it."""
+    peak, source = worker_peak(rows, plan)
+    return decide_workers(scene, worker_peak_mb=peak, peak_source=source,
+                          parent_peak_mb=parent_peak_mb, memory_mb=memory_bytes() / MIB,
+                          devices=run_devices(scene))
