@@ -160,3 +160,27 @@ def test_a_plugins_paired_test_is_chosen_by_name_and_named_in_the_report(plugin_
         make_report(rows, primary=PRIMARY, paired_test=choose_paired_test("sign", registry),
                     sequential=Design(primary=tuple(PRIMARY), seed_order=tuple(SEEDS),
                                       looks=(5, 8)))
+
+
+@pytest.mark.slow("trains a tiny grid (2 encoders × 3 seeds of logreg) before re-rendering it")
+def test_tactbench_report_renders_a_run_again_with_a_plugins_paired_test(plugin_dist,
+                                                                         tiny_scene, cache):
+    """The plugin is one module and its entry point (no file of tactbench): `tactbench
+    report --paired-test sign` re-renders a finished run with it, recorded and named."""
+    import json
+    import subprocess
+    import sys
+
+    from tactbench.runner import run
+
+    plugin_dist("tactbench-sign", "sign_paired", SIGN_TEST)
+    scene = tiny_scene(classifiers=["logreg"], seeds=[0, 1, 2])
+    run(scene, cache=cache, progress=False, plots=False)
+    done = subprocess.run([sys.executable, "-m", "tactbench", "report", scene.out,
+                           "--paired-test", "sign", "--no-plots"], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads((Path(scene.out) / "results.json").read_text())
+    assert doc["statistics"]["paired_test"] == "sign"
+    assert {c["paired_test"] for c in doc["comparisons"]} == {"sign"}
+    assert "paired test `sign` (--paired-test)" in (Path(scene.out) / "report.md").read_text()
