@@ -22,13 +22,12 @@ import sys
 from pathlib import Path
 
 from tactbench.paths import discard
-from tactbench.runner.execution.identity import migrated_row
-from tactbench.runner.execution.results import ResultStore
+from tactbench.runner import ResultStore, migrated_row
 
 
 def rekey(folder: Path) -> tuple[int, int]:
-    """Re-key the rows of one run folder (:func:`~tactbench.runner.execution.identity.
-    migrated_row`, the package's migration); (rows moved, rows kept)."""
+    """Re-key the rows of one run folder (:func:`tactbench.runner.migrated_row`, the
+    package's migration); (rows moved, rows kept)."""
     store = ResultStore(folder)
     rows = store.stored_rows()
     try:  # every row checked before any is moved

@@ -82,9 +82,10 @@ This package is the runner's one public face: the names below (``__all__``) are 
 the commands, the benchmark scripts, plugins and notebooks use, and the only runner
 names they import (``tests/test_architecture.py`` fails on an import of a room's module
 from outside the runner), so the rooms can be rearranged behind them. What an event
-hook receives is a plain record, documented with the hooks (:mod:`tactbench.hookspecs`):
-a cell's row as stored, a look's comparisons (:func:`comparison_record` each), a run's
-summary.
+hook receives is a record of plain values, documented with the hooks
+(:mod:`tactbench.hookspecs`) and below: a cell's row as stored, a look's record
+(:func:`look_record`) and a run's summary (:func:`run_summary`), their comparisons each a
+:func:`comparison_record`.
 """
 
 from tactbench.machine import git_revision
@@ -94,6 +95,7 @@ from tactbench.runner.analysis.forecast import forecast, points
 from tactbench.runner.analysis.paired_tests import (DEFAULT_PAIRED_TEST, CorrectedT,
                                                     PairedTestChoice, choose_paired_test)
 from tactbench.runner.analysis.power import detectable_effect, power
+from tactbench.runner.analysis.records import comparison_record, look_record, run_summary
 from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
                                                   family_forecast, family_look, procedure,
                                                   simulate_paths)
@@ -104,6 +106,7 @@ from tactbench.runner.execution.cache import KEEP_RECENT_S, EncodingCache, ensur
 from tactbench.runner.execution.cell import (PREDICTION_LISTS, CellJob, failed_row, make_jobs,
                                              run_cell)
 from tactbench.runner.execution.entries import load_encoding
+from tactbench.runner.execution.identity import migrated_row
 from tactbench.runner.execution.learning import cell_learning, pooled_p, row_evidence, within_noise
 from tactbench.runner.execution.planning import (ROW_SCHEMA, Cell, Plan, digest, grid_identity,
                                                  plan, row_identity)
@@ -115,10 +118,10 @@ from tactbench.runner.execution.scene import (DEFAULT_PRIMARY, EXECUTORS, FIRST_
                                               INPUT_KINDS, UNTIL, Scene, load_scene_file,
                                               parse_duration, parse_lengths, parse_seeds,
                                               show_duration)
+from tactbench.runner.execution.workers import Workers, run_workers
 from tactbench.runner.orchestrate import render_folder, run, run_until
 from tactbench.runner.presentation.frames import (EXTRA as EXPORT_EXTRA, cells_frame,
-                                                  comparison_record, comparisons_frame,
-                                                  write_parquet)
+                                                  comparisons_frame, write_parquet)
 from tactbench.runner.presentation.plots import check_reference
 from tactbench.runner.presentation.tables import (answer_text, comparisons_markdown, labels_for,
                                                   looks_markdown, markdown_table,
@@ -133,10 +136,11 @@ __all__ = [
     "plan", "Plan", "Cell", "ROW_SCHEMA", "forecast", "points",
     "EncodingCache", "KEEP_RECENT_S", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row", "PREDICTION_LISTS",
-    "run", "run_until", "render_folder", "Report", "git_revision",
+    "run", "run_until", "render_folder", "Report", "git_revision", "Workers", "run_workers",
     # the rows: the store, a row's status, identity and learning
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows", "failed_cells",
     "digest", "row_identity", "grid_identity", "IDENTITY_DEFAULTS", "identity_differences",
+    "migrated_row",
     "row_scene", "cell_learning", "row_evidence", "pooled_p", "within_noise",
     # the statistics: comparisons, their verdicts, power and the sequential looks
     "Comparison", "comparisons", "plain_t", "corrected_t", "A_BETTER", "B_BETTER",
@@ -148,5 +152,7 @@ __all__ = [
     "short_name", "labels_for", "verdict_text", "answer_text", "markdown_table",
     "comparisons_markdown", "looks_markdown", "print_table", "print_comparisons",
     "write_report", "check_reference", "flat_rows", "training_cpu_seconds",
-    "comparison_record", "cells_frame", "comparisons_frame", "write_parquet", "EXPORT_EXTRA",
+    "cells_frame", "comparisons_frame", "write_parquet", "EXPORT_EXTRA",
+    # what event hooks receive: plain records of a comparison, a look, a run
+    "comparison_record", "look_record", "run_summary",
 ]
