@@ -1,6 +1,7 @@
 """What the test suite costs on this machine: the README's command, the slow tests, each room.
 
     python benchmarks/test_suite.py [--parts fast,slow,rooms] [--out docs/benchmarks/test-suite.json]
+                                    [--docs-only]
 
 Each part runs pytest in a subprocess from the repository root, one after another, with
 ``--durations=0`` so that every test's own time is kept:
@@ -14,7 +15,8 @@ Each part runs pytest in a subprocess from the repository root, one after anothe
 
 It records each part's wall time, pytest's closing counts, the summed test time by room
 (setup + call + teardown, which is more than the wall time on several cores), the ten
-slowest tests, the machine and the date. The goals (docs/testing.md): the fast suite
+slowest tests, the machine and the date; a full measurement (all three parts, the default
+--out) also writes the measured block of docs/testing.md. The goals (docs/testing.md): the fast suite
 ≤ 240 s, a room ≤ 60 s, on an idle 2-core machine. Nothing else should run meanwhile: on
 2 cores a second busy process slows every test 2–7×.
 """
@@ -85,11 +87,50 @@ def machine() -> dict:
             "platform": platform.platform()}
 
 
+START, END = "<!-- suite:start -->", "<!-- suite:end -->"
+DOC = REPO / "docs" / "testing.md"
+
+
+def docs_text(record: dict) -> str:
+    """The measured block of docs/testing.md, written from a record of :func:`main`."""
+    m = record["machine"]
+    lines = [f"Measured {record['date']} at commit {record['commit']}, on {m['cpu']} "
+             f"({m['cores']} cores), Python {m['python']}:", ""]
+    for name, what in (("fast", "the fast suite (the README's command)"),
+                       ("slow", "the slow tests (`-m slow`)")):
+        if name in record:
+            part = record[name]
+            lines.append(f"- {what}: **{part['wall_s']:.0f} s** wall, {part['closing']};")
+    if "rooms" in record:
+        rooms = record["rooms"]
+        worst = max(rooms, key=lambda r: rooms[r]["wall_s"])
+        lines.append("- one room at a time: " + ", ".join(
+            f"`{r}` {v['wall_s']:.0f} s" for r, v in rooms.items()) +
+            f" (the longest: `{worst}`).")
+    if "fast" in record and record["fast"]["slowest"]:
+        slow = record["fast"]["slowest"][:5]
+        lines += ["", "The fast suite's five longest tests (setup + call + teardown): " +
+                  "; ".join(f"`{t['test']}` {t['s']:.1f} s" for t in slow) + "."]
+    return "\n".join(lines)
+
+
+def write_docs(record: dict, doc: Path = DOC) -> None:
+    text = doc.read_text()
+    head, rest = text.split(START, 1)
+    _, tail = rest.split(END, 1)
+    doc.write_text(f"{head}{START}\n{docs_text(record)}\n{END}{tail}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--parts", default="fast,slow,rooms")
     ap.add_argument("--out", type=Path, default=REPO / "docs/benchmarks/test-suite.json")
+    ap.add_argument("--docs-only", action="store_true",
+                    help="write docs/testing.md's block from --out again, measuring nothing")
     a = ap.parse_args(argv)
+    if a.docs_only:
+        write_docs(json.loads(a.out.read_text()))
+        return 0
     parts = [p for p in a.parts.split(",") if p]
     unknown = set(parts) - {"fast", "slow", "rooms"}
     if unknown:
@@ -115,6 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(record, indent=1) + "\n")
     print(f"wrote {a.out}")
+    if a.out == REPO / "docs/benchmarks/test-suite.json" and {"fast", "slow", "rooms"} <= set(parts):
+        write_docs(record)
+        print(f"wrote {DOC}")
     failed = [name for name in ("fast", "slow") if record.get(name, {}).get("returncode")]
     return 1 if failed else 0
 
