@@ -18,8 +18,11 @@ entries are kept), with the command, the machine and the date:
 - ``family``: a primary family's chance of every comparison being answered, the run's
   own procedure path by path (cells drawn, differences taken, ``family_look`` or the
   fixed design's Holm) against ``tactbench plan``'s forecast
-  (:func:`tactbench.runner.analysis.sequential.family_forecast`) and the product of
+  (:func:`tactbench.runner.analysis.family_paths.family_forecast`) and the product of
   independent comparisons it printed before.
+- ``futility-curve``: the futility rule's trade-off curve, its predictive and spread
+  levels against the share of powerless paths stopped at the first look and the
+  largest share of decidable paths given up.
 - ``disagreement``: the per-run disagreement of the stored reports' primary
   comparisons (no simulation), beside the no-pilot assumption of ``tactbench plan``.
 - ``learned``: "not learned" (:func:`tactbench.runner.execution.learning.cell_learning`'s
@@ -212,7 +215,7 @@ def _family_scene(name: str, pairs, effects, margin, looks, paths: int, seed: in
     differences taken, and the looks made by ``family_look`` (``--until``) or the
     fixed design's corrected t with Holm and TOST (``comparisons``' rule, via
     ``statistics.verdict``) — a construction of its own, not ``draw_family``; beside it,
-    the plan's forecast (``sequential.family_forecast``, its default paths) and the
+    the plan's forecast (``family_paths.family_forecast``, its default paths) and the
     product of the comparisons' own forecasts the plan printed before."""
     from tactbench.runner import (A_BETTER, B_BETTER, EQUIVALENT, FamilyState, corrected_t,
                                   family_forecast, family_look, holm, power, procedure,
@@ -276,8 +279,56 @@ def family_part(reps: int) -> dict:
             "paths": reps, "results": out}
 
 
+#: The futility rule's parameters the trade-off curve tries: its predictive level (the
+#: runs to come land beyond the favourable edge with this chance) and its spread level
+#: (the one-sided lower confidence limit of the spread; 0.5 is about the sample spread).
+CURVE_REACH = (0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5)
+CURVE_SPREAD = (0.2, 0.5)
+
+
+def futility_curve_part(reps: int) -> dict:
+    """The futility rule's trade-off: for each (predictive level, spread level), the
+    share of powerless paths (a fixed design of 20 runs has power 2 % or 5 % at the
+    comparison's level) stopped futile at the first look (the goal: ≥ 90 %), and the
+    largest share over powered scenes (power 20–95 %) of paths given up that a later
+    look would have decided (the goal: ≤ 1 %), over overlap ratios 0.1, 0.25, 0.8 and
+    levels α and α/3 — the same paths for every parameter, futility off once."""
+    from tactbench.runner import DECIDED_CODES, OUTCOMES_FUTILE, detectable_effect, simulate_paths
+
+    scenes = []
+    for ratio in (0.1, 0.25, 0.8):
+        for alpha in (0.05, 0.05 / 3):
+            for target in (0.02, 0.05, 0.2, 0.5, 0.8, 0.95):
+                effect = detectable_effect(SD, ratio, LOOKS[-1], alpha=alpha, target=target) \
+                    if target > alpha else 0.0
+                off = simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha, paths=reps,
+                                     seed=11, futility=False)
+                scenes.append((ratio, alpha, target, effect, np.isin(off[0], DECIDED_CODES)))
+    out = []
+    for reach in CURVE_REACH:
+        for spread in CURVE_SPREAD:
+            first, given = [], []
+            for ratio, alpha, target, effect, decided_off in scenes:
+                code, stop = simulate_paths(effect, SD, ratio, LOOKS, alpha=alpha,
+                                            paths=reps, seed=11, levels=(reach, spread))
+                early = np.isin(code, OUTCOMES_FUTILE) & (stop < LOOKS[-1])
+                if target <= 0.05:
+                    first.append(float(np.mean(early & (stop == LOOKS[0]))))
+                else:
+                    given.append(float(np.mean(early & decided_off)))
+            out.append({"reach_level": reach, "spread_level": spread,
+                        "powerless_first_look_min": round(min(first), 4),
+                        "powerless_first_look_max": round(max(first), 4),
+                        "given_up_max": round(max(given), 4),
+                        "meets_both": min(first) >= 0.9 and max(given) <= 0.01})
+    return {"what": f"futility trade-off: looks {list(LOOKS)}, per-run sd {100 * SD:.0f} "
+                    f"points, ratios 0.1/0.25/0.8, levels α and α/3; {reps} paths a scene",
+            "paths": reps, "results": out}
+
+
 PARTS = {"learned": learned_part, "futility": futility_part, "alpha": alpha_part,
-         "disagreement": disagreement_part, "family": family_part}
+         "disagreement": disagreement_part, "family": family_part,
+         "futility-curve": futility_curve_part}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -92,18 +92,24 @@ def plan_cmd(ctx: click.Context, scene_file: str | None, effect: float, as_json:
         click.echo(f"  floor: no number of runs of these {p.recordings} recordings "
                    f"resolves less than {p.floor:.1f} points ((z_(1−α/2) + z_0.8) × "
                    f"{p.persistent:.2f}){more}")
-    if f.family is not None and len(f.primaries) > 1:
-        fam = f.family
-        shared = sum(x != 0 for row in fam["corr"] for x in row) > len(f.primaries)
-        click.echo(f"family: every one of the {len(f.primaries)} primary comparisons "
-                   f"answered with chance {fam['answered']:.0%} (simulated through the "
-                   f"run's own procedure: Holm over the family, α passed on after a "
-                   f"rejection" + (", the looks" if f.looks else ", one fixed test")
-                   + (", comparisons sharing a cell correlated" if shared else
-                      ", the comparisons share no cell and are drawn independent")
-                   + f"; {fam['paths']} paths, ±{fam['mc_error']:.3f})")
+    _print_family(f)
     if not f.primaries:
         click.echo("no primary comparison (give --primary A..B)", file=sys.stderr)
+
+
+def _print_family(f) -> None:
+    """The family's chance of every primary comparison being answered, and how."""
+    if f.family is None or len(f.primaries) < 2:
+        return
+    fam = f.family
+    shared = sum(x != 0 for row in fam["corr"] for x in row) > len(f.primaries)
+    click.echo(f"family: every one of the {len(f.primaries)} primary comparisons "
+               f"answered with chance {fam['answered']:.0%} (simulated through the "
+               f"run's own procedure: Holm over the family, α passed on after a "
+               f"rejection" + (", the looks" if f.looks else ", one fixed test")
+               + (", comparisons sharing a cell correlated" if shared else
+                  ", the comparisons share no cell and are drawn independent")
+               + f"; {fam['paths']} paths, ±{fam['mc_error']:.3f})")
 
 
 def _print_distinct(f) -> None:

@@ -94,9 +94,9 @@ from tactbench.runner.analysis.forecast import forecast, points
 from tactbench.runner.analysis.paired_tests import (DEFAULT_PAIRED_TEST, CorrectedT,
                                                     PairedTestChoice, choose_paired_test)
 from tactbench.runner.analysis.power import detectable_effect, power
+from tactbench.runner.analysis.family_paths import family_forecast
 from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
-                                                  family_forecast, family_look, procedure,
-                                                  simulate_paths)
+                                                  family_look, procedure, simulate_paths)
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
                                                   corrected_t, holm, tost_p, verdict)
 from tactbench.runner.analysis.summaries import failed_cells

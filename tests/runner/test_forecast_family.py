@@ -79,7 +79,7 @@ def test_comparisons_sharing_a_baseline_are_drawn_correlated():
     """raw → frame-diff and raw → flow share raw's runs: their differences correlate by
     0.5 (equal cell spreads); a comparison with no cell in common is independent, and
     one against the other's B in the other role anticorrelates."""
-    from tactbench.runner.analysis.sequential import arm_correlation, draw_family
+    from tactbench.runner.analysis.family_paths import arm_correlation, draw_family
 
     corr = arm_correlation([("raw", "fd"), ("raw", "flow"), ("knn", "svc"), ("fd", "x")])
     assert corr[0][1] == 0.5 and corr[0][2] == 0.0 and corr[0][3] == -0.5
@@ -110,9 +110,8 @@ def _run_family(d, looks, margin):
 def test_the_familys_forecast_follows_the_runs_looks_path_by_path():
     """The plan's vectorised family (Holm carried over the looks, α of a rejection passed
     on) ends every path exactly as the run's family_look does, recycled α included."""
-    from tactbench.runner.analysis.sequential import (A_BETTER, B_BETTER, OUTCOMES,
-                                                      arm_correlation, draw_family,
-                                                      family_codes)
+    from tactbench.runner.analysis.family_paths import arm_correlation, draw_family, family_codes
+    from tactbench.runner.analysis.sequential import A_BETTER, B_BETTER, OUTCOMES
 
     looks = [5, 10]
     corr = arm_correlation([("raw", "fd"), ("raw", "flow"), ("raw", "far")])
@@ -127,8 +126,9 @@ def test_the_familys_forecast_follows_the_runs_looks_path_by_path():
 
 
 def test_the_fixed_familys_forecast_is_the_runs_verdicts():
-    from tactbench.runner.analysis.sequential import (OUTCOMES, arm_correlation, draw_family,
-                                                      fixed_family_codes)
+    from tactbench.runner.analysis.family_paths import (arm_correlation, draw_family,
+                                                        fixed_family_codes)
+    from tactbench.runner.analysis.sequential import OUTCOMES
     from tactbench.runner.analysis.statistics import corrected_t, holm, tost_p, verdict
 
     corr = arm_correlation([("raw", "fd"), ("raw", "flow")])
@@ -152,7 +152,7 @@ def test_the_familys_forecast_agrees_with_the_benchmarks_simulation():
     import json
     from pathlib import Path
 
-    from tactbench.runner.analysis.sequential import family_forecast
+    from tactbench.runner.analysis.family_paths import family_forecast
 
     doc = json.loads((Path(__file__).parents[2] / "docs" / "benchmarks"
                       / "statistics-checks.json").read_text())["family"]

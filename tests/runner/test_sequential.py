@@ -277,3 +277,31 @@ def test_the_minimum_of_evidence_holds_at_every_look_as_in_a_fixed_design():
     ok = family_look(FamilyState(0.05, ["q"]), {"q": d}, {"q": RATIO}, looks=[5, 10],
                      max_runs=20, discordant={"q": MIN_DISCORDANT_RECORDINGS})
     assert ok["q"].decision == "B better"
+
+
+def test_plans_cannot_be_answered_is_the_looks_futile_stop():
+    """plan's "cannot be answered within the maximum" (unanswerable) and the look's
+    futile stop are one rule (out_of_reach): a first look that sees exactly the planned
+    difference and spread stops futile exactly where plan says so — on both sides of
+    the edge, with and without a margin."""
+    import numpy as np
+
+    from tactbench.runner.analysis.forecast import _primary
+    from tactbench.runner.analysis.sequential import FUTILE, look, unanswerable
+
+    z = np.array([-1.2, -0.4, 0.1, 0.5, 1.0])
+    z = (z - z.mean()) / z.std(ddof=1)  # mean 0, sample variance 1 exactly
+    seen = set()
+    for effect in np.linspace(0.0, 0.05, 26):
+        for margin in (None, 0.02):
+            said = unanswerable(effect, 0.03, 0.25, [5, 10, 15, 20], alpha=0.05 / 3,
+                                margin=margin)
+            got = look(effect + 0.03 * z, 0.25, looks=[5], max_runs=20, alpha=0.05 / 3,
+                       margin=margin).decision
+            assert said == (got == FUTILE), (effect, margin, got)
+            seen.add(said)
+    assert seen == {True, False}
+    f = _primary("q", None, 20, 0.01, 0.25, 400, 0.05 / 3, 1600, looks=[5, 10, 15, 20],
+                 n_train=1200)
+    assert f.unanswerable and any("cannot be answered within 20 runs" in w
+                                  for w in f.warnings)

@@ -25,7 +25,7 @@ family's level (Holm's first step, α/m for m primary comparisons), exactly
 (:func:`tactbench.runner.analysis.power.power`); :func:`family_answered` gives the
 family's chance of every one being answered, simulated through the run's own procedure
 (Holm as the run spends it, the looks with ``--until``, comparisons sharing a cell
-correlated: :func:`tactbench.runner.analysis.sequential.family_forecast`). For a run
+correlated: :func:`tactbench.runner.analysis.family_paths.family_forecast`). For a run
 ``--until answered`` the forecast
 is of the sequential procedure itself
 (:func:`tactbench.runner.analysis.sequential.procedure`: found, equivalent, the other
@@ -70,7 +70,8 @@ from tactbench.runner.analysis.power import (
 )
 from tactbench.runner.execution.cache import EncodingCache, entries_bytes
 from tactbench.runner.execution.estimate import estimate_run, missing_entries
-from tactbench.runner.analysis.sequential import family_forecast, procedure
+from tactbench.runner.analysis.family_paths import family_forecast
+from tactbench.runner.analysis.sequential import procedure, unanswerable
 from tactbench.runner.execution.results import ResultStore, ok_rows
 from tactbench.runner.execution.scene import Scene
 from tactbench.runner.execution.workers import run_workers
@@ -115,6 +116,9 @@ class PrimaryForecast:
     persistent: float = 0.0
     persistent_said: str = ""  # it, as plan says it (persistent_text)
     sequential: dict[str, Any] | None = None  # with --until: sequential.procedure's forecast
+    # with --until: a first look seeing exactly the effect and spread would stop futile
+    # (sequential.unanswerable: the look's own rule, out_of_reach)
+    unanswerable: bool | None = None
     warnings: list[str] = dataclasses.field(default_factory=list)
 
 
@@ -146,7 +150,7 @@ class Forecast:
     cache_bytes: int = 0  # the new encodings the run writes to the cache (its first data set's)
     cache_free: int | None = None  # free on the cache's disk (None: it cannot say)
     family_answered: float | None = None  # every primary answered (family_answered)
-    family: dict[str, Any] | None = None  # sequential.family_forecast's, as a dict
+    family: dict[str, Any] | None = None  # family_paths.family_forecast's, as a dict
     distinct_splits: int | None = None  # the distinct splits the planned seeds draw
     runs_asked: int = 0  # the runs (seeds) planned
 
@@ -244,7 +248,7 @@ def family_answered(primaries: list[PrimaryForecast], pairs: list[tuple], *,
                     margin: float | None = None) -> dict[str, Any] | None:
     """The chance that every comparison of the primary family is answered (declared
     better either way, or equivalent), simulated through the run's own procedure
-    (:func:`tactbench.runner.analysis.sequential.family_forecast`): each comparison at
+    (:func:`tactbench.runner.analysis.family_paths.family_forecast`): each comparison at
     the plan's effect and spread, the comparisons correlated by the cells they share
     (``pairs``: each comparison's two cells), Holm as the run spends it (α passed on
     after a rejection), and with ``looks`` (``--until``) the sequential looks, else one
@@ -467,6 +471,8 @@ def _primary(text: str, found: Comparison | None, runs: int, effect: float,
         proc = procedure(effect, sd, ratio, looks, alpha=level,
                          margin=None if margin is None else margin / 100)
         f.sequential = {"looks": list(looks), **proc.as_dict()}
+        f.unanswerable = unanswerable(effect, sd, ratio, looks, alpha=level,
+                                      margin=None if margin is None else margin / 100)
     f.persistent_said = persistent_text(f, n_test, n_train)
     f.warnings = warnings(f)
     return f
@@ -492,7 +498,9 @@ def points(value: float) -> str:
 
 def warnings(f: PrimaryForecast) -> list[str]:
     """What a plan must say before any work, a line each: an effect (or the effect found
-    at 80 % power) inside the margin, and a design short of 80 % power at its runs."""
+    at 80 % power) inside the margin, a question the looks' own rule says cannot be
+    answered within the maximum (:func:`~tactbench.runner.analysis.sequential.unanswerable`),
+    and a design short of 80 % power at its runs."""
     out = []
     m = f.margin
     if m and f.effect <= m:
@@ -503,6 +511,10 @@ def warnings(f: PrimaryForecast) -> list[str]:
                    f"{f.detectable:.2f} points, lies inside the ±{m:g} margin: such a "
                    f"difference would end \"equivalent\"")
     seq = f.sequential
+    if f.unanswerable:
+        out.append(f"{f.name}: cannot be answered within {f.runs} runs: a first look that "
+                   f"saw exactly {points(f.effect)} points with this spread would stop "
+                   f"futile (the look's own rule); more data would, not more runs")
     if seq is not None and seq["power"] < TARGET_POWER:
         out.append(f"{f.name}: the sequential run finds {points(f.effect)} points with "
                    f"{seq['power']:.0%} power at most {f.runs} runs (a fixed design of "

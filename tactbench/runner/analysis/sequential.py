@@ -67,20 +67,21 @@ FUTILITY_LEVEL = 0.20
 SPREAD_LEVEL = 0.20
 
 
-def favourable_sd(var, j: int):
-    """The one-sided lower ``1 − SPREAD_LEVEL`` confidence limit of the per-run spread
+def favourable_sd(var, j: int, level: float = SPREAD_LEVEL):
+    """The one-sided lower ``1 − level`` (:data:`SPREAD_LEVEL`) confidence limit of the per-run spread
     from ``j`` runs' sample variance ``var`` (chi-square on ``j − 1`` degrees of
     freedom): the smallest spread the runs so far plausibly have."""
     import numpy as np
     from scipy import stats
 
     df = max(1, j - 1)
-    return np.sqrt(np.asarray(var, dtype=float) * df / float(stats.chi2.isf(SPREAD_LEVEL, df)))
+    return np.sqrt(np.asarray(var, dtype=float) * df / float(stats.chi2.isf(level, df)))
 
 
-def futility_reach(var, j: int, max_runs: int):
+def futility_reach(var, j: int, max_runs: int, level: float = FUTILITY_LEVEL):
     """How far the mean difference can still move by the last planned look, at the
-    favourable edge of a one-sided ``1 − FUTILITY_LEVEL`` predictive interval: the runs
+    favourable edge of a one-sided ``1 − level`` (:data:`FUTILITY_LEVEL`) predictive
+    interval: the runs
     ``j+1…max_runs`` replace the mean of ``j`` by that of ``max_runs``, which differ by
     ``s · sqrt(1/j − 1/max_runs) · T_{j−1}`` (``s²`` = ``var``, the runs' sample
     variance, estimated on ``j − 1`` degrees of freedom: Student's t, not the normal
@@ -88,7 +89,7 @@ def futility_reach(var, j: int, max_runs: int):
     import numpy as np
     from scipy import stats
 
-    q = float(stats.t.isf(FUTILITY_LEVEL, max(1, j - 1)))
+    q = float(stats.t.isf(level, max(1, j - 1)))
     return q * np.sqrt(max(0.0, 1 / j - 1 / max_runs) * np.asarray(var, dtype=float))
 
 
@@ -220,12 +221,51 @@ def _bounds(looks: Sequence[int], max_runs: int, ratio: float, alpha: float
     return bounds[len(looks) - 1], bounds[-1]
 
 
+def out_of_reach(mean, var, j: int, ratio: float, c_last: float, max_runs: int,
+                 margin: float | None, levels: tuple[float, float] | None = None):
+    """Whether a question can no longer be answered within ``max_runs`` runs — the one
+    rule for "cannot be answered within the maximum" that a look stops futile by
+    (:func:`_decide`) and ``tactbench plan`` says before the run
+    (:func:`unanswerable`). Arrays of means and sample variances of ``j`` runs' per-run
+    differences, or scalars: even where the runs to come move the mean to the favourable
+    edge of their predictive interval (:func:`futility_reach`) and the spread is at its
+    lower confidence limit (:func:`favourable_sd`) the mean would not cross the last
+    look's boundary ``c_last``, nor (with a margin) would the interval fit inside the
+    margin at its least favourable. ``levels``: (predictive, spread) one-sided levels,
+    :data:`FUTILITY_LEVEL` and :data:`SPREAD_LEVEL` unless given (the benchmark's
+    trade-off curve varies them)."""
+    import numpy as np
+
+    reach_level, spread_level = levels or (FUTILITY_LEVEL, SPREAD_LEVEL)
+    mean, var = np.asarray(mean, dtype=float), np.asarray(var, dtype=float)
+    se_last = np.sqrt(1 / max_runs + ratio) * favourable_sd(var, j, spread_level)
+    move = futility_reach(var, j, max_runs, reach_level)
+    best = np.abs(mean) + move
+    worst = np.maximum(0.0, np.abs(mean) - move)
+    return ~(best >= c_last * se_last) & ~(bool(margin) & (worst + c_last * se_last
+                                                         <= (margin or 0)))
+
+
+def unanswerable(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
+                 alpha: float, margin: float | None = None) -> bool:
+    """What ``tactbench plan`` says before a run ``--until answered``: whether its first
+    look, seeing exactly the planned ``effect`` with the planned spread ``sd``, would
+    stop futile — :func:`out_of_reach` at that look, the rule the look itself applies,
+    so that plan's "cannot be answered within the maximum" and the look's futile stop
+    are one function."""
+    looks = [int(x) for x in looks]
+    _, c_last = _bounds(looks[:1], looks[-1], ratio, alpha)
+    return bool(out_of_reach(effect, sd * sd, looks[0], ratio, c_last, looks[-1], margin))
+
+
 def _decide(mean, var, j: int, ratio: float, c: float, c_last: float, max_runs: int,
-            margin: float | None, futility: bool = True):
+            margin: float | None, futility: bool = True,
+            levels: tuple[float, float] | None = None):
     """The decision codes of a look at ``j`` runs (arrays of means and sample variances
     of the per-run differences, or scalars): what :func:`look` says, and what
     :func:`procedure` simulates — one rule for both (``futility`` False: never futile
-    before the last look, to measure what futility gives up)."""
+    before the last look, to measure what futility gives up; ``levels`` as for
+    :func:`out_of_reach`)."""
     import numpy as np
 
     mean, var = np.asarray(mean, dtype=float), np.asarray(var, dtype=float)
@@ -234,16 +274,7 @@ def _decide(mean, var, j: int, ratio: float, c: float, c_last: float, max_runs: 
         z = np.where(se > 0, mean / se, np.where(mean == 0, 0.0, np.sign(mean) * np.inf))
         eq = (se > 0) & (np.minimum((mean + (margin or 0)) / se,
                                     ((margin or 0) - mean) / se) >= c) & bool(margin)
-    # futile: even where the runs to come move the mean to the favourable edge of their
-    # predictive interval it would not cross the last look's boundary, nor (with a
-    # margin) would the interval fit inside the margin at its least favourable
-    se_last = np.sqrt(1 / max_runs + ratio) * favourable_sd(var, j)
-    move = futility_reach(var, j, max_runs)
-    best = np.abs(mean) + move
-    worst = np.maximum(0.0, np.abs(mean) - move)
-    hopeless = ~(best >= c_last * se_last) & ~(bool(margin) & (worst + c_last * se_last
-                                                             <= (margin or 0)))
-    hopeless = hopeless & futility
+    hopeless = out_of_reach(mean, var, j, ratio, c_last, max_runs, margin, levels) & futility
     return np.select([np.abs(z) >= c, eq, np.full(z.shape, j >= max_runs), se == 0,
                       hopeless], [np.where(z > 0, _B, _A), _EQ, _LAST, _FLAT, _REACH], _GO)
 
@@ -383,9 +414,12 @@ OUTCOMES_FUTILE, DECIDED_CODES = (_FLAT, _REACH), (_B, _A, _EQ)
 
 def simulate_paths(effect: float, sd: float, ratio: float, looks: Sequence[int], *,
                    alpha: float, margin: float | None = None, paths: int = FORECAST_PATHS,
-                   seed: int = 37, futility: bool = True):
+                   seed: int = 37, futility: bool = True,
+                   levels: tuple[float, float] | None = None):
     """Each simulated path of :func:`procedure`: its outcome code (:data:`OUTCOMES`) and
-    the runs at which it stopped, as two arrays; the paths depend on ``seed`` only."""
+    the runs at which it stopped, as two arrays; the paths depend on ``seed`` only.
+    ``levels``: the futility rule's (predictive, spread) levels (:func:`out_of_reach`),
+    the package's unless given."""
     import numpy as np
 
     looks = [int(j) for j in looks]
@@ -405,7 +439,7 @@ def simulate_paths(effect: float, sd: float, ratio: float, looks: Sequence[int],
         var = np.maximum(squares - total * total / j, 0.0) / (j - 1)
         c, c_last = _bounds(looks[:k + 1], max_runs, ratio, alpha)
         going = code == _GO
-        now = _decide(mean, var, j, ratio, c, c_last, max_runs, margin, futility)
+        now = _decide(mean, var, j, ratio, c, c_last, max_runs, margin, futility, levels)
         code = np.where(going, now, code)
         stop = np.where(going & (now != _GO), j, stop)
         if not (code == _GO).any():
@@ -519,161 +553,3 @@ def family_look(state: FamilyState, diffs: dict[str, Sequence[float]], ratios: d
         if name not in state.closed and res.decision in (EQUIVALENT, FUTILE, NOT_LEARNED):
             state.closed[name] = res
     return out
-
-
-#: Paths :func:`family_forecast` simulates in ``tactbench plan``: few enough to stay well
-#: under a second with three primaries and four looks (about 0.1 s on a 2-core VM, the
-#: boundaries aside, which the comparisons' own forecasts share), one standard error
-#: on the family's share at most ``0.5/√paths`` (0.011).
-FAMILY_PATHS = 2000
-
-
-def arm_correlation(pairs: Sequence[tuple]) -> list[list[float]]:
-    """The correlation of the per-run differences of comparisons ``pairs`` (each ``(A,
-    B)``, cells by any hashable name), from the cells they share: with every cell's
-    accuracy varying on its own by the same amount, ``B − A`` and ``B′ − A′`` covary by
-    one cell's variance for each cell in the same role (``A = A′`` or ``B = B′``) and by
-    minus it for each in opposite roles, so two comparisons against one baseline
-    (``raw → frame-diff``, ``raw → farneback``) correlate by 0.5; comparisons with no
-    cell in common are taken as independent (what their shared splits add is not
-    known before the runs)."""
-    out = []
-    for a, b in pairs:
-        row = []
-        for a2, b2 in pairs:
-            same = (a == a2) + (b == b2) - (a == b2) - (b == a2)
-            row.append(same / 2)
-        out.append(row)
-    return out
-
-
-def draw_family(effects: Sequence[float], sds: Sequence[float], ratios: Sequence[float],
-                corr: Sequence[Sequence[float]], max_runs: int, *, paths: int, seed: int):
-    """Per-run differences of a family, ``(paths, m, max_runs)``: comparison ``i`` as in
-    :func:`simulate_paths` (a part every run shares, of variance ``ratio_i · sd_i²``, and
-    each run's own, of ``sd_i²``), the comparisons correlated by ``corr`` in both parts
-    (:func:`arm_correlation`). Depends on ``seed`` only."""
-    import numpy as np
-
-    effects, sds, ratios = (np.asarray(x, dtype=float) for x in (effects, sds, ratios))
-    w, v = np.linalg.eigh(np.asarray(corr, dtype=float))
-    root = v * np.sqrt(np.clip(w, 0.0, None))  # root @ root.T == corr (singular allowed)
-    rng = np.random.default_rng(seed)
-    m = len(effects)
-    shared = rng.standard_normal((paths, m)) @ root.T * sds * np.sqrt(ratios)
-    own = np.einsum("pjk,ik->pij", rng.standard_normal((paths, max_runs, m)), root)
-    return effects[None, :, None] + shared[:, :, None] + own * sds[None, :, None]
-
-
-def family_codes(diffs, ratios: Sequence[float], looks: Sequence[int], *, alpha: float,
-                 margin: float | None = None, futility: bool = True):
-    """What the run's looks (:func:`family_look`: Holm carried over the looks, α of a
-    rejection passed to every hypothesis not rejected) end with on each path of
-    ``diffs`` (``(paths, m, ≥ looks[-1])``), vectorised over the paths: the decision
-    codes ``(paths, m)`` (:data:`OUTCOMES`) and the runs each path stopped at. After r
-    rejections of m every hypothesis not rejected holds α/(m − r), so a look repeats at
-    the larger level until no more is rejected, as :func:`family_look` does; its
-    boundaries are the same calls (:func:`_bounds`). The minimum of discordant
-    recordings and "not learned" are not simulated (learners, enough disagreement)."""
-    import numpy as np
-
-    diffs = np.asarray(diffs, dtype=float)
-    paths, m, _ = diffs.shape
-    looks = [int(j) for j in looks]
-    max_runs = looks[-1]
-    code = np.full((paths, m), _GO)
-    stop = np.full(paths, max_runs)
-    for k, j in enumerate(looks):
-        mean, var = diffs[:, :, :j].mean(axis=2), diffs[:, :, :j].var(axis=2, ddof=1)
-        was_open = code == _GO
-        now = code.copy()
-        while True:
-            rejected = np.isin(now, (_B, _A)).sum(axis=1)
-            fresh = now.copy()
-            for i in range(m):
-                todo = was_open[:, i] & ~np.isin(now[:, i], (_B, _A))  # rejected stays
-                for r in np.unique(rejected[todo]):
-                    rows = todo & (rejected == r)
-                    c, c_last = _bounds(looks[:k + 1], max_runs, ratios[i], alpha / (m - r))
-                    fresh[rows, i] = _decide(mean[rows, i], var[rows, i], j, ratios[i], c,
-                                             c_last, max_runs, margin, futility)
-            # only a rejection raises the others' level: keep rejections, redo the rest
-            grew = np.isin(fresh, (_B, _A)).sum(axis=1) > rejected
-            now = np.where(was_open, fresh, code)
-            if not grew.any():
-                break
-            # the paths that rejected more look again; the others are settled
-            keep = ~grew[:, None] | np.isin(now, (_B, _A))
-            now = np.where(was_open & ~keep, _GO, now)
-        stop = np.where(was_open.any(axis=1) & ~(now == _GO).any(axis=1)
-                        & (stop == max_runs), j, stop)
-        code = now
-        if not (code == _GO).any():
-            break
-    return code, stop
-
-
-def fixed_family_codes(diffs, ratios: Sequence[float], *, alpha: float,
-                       margin: float | None = None):
-    """What a fixed design's verdicts are on each path of ``diffs`` (``(paths, m, J)``):
-    each comparison's corrected t, Holm over the family, TOST with Holm where there is a
-    margin (:func:`~tactbench.runner.analysis.statistics.verdict`'s rule, learners with
-    enough disagreement assumed), as decision codes ``(paths, m)``: better either way,
-    equivalent, or :data:`_LAST` (unresolved)."""
-    import numpy as np
-
-    from tactbench.runner.analysis.statistics import MIN_RUNS, corrected_t, holm, tost_p
-
-    diffs = np.asarray(diffs, dtype=float)
-    paths, m, j = diffs.shape
-    t = [corrected_t(diffs[:, i], ratios[i]) for i in range(m)]
-    p_holm = holm(np.stack([x["p"] for x in t], axis=1))
-    low, high = (np.stack([x[k] for x in t], axis=1) for k in ("low", "high"))
-    eq = (holm(np.stack([tost_p(diffs[:, i], ratios[i], margin) for i in range(m)], axis=1))
-          < alpha) if margin else np.zeros((paths, m), dtype=bool)
-    if j < MIN_RUNS:
-        return np.full((paths, m), _LAST)
-    return np.select([(p_holm < alpha) & (low > 1e-9), (p_holm < alpha) & (high < -1e-9), eq],
-                     [_B, _A, _EQ], _LAST)
-
-
-@dataclass(frozen=True)
-class FamilyForecast:
-    """A primary family's chance of being answered, simulated through the run's own
-    procedure: ``answered`` every comparison (better either way, or equivalent),
-    ``each`` the share per comparison, over ``paths`` paths (``mc_error``: one standard
-    error at most, ``0.5/√paths``), the comparisons correlated by ``corr``."""
-
-    answered: float
-    each: list[float]
-    paths: int
-    mc_error: float
-    corr: list[list[float]]
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
-
-
-def family_forecast(effects: Sequence[float], sds: Sequence[float], ratios: Sequence[float],
-                    pairs: Sequence[tuple], *, runs: int, looks: Sequence[int] | None,
-                    alpha: float, margin: float | None = None, paths: int = FAMILY_PATHS,
-                    seed: int = 41) -> FamilyForecast:
-    """The chance that every comparison of a primary family is answered: paths drawn by
-    :func:`draw_family` (correlated by the cells the comparisons share,
-    :func:`arm_correlation`) and judged as the run judges them — with ``looks`` (a run
-    ``--until answered``, the last the maximum) by :func:`family_codes`, the looks'
-    own Holm carried over; without, a fixed design of ``runs`` by
-    :func:`fixed_family_codes`. Deterministic (a fixed seed)."""
-    import numpy as np
-
-    corr = arm_correlation(pairs)
-    diffs = draw_family(effects, sds, ratios, corr, looks[-1] if looks else runs,
-                        paths=paths, seed=seed)
-    if looks:
-        code, _ = family_codes(diffs, ratios, looks, alpha=alpha, margin=margin)
-    else:
-        code = fixed_family_codes(diffs, ratios, alpha=alpha, margin=margin)
-    done = np.isin(code, DECIDED_CODES)
-    return FamilyForecast(answered=float(done.all(axis=1).mean()),
-                          each=[float(x) for x in done.mean(axis=0)], paths=paths,
-                          mc_error=0.5 / math.sqrt(paths), corr=corr)
