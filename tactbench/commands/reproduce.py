@@ -283,7 +283,7 @@ def _line(r: dict[str, Any]) -> str:
               help="Where the cells are trained again: a new or empty folder, or an "
                    "earlier reproduction's. [default: a temporary folder, removed after]")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Cells at once. [default: this machine's usable cores]")
+              help="Cells at once. [default: cores, GPUs and memory allow]")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document.")
 def reproduce_cmd(folder: str, keys: tuple[str, ...], everything: bool, out: str | None,
                   workers: int | None, as_json: bool) -> None:

@@ -128,7 +128,7 @@ SCENE_OPTIONS = [
                       "gives other numbers)."),
     scene_option("--executor", field="executor", type=click.Choice(EXECUTORS),
                  help="Where cells run: this machine, or a dask cluster."),
-    scene_option("--workers", field="workers", type=int, none="this machine's cores / --threads",
+    scene_option("--workers", field="workers", type=int, none="cores / --threads, GPUs, memory",
                  help="Cells at once (processes)."),
     scene_option("--scheduler", field="scheduler", none="a local cluster",
                  help="dask scheduler address tcp://HOST:PORT (with --executor dask)."),

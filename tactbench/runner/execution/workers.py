@@ -109,11 +109,11 @@ def worker_peak(rows: Iterable[Mapping[str, Any]] = (), p: "Plan | None" = None,
                 and isinstance(r.get("peak_rss_mb"), (int, float))
                 and r["peak_rss_mb"] == r["peak_rss_mb"]]
     if measured:
-        return max(measured), f"measured by {len(measured)} stored cell(s)"
+        return max(measured), f"the largest of {len(measured)} stored cell(s)"
     if p is None:
         return None, "not forecast"
     estimate = WORKER_BASE_MB + (bank_budget_bytes() + 2 * p.batch_bytes) / MIB
-    return estimate, "estimated from the plan (no stored cell measured it)"
+    return estimate, "estimated from the plan: no stored cell measured one"
 
 
 def run_devices(scene: "Scene") -> list[str] | None:
