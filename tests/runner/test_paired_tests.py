@@ -110,6 +110,13 @@ def test_a_run_refuses_a_paired_test_before_any_training(tiny_scene, cache):
     assert not list((Path(scene.out) / "cells").glob("*.json"))  # nothing trained
 
 
+def test_plan_refuses_what_the_run_would_refuse(tiny_scene):
+    from tactbench.runner import forecast
+
+    with pytest.raises(InputError, match="'wilcoxon' is not valid for runs of a resampled"):
+        forecast(tiny_scene(paired_test="wilcoxon"))
+
+
 def test_an_unknown_paired_test_is_one_line_naming_the_known_ones():
     with pytest.raises(TactbenchError, match="unknown paired-test 'wilcox'; did you mean "
                                          "'wilcoxon'"):

@@ -57,6 +57,7 @@ from tactbench.runner.execution.planning import (
     plan_runs,
     run_datasets,
 )
+from tactbench.runner.analysis.paired_tests import choose_paired_test
 from tactbench.runner.analysis.power import (
     TARGET_POWER,
     detectable_effect,
@@ -187,6 +188,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     n_train = len(splits[0].train)
     independent = p.run_dataset is not None  # each run its own data set: no overlap
     design = "independent" if independent else split_design(p.split, splits)
+    # what run refuses, refused here in its words (its power is still the corrected t's)
+    choose_paired_test(scene.paired_test, registry).check(design, sequential=bool(scene.until))
     ratio = 0.0 if design in ("independent", "fixed") else \
         seed_mean_ratio(len(splits)) if design == "kfold" else n_test / n_train
     others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
