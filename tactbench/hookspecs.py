@@ -89,14 +89,21 @@ def cell_finished(row, out):
 
 
 @hookspec
-def run_finished(report, out):
-    """A run ended and wrote its report (``tactbench run``, :func:`tactbench.runner.run`,
-    and each look's batch of ``run --until answered``): ``report`` is the folder's
-    :class:`~tactbench.runner.presentation.writers.Report` as written, ``out`` the run
-    folder. The place to close what ``cell_finished`` opened (a tracking run)."""
+def look_finished(look, out):
+    """A look of ``run --until answered`` ended and wrote its report: ``look`` is its
+    record (a dict of plain values, :func:`~tactbench.runner.analysis.records.look_record`:
+    ``look``, ``runs``, ``answered``, ``stopped``, ``decisions``, ``rows`` as stored and
+    ``comparisons``, each a :func:`~tactbench.runner.comparison_record`), ``out`` the run
+    folder."""
 
 
 @hookspec
-def look_finished(report, out):
-    """A look of ``run --until answered`` ended: ``report`` is the folder's
-    :class:`~tactbench.runner.presentation.writers.Report` after it, ``out`` the run folder."""
+def run_finished(summary, out):
+    """A run ended and wrote its report, once per run (``tactbench run``,
+    :func:`tactbench.runner.run`, and ``run --until answered`` after its last look):
+    ``summary`` is its record (a dict of plain values,
+    :func:`~tactbench.runner.analysis.records.run_summary`: ``rows`` as stored,
+    ``comparisons``, the keys ``ok`` and ``failed``, ``computed``, ``skipped``,
+    ``seconds``, and ``until``: the last look of ``--until answered``, None for a plain
+    run), ``out`` the run folder. The place to close what ``cell_finished`` opened (a
+    tracking run)."""

@@ -180,8 +180,8 @@ def test_hook_register_commands(plugin_dist):
 
 def _events_plugin(seen):
     return namespace(cell_finished=lambda row, out: seen.append(("cell", row["key"], out)),
-                     run_finished=lambda report, out: seen.append(("run", report, out)),
-                     look_finished=lambda report, out: seen.append(("look", report, out)))
+                     run_finished=lambda summary, out: seen.append(("run", summary, out)),
+                     look_finished=lambda look, out: seen.append(("look", look, out)))
 
 
 def test_hook_cell_finished(tmp_path):
@@ -195,7 +195,7 @@ def test_hook_cell_finished(tmp_path):
 def test_hook_look_finished(tmp_path):
     seen = []
     reg = registry_with(("events", _events_plugin(seen)))
-    reg.notify("look_finished", report="R", out=tmp_path)
+    reg.notify("look_finished", look="R", out=tmp_path)
     reg.settle()
     assert seen == [("look", "R", tmp_path)]
 
@@ -203,7 +203,7 @@ def test_hook_look_finished(tmp_path):
 def test_hook_run_finished(tmp_path):
     seen = []
     reg = registry_with(("events", _events_plugin(seen)))
-    reg.notify("run_finished", report="R", out=tmp_path)
+    reg.notify("run_finished", summary="R", out=tmp_path)
     reg.settle()
     assert seen == [("run", "R", tmp_path)]
 

@@ -82,9 +82,10 @@ This package is the runner's one public face: the names below (``__all__``) are 
 the commands, the benchmark scripts, plugins and notebooks use, and the only runner
 names they import (``tests/test_architecture.py`` fails on an import of a room's module
 from outside the runner), so the rooms can be rearranged behind them. What an event
-hook receives is a plain record, documented with the hooks (:mod:`tactbench.hookspecs`):
-a cell's row as stored, a look's comparisons (:func:`comparison_record` each), a run's
-summary.
+hook receives is a record of plain values, documented with the hooks
+(:mod:`tactbench.hookspecs`) and below: a cell's row as stored, a look's record
+(:func:`look_record`) and a run's summary (:func:`run_summary`), their comparisons each a
+:func:`comparison_record`.
 """
 
 from tactbench.machine import git_revision
@@ -95,6 +96,7 @@ from tactbench.runner.analysis.paired_tests import (DEFAULT_PAIRED_TEST, Correct
                                                     PairedTestChoice, choose_paired_test)
 from tactbench.runner.analysis.power import detectable_effect, power
 from tactbench.runner.analysis.family_paths import family_forecast
+from tactbench.runner.analysis.records import comparison_record, look_record, run_summary
 from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
                                                   family_look, procedure, simulate_paths)
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
@@ -119,8 +121,7 @@ from tactbench.runner.execution.scene import (DEFAULT_PRIMARY, EXECUTORS, FIRST_
 from tactbench.runner.execution.workers import Workers, run_workers
 from tactbench.runner.orchestrate import render_folder, run, run_until
 from tactbench.runner.presentation.frames import (EXTRA as EXPORT_EXTRA, cells_frame,
-                                                  comparison_record, comparisons_frame,
-                                                  write_parquet)
+                                                  comparisons_frame, write_parquet)
 from tactbench.runner.presentation.plots import check_reference
 from tactbench.runner.presentation.tables import (answer_text, comparisons_markdown, labels_for,
                                                   looks_markdown, markdown_table,
@@ -151,5 +152,7 @@ __all__ = [
     "short_name", "labels_for", "verdict_text", "answer_text", "markdown_table",
     "comparisons_markdown", "looks_markdown", "print_table", "print_comparisons",
     "write_report", "check_reference", "flat_rows", "training_cpu_seconds",
-    "comparison_record", "cells_frame", "comparisons_frame", "write_parquet", "EXPORT_EXTRA",
+    "cells_frame", "comparisons_frame", "write_parquet", "EXPORT_EXTRA",
+    # what event hooks receive: plain records of a comparison, a look, a run
+    "comparison_record", "look_record", "run_summary",
 ]

@@ -31,6 +31,7 @@ from tactbench.paths import discard
 from tactbench.plugins import load_registry
 from tactbench.runner.analysis.answering import History, first_look_to_run
 from tactbench.runner.analysis.paired_tests import choose_paired_test
+from tactbench.runner.analysis.records import look_record, run_summary
 from tactbench.runner.execution.cache import (EncodingCache, check_room_runs,
                                               ensure_encodings)
 from tactbench.runner.execution.cell import make_jobs, model_problem
@@ -92,8 +93,7 @@ def _pending(p: Plan, store: ResultStore, models: Path | None, progress) -> list
 
 def run(scene: Scene, *, registry=None, progress: bool = True,
         cache: EncodingCache | None = None, plots: bool = True,
-        on_row: Callable[[dict[str, Any]], None] | None = None,
-        resume: History | None = None) -> Report:
+        on_row: Callable[[dict[str, Any]], None] | None = None) -> Report:
     """Run ``scene``: plan, encode what is missing, run unfinished cells, then write the
     folder's report (results.json, results.csv, report.md and, with ``plots``, the
     figures) from every row of ``OUT/cells`` and return it, with ``computed``,
@@ -102,10 +102,32 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     ``registry`` (default: every installed plugin) is used for planning and by every
     cell, in every executor. A cell that raises is stored as a failed row and the others
     go on; ``on_row(row)`` is called with each row as it is stored, and so is every
-    plugin's ``cell_finished`` hook (:mod:`tactbench.hookspecs`). ``resume``: the
-    ``history`` of this run's previous look (:func:`run_until`), whose looks the report
-    does not compute again.
+    plugin's ``cell_finished`` hook; when the report is written, every plugin's
+    ``run_finished`` hook is called with the run's summary
+    (:func:`~tactbench.runner.analysis.records.run_summary`; :mod:`tactbench.hookspecs`).
     """
+    registry = registry or load_registry()
+    report = _batch(scene, registry=registry, progress=progress, cache=cache, plots=plots,
+                    on_row=on_row)
+    _finished(registry, report, scene.out)
+    return report
+
+
+def _finished(registry, report: Report, out: str | Path) -> None:
+    """A run ended (a plain one, or every look of :func:`run_until`): each plugin's
+    ``run_finished`` hook gets its summary, and the hooks are waited for."""
+    registry.notify("run_finished", out=Path(out), summary=run_summary(
+        report.rows, report.comparisons, computed=report.computed, skipped=report.skipped,
+        seconds=report.seconds, looks=report.looks, budget_stop=report.budget_stop))
+    registry.settle()  # the hooks' calls, each within its bound
+
+
+def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
+           on_row: Callable[[dict[str, Any]], None] | None,
+           cache: EncodingCache | None = None, resume: History | None = None) -> Report:
+    """:func:`run` but its ``run_finished`` event: one look's batch of :func:`run_until`
+    (``resume``: the ``history`` of the run's previous look, whose looks the report does
+    not compute again)."""
     start = time.perf_counter()
     hook_timeout()  # a bad TACTBENCH_HOOK_TIMEOUT: one line before any work
     cache = cache or EncodingCache()  # an unusable cache folder: before any work
@@ -161,8 +183,7 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     report.paths.update(refresh_parquet(report, scene.out))  # never left stale
     report.computed, report.skipped = len(pending), len(identities) - len(pending)
     report.seconds = time.perf_counter() - start
-    plans[0].registry.notify("run_finished", report=report, out=Path(scene.out))
-    plans[0].registry.settle()  # the hooks' calls, each within its bound
+    plans[0].registry.settle()  # the cell hooks' calls, each within its bound
     return report
 
 
@@ -322,9 +343,11 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     ``max_runs`` is reached, or the next batch would start past ``budget``. Returns the
     last :class:`~tactbench.runner.presentation.writers.Report` (its ``looks``: every look, replayed
     from the rows); ``on_look(report)`` is called after each look, and so is every
-    plugin's ``look_finished`` hook; ``on_row``: see :func:`run`. Ctrl-C between cells
-    keeps every finished cell. The report's ``computed``, ``skipped`` and ``seconds`` are
-    this call's, over all its looks."""
+    plugin's ``look_finished`` hook, with the look's record
+    (:func:`~tactbench.runner.analysis.records.look_record`); ``on_row``: see :func:`run`.
+    Ctrl-C between cells keeps every finished cell. The report's ``computed``,
+    ``skipped`` and ``seconds`` are this call's, over all its looks; every plugin's
+    ``run_finished`` hook is called once, after the last look (as by :func:`run`)."""
     registry = registry or load_registry()
     design = scene.design  # the seed order, the looks and the budget: decided once
     order, looks, budget = design.seed_order, design.looks, design.budget_seconds
@@ -333,13 +356,14 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     report, computed = None, 0
     for k in range(first_look_to_run(stored, order, looks), len(looks)):
         t0 = time.perf_counter()
-        report = run(dataclasses.replace(scene, seeds=list(order[:looks[k]])),
-                     registry=registry, progress=progress, plots=plots, on_row=on_row,
-                     resume=report.history if report is not None else None)
+        report = _batch(dataclasses.replace(scene, seeds=list(order[:looks[k]])),
+                        registry=registry, progress=progress, plots=plots, on_row=on_row,
+                        resume=report.history if report is not None else None)
         computed += report.computed
         if on_look is not None:
             on_look(report)
-        registry.notify("look_finished", report=report, out=Path(scene.out))
+        registry.notify("look_finished", out=Path(scene.out), look=look_record(
+            report.rows, report.comparisons, report.looks))
         registry.settle()
         if report.failed or (report.looks or {}).get("answered"):
             break
@@ -360,4 +384,5 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     usage = [resource.getrusage(who) for who in (resource.RUSAGE_SELF,
                                                  resource.RUSAGE_CHILDREN)]
     report.cpu_seconds = sum(u.ru_utime + u.ru_stime for u in usage)
+    _finished(registry, report, scene.out)
     return report

@@ -22,9 +22,8 @@ from typing import TYPE_CHECKING, Any, Sequence
 from tactbench.errors import MissingExtraError, require
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_bytes, discard
-from tactbench.runner.analysis.comparisons import Comparison
-from tactbench.runner.execution.results import INDEPENDENT_RUNS, ok_rows
-from tactbench.runner.execution.questions import FACTORS, parse_contrast, spec_label
+from tactbench.runner.analysis.records import COMPARISON_KINDS, comparison_record
+from tactbench.runner.execution.results import INDEPENDENT_RUNS
 from tactbench.runner.presentation.writers import csv_columns, flat_rows
 
 if TYPE_CHECKING:
@@ -51,16 +50,6 @@ CELL_KINDS = {"split_seed": "int", "L": "int", "seed": "int", "init_seed": "int"
               "encode_ms_per_frame": "float", "train_s": "float",
               "inference_ms_per_sequence": "float", "peak_rss_mb": "float",
               "n_train_windows": "int", "n_test": "int", "threads": "int"}
-#: The columns of :func:`comparisons_frame`, in order, with their kinds (``cells_a`` and
-#: ``cells_b``: lists of cell keys).
-COMPARISON_KINDS = {
-    "family": "text", "dataset": "text", "split": "text", "factor": "text", "a": "text",
-    "b": "text", "encoder": "text", "classifier": "text", "L": "int",
-    "difference": "float", "low": "float", "high": "float", "confidence": "float",
-    "p": "float", "p_holm": "float", "verdict": "text", "runs": "int",
-    "accuracy_a": "float", "accuracy_b": "float", "equivalence_margin": "float",
-    "equivalence_p": "float", "equivalence_p_holm": "float", "family_size": "int",
-    "method": "text", "note": "text", "cells_a": "keys", "cells_b": "keys"}
 
 
 def cells_frame(report: "Report") -> "pandas.DataFrame":
@@ -100,39 +89,6 @@ def comparisons_frame(report: "Report") -> "pandas.DataFrame":
     data = {name: _column(pd, [r[name] for r in records], kind)
             for name, kind in COMPARISON_KINDS.items()}
     return pd.DataFrame(data, columns=list(COMPARISON_KINDS))
-
-
-def comparison_record(c: Comparison, rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """The fields of :data:`COMPARISON_KINDS` of ``c`` as plain values (``cells_a`` and
-    ``cells_b`` found among ``rows``): a row of :func:`comparisons_frame`, and what the
-    MLflow plugin logs for a comparison."""
-    record = {name: getattr(c, name, None) for name in COMPARISON_KINDS}
-    record.update({f: c.where.get(f) for f in FACTORS})
-    record["cells_a"], record["cells_b"] = compared_cells(c, rows)
-    return record
-
-
-def compared_cells(c: Comparison, rows: Sequence[dict[str, Any]]
-                   ) -> tuple[list[str], list[str]]:
-    """The keys of the ok cells (one per run) on side A and on side B of ``c``."""
-    if c.factor == "contrast":
-        sides = parse_contrast(f"{c.a}..{c.b}")
-    else:
-        sides = ({c.factor: c.a}, {c.factor: c.b})
-
-    def keys(side: dict[str, Any]) -> list[str]:
-        spec = {**c.where, **side}
-        return sorted(str(r["key"]) for r in ok_rows(rows)
-                      if r.get("split") == c.split and all(_same(f, r.get(f), v)
-                                                           for f, v in spec.items()))
-
-    return keys(sides[0]), keys(sides[1])
-
-
-def _same(factor: str, value: Any, wanted: Any) -> bool:
-    """Whether a row's ``factor`` is ``wanted`` (a classifier also by its short label)."""
-    return str(value) == str(wanted) or (factor == "classifier"
-                                         and spec_label(str(value)) == str(wanted))
 
 
 def _column(pd: Any, values: list[Any], kind: str) -> Any:

@@ -44,16 +44,16 @@ def cell_finished(row, out):
 
 
 @hookimpl
-def run_finished(report, out):
+def run_finished(summary, out):
     """The run's comparisons and each cell's learning judged over its runs, then its
     parent ended: FINISHED, or FAILED where a cell could not be logged (never left
     RUNNING)."""
-    _log_report(report, out, cells=True)
+    _log_record(summary, out, cells=True)
 
 
 @hookimpl
-def look_finished(report, out):
-    _log_report(report, out, cells=False)
+def look_finished(look, out):
+    _log_record(look, out, cells=False)
 
 
 def _live():
@@ -87,12 +87,14 @@ def end_live_parents(status: str = "KILLED") -> None:
             pass
 
 
-def _log_report(report, out, *, cells):
+def _log_record(record, out, *, cells):
+    """A run's or a look's record (its rows as stored, its comparisons) logged, then the
+    parents ended."""
     exporter = _live()
     if exporter is None:
         return
     try:
-        exporter.log_report(out, report, cells=cells)
+        exporter.log_record(out, record, cells=cells)
     except BaseException:
         exporter.live_failed = True
         raise

@@ -319,8 +319,8 @@ class Exporter:
 
     def log_comparison(self, out: str | Path, record: dict[str, Any],
                        row: dict[str, Any], grid_cells: set[str]) -> bool:
-        """One comparison (:func:`tactbench.runner.presentation.frames.comparison_record`)
-        as a run under the parent of the grid of ``row`` (:meth:`parent`)."""
+        """One comparison (:func:`tactbench.runner.comparison_record`) as a run under the
+        parent of the grid of ``row`` (:meth:`parent`)."""
         identity = {k: record[k] for k in ("family", "dataset", "split", "factor", "a",
                                            "b", "encoder", "classifier", "L")}
         return self._upsert(self.parent(out, row, grid_cells),
@@ -328,18 +328,20 @@ class Exporter:
                              "tactbench.comparison_key": _digest(identity)},
                             _digest(record), lambda: comparison_run(record))[0]
 
-    def log_report(self, out: str | Path, report: Any, *, cells: bool = True
+    def log_record(self, out: str | Path, record: dict[str, Any], *, cells: bool = True
                    ) -> dict[str, int]:
-        """Every row (with ``cells``) and every comparison of ``report``: counts of
-        runs ``logged`` and ``unchanged``."""
-        if not report.rows:
+        """Every row (with ``cells``) and every comparison of a run's or a look's
+        ``record`` (what the ``run_finished`` and ``look_finished`` hooks receive,
+        :func:`tactbench.runner.run_summary`, :func:`tactbench.runner.look_record`):
+        counts of runs ``logged`` and ``unchanged``."""
+        rows = record["rows"]
+        if not rows:
             return {"logged": 0, "unchanged": 0}
-        judged = cells_learning(report.rows)
-        grid = {str(row["key"]) for row in report.rows}  # the folder's grid: every cell
-        done = [self.log_cell(out, row, grid, judged.get(_cell_of(row)))
-                for row in report.rows] if cells else []
-        done += [self.log_comparison(out, comparison_record(c, report.rows), report.rows[0],
-                                     grid) for c in report.comparisons]
+        judged = cells_learning(rows)
+        grid = {str(row["key"]) for row in rows}  # the folder's grid: every cell
+        done = [self.log_cell(out, row, grid, judged.get(_cell_of(row))) for row in rows
+                ] if cells else []
+        done += [self.log_comparison(out, c, rows[0], grid) for c in record["comparisons"]]
         return {"logged": sum(done), "unchanged": len(done) - sum(done)}
 
 
@@ -419,11 +421,13 @@ def export_folder(out: str | Path, uri: str, experiment: str = EXPERIMENT,
                   registry: Any = None) -> dict[str, int]:
     """The finished run folder ``out`` into MLflow at ``uri``: read (nothing written
     there; a folder that is not a run is one line), then every cell and comparison
-    logged once (:meth:`Exporter.log_report`)."""
+    logged once (:meth:`Exporter.log_record`)."""
     report = render_folder(out, plots=False, write=False, registry=registry)
+    record = {"rows": report.rows,
+              "comparisons": [comparison_record(c, report.rows) for c in report.comparisons]}
     exporter = Exporter.connect(uri, experiment)
     try:
-        counts = exporter.log_report(out, report)
+        counts = exporter.log_record(out, record)
     except BaseException as exc:
         failure = _end_failed(exporter)
         if isinstance(exc, TactbenchError) or not isinstance(exc, Exception):
