@@ -196,3 +196,44 @@ def test_the_readme_window_length_answer_is_the_contrast():
     [c] = [c for c in _results("study/lengths")["comparisons"] if c.get("family") == "primary"]
     [said] = _bullets("The study's window length")
     _answer_at(c, said, 0)
+
+
+ANSWER = re.compile(
+    r"^- .*?: (?P<b>[^:]+?) − (?P<a>[^:]+?): (?P<d>[+-]\d+\.\d) points, 95 % interval over "
+    r"runs \[(?P<lo>[+-]\d+\.\d), (?P<hi>[+-]\d+\.\d)\] \(unadjusted\), (?P<k>\d+) of "
+    r"(?P<j>\d+) runs higher, .*?\((?P<family>primary|exploratory), (?P<m>\d+)\) → "
+    r"\*\*(?P<word>[^*]+)\*\*")
+
+
+def _answer_lines():
+    """(report, line) of every report sentence that gives one comparison's answer."""
+    return [(md.name, line) for md in sorted(REPORTS.glob("*.md"))
+            for line in md.read_text().splitlines() if ANSWER.match(line)]
+
+
+def test_the_reports_answer_sentences_are_found():
+    assert {name for name, _ in _answer_lines()} >= {"study.md", "real-data.md",
+                                                     "which-classifier.md"}
+
+
+@pytest.mark.parametrize("report, line", _answer_lines(),
+                         ids=[f"{n}:{i}" for i, (n, _) in enumerate(_answer_lines())])
+def test_each_answer_sentence_is_a_stored_comparison(report, line):
+    """A report's "B − A: d points, [lo, hi], k of J runs higher, (family, m) → verdict"
+    is a comparison stored in one of that report's results.json: the same rounded
+    difference and interval, k runs where B was higher of J, its family and the
+    family's size, and the verdict (the better side named as the sentence names it)."""
+    m = ANSWER.match(line)
+    comps = [c for f in sorted((REPORTS / report.removesuffix(".md")).rglob("results.json"))
+             for c in json.loads(f.read_text())["comparisons"]]
+    same = [c for c in comps if not c.get("ceiling")
+            and f"{100 * c['difference']:+.1f}" == m["d"]
+            and f"{100 * c['low']:+.1f}" == m["lo"] and f"{100 * c['high']:+.1f}" == m["hi"]
+            and c["runs"] == int(m["j"]) and c.get("family") == m["family"]]
+    assert same, line
+    want = {"B better": f"{m['b']} better", "A better": f"{m['a']} better"}
+    ok = [c for c in same if c["b_better_runs"] == int(m["k"])
+          and c.get("family_size") == int(m["m"])
+          and (m["word"] == want.get(c["verdict"], c["verdict"])
+               or (c["verdict"] == "equivalent" and m["word"].startswith("equivalent")))]
+    assert ok, (line, [(c["b_better_runs"], c.get("family_size"), c["verdict"]) for c in same])
