@@ -256,7 +256,8 @@ def plot_cost_vs_accuracy(summaries: Sequence[dict[str, Any]], colour: dict[tupl
     accs = [100 * s["accuracy_mean"] for s in drawn]
     for s, x, y in zip(drawn, costs, accs):
         band = accuracy_band(s)
-        yerr = [[y - 100 * band[0]], [100 * band[1] - y]] if band else None
+        # seeds of one accuracy: the interval's ends can stand a rounding error inside it
+        yerr = [[max(0.0, y - 100 * band[0])], [max(0.0, 100 * band[1] - y)]] if band else None
         ax.errorbar([x], [y], yerr=yerr, marker="o", capsize=3,
                     color=colour[_curve_key(s, labels)])
         ax.annotate(f"{s['encoder']} / {spec_label(s['classifier'], labels)} L={s['L']}",
