@@ -26,9 +26,10 @@ from tactbench.runner.analysis.statistics import MIN_RUNS, corrected_t, holm, to
 
 
 #: Paths :func:`family_forecast` simulates in ``tactbench plan``: few enough to stay well
-#: under a second with three primaries and four looks (about 0.1 s on a 2-core VM, the
-#: boundaries aside, which the comparisons' own forecasts share), one standard error
-#: on the family's share at most ``0.5/√paths`` (0.011).
+#: under a second with three primaries and four looks (on a 2-core VM: 0.05 s once
+#: the boundaries are placed, 0.56 s where Holm's later levels α/2 and α place theirs
+#: for the first time), one standard error on the family's share at most
+#: ``0.5/√paths`` (0.011).
 FAMILY_PATHS = 2000
 
 
