@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 from click.testing import CliRunner
@@ -47,12 +48,19 @@ def test_a_pilots_rows_give_times_and_the_spread(tmp_path, monkeypatch):
     assert sources.count("finished (stored)") == 6
     assert all(s.startswith("pilot: median of 3") for s in sources if "finished" not in s)
     assert doc["unknown"] == 0 and doc["seconds"] > 0 and doc["peak_mb"] > 0
+    # a worker's forecast peak is the pilot's largest; the run's adds its own process
+    assert doc["worker_peak_mb"] == doc["peak_mb"] and "stored cell" in doc[
+        "worker_peak_source"]
+    assert doc["run_peak_mb"] > doc["worker_peak_mb"] - 406 and doc["workers"] >= 1
     [p] = doc["primaries"]
     assert p["sd_source"].startswith("pilot: 3 stored runs") and p["effect"] == 10
     # this tiny pilot's models agree on every recording: that is no spread of 0
     assert p["power"] < 1 and p["sd"] > 0
     text = _invoke(tmp_path, monkeypatch, "plan", *TINY, "--seed", "0-5", "--out", str(out))
     assert "floor: no number of runs of these" in text.output
+    assert re.search(r"memory: \d+ worker\(s\) at once \(set by (cores|memory)\), each at "
+                     r"about [\d.]+ GiB \(the largest of \d+ stored cell\(s\)\)", text.output)
+    assert "the whole run, its own process and every worker, about" in text.output
 
 
 def test_without_a_pilot_the_spread_is_an_assumption_and_warnings_come_first(tmp_path,
