@@ -118,3 +118,11 @@ def test_a_local_dask_worker_owns_the_device_of_its_place(monkeypatch):
         executors._dask_cell(None, ["cuda:0", "cuda:1", "cuda:2"])
     devices.own_device(None)
     assert seen == ["cuda:0", "cuda:1", "cuda:2"]
+
+
+def test_a_row_names_the_gpu_it_trained_on(fake_gpus, monkeypatch):
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "get_device_name", lambda d: f"GPU {d.index}")
+    assert devices.device_label("cuda:1") == "cuda:1 (GPU 1)"
+    assert devices.device_label("cpu") == "cpu"

@@ -46,7 +46,7 @@ from tactbench.data.splits import (
 from tactbench.data.windows import UNNAMED_TEST_WINDOW, Windows, check_windows
 from tactbench.errors import TactbenchError
 from tactbench.plugins import Registry
-from tactbench.runner.execution.devices import cell_device, check_device
+from tactbench.runner.execution.devices import cell_device, check_device, device_label
 from tactbench.runner.execution.entries import load_encoding
 from tactbench.runner.execution.identity import DEFAULT_DEVICE
 from tactbench.runner.execution.learning import TRAIN_SAMPLE, chance_level, learning_fields
@@ -282,7 +282,7 @@ def train_and_test(job: CellJob, progress: Callable[..., None] | None = None, *,
                           truth=truth, predicted=predicted, k=len(job.data.classes)),
         "fit": _jsonable(tested["fits"][0] if len(splits) == 1 else tested["fits"]),
         "device": job.identity.get("device", DEFAULT_DEVICE),  # its kind, in its identity
-        "device_used": device,  # the one this process owned (cuda:1)
+        "device_used": device_label(device),  # the one it trained on, a GPU's model too
         "threads": job.threads,
         "versions": versions(),
         "host": host(),

@@ -88,6 +88,16 @@ def cell_device(identity: Mapping[str, Any], asked: str) -> str:
     return asked if kind_of(asked) == kind else kind
 
 
+def device_label(device: str) -> str:
+    """``device`` as a row records the one a cell trained on: a GPU with its model
+    (``cuda:1 (NVIDIA H200)``), the CPU as ``cpu``. Imports torch for a GPU."""
+    if kind_of(device) != "cuda":
+        return str(device)
+    import torch
+
+    return f"{device} ({torch.cuda.get_device_name(torch.device(device))})"
+
+
 def check_device(identity: Mapping[str, Any], device: str) -> str:
     """Refuse to train a cell of ``identity`` on ``device`` when that device is not of
     the kind the identity says, or is missing here (a dask worker without the GPU):
