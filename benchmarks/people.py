@@ -49,7 +49,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from tactbench.machine import benchmark_meta  # noqa: E402
-from tactbench.runner import corrected_t  # noqa: E402
+from tactbench.runner import corrected_t, parse_seeds  # noqa: E402
 
 from typing import Sequence  # noqa: E402
 
@@ -142,13 +142,6 @@ def between_person_variance(correct: Sequence[bool], people: Sequence[str], *,
 # --------------------------------------------------------------------- running
 
 
-def _seeds(text: str) -> list[int]:
-    if "-" in text:
-        lo, hi = text.split("-", 1)
-        return list(range(int(lo), int(hi) + 1))
-    return [int(s) for s in text.split(",")]
-
-
 def run_grid(dataset: str, encoders: list[str], classifier: str, length: int,
              seeds: list[int], split: str, test_window: str, work: Path,
              workers: int = 1) -> list[dict]:
@@ -181,7 +174,7 @@ def measure(args: argparse.Namespace, work: Path) -> dict:
     from tactbench.data.splits import user_folds
     from tactbench.datasets.loading import load_dataset
 
-    seeds = _seeds(args.seeds)
+    seeds = parse_seeds(args.seeds.split(","))  # "0-4", "0,2,5" or "0-2,5"
     t0 = time.perf_counter()
     ds = load_dataset(args.dataset)
     users = np.asarray(ds.users)

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -44,10 +43,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from tactbench import machine as facts
-from tactbench.runner import (A_BETTER, B_BETTER, Comparison, DECIDED, DEFAULT_PRIMARY, EQUIVALENT,
+from tactbench.commands.run import scene_of_command
+from tactbench.runner import (B_BETTER, DECIDED, DEFAULT_PRIMARY, Comparison, answer_brief,
                               answer_text, check_reference, comparisons_markdown, failed_cells,
-                              looks_markdown, markdown_table, plain_t, render_folder, short_name,
-                              write_report)
+                              finding_text, looks_markdown, markdown_table, percent,
+                              render_folder, short_name, verdict_text, write_report)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
@@ -120,13 +120,6 @@ def _shown(args: list[str], out: Path) -> str:
     return "tactbench " + " ".join(_quote(a) for a in argv)
 
 
-def _statistics_options(args: list[str]) -> tuple[list[str], float | None]:
-    """The ``--contrast`` values and the ``--margin`` of a grid's arguments."""
-    contrasts = [args[i + 1] for i, a in enumerate(args[:-1]) if a == "--contrast"]
-    margin = float(args[args.index("--margin") + 1]) if "--margin" in args else None
-    return contrasts, margin
-
-
 def run_grid(report: str, part: str, args: list[str], root: Path, *,
              reference: list[dict] | None = None) -> dict:
     """One ``tactbench run``: its results.json, commands and timing (kept across reruns).
@@ -172,8 +165,9 @@ def run_grid(report: str, part: str, args: list[str], root: Path, *,
     # the report from the cells (the folder's one store of rows), with the primary
     # questions, looks and per-user results as the package renders any run folder, and
     # the published points beside it
-    contrasts, margin = _statistics_options(args)
-    report = render_folder(out, contrasts=contrasts, margin=margin, write=False)
+    scene = scene_of_command(args)  # its statistics options, as `tactbench run` reads them
+    report = render_folder(out, contrasts=list(scene.contrasts or ()), margin=scene.margin,
+                           write=False)
     write_report(out, replace(report, reference=check_reference(reference)))
     results = json.loads((out / "results.json").read_text())
     return {"part": part, "out": out, "timing": timing, "results": results,
@@ -238,10 +232,6 @@ def header(title: str, name: str, what: str, parts: list[dict], m: dict,
 # --------------------------------------------------------------------------- tables
 
 
-def pct(x: float | None) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f}"
-
-
 def summary_table(results: dict) -> str:
     return markdown_table(results["summary"])
 
@@ -270,41 +260,6 @@ def comp(results: dict, factor: str, a, b, **where) -> dict | None:
                for k, v in where.items()):
             return c
     return None
-
-
-def verdict_words(c: dict, a: str, b: str) -> str:
-    """The verdict of a comparison in words, with A and B named."""
-    v = c["verdict"]
-    if v == B_BETTER:
-        return f"{b} better"
-    if v == A_BETTER:
-        return f"{a} better"
-    if v == EQUIVALENT:
-        return f"equivalent within ±{c['equivalence_margin']:g} points"
-    return v
-
-
-def say(c: dict | None, a: str, b: str) -> str:
-    """One sentence for a paired comparison, from its entry in results.json."""
-    if c is None:
-        return f"{b} − {a}: not compared."
-    if c.get("ceiling"):
-        return (f"{b} − {a}: both right on every paired recording of every run "
-                f"({c['runs']} runs): a ceiling, not a precise zero.")
-    text = f"{b} − {a}: {100 * c['difference']:+.1f} points"
-    if c["df"]:
-        text += (f", 95 % interval over runs [{100 * c['low']:+.1f}, "
-                 f"{100 * c['high']:+.1f}] (unadjusted)")
-    text += f", {c['b_better_runs']} of {c['runs']} runs higher"
-    if c["t_p"] is not None:
-        test = ("paired t, independent runs" if plain_t(Comparison.from_dict(c))
-                else "corrected t")
-        text += (f", p = {c['t_p']:.2g} ({test}), Holm p = {c['p_holm']:.2g} "
-                 f"({c.get('family') or 'exploratory'}, {c['family_size']})")
-    text += f" → **{verdict_words(c, a, b)}**"
-    if c.get("note"):
-        text += f" ({c['note']})"
-    return text + "."
 
 
 def figures(part: dict, rel: Path) -> list[str]:
@@ -381,7 +336,7 @@ def study(root: Path, m: dict) -> str:
     for name, what, _, _ in DESIGNS:
         c = primary(by[name])
         lines.append(f"- {name} ({what.split(':')[0]}), L = 5: "
-                     f"{say(c, 'raw', 'farneback')}")
+                     f"{finding_text(c, 'raw', 'farneback')}")
     lines.append(f"- {_half_l(lengths['results'])}")
     lines += ["", "## What it does not show", "",
               f"- {SHORT_NOTE}",
@@ -434,7 +389,7 @@ def flagship_section(parts: list[dict]) -> list[str]:
             lines.append(f"| {name} | - | - | not compared | - | - | - |")
             continue
         cpu = (res.get("looks") or {}).get("train_cpu_seconds")
-        lines.append(f"| {name} | {pct(c['accuracy_a'])} | {pct(c['accuracy_b'])} | "
+        lines.append(f"| {name} | {percent(c['accuracy_a'])} | {percent(c['accuracy_b'])} | "
                      f"{100 * c['difference']:+.1f} [{100 * c['low']:+.1f}, "
                      f"{100 * c['high']:+.1f}] | {c['runs']} | {stop_words(res)} | "
                      f"{'-' if cpu is None else f'{cpu / 60:.0f}'} |")
@@ -451,7 +406,7 @@ def study_figures(paper: dict, users: dict, lengths: dict) -> list[str]:
     other lengths from the lengths part)."""
     def acc(results, enc, L):
         s = find(results, encoder=enc, L=L)
-        return "-" if s is None else f"{pct(s['accuracy_mean'])} ± {pct(s['accuracy_std'])}"
+        return "-" if s is None else f"{percent(s['accuracy_mean'])} ± {percent(s['accuracy_std'])}"
 
     def row(label, study_value, ours_paper, ours_users):
         return f"| {label} | {study_value} | {ours_paper} | {ours_users} |"
@@ -485,7 +440,7 @@ def _half_l(results: dict) -> str:
         return "the study's \"flow at half the L beats pressure\": not compared."
     return ("the study's \"flow at half the L beats pressure\" (the lengths part's primary "
             "question, paired over the same runs and test recordings): "
-            + say(half, "raw at L = 6", "farneback at L = 3"))
+            + finding_text(half, "raw at L = 6", "farneback at L = 3"))
 
 
 def lengths_section(part: dict) -> list[str]:
@@ -522,7 +477,7 @@ def people_change(paper: dict, users: dict, paper_v1: dict, users_v1: dict,
         return None if s is None else s["accuracy_mean"]
 
     def cell(x):
-        return "-" if x is None else pct(x)
+        return "-" if x is None else percent(x)
 
     lines = ["## What the new people change (at the earlier CNN budget)", "",
              "Stored grids of this report from before the default recipe changed, with the "
@@ -567,7 +522,7 @@ def _gain(c: dict | None) -> str:
     if c is None:
         return "-"
     return (f"{100 * c['difference']:+.1f} [{100 * c['low']:+.1f}, {100 * c['high']:+.1f}], "
-            f"{verdict_words(c, 'raw', 'flow')}")
+            f"{verdict_text(c, names=('raw', 'flow'))}")
 
 
 def _class_gain(results: dict, cls: str) -> str:
@@ -647,7 +602,7 @@ def which_flow(root: Path, m: dict) -> str:
                    "flow better than the frame difference, the cheapest motion cue, for "
                    "the CNN?", [part], m)
     lines += ["## The primary question", "",
-              *[f"- {say(c, c['a'], c['b'])}" for c in results["comparisons"]
+              *[f"- {finding_text(c, c['a'], c['b'])}" for c in results["comparisons"]
                 if c.get("family") == "primary"], ""]
     if results.get("looks"):
         lines += [looks_markdown(results["looks"]), ""]
@@ -663,7 +618,7 @@ def which_flow(root: Path, m: dict) -> str:
         pts, rho, p = link
         lines += ["| encoder | endpoint error (px, flowbench, 72 × 67) | accuracy % |",
                   "|---|---|---|"]
-        lines += [f"| {enc} | {e:.2f} | {pct(a)} |" for enc, e, a in pts]
+        lines += [f"| {enc} | {e:.2f} | {percent(a)} |" for enc, e, a in pts]
         lines += ["", f"Spearman's ρ between endpoint error and accuracy over these "
                   f"{len(pts)} flow encoders: {rho:+.2f} (p = {p:.2f}). "
                   + ("With so few encoders this is no evidence either way: it neither "
@@ -674,7 +629,7 @@ def which_flow(root: Path, m: dict) -> str:
         lines.append("(run `python benchmarks/reports.py flow-error` first for this table)")
     lines += ["", "## What it shows", ""]
     c = comp(results, "encoder", "raw", "farneback", classifier="small-cnn-lstm")
-    lines.append(f"- small-cnn-lstm: {say(c, 'raw', 'farneback')}")
+    lines.append(f"- small-cnn-lstm: {finding_text(c, 'raw', 'farneback')}")
     for enc in encoders:
         if enc in ("raw", "farneback"):
             continue
@@ -682,7 +637,7 @@ def which_flow(root: Path, m: dict) -> str:
             comp(results, "encoder", enc, "farneback", classifier="small-cnn-lstm")
         if c is not None:
             a, b = (c["a"], c["b"])
-            lines.append(f"- small-cnn-lstm: {say(c, a, b)}")
+            lines.append(f"- small-cnn-lstm: {finding_text(c, a, b)}")
     lines += ["", "## What it does not show", "", f"- {SHORT_NOTE}",
               "- One window length (L = 5) and one classifier budget; encoders that need "
               "longer windows or more training may rank differently.",
@@ -729,14 +684,14 @@ def which_classifier(root: Path, m: dict) -> str:
         lines += figures(part, Path("which-classifier")) + [""]
     lines += ["## What it shows", ""]
     for c in (c for c in res["comparisons"] if c.get("family") == "primary"):
-        lines.append(f"- {c['encoder']}: {say(c, short(c['a']), short(c['b']))}")
+        lines.append(f"- {c['encoder']}: {finding_text(c, short_name(c['a']), short_name(c['b']))}")
     for clf in ("logreg", "small-cnn-lstm", "sklearn:HistGradientBoostingClassifier",
                 "sklearn:SVC"):
         c = comp(res, "encoder", "raw", "farneback", classifier=clf)
         if c is not None:
-            lines.append(f"- {clf}: {say(c, 'raw', 'farneback')}")
+            lines.append(f"- {clf}: {finding_text(c, 'raw', 'farneback')}")
     c = comp(vectors["results"], "encoder", "raw", "frame-diff", classifier="taxel-lstm")
-    lines.append(f"- taxel-lstm on vectors: {say(c, 'raw', 'frame-diff')}")
+    lines.append(f"- taxel-lstm on vectors: {finding_text(c, 'raw', 'frame-diff')}")
     on_images = sorted({short_name(s["classifier"]) for s in vectors["results"]["summary"]
                         if s.get("input") == "images"})
     if on_images:
@@ -766,12 +721,12 @@ def strongest(results: dict) -> list[str]:
         ranked = sorted((s for s in results["summary"] if s["encoder"] == enc),
                         key=lambda s: -s["accuracy_mean"])
         for s in ranked:
-            lines.append(f"| {enc} | {short(s['classifier'])} | "
-                         f"{pct(s['accuracy_mean'])} ± {pct(s['accuracy_std'])} | "
+            lines.append(f"| {enc} | {short_name(s['classifier'])} | "
+                         f"{percent(s['accuracy_mean'])} ± {percent(s['accuracy_std'])} | "
                          f"{s['train_s_mean']:.1f} | {s['inference_ms_per_sequence_mean']:.2f} |")
     best = max(results["summary"], key=lambda s: s["accuracy_mean"])
     lines += ["", f"The highest mean accuracy is {best['encoder']} / "
-              f"{short(best['classifier'])}: {pct(best['accuracy_mean'])} % at "
+              f"{short_name(best['classifier'])}: {percent(best['accuracy_mean'])} % at "
               f"{best['train_s_mean']:.1f} s of training per cell. Whether it is better "
               "than the CNN is the primary question below (paired over runs)."]
     return lines
@@ -883,7 +838,7 @@ def real_data(root: Path, m: dict) -> str:
         for c in part["results"]["comparisons"]:
             if c["factor"] == "encoder":
                 lines.append(f"- {part['part']}, {short_name(c['classifier'])}, "
-                             f"L = {c['L']}: {say(c, 'raw', 'frame-diff')}")
+                             f"L = {c['L']}: {finding_text(c, 'raw', 'frame-diff')}")
     lines += ["", "## What it does not show", "",
               "- Neither set has user ids, so every split mixes recordings of the same "
               "session into training and test: these accuracies say how well a recording "
@@ -997,22 +952,6 @@ def findings(root: Path) -> tuple[list[str], list[str]]:
     return primary_findings(root), exploratory_findings(root)
 
 
-def answer_words(c: dict, a: str, b: str) -> str:
-    """A primary comparison's answer: the verdict its looks reached, the difference over
-    runs and why it stopped where it is unresolved (a ceiling named as one)."""
-    if c.get("ceiling"):
-        return (f"**a ceiling**: {a} and {b} right on every paired recording of every run "
-                f"({c['runs']} runs)")
-    text = f"**{verdict_words(c, a, b)}**, {b} − {a} {100 * c['difference']:+.1f} points"
-    if c["df"]:
-        text += f" [{100 * c['low']:+.1f}, {100 * c['high']:+.1f}]"
-    text += f" over {c['runs']} runs"
-    note = c.get("note", "")
-    if c["verdict"] not in DECIDED and note:
-        text += f" ({note.removeprefix('group-sequential: ')})"
-    return text
-
-
 def _primaries(results: dict | None) -> list[dict]:
     return [c for c in (results or {}).get("comparisons", []) if c.get("family") == "primary"]
 
@@ -1027,7 +966,7 @@ def primary_findings(root: Path) -> list[str]:
     if answered:
         out.append("[The study's flagship](docs/reports/study.md), Farnebäck flow against "
                    f"the pressure image at L = {answered[0][1]['L']} (simulator, the "
-                   "default CNN): " + "; ".join(f"{said[name]}: {answer_words(c, 'raw', 'flow')}"
+                   "default CNN): " + "; ".join(f"{said[name]}: {answer_brief(c, 'raw', 'flow')}"
                                                 for name, c in answered) + ".")
     lengths = _load(root, "study", "lengths")
     half = lengths and comp(lengths, "contrast", "encoder=raw,L=6", "encoder=farneback,L=3")
@@ -1035,20 +974,20 @@ def primary_findings(root: Path) -> list[str]:
         design = "run until answered" if lengths.get("looks") else "a fixed design of"
         out.append("[The study's window length](docs/reports/study.md), its \"flow at half "
                    f"the L beats pressure\" ({_split(lengths)}, {design} {half['runs']} "
-                   "runs): " + answer_words(half, "raw at L = 6", "flow at L = 3") + ".")
+                   "runs): " + answer_brief(half, "raw at L = 6", "flow at L = 3") + ".")
     images = _load(root, "which-classifier", "images")
     if _primaries(images):
         out.append("[Which classifier?](docs/reports/which-classifier.md) The CNN against "
                    f"HistGradientBoosting ({_split(images)}): " + "; ".join(
-                       f"on {c['encoder']}: " + answer_words(c, "the CNN", "the tree")
+                       f"on {c['encoder']}: " + answer_brief(c, "the CNN", "the tree")
                        for c in _primaries(images)) + ".")
     flow = _load(root, "which-flow", "users")
     if _primaries(flow):
         out.append("[Which flow?](docs/reports/which-flow.md) Farnebäck against the frame "
                    f"difference, the CNN, {_split(flow)}: "
-                   + "; ".join(answer_words(c, c["a"], c["b"]) for c in _primaries(flow))
+                   + "; ".join(answer_brief(c, c["a"], c["b"]) for c in _primaries(flow))
                    + ".")
-    items = [f"{name}, {short(c['classifier'])}: {answer_words(c, 'raw', 'frame-diff')}"
+    items = [f"{name}, {short_name(c['classifier'])}: {answer_brief(c, 'raw', 'frame-diff')}"
              for name, res in _real(root) for c in _primaries(res)]
     if items:
         out.append("[Real data](docs/reports/real-data.md), the sweep-to-sweep change "
@@ -1080,7 +1019,7 @@ def _lengths_finding(lengths: dict | None) -> str | None:
     return ("[The study, window length](docs/reports/study.md) "
             f"({_split(lengths)}, {max(len(s['seeds']) for s in lengths['summary'])} "
             "runs; its primary question is above). With flow, accuracy at L = "
-            + ", ".join(f"{s['L']}: {pct(s['accuracy_mean'])} %" for s in flow)
+            + ", ".join(f"{s['L']}: {percent(s['accuracy_mean'])} %" for s in flow)
             + "; the study's model (an ImageNet-pretrained EfficientNet-B0, 100 epochs on "
             f"a GPU) reached {published} % at L = 5. " + _verdict_count([lengths]))
 
@@ -1089,7 +1028,7 @@ def _flow_finding(root: Path, flow: dict | None) -> str | None:
     if not flow:
         return None
     cnn = [c for c in flow["comparisons"] if c["factor"] == "encoder" and c["a"] == "raw"
-           and short(c["classifier"]) == CNN]
+           and short_name(c["classifier"]) == CNN]
     better = [c["b"] for c in cnn if c["verdict"] == B_BETTER]
     text = ("[Which flow?](docs/reports/which-flow.md) With the CNN, "
             f"{len(better)} of {len(cnn)} encoders are resolved better than the pressure "
@@ -1113,13 +1052,13 @@ def _classifier_finding(images: dict | None) -> str | None:
     best = max(images["summary"], key=lambda s: s["accuracy_mean"])
     gains = [c for c in images["comparisons"] if c["factor"] == "encoder"]
     return ("[Which classifier?](docs/reports/which-classifier.md) On pressure images "
-            f"the models score {pct(lo['accuracy_mean'])} % ({short(lo['classifier'])}) "
-            f"to {pct(hi['accuracy_mean'])} % ({short(hi['classifier'])}); flow changes "
+            f"the models score {percent(lo['accuracy_mean'])} % ({short_name(lo['classifier'])}) "
+            f"to {percent(hi['accuracy_mean'])} % ({short_name(hi['classifier'])}); flow changes "
             "them by " + ", ".join(f"{100 * c['difference']:+.1f}"
-                                   f" ({short(c['classifier'])}: "
-                                   f"{verdict_words(c, 'raw', 'flow')})" for c in gains)
-            + f" points; the best cell is {best['encoder']} / {short(best['classifier'])} "
-            f"at {pct(best['accuracy_mean'])} ± {pct(best['accuracy_std'])} % "
+                                   f" ({short_name(c['classifier'])}: "
+                                   f"{verdict_text(c, names=('raw', 'flow'))})" for c in gains)
+            + f" points; the best cell is {best['encoder']} / {short_name(best['classifier'])} "
+            f"at {percent(best['accuracy_mean'])} ± {percent(best['accuracy_std'])} % "
             f"({len(best['seeds'])} runs). " + _verdict_count([images]))
 
 
@@ -1130,12 +1069,12 @@ def _real_finding(real: list[tuple[str, dict]]) -> str | None:
     for name, res in real:
         for c in res["comparisons"]:
             if c["factor"] == "encoder" and c.get("family") != "primary":
-                items.append(f"{name}, {short(c['classifier'])}: ceiling (both "
+                items.append(f"{name}, {short_name(c['classifier'])}: ceiling (both "
                              "right on every recording)" if c.get("ceiling") else
-                             f"{name}, {short(c['classifier'])}: "
+                             f"{name}, {short_name(c['classifier'])}: "
                              f"{100 * c['difference']:+.1f} "
                              f"[{100 * c['low']:+.1f}, {100 * c['high']:+.1f}] "
-                             f"({verdict_words(c, 'raw', 'frame-diff')})")
+                             f"({verdict_text(c, names=('raw', 'frame-diff'))})")
     results = [res for _, res in real]
     inputs = {s.get("input") for res in results for s in res["summary"]}
     what = "taxel vectors" if inputs == {"vectors"} else "images and taxel vectors"
@@ -1199,10 +1138,6 @@ def epe_vs_accuracy(root: Path, results: dict):
         return None
     rho, p = spearmanr([e for _, e, _ in pts], [a for _, _, a in pts])
     return pts, float(rho), float(p)
-
-
-def short(spec: str) -> str:
-    return short_name(str(spec))
 
 
 def _verdict_count(results: list[dict]) -> str:

@@ -150,11 +150,6 @@ def summary(rows: list[dict]) -> dict:
     return out
 
 
-def _seeds(text: str) -> list[int]:
-    lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
-
-
 def measure(seeds: list[int], work: Path) -> dict:
     made = make_signed_folder(SHARED / "cyskin-fingers", work / "folder")
     specs = readings(work / "folder")
@@ -180,8 +175,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from tactbench.machine import machine
     from tactbench.paths import atomic_write_text
+    from tactbench.runner import parse_seeds
 
-    seeds = _seeds(args.seeds)
+    seeds = parse_seeds(args.seeds.split(","))
     t0 = time.perf_counter()
     if args.work:
         res = measure(seeds, Path(args.work))

@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from people import _seeds, corrected_t_interval  # noqa: E402
+from people import corrected_t_interval  # noqa: E402
 
 SHARED = Path(os.environ.get("TACTBENCH_SHARED_DATA", REPO.parent / "shared" / "data"))
 WINDOWS = ("first", "onset", "vote")
@@ -72,7 +72,9 @@ def run_window(spec: str, length: int, seeds: list[int], window: str, work: Path
 
 
 def measure(args: argparse.Namespace, work: Path) -> dict:
-    seeds = _seeds(args.seeds)
+    from tactbench.runner import parse_seeds
+
+    seeds = parse_seeds(args.seeds.split(","))
     out: dict = {}
     for name, spec, length, skipped in datasets(args.sim):
         if skipped:

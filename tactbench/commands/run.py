@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import click
 
@@ -279,3 +279,11 @@ def print_report(report: Report, *, as_json: bool, title: str, done: str) -> Non
                        f"seed={f['seed']}: {f['error']} ({cells / f['key']}.json)", err=True)
         click.echo(f"{len(failed)} cell(s) failed; their rows are in {cells}/ and running "
                    f"the same command again retries them", err=True)
+
+
+def scene_of_command(args: Sequence[str]) -> Scene:
+    """The scene ``tactbench run ARGS`` would run, read by this command's own options
+    (nothing is run): for a script that keeps a run's command line, such as
+    benchmarks/reports.py, so that no script parses the options again."""
+    ctx = run_cmd.make_context("run", list(args))
+    return scene_from(ctx, ctx.params["scene_file"], ctx.params)

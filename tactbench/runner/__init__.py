@@ -126,6 +126,7 @@ from tactbench.runner.presentation.plots import check_reference
 from tactbench.runner.presentation.tables import (answer_text, comparisons_markdown, labels_for,
                                                   looks_markdown, markdown_table,
                                                   print_comparisons, print_table, verdict_text)
+from tactbench.runner.presentation.words import answer_brief, finding_text, percent
 from tactbench.runner.presentation.writers import (Report, flat_rows, training_cpu_seconds,
                                                    write_report)
 
@@ -149,7 +150,8 @@ __all__ = [
     "procedure", "family_forecast", "holm", "tost_p", "verdict",
     "CorrectedT", "PairedTestChoice", "choose_paired_test", "DEFAULT_PAIRED_TEST",
     # what a report shows: names, words, tables, files, data frames
-    "short_name", "labels_for", "verdict_text", "answer_text", "markdown_table",
+    "short_name", "labels_for", "verdict_text", "answer_text", "finding_text", "answer_brief",
+    "percent", "markdown_table",
     "comparisons_markdown", "looks_markdown", "print_table", "print_comparisons",
     "write_report", "check_reference", "flat_rows", "training_cpu_seconds",
     "cells_frame", "comparisons_frame", "write_parquet", "EXPORT_EXTRA",

@@ -96,13 +96,14 @@ def comparison_header(comps: Comparisons) -> list[str]:
     return [column or col if col == "p (corrected t)" else col for col in COMPARISON_HEADER]
 
 
-def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None) -> str:
-    """The verdict in words: ``farneback better``, ``equivalent within ±2``, ..."""
+def verdict_text(c: Comparison | Mapping[str, Any], labels: Labels | None = None,
+                 names: tuple[str, str] | None = None) -> str:
+    """The verdict in words: ``farneback better``, ``equivalent within ±2``, ...; ``names``:
+    A and B as a sentence calls them (``("raw", "flow")``), else their labels."""
     [c] = read_comparisons([c])
-    if c.verdict == B_BETTER:
-        return f"{_comparison_label(c, 'b', labels)} better"
-    if c.verdict == A_BETTER:
-        return f"{_comparison_label(c, 'a', labels)} better"
+    a, b = names or (_comparison_label(c, "a", labels), _comparison_label(c, "b", labels))
+    if c.verdict in (B_BETTER, A_BETTER):
+        return f"{b if c.verdict == B_BETTER else a} better"
     if c.verdict == EQUIVALENT:
         return f"equivalent within ±{c.equivalence_margin:g}"
     return c.verdict
@@ -143,9 +144,7 @@ def _power_runs(c: Comparison) -> str:
 
 
 def _p_value(p: float | None) -> str:
-    if p is None:
-        return "-"
-    return "< 0.001" if p < 0.001 else f"{p:.3f}"
+    return "-" if p is None else "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
 def comparisons_markdown(comps: Comparisons, labels: Labels | None = None) -> str:
