@@ -71,7 +71,7 @@ from tactbench.runner.analysis.variance import COMPONENTS, TEST_SAMPLING
 #: it: the corrected t's (``p``), Holm-adjusted within its family (``p_holm``). The
 #: sign-flip test over runs (``permutation_p``) is reported for reference only: it
 #: assumes independent runs, which runs of one data set are not, so it is no check on
-#: the correction (tests/runner/test_power.py shows it exceeding α).
+#: the correction (tests/runner/analysis/test_power.py shows it exceeding α).
 P_RULE = ("p is the corrected t's; Holm adjusts it within its family (primary or "
           "exploratory), and the verdict rests on the adjusted p")
 

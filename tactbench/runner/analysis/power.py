@@ -29,7 +29,7 @@ variance:
 Hand-written rather than taken from a library: statsmodels' ``TTestPower`` and baycomp's
 ``CorrelatedTTest`` both assume another variance (the plain t, and a correlation fixed at
 ``1/K`` by K folds); the corrected variance with ``ratio = n_test/n_train`` needs only the
-noncentral t (computed here, :func:`t_power`) and the Student t of scipy. ``tests/runner/test_power.py`` checks each
+noncentral t (computed here, :func:`t_power`) and the Student t of scipy. ``tests/runner/analysis/test_power.py`` checks each
 against an independent computation (a simulation, or baycomp where it applies).
 """
 
@@ -104,7 +104,7 @@ def t_power(noncentrality: float, critical: float, df: int) -> float:
 
     scipy's ``nct.sf`` is wrong at 1–2 degrees of freedom for a large noncentrality (at
     df 2 it gives 0.949 where the power is 0.749: docs/statistics.md), which is why this
-    is computed here; ``tests/runner/test_power.py`` checks it against a simulation."""
+    is computed here; ``tests/runner/analysis/test_power.py`` checks it against a simulation."""
     from scipy import integrate, special
 
     nc = abs(float(noncentrality))

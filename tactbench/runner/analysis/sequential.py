@@ -34,7 +34,7 @@ declared better or worse, its α passes in equal shares to every hypothesis not 
 (those closed futile keep theirs unused: :func:`family_look`), and the open ones'
 boundaries are computed again at the larger level. Both steps are hand-written (no
 maintained Python library computes spending-function boundaries; statsmodels has none);
-``tests/runner/test_sequential.py`` checks the family-wise error under no difference and
+``tests/runner/analysis/test_sequential.py`` checks the family-wise error under no difference and
 the power under a real one by simulation with correlated runs. :func:`procedure`
 forecasts what the whole procedure will do for a true difference (its power, expected
 runs, chance of ending futile), by the same rule and boundaries (``tactbench plan``).

@@ -26,7 +26,7 @@ The functions here are pure (numpy arrays in, numbers out); scipy is imported in
 
 :func:`sign_flip_p`, :func:`corrected_t` and :func:`holm` are written with numpy and work
 on arrays of many families at once (the leading axes), which keeps the simulation checks
-of tests/runner/test_statistics.py fast; each is checked there against scipy's own
+of tests/runner/analysis/test_statistics.py fast; each is checked there against scipy's own
 (``scipy.stats.permutation_test``, ``scipy.stats.ttest_1samp``).
 """
 

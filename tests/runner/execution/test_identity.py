@@ -64,7 +64,7 @@ def test_the_migration_script_moves_rows_through_the_package(tmp_path):
     from pathlib import Path
 
     spec = importlib.util.spec_from_file_location(
-        "pin_identities", Path(__file__).parents[2] / "benchmarks" / "pin_identities.py")
+        "pin_identities", Path(__file__).parents[3] / "benchmarks" / "pin_identities.py")
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     store = ResultStore(tmp_path)

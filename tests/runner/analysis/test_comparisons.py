@@ -13,7 +13,7 @@ from tactbench.errors import CorruptArtefactError
 from tactbench.runner.analysis.comparisons import ADDED_FIELDS, Comparison, comparisons, read_comparisons
 from tactbench.runner.analysis.statistics import corrected_t
 
-REPORTS = Path(__file__).resolve().parents[2] / "docs" / "reports"
+REPORTS = Path(__file__).resolve().parents[3] / "docs" / "reports"
 
 N, POSITIONS, USERS, K, SEEDS = 36, 6, 9, 3, range(4)
 POSITION = [i % POSITIONS for i in range(N)]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from tactbench.runner import answer_brief, finding_text, percent, verdict_text
 
-STORED = Path(__file__).resolve().parents[2] / "docs" / "reports" / "study" / "paper"
+STORED = Path(__file__).resolve().parents[3] / "docs" / "reports" / "study" / "paper"
 
 
 def _stored() -> dict:

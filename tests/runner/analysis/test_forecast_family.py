@@ -154,7 +154,7 @@ def test_the_familys_forecast_agrees_with_the_benchmarks_simulation():
 
     from tactbench.runner.analysis.family_paths import family_forecast
 
-    doc = json.loads((Path(__file__).parents[2] / "docs" / "benchmarks"
+    doc = json.loads((Path(__file__).parents[3] / "docs" / "benchmarks"
                       / "statistics-checks.json").read_text())["family"]
     for s in doc["results"]:
         m = len(s["pairs"])
