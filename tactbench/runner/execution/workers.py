@@ -10,7 +10,9 @@ count is the scene's ``workers`` where given, else the smallest of:
 - **memory**: as many workers as fit in this machine's memory beside the run's own
   process, each at its forecast peak (:func:`worker_peak`): the largest peak a stored
   cell of the grid measured (a pilot, an earlier look or run), else an estimate from the
-  plan (a worker's imports, the training frame bank, a batch of windows).
+  plan (a worker's imports, the training frame bank, a batch of windows): a floor, since
+  a network's activations are not in it (most of the paper profile's cnn-lstm peak),
+  so a pilot's rows are what make the bound sure.
 
 :func:`decide_workers` is the rule (no machine read where its caller says the facts);
 :func:`run_workers` reads the machine and the plan and applies it. The executors, the
@@ -113,7 +115,8 @@ def worker_peak(rows: Iterable[Mapping[str, Any]] = (), p: "Plan | None" = None,
     if p is None:
         return None, "not forecast"
     estimate = WORKER_BASE_MB + (bank_budget_bytes() + 2 * p.batch_bytes) / MIB
-    return estimate, "estimated from the plan: no stored cell measured one"
+    return estimate, ("at least: estimated from the plan, no stored cell measured one "
+                      "(a pilot of one seed measures it)")
 
 
 def run_devices(scene: "Scene") -> list[str] | None:

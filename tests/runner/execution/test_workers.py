@@ -55,7 +55,7 @@ def test_a_workers_peak_is_the_largest_a_stored_cell_measured_else_the_plans_est
     assert worker_peak(rows, P())[0] == 700.0
     peak, source = worker_peak([], P())
     bank = workers_module.bank_budget_bytes() / 2 ** 20
-    assert peak == pytest.approx(WORKER_BASE_MB + bank + 128) and "estimated" in source
+    assert peak == pytest.approx(WORKER_BASE_MB + bank + 128) and "at least" in source
     assert worker_peak([]) == (None, "not forecast")
 
 
