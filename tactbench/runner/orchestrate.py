@@ -4,10 +4,15 @@ answered; ``render_folder(out)``: the report of a finished folder again, from it
 
 This module composes the runner's three rooms and does nothing else: execution
 (:mod:`tactbench.runner.execution`: plan, cache, cells, the store of rows), analysis
-(:mod:`tactbench.runner.analysis`: the looks of a sequential run) and presentation
-(:mod:`tactbench.runner.presentation`: the report). Every function ends the same way:
-every sound row of ``OUT/cells`` (the one store of a run folder) → :func:`make_report` →
-:func:`write_report`, so a run's report and a re-rendered one are the same files.
+(:mod:`tactbench.runner.analysis`: what the rows say, decided — the comparisons, the
+looks of a sequential run and whether they answered it) and presentation
+(:mod:`tactbench.runner.presentation`: the report, which only formats). Every function
+ends the same way: every sound row of ``OUT/cells`` (the one store of a run folder) →
+:func:`~tactbench.runner.analysis.report.analyse` →
+:func:`~tactbench.runner.presentation.writers.render` → :func:`write_report`, so a run's
+report and a re-rendered one are the same files. The loop of :func:`run_until` reads its
+decisions (answered, failed, the looks to go on from) from the analysis, never from the
+rendered report.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from tactbench.plugins import load_registry
 from tactbench.runner.analysis.answering import History, first_look_to_run
 from tactbench.runner.analysis.paired_tests import choose_paired_test
 from tactbench.runner.analysis.records import look_record, run_summary
+from tactbench.runner.analysis.report import Analysis, analyse
 from tactbench.runner.execution.cache import (EncodingCache, check_room_runs,
                                               ensure_encodings)
 from tactbench.runner.execution.cell import make_jobs, model_problem
@@ -58,7 +64,7 @@ from tactbench.runner.execution.scene import Scene, design_of
 from tactbench.runner.execution.questions import check_contrasts
 from tactbench.runner.execution.system import MemoryTracker
 from tactbench.runner.presentation.frames import EXTRA as EXPORT_EXTRA, refresh_parquet
-from tactbench.runner.presentation.writers import Report, make_report, write_report
+from tactbench.runner.presentation.writers import Report, render, write_report
 from tactbench.ui import Progress
 
 log = logging.getLogger("tactbench.runner")
@@ -116,9 +122,11 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
 def _finished(registry, report: Report, out: str | Path) -> None:
     """A run ended (a plain one, or every look of :func:`run_until`): each plugin's
     ``run_finished`` hook gets its summary, and the hooks are waited for."""
+    analysis = report.analysis
     registry.notify("run_finished", out=Path(out), summary=run_summary(
-        report.rows, report.comparisons, computed=report.computed, skipped=report.skipped,
-        seconds=report.seconds, looks=report.looks, budget_stop=report.budget_stop))
+        analysis.rows, analysis.comparisons, computed=report.computed,
+        skipped=report.skipped, seconds=report.seconds, looks=analysis.looks,
+        budget_stop=report.budget_stop))
     registry.settle()  # the hooks' calls, each within its bound
 
 
@@ -126,7 +134,7 @@ def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
            on_row: Callable[[dict[str, Any]], None] | None,
            cache: EncodingCache | None = None, resume: History | None = None) -> Report:
     """:func:`run` but its ``run_finished`` event: one look's batch of :func:`run_until`
-    (``resume``: the ``history`` of the run's previous look, whose looks the report does
+    (``resume``: the ``history`` of the run's previous look, whose looks the analysis does
     not compute again)."""
     start = time.perf_counter()
     hook_timeout()  # a bad TACTBENCH_HOOK_TIMEOUT: one line before any work
@@ -169,16 +177,17 @@ def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
                 on_row(row)
 
         if jobs:  # the worker count, decided once (cores, GPUs, memory: workers.py)
-            workers = run_workers(scene, store.stored_rows(), plan=plans[0],
+            # the rows' measured peaks; a damaged row was named when the cells were planned
+            workers = run_workers(scene, store.stored_rows(quiet=True), plan=plans[0],
                                   parent_peak_mb=memory.peak_mb)
             execute(scene, jobs, finish, bars, memory, workers)
     claim.unlink(missing_ok=True)
-    report = make_report(store.stored_rows(), contrasts=scene.contrasts or (),
-                         margin=scene.margin,
-                         users=known_users(p.dataset.users) if p.run_dataset is None else None,
-                         rendered="at the end of the run, from the rows of cells/",
-                         primary=scene.design.primary, sequential=scene.design,
-                         resume=resume, paired_test=paired)
+    analysis = analyse(store.stored_rows(), contrasts=scene.contrasts or (),
+                       margin=scene.margin,
+                       users=known_users(p.dataset.users) if p.run_dataset is None else None,
+                       primary=scene.design.primary, sequential=scene.design,
+                       resume=resume, paired_test=paired)
+    report = render(analysis, rendered="at the end of the run, from the rows of cells/")
     write_report(scene.out, report, plots=plots)
     report.paths.update(refresh_parquet(report, scene.out))  # never left stale
     report.computed, report.skipped = len(pending), len(identities) - len(pending)
@@ -249,14 +258,32 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
                                              for r in rows])
     users, missing = dataset_users(rows, registry)
     how = "re-rendered from the stored rows of cells/ (nothing trained)"
-    report = make_report(rows, contrasts=contrasts, margin=margin, users=users,
-                         primary=primary, sequential=design, paired_test=paired,
-                         rendered=how + (f"; per-user results left out: {missing}"
-                                         if missing else ""))
+    report = render(analyse(rows, contrasts=contrasts, margin=margin, users=users,
+                            primary=primary, sequential=design, paired_test=paired),
+                    rendered=how + (f"; per-user results left out: {missing}"
+                                    if missing else ""))
     if write:
         write_report(out, report, plots=plots)
         report.paths.update(refresh_parquet(report, out, write=parquet))
     return report
+
+
+def make_report(rows: Sequence[dict[str, Any]], *,
+                reference: Sequence[dict[str, Any]] | None = None,
+                rendered: str | None = None, **options: Any) -> Report:
+    """The :class:`~tactbench.runner.presentation.writers.Report` of ``rows``: their
+    :func:`~tactbench.runner.analysis.report.analyse` (with its ``options``: contrasts,
+    margin, users, primary, sequential, resume, paired_test) rendered
+    (:func:`~tactbench.runner.presentation.writers.render`, with ``reference`` and
+    ``rendered``); nothing is written."""
+    return render(analyse(rows, **options), reference=reference, rendered=rendered)
+
+
+def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *, plots: bool = True,
+                  **options: Any) -> dict[str, Path]:
+    """:func:`make_report` of ``rows`` (with its ``options``), written into ``out`` by
+    :func:`write_report`; returns the paths written."""
+    return write_report(out, make_report(rows, **options), plots=plots)
 
 
 def planned_design(p: Plan) -> str:
@@ -358,20 +385,21 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
         t0 = time.perf_counter()
         report = _batch(dataclasses.replace(scene, seeds=list(order[:looks[k]])),
                         registry=registry, progress=progress, plots=plots, on_row=on_row,
-                        resume=report.history if report is not None else None)
+                        resume=report.analysis.history if report is not None else None)
+        analysis: Analysis = report.analysis  # the decisions: analysis's, not the report's
         computed += report.computed
         if on_look is not None:
             on_look(report)
         registry.notify("look_finished", out=Path(scene.out), look=look_record(
-            report.rows, report.comparisons, report.looks))
+            analysis.rows, analysis.comparisons, analysis.looks))
         registry.settle()
-        if report.failed or (report.looks or {}).get("answered"):
+        if analysis.failed or analysis.answered:
             break
         elapsed = time.perf_counter() - start
         batch = time.perf_counter() - t0
         if k + 1 < len(looks):  # a look of stored cells took ~0 s: what the next costs
-            batch = max(batch, next_batch_seconds(report.ok, looks[k + 1] - looks[k],
-                                                  run_workers(scene, report.ok).count))
+            batch = max(batch, next_batch_seconds(analysis.ok, looks[k + 1] - looks[k],
+                                                  run_workers(scene, analysis.ok).count))
         if budget is not None and k + 1 < len(looks) and elapsed + batch > budget:
             report.budget_stop = (f"the budget of {design.budget}: {elapsed / 60:.1f} min "
                                   f"spent, the next batch would take about "

@@ -257,10 +257,21 @@ class ResultStore:
             return []
         return sorted(p.stem for p in self.cells.glob("*.json") if not p.name.startswith("."))
 
-    def stored_rows(self) -> list[dict[str, Any]]:
+    def stored_rows(self, *, quiet: bool = False) -> list[dict[str, Any]]:
         """Every sound row of the folder, ok and failed, in :func:`scene_order`; a damaged
-        one is named in a warning and left out (as :meth:`get` does)."""
-        return scene_order(self.rows(self.keys()))
+        one is named in a warning and left out (as :meth:`get` does) — or, ``quiet``, left
+        out without a word, for a second read of a folder whose damage was already said."""
+        if not quiet:
+            return scene_order(self.rows(self.keys()))
+        sound = []
+        for key in self.keys():
+            try:
+                row = self.read(key)
+            except CorruptArtefactError:
+                continue
+            if row is not None:
+                sound.append(row)
+        return scene_order(sound)
 
     # ------------------------------------------------------- runs sharing an out folder
 
