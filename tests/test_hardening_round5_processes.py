@@ -106,7 +106,7 @@ import os
 import signal
 
 
-def die_at_start():  # a worker that cannot start (as an unimportable main module)
+def die_at_start(*args):  # a worker that cannot start (as an unimportable main module)
     os._exit(3)
 
 
@@ -130,7 +130,8 @@ def _workers_module(tmp_path, monkeypatch):
 
 def test_workers_that_cannot_start_are_an_error_naming_the_fix(tmp_path, monkeypatch):
     helpers = _workers_module(tmp_path, monkeypatch)
-    monkeypatch.setattr(executors, "start_worker", helpers.die_at_start)
+    # the pool's initializer, pickled by name: the spawned worker runs the helper's
+    monkeypatch.setattr(executors, "_start_local_worker", helpers.die_at_start)
     stored: list = []
     with pytest.raises(WorkerError, match=r"cannot start here \(a worker exit status 3\).*"
                                           r"--workers 1"):

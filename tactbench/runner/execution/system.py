@@ -130,7 +130,7 @@ def main_reimport_problem() -> str | None:
     again; a call from a function or a guarded block is safe."""
     main = sys.modules.get("__main__")
     spec = getattr(main, "__spec__", None)
-    name = getattr(spec, "name", None)
+    name = spec.name if spec is not None else None  # a ModuleSpec always has one
     if name is not None and (name == "__main__" or name.endswith(".__main__")):
         return None  # a package's __main__ (python -m tactbench): never imported again
     path = getattr(spec, "origin", None) or getattr(main, "__file__", None)
