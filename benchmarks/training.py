@@ -42,7 +42,7 @@ nothing), read back through the run folder's store
 (:class:`tactbench.runner.ResultStore`), each recipe found by the spec its cells carry
 (:func:`tactbench.profiles.canonical_classifier`); CPU-seconds are the ones each row
 records of its fitting process (every thread:
-:func:`tactbench.runner.presentation.writers.training_cpu_seconds`), wall seconds beside
+:func:`tactbench.runner.analysis.report.training_cpu_seconds`), wall seconds beside
 them. It writes ``--out`` (JSON: machine, date, load, per-recipe accuracy, costs,
 intervals) and a PNG beside it.
 

@@ -363,6 +363,65 @@ def test_the_room_rule_sees_a_wrong_arrow():
     assert "presentation" not in ROOM_MAY_IMPORT["analysis"]
 
 
+# ------------------------------------------------------------------ analysis decides
+
+#: What presentation may take from analysis besides its records' classes and constants:
+#: readers of what analysis decided (a record in, a fact of it out), none of which decides.
+PRESENTATION_READS = {"plain_t", "beyond_looks", "chosen_tests", "read_comparisons",
+                      "failed_cells", "comparison_record"}
+#: Analysis's functions that decide (from rows to summaries, verdicts, looks): only
+#: orchestrate calls them, never presentation.
+DECIDERS = {"analyse", "comparisons", "replay", "summarise", "variance_decomposition",
+            "run_level_tests", "family_look", "sequential_verdict"}
+#: What orchestrate takes from presentation: the report of an analysis and its files.
+ORCHESTRATE_FROM_PRESENTATION = {"Report", "render", "write_report", "refresh_parquet",
+                                 "EXTRA"}
+#: The decided parts of a report, which orchestrate reads from the analysis instead.
+DECIDED_ATTRIBUTES = {"rows", "summaries", "comparisons", "looks", "history", "ok", "failed",
+                      "statistics", "variance"}
+
+
+def names_from(path: Path, package: str) -> list[tuple[str, int]]:
+    """``(name, line)`` for each name ``path`` imports from a module under ``package``."""
+    return [(alias.name, node.lineno) for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(package)
+            for alias in node.names]
+
+
+def test_the_name_finder_sees_names(tmp_path):
+    (tmp_path / "m.py").write_text("from tactbench.runner.analysis.report import analyse\n"
+                                   "def f():\n    from tactbench.errors import InputError\n")
+    assert names_from(tmp_path / "m.py", "tactbench.runner.analysis") == [("analyse", 1)]
+
+
+def test_presentation_only_renders_what_analysis_decided():
+    """Presentation takes from analysis the records it shows (classes, constants) and
+    readers of them; it never runs the analysis (summaries, comparisons, looks)."""
+    assert not PRESENTATION_READS & DECIDERS
+    wrong = [f"{module}:{line} imports {name}" for module, path in MODULES.items()
+             if room_of(module) == "presentation"
+             for name, line in names_from(path, "tactbench.runner.analysis")
+             if not name[0].isupper() and name not in PRESENTATION_READS]
+    assert not wrong, "presentation runs analysis (analysis decides, presentation " \
+                      "renders): " + "; ".join(wrong)
+
+
+def test_orchestrate_reads_its_decisions_from_analysis():
+    """Orchestrate imports from presentation only the report and its writing, and reads
+    nothing decided (rows, comparisons, looks, whether a look answered the run) off a
+    rendered report: those come from its analysis."""
+    path = MODULES["tactbench.runner.orchestrate"]
+    taken = {name for name, _ in names_from(path, "tactbench.runner.presentation")}
+    assert "render" in taken and taken <= ORCHESTRATE_FROM_PRESENTATION, taken
+    assert {"analyse"} <= {name for name, _ in names_from(path, "tactbench.runner.analysis")}
+    wrong = [f"{node.lineno}: report.{node.attr}"
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+             and node.value.id == "report" and node.attr in DECIDED_ATTRIBUTES]
+    assert not wrong, "orchestrate reads a decision off the rendered report: " + \
+        "; ".join(wrong)
+
+
 # ------------------------------------------------------------------ the public face
 
 #: Code outside the runner that is held to its public face: the package's other modules,

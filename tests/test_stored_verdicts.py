@@ -26,7 +26,7 @@ FIELDS = ("verdict", "difference", "low", "high", "t_p", "permutation_p", "p", "
 def _recompute(path: Path) -> tuple[dict, list]:
     from tactbench.runner.execution.results import ResultStore, latest_scene
     from tactbench.runner.execution.scene import design_of
-    from tactbench.runner.presentation.writers import make_report
+    from tactbench.runner.orchestrate import make_report
 
     doc = json.loads(path.read_text())
     rows = ResultStore(path.parent).stored_rows()

@@ -97,6 +97,7 @@ from tactbench.runner.analysis.paired_tests import (DEFAULT_PAIRED_TEST, Correct
 from tactbench.runner.analysis.power import detectable_effect, power
 from tactbench.runner.analysis.family_paths import family_forecast
 from tactbench.runner.analysis.records import comparison_record, look_record, run_summary
+from tactbench.runner.analysis.report import Analysis, analyse, training_cpu_seconds
 from tactbench.runner.analysis.sequential import (DECIDED_CODES, OUTCOMES_FUTILE, FamilyState,
                                                   family_look, procedure, simulate_paths)
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
@@ -119,7 +120,7 @@ from tactbench.runner.execution.scene import (DEFAULT_PRIMARY, EXECUTORS, FIRST_
                                               parse_duration, parse_lengths, parse_seeds,
                                               show_duration)
 from tactbench.runner.execution.workers import Workers, run_workers
-from tactbench.runner.orchestrate import render_folder, run, run_until
+from tactbench.runner.orchestrate import make_report, render_folder, run, run_until
 from tactbench.runner.presentation.frames import (EXTRA as EXPORT_EXTRA, cells_frame,
                                                   comparisons_frame, write_parquet)
 from tactbench.runner.presentation.plots import check_reference
@@ -127,8 +128,7 @@ from tactbench.runner.presentation.tables import (answer_text, comparisons_markd
                                                   looks_markdown, markdown_table,
                                                   print_comparisons, print_table, verdict_text)
 from tactbench.runner.presentation.words import answer_brief, finding_text, percent
-from tactbench.runner.presentation.writers import (Report, flat_rows, training_cpu_seconds,
-                                                   write_report)
+from tactbench.runner.presentation.writers import Report, flat_rows, render, write_report
 
 __all__ = [
     # a run: its scene, its plan, running it, its report again
@@ -138,6 +138,8 @@ __all__ = [
     "EncodingCache", "KEEP_RECENT_S", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row", "PREDICTION_LISTS",
     "run", "run_until", "render_folder", "Report", "git_revision", "Workers", "run_workers",
+    # a folder's rows analysed (decided), then rendered (said): make_report does both
+    "Analysis", "analyse", "render", "make_report",
     # the rows: the store, a row's status, identity and learning
     "ResultStore", "OK", "FAILED", "row_status", "ok_rows", "failed_rows", "failed_cells",
     "digest", "row_identity", "grid_identity", "IDENTITY_DEFAULTS", "identity_differences",

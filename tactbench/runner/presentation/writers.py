@@ -1,21 +1,20 @@
-"""A run folder's report: computed from its rows, written as results.json, results.csv,
-report.md and the figures.
+"""A run folder's report: an :class:`~tactbench.runner.analysis.report.Analysis` written
+as results.json, results.csv, report.md and the figures.
 
-:func:`make_report` computes a :class:`Report` from rows alone (what the cells of a folder
-hold: :meth:`tactbench.runner.execution.results.ResultStore.stored_rows`); :func:`write_report`
-writes it. Nothing here reads a file back: the same rows always give the same files, but
-for the one line saying when and by which command they were rendered (:data:`RENDERED`).
-What a run writes at the top of its folder (the out-folder check asks it) is said with
-the rows, :func:`tactbench.runner.execution.results.is_run_output`.
+:func:`render` makes a :class:`Report` of an analysis (what the rows say, decided in
+:mod:`tactbench.runner.analysis.report`); :func:`write_report` writes it. Nothing here
+decides or computes a number, and nothing reads a file back: the same rows always give
+the same files, but for the one line saying when and by which command they were
+rendered (:data:`RENDERED`). What a run writes at the top of its folder (the out-folder
+check asks it) is said with the rows,
+:func:`tactbench.runner.execution.results.is_run_output`.
 """
 
 from __future__ import annotations
 
 import csv
-import dataclasses
 import io
 import json
-import shlex
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -24,24 +23,17 @@ from typing import Any, Iterable, Sequence
 from tactbench.data.windows import UNNAMED_TEST_WINDOW
 from tactbench.machine import describe_machines
 from tactbench.paths import atomic_write_text
-from tactbench.runner.analysis.answering import History, comparison_name, replay
-from tactbench.runner.analysis.comparisons import Comparison, comparisons
-from tactbench.runner.analysis.paired_tests import (DEFAULT_CHOICE, DEFAULT_PAIRED_TEST,
-                                                    PairedTestChoice)
+from tactbench.runner.analysis.comparisons import Comparison
+from tactbench.runner.analysis.report import Analysis
 from tactbench.runner.presentation.plots import caption, check_reference, write_plots
 from tactbench.runner.execution.identity import IDENTITY_DEFAULTS
 from tactbench.runner.execution.results import (
     INDEPENDENT_RUNS,
     REPORT_HEADER,
     command_line,
-    failed_rows,
     ok_rows,
     row_status,
 )
-from tactbench.runner.execution.scene import Design
-from tactbench.runner.analysis.sequential import FUTILE
-from tactbench.runner.analysis.statistics import DECIDED, NOT_LEARNED, UNRESOLVED
-from tactbench.runner.analysis.summaries import summarise, variance_decomposition
 from tactbench.runner.presentation.tables import (
     comparisons_section,
     labels_for,
@@ -61,29 +53,20 @@ RENDERED = "- rendered: "
 
 @dataclass
 class Report:
-    """What a run folder's rows say, as results.json, results.csv and report.md show it.
+    """A folder's :class:`~tactbench.runner.analysis.report.Analysis` as results.json,
+    results.csv and report.md show it (:func:`render`).
 
-    ``rows``: every row, ok and failed, in the scene's order; ``summaries`` (one per
-    dataset, split, encoder, classifier and L, over seeds), ``comparisons`` (paired over
-    runs), ``variance`` and ``statistics`` (the options they were made with) are computed
-    from them (:func:`make_report`); ``runs``: the command lines and git revisions that
-    computed the rows; ``rendered``: when and by which command this report was made;
+    ``analysis``: what the rows say, decided (its ``rows``, ``summaries``,
+    ``comparisons``, ``variance``, ``statistics``, ``runs``, ``looks`` and ``history``
+    are read here too, as attributes of the report); ``rendered``: when and by which
+    command this report was made; ``reference``: published points set beside ours;
     ``paths``: the files written (empty until :func:`write_report`). :func:`run` also
     sets ``computed``, ``skipped`` and ``seconds``.
     """
 
-    rows: list[dict[str, Any]]
-    summaries: list[dict[str, Any]]
-    comparisons: list[Comparison]
-    variance: list[dict[str, Any]]
-    statistics: dict[str, Any]
-    runs: list[dict[str, Any]]
+    analysis: Analysis
     rendered: dict[str, str]
     reference: list[dict[str, Any]] = field(default_factory=list)
-    looks: dict[str, Any] | None = None  # a run --until answered: every look, replayed
-    # the looks as computed (answering.History), for the next look of the same run to go
-    # on from (make_report's ``resume``); not part of any file
-    history: Any = field(default=None, repr=False, compare=False)
     paths: dict[str, Path] = field(default_factory=dict)
     computed: int = 0  # cells run now (ok or failed); set by run()
     cpu_seconds: float | None = None  # set by run_until: this process and its workers
@@ -92,14 +75,49 @@ class Report:
     seconds: float = 0.0
 
     @property
+    def rows(self) -> list[dict[str, Any]]:
+        """Every row, ok and failed, in the scene's order."""
+        return self.analysis.rows
+
+    @property
+    def summaries(self) -> list[dict[str, Any]]:
+        """One per dataset, split, encoder, classifier and L, over seeds."""
+        return self.analysis.summaries
+
+    @property
+    def comparisons(self) -> list[Comparison]:
+        """The paired comparisons over runs, each with its verdict."""
+        return self.analysis.comparisons
+
+    @property
+    def variance(self) -> list[dict[str, Any]]:
+        """Where each cell's accuracy variance comes from."""
+        return self.analysis.variance
+
+    @property
+    def statistics(self) -> dict[str, Any]:
+        """The statistics options the comparisons were made with."""
+        return self.analysis.statistics
+
+    @property
+    def runs(self) -> list[dict[str, Any]]:
+        """The command lines and git revisions that computed the rows."""
+        return self.analysis.runs
+
+    @property
+    def looks(self) -> dict[str, Any] | None:
+        """A run ``--until answered``: every look, replayed (None for a fixed design)."""
+        return self.analysis.looks
+
+    @property
     def ok(self) -> list[dict[str, Any]]:
         """Rows of the cells that finished."""
-        return ok_rows(self.rows)
+        return self.analysis.ok
 
     @property
     def failed(self) -> list[dict[str, Any]]:
         """Rows of the cells that raised (retried by the next run of the same scene)."""
-        return failed_rows(self.rows)
+        return self.analysis.failed
 
     def table(self) -> list[dict[str, Any]]:
         """The rows as a flat table, one dict per cell with the columns of results.csv
@@ -178,114 +196,16 @@ def rows_csv(rows: Sequence[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
-def make_report(rows: Sequence[dict[str, Any]], *,
-                reference: Iterable[dict[str, Any]] | None = None,
-                contrasts: Sequence[str] = (), margin: float | None = None,
-                users: Sequence[str] | None = None, rendered: str | None = None,
-                primary: Sequence[str] = (), sequential: Design | None = None,
-                resume: History | None = None,
-                paired_test: PairedTestChoice = DEFAULT_CHOICE) -> Report:
-    """The :class:`Report` of ``rows`` (every row of a folder, ok and failed, in the
-    scene's order: failed cells are listed and left out of summaries and plots).
+def render(analysis: Analysis, *, reference: Iterable[dict[str, Any]] | None = None,
+           rendered: str | None = None) -> Report:
+    """The :class:`Report` of ``analysis``: nothing is decided here, only said.
 
     ``reference``: published points to set beside ours (:func:`check_reference`; a
-    mistake is refused here, before any file); ``contrasts``, ``margin`` (points) and
-    ``primary`` (the contrasts of the confirmatory family): see
-    :func:`tactbench.runner.analysis.comparisons.comparisons`; ``users``: the user of each
-    dataset sample (by index), for per-user results; ``rendered``: how the report came
-    to be, said in report.md beside the command line and the time; ``sequential``: the
-    :class:`~tactbench.runner.execution.scene.Design` of a run ``--until answered``, whose
-    looks are replayed from the rows (:func:`tactbench.runner.analysis.answering.replay`;
-    ``resume``: an earlier report's ``history`` of the same run, whose looks are not
-    computed again); ``paired_test``: the test every comparison's p and interval come
-    from (:mod:`tactbench.runner.analysis.paired_tests`), recorded in ``statistics``
-    where it is not the default.
-    """
-    rows = list(rows)
-    reference = check_reference(reference)
-    looks = history = None
-    if sequential is not None and sequential.looks and primary:
-        paired_test.check(None, sequential=True)  # the looks: one line, before any file
-        history = replay(rows, seed_order=sequential.seed_order, looks=sequential.looks,
-                         primary=primary, margin=margin, resume=resume)
-        looks = history.as_dict()
-        looks["budget"] = sequential.budget
-        looks["train_cpu_seconds"] = training_cpu_seconds(rows)
-        looks["runs_stored"] = len({int(r["seed"]) for r in ok_rows(rows)})
-    comps = comparisons(rows, contrasts=contrasts, margin=margin, users=users, primary=primary,
-                        paired_test=paired_test)
-    if looks is not None:
-        comps = [sequential_verdict(c, looks) if c.family == "primary" else c for c in comps]
-    return Report(looks=looks, history=history,
-        rows=rows, summaries=summarise(rows, users=users), comparisons=comps,
-        variance=variance_decomposition(rows),
-        statistics={"unit": "run (one split seed)", "contrasts": list(contrasts),
-                    "margin": margin, "per_user": users is not None,
-                    **({"primary": list(primary)} if primary else {}),
-                    **({"paired_test": paired_test.name}
-                       if paired_test.name != DEFAULT_PAIRED_TEST else {})},
-        runs=computed_by(rows), reference=reference,
-        rendered={"by": command_line(), "how": rendered or "from the rows of cells/",
-                  "at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")})
-
-
-def sequential_verdict(c: Comparison, looks: dict[str, Any]) -> Comparison:
-    """A primary comparison of a run ``--until answered`` with the verdict its looks
-    reached: better, worse or equivalent where a look's boundary decided it, else
-    unresolved with the looks' reason in the note. The fixed-design verdict at the last
-    run count would ignore the looks before it (and overstate the evidence); the
-    interval and p beside it stay the unadjusted ones, labelled so."""
-    name = comparison_name(c)
-    seen = [(lk["runs"], lk["comparisons"][name]) for lk in looks.get("looks", ())
-            if name in lk["comparisons"]]
-    if not seen or c.verdict == NOT_LEARNED:  # a run of its cells did not learn: no verdict
-        return c
-    runs, last = seen[-1]
-    decided = (looks.get("decisions") or {}).get(name)
-    if decided in DECIDED:
-        return dataclasses.replace(c, verdict=decided, note=(
-            f"group-sequential: decided at the look after {runs} runs, α spent over "
-            f"{len(seen)} look(s)"))
-    why = (f"futile after {runs} runs" + (f" ({last['why']})" if last.get("why") else "")
-           if last["decision"] == FUTILE
-           else f"no verdict in {len(seen)} look(s) up to {runs} runs ({last['why']})"
-           if last.get("why")  # a boundary crossed below the minimum of evidence
-           else f"no boundary crossed in {len(seen)} look(s) up to {runs} runs")
-    return dataclasses.replace(c, verdict=UNRESOLVED, note=f"group-sequential: {why}")
-
-
-def training_cpu_seconds(rows: Iterable[dict[str, Any]]) -> float | None:
-    """The training CPU-seconds (every thread of the fitting process) summed over the
-    ok rows that record it; None when none does (rows from before it was recorded)."""
-    values = []
-    for row in ok_rows(list(rows)):
-        fits = row.get("fit")
-        for fit in fits if isinstance(fits, list) else [fits]:
-            value = fit.get("train_cpu_seconds") if isinstance(fit, dict) else None
-            if isinstance(value, (int, float)) and value >= 0:
-                values.append(float(value))
-    return sum(values) if values else None
-
-
-def computed_by(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The runs that computed ``rows``: ``{"command", "git", "cells"}`` for each distinct
-    command line and git revision a row records (``run``), the earliest first. A command
-    is shown as :func:`~tactbench.runner.execution.results.command_line` writes it (rows from
-    before it kept the program's path: ``/src/tactbench/__main__.py run`` is
-    ``tactbench run``)."""
-    runs: dict[tuple, dict[str, Any]] = {}
-    for row in sorted(rows, key=lambda r: (str(r.get("finished", "")), str(r.get("key")))):
-        run = row.get("run") if isinstance(row.get("run"), dict) else {}
-        command = run.get("command")
-        try:
-            command = command_line(shlex.split(command)) if isinstance(command, str) \
-                else command
-        except ValueError:  # unbalanced quotes: shown as recorded
-            pass
-        entry = runs.setdefault((str(command), str(run.get("git"))), {
-            "command": command, "git": run.get("git"), "cells": 0})
-        entry["cells"] += 1
-    return list(runs.values())
+    mistake is refused here, before any file); ``rendered``: how the report came to be,
+    said in report.md beside the command line and the time."""
+    return Report(analysis=analysis, reference=check_reference(reference),
+                  rendered={"by": command_line(), "how": rendered or "from the rows of cells/",
+                            "at": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")})
 
 
 def write_report(out: str | Path, report: Report, *, plots: bool = True) -> dict[str, Path]:
@@ -305,13 +225,6 @@ def write_report(out: str | Path, report: Report, *, plots: bool = True) -> dict
     atomic_write_text(paths["markdown"], markdown_report(report, figures))
     report.paths = paths
     return paths
-
-
-def write_reports(out: str | Path, rows: Sequence[dict[str, Any]], *, plots: bool = True,
-                  **options: Any) -> dict[str, Path]:
-    """:func:`make_report` of ``rows`` (with its ``options``), written into ``out`` by
-    :func:`write_report`; returns the paths written."""
-    return write_report(out, make_report(rows, **options), plots=plots)
 
 
 def _runs_text(runs: Sequence[dict[str, Any]]) -> str:

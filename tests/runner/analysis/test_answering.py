@@ -126,7 +126,7 @@ def test_runs_stored_beyond_the_last_look_are_said_beside_the_looks():
     runs of an earlier stopping rule) says so: its tables use every run, its verdicts the
     looks' runs."""
     from tactbench.runner.presentation.tables import looks_markdown
-    from tactbench.runner.presentation.writers import make_report
+    from tactbench.runner.orchestrate import make_report
 
     rows = _rows(range(8), 0.2)
     sequential = Design(primary=tuple(PRIMARY), seed_order=tuple(range(20)),

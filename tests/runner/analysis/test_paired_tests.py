@@ -19,7 +19,7 @@ from tactbench.runner.analysis.paired_builtins import (WilcoxonSignedRank,
 from tactbench.runner.analysis.paired_tests import DEFAULT_CHOICE, choose_paired_test
 from tactbench.runner.execution.scene import Design
 from tactbench.runner.presentation.tables import comparison_header, comparisons_text
-from tactbench.runner.presentation.writers import make_report
+from tactbench.runner.orchestrate import make_report
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 PRIMARY = ["encoder=raw..encoder=farneback"]

@@ -147,7 +147,7 @@ def _rows(inits, splits=3, users=None):
 
 def test_a_comparison_over_init_seeds_carries_the_decomposition_and_reads_back(tmp_path):
     from tactbench.runner.analysis.comparisons import Comparison, comparisons
-    from tactbench.runner.presentation.writers import write_reports
+    from tactbench.runner.orchestrate import write_reports
 
     [c] = comparisons(_rows([0, 1]))
     v = c.variance_components
@@ -164,7 +164,7 @@ def test_a_comparison_over_init_seeds_carries_the_decomposition_and_reads_back(t
 
 def test_without_init_seeds_or_with_one_there_is_none(tmp_path):
     from tactbench.runner.analysis.comparisons import Comparison, comparisons
-    from tactbench.runner.presentation.writers import write_reports
+    from tactbench.runner.orchestrate import write_reports
 
     for rows in (_rows([None]), _rows([0]), _rows([0, 1], splits=1),
                  _rows([0, 1], users=40)):  # one test user a split seed

@@ -224,7 +224,7 @@ def test_a_comparison_without_verdict_leaves_the_family_as_it_was():
 def test_a_look_closes_a_question_at_chance_without_passing_its_alpha():
     from tactbench.runner.analysis.answering import replay
     from tactbench.runner.execution.scene import Design
-    from tactbench.runner.presentation.writers import make_report
+    from tactbench.runner.orchestrate import make_report
 
     rows = _rows(train={"raw": 0.5}, seeds=range(5))
     h = replay(rows, seed_order=list(range(5)), looks=[5],
@@ -328,7 +328,7 @@ def test_folds_are_scored_together(tiny_scene, cache, fake_registry, learnable):
 def test_a_stored_verdict_from_looks_is_not_replaced_for_a_flagged_comparison():
     from tactbench.runner.analysis.answering import comparison_name
     from tactbench.runner.analysis.comparisons import comparisons
-    from tactbench.runner.presentation.writers import sequential_verdict
+    from tactbench.runner.analysis.report import sequential_verdict
 
     [c] = comparisons(_rows(train={"farneback": 0.5}, seeds=range(5)),
                       primary=["encoder=raw..encoder=farneback"])

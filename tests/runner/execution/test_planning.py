@@ -216,7 +216,7 @@ def test_an_out_folder_an_earlier_run_wrote_is_accepted(tmp_path, cache, tiny_sc
 
     scene = tiny_scene(encoders=["raw"], classifiers=["logreg:max_iter=20"], seeds=[0])
     run(scene, progress=False, cache=cache)
-    from tactbench.runner.presentation.writers import write_reports
+    from tactbench.runner.orchestrate import write_reports
 
     out = tmp_path / "out"
     write_reports(out, [], plots=False)

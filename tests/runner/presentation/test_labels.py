@@ -10,7 +10,7 @@ import pytest
 from tactbench.runner.analysis.comparisons import comparisons
 from tactbench.runner.analysis.summaries import failed_cells, summarise
 from tactbench.runner.execution.questions import spec_labels
-from tactbench.runner.presentation.writers import write_reports
+from tactbench.runner.orchestrate import write_reports
 
 #: Two resolved specs of one classifier (profile defaults merged), as rows store them.
 WIDE = ("small-cnn-lstm:batch_size=64,epochs=4,head=concat,input_size=16,lr=0.003,"

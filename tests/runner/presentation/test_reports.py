@@ -12,7 +12,7 @@ import pytest
 
 from tactbench.runner import run
 from tactbench.runner.analysis.summaries import failed_cells, summarise
-from tactbench.runner.presentation.writers import write_reports
+from tactbench.runner.orchestrate import write_reports
 from prediction_rows import prediction_row  # tests/runner/prediction_rows.py
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -622,7 +622,7 @@ def test_a_contrast_side_keeps_the_commas_of_a_spec_with_several_options():
 
 
 def test_the_runs_that_computed_the_rows_are_named_one_way():
-    from tactbench.runner.presentation.writers import computed_by
+    from tactbench.runner.analysis.report import computed_by
 
     def row(key, command, git, finished):
         return {"key": key, "finished": finished, "run": {"command": command, "git": git}}
