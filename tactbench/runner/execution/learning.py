@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 #: What :func:`learning_status` may say of a cell.
 LEARNED, DID_NOT_LEARN, DID_NOT_TRANSFER = "learned", "did not learn", "did not transfer"
@@ -57,8 +57,6 @@ LEARNING_FIELD = "learning"
 NOISE_ALPHA = 0.05
 #: At most this many training windows are scored per fold (a seeded sample).
 TRAIN_SAMPLE = 2000
-#: The mark of a flagged cell's accuracy in the tables.
-MARK = "†"
 
 
 def chance_level(labels: Sequence[int], k: int) -> float:
@@ -133,11 +131,6 @@ def _pct(value: Any) -> str:
     return "?" if not isinstance(value, (int, float)) else f"{100 * value:.0f} %"
 
 
-def accuracy_mark(summary: Mapping[str, Any]) -> str:
-    """:data:`MARK` after a summary's accuracy where the cell did not learn."""
-    return f" {MARK}" if summary.get(LEARNING_FIELD) else ""
-
-
 def summary_learning(rows: Iterable[Mapping[str, Any]]) -> dict[str, list[int]]:
     """A summary's ``learning``: status → the seeds judged, where the cell's runs together
     did not learn (:func:`cell_learning`); empty where it learned or nothing tells."""
@@ -145,25 +138,6 @@ def summary_learning(rows: Iterable[Mapping[str, Any]]) -> dict[str, list[int]]:
     if judged is None or judged.learned:
         return {}
     return {judged.status: list(judged.seeds)}
-
-
-def legend(summaries: Sequence[Mapping[str, Any]], label: Callable[[Any], str]) -> list[str]:
-    """The lines under a table of ``summaries`` explaining :data:`MARK` (none without
-    one); ``label(summary)`` names a cell."""
-    marked = [s for s in summaries if s.get(LEARNING_FIELD)]
-    if not marked:
-        return []
-    lines = [f"{MARK} The model did not learn or did not transfer, judged over its runs "
-             f"together: its training accuracy is near guessing (κ below "
-             f"{TRAIN_KAPPA_MIN:g}), or its test recordings of all runs pooled cannot be told "
-             f"from guessing (1/k or the majority class; one-sided exact test at "
-             f"{NOISE_ALPHA:g}); no comparison with the cell gets a verdict "
-             f"(docs/statistics.md)."]
-    for s in marked:
-        runs = "; ".join(f"{status} over {_runs_text(seeds)}"
-                         for status, seeds in s[LEARNING_FIELD].items())
-        lines.append(f"{MARK} {label(s)}: {runs}.")
-    return lines
 
 
 # ------------------------------------------------------------------ a cell's runs together
@@ -281,7 +255,8 @@ def cell_learning(rows: Iterable[Mapping[str, Any]]) -> CellLearning | None:
         train_accuracy=train, train_chance=chance, train_kappa=kappa)
 
 
-def _runs_text(seeds: Sequence[int]) -> str:
+def runs_text(seeds: Sequence[int]) -> str:
+    """``runs 0, 1, 2`` (``run 3`` for one): the runs a cell was judged over."""
     return f"run{'s' if len(seeds) != 1 else ''} {', '.join(map(str, seeds))}"
 
 
@@ -300,4 +275,4 @@ def describe_cell(name: str, judged: CellLearning | None) -> str:
                  f"{_pct(judged.train_chance)}, κ {judged.train_kappa:.2f}")
         if judged.status == DID_NOT_LEARN:
             train += f" < {TRAIN_KAPPA_MIN:.2f}"
-    return f"{name} {judged.status} over {_runs_text(judged.seeds)} ({train}; {test})"
+    return f"{name} {judged.status} over {runs_text(judged.seeds)} ({train}; {test})"

@@ -7,7 +7,10 @@ other specs of the same run (:func:`spec_labels`). A *contrast* (``--contrast``,
 (``encoder=raw..encoder=farneback``; :func:`parse_contrast`), and the cells it pairs are
 found by :func:`contrast_pairs`. Both are read when a run is planned (a question that
 names no two cells is refused before any work, :func:`check_contrasts`) and again by the
-analysis and the reports, so they live here, with the run.
+analysis and the reports, so they live here, with the run. A spec's short name and label
+are names, not decoration: a contrast is written with them, a comparison and a look's
+decision are keyed by them, and summaries are ordered by them, so execution and analysis
+need them; how a table or a figure lays them out is presentation's.
 """
 
 from __future__ import annotations

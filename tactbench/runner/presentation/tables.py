@@ -10,7 +10,7 @@ from tactbench.runner.analysis.answering import beyond_looks
 from tactbench.runner.analysis.paired_tests import PAIRED_TEST_TEXT, chosen_tests
 from tactbench.runner.analysis.comparisons import (INDEPENDENT_METHOD, P_RULE, Comparison, plain_t,
                                                    read_comparisons)
-from tactbench.runner.execution.learning import accuracy_mark, legend
+from tactbench.runner.presentation.marks import accuracy_mark, learning_legend
 from tactbench.runner.analysis.statistics import (A_BETTER, B_BETTER, DECIDED, EQUIVALENT,
                                                   MIN_RUNS, NOT_LEARNED, TOO_FEW_RUNS, UNRESOLVED)
 from tactbench.runner.analysis.summaries import failed_cells
@@ -249,8 +249,8 @@ def print_table(summaries: Sequence[dict[str, Any]], *, title: str = "",
 def _legend(summaries: Sequence[dict[str, Any]], labels: Labels | None) -> list[str]:
     """The lines under the accuracy table on cells that did not learn (none without)."""
     labels = labels_for(summaries=summaries) if labels is None else labels
-    return legend(summaries, lambda s: f"{s['encoder']} / {spec_label(s['classifier'], labels)}"
-                  f" L={s['L']}")
+    return learning_legend(summaries, lambda s: f"{s['encoder']} / "
+                           f"{spec_label(s['classifier'], labels)} L={s['L']}")
 
 
 def markdown_table(summaries: Sequence[dict[str, Any]], labels: Labels | None = None) -> str:
