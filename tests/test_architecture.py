@@ -27,6 +27,8 @@ def test_every_module_the_map_names_exists():
 
 
 def test_every_module_of_the_package_is_on_the_map():
+    """A folder named on the map covers its modules, but for the runner: each of its
+    modules is named, with its job (the walk of a run goes through them)."""
     named = set(named_paths())
     folders = {p.rstrip("/") for p in named if p.endswith("/")}
     unlisted = []
@@ -34,7 +36,9 @@ def test_every_module_of_the_package_is_on_the_map():
         rel = path.relative_to(REPO).as_posix()
         if path.name == "__init__.py" or path.name == "__main__.py":
             continue
-        if rel not in named and path.parent.relative_to(REPO).as_posix() not in folders:
+        covered = path.parent.relative_to(REPO).as_posix() in folders \
+            and not rel.startswith("tactbench/runner/")
+        if rel not in named and not covered:
             unlisted.append(rel)
     assert not unlisted, f"modules missing from docs/architecture.md: {unlisted}"
 
