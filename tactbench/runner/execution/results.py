@@ -19,8 +19,8 @@ Rows written before checksums existed have none to verify and are checked for sh
 only.
 
 ``OUT/cells`` is the one store of a run folder: results.json, results.csv and report.md
-are rendered from these rows (:func:`tactbench.runner.presentation.writers.make_report`)
-and never read back. :meth:`ResultStore.stored_rows` gives every sound row of a folder in the order of
+are rendered from these rows (:func:`tactbench.runner.analysis.report.analyse`, then
+:func:`tactbench.runner.presentation.writers.render`) and never read back. :meth:`ResultStore.stored_rows` gives every sound row of a folder in the order of
 the scene that computed it (:func:`scene_order`), for a report that the rows alone decide.
 """
 
