@@ -38,7 +38,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 GOALS = {"fast_s": 240.0, "room_s": 60.0}
 DURATION = re.compile(r"^\s*([0-9.]+)s (setup|call|teardown)\s+(\S+)")
-CLOSING = re.compile(r"=+ (.*\d+ (?:passed|failed|error).*) in ([0-9.]+)s")
+#: pytest's closing line, with -q ("3 passed in 1.2s") or without ("=== 3 passed in 1.2s ===")
+CLOSING = re.compile(r"^=*\s*(\d+ (?:passed|failed|errors?|skipped|deselected).*?) in ([0-9.]+)s")
 
 
 def rooms() -> list[str]:
@@ -69,7 +70,7 @@ def pytest_part(args: list[str]) -> dict:
             seconds, node = float(m.group(1)), m.group(3)
             by_room[room_of(node)] += seconds
             by_test[node] += seconds
-        elif (m := CLOSING.search(line)):
+        elif (m := CLOSING.match(line)):
             closing = m.group(1)
     slowest = sorted(by_test.items(), key=lambda kv: -kv[1])[:10]
     return {"command": " ".join(["python", "-m", "pytest", *args]) or "python -m pytest",
