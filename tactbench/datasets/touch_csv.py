@@ -36,6 +36,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tactbench.data.dataset import Dataset
+from tactbench.datasets.array_files import is_number
 from tactbench.budget import check_budget, human_bytes
 from tactbench.errors import BudgetError, InputError, require
 from tactbench.integrity import check_regular_file
@@ -109,14 +110,6 @@ def _first_line(path: Path) -> list[str]:
     return next(csv.reader([text]), []) if text.strip() else []
 
 
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 def _columns(path: Path, first: list[str], labels: Sequence[str], numbers: Sequence[str],
              aliases: dict[str, str], corpus: str, optional: Sequence[str] = ()
              ) -> tuple[list[str], int]:
@@ -129,7 +122,7 @@ def _columns(path: Path, first: list[str], labels: Sequence[str], numbers: Seque
     if not first:
         raise InputError(f"{path}: empty file (a {corpus} file has the columns {want})")
     probe = first[len(named)] if len(first) > len(named) else ""
-    if _is_number(probe):  # no header: the documented order
+    if is_number(probe):  # no header: the documented order
         if len(first) != expected:
             raise InputError(f"{path}, line 1: {len(first)} columns; a {corpus} file without "
                              f"a header has {expected} ({want})")
