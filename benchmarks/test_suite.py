@@ -130,6 +130,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="write docs/testing.md's block from --out again, measuring nothing")
     a = ap.parse_args(argv)
     if a.docs_only:
+        if not a.out.is_file():
+            ap.error(f"--docs-only writes docs/testing.md from {a.out}, which does not exist: "
+                     f"measure first")
         write_docs(json.loads(a.out.read_text()))
         return 0
     parts = [p for p in a.parts.split(",") if p]
