@@ -190,7 +190,7 @@ def _written(cache: EncodingCache) -> int:
 
 
 def test_plan_counts_every_runs_data_set(cache, tmp_path):
-    from tactbench.runner.analysis.forecast import forecast
+    from tactbench.runner import forecast
 
     one = forecast(_per_run_scene(tmp_path, [0])).cache_bytes
     two = forecast(_per_run_scene(tmp_path, [0, 1])).cache_bytes
@@ -200,7 +200,7 @@ def test_plan_counts_every_runs_data_set(cache, tmp_path):
 @pytest.mark.slow("plans, then runs a grid of three runs, each on a data set of its own")
 def test_a_per_run_grid_writes_what_plan_said(cache, tmp_path):
     from tactbench.runner import run
-    from tactbench.runner.analysis.forecast import forecast
+    from tactbench.runner import forecast
 
     said = forecast(_per_run_scene(tmp_path, [0, 1, 2])).cache_bytes
     run(_per_run_scene(tmp_path, [0, 1, 2]), progress=False, plots=False, cache=cache)
@@ -215,7 +215,7 @@ def test_the_room_check_counts_every_runs_data_set_before_writing(cache, tmp_pat
 
     from tactbench.errors import StorageError
     from tactbench.runner import run
-    from tactbench.runner.analysis.forecast import forecast
+    from tactbench.runner import forecast
 
     one = forecast(_per_run_scene(tmp_path, [0])).cache_bytes
     usage = namedtuple("usage", "total used free")

@@ -76,7 +76,8 @@ rows), :mod:`tactbench.runner.analysis` (summaries, statistics, comparisons, the
 sequential looks; it reads execution's records) and :mod:`tactbench.runner.presentation`
 (tables, figures, report files, data frames; it reads both). Beside them,
 :mod:`~tactbench.runner.orchestrate` composes the three into :func:`run`,
-:func:`run_until` and :func:`render_folder`.
+:func:`run_until` and :func:`render_folder`, and :mod:`~tactbench.runner.forecasting`
+composes execution and analysis into :func:`forecast` (``tactbench plan``).
 
 This package is the runner's one public face: the names below (``__all__``) are what
 the commands, the benchmark scripts, plugins and notebooks use, and the only runner
@@ -91,7 +92,7 @@ hook receives is a record of plain values, documented with the hooks
 from tactbench.machine import git_revision
 from tactbench.paths import atomic_write_text  # noqa: F401  (reports imported it from here)
 from tactbench.runner.analysis.comparisons import Comparison, comparisons, plain_t
-from tactbench.runner.analysis.forecast import forecast, points
+from tactbench.runner.analysis.forecast import points
 from tactbench.runner.analysis.paired_tests import (DEFAULT_PAIRED_TEST, CorrectedT,
                                                     PairedTestChoice, choose_paired_test)
 from tactbench.runner.analysis.power import detectable_effect, power
@@ -120,6 +121,7 @@ from tactbench.runner.execution.scene import (DEFAULT_PRIMARY, EXECUTORS, FIRST_
                                               parse_duration, parse_lengths, parse_seeds,
                                               show_duration)
 from tactbench.runner.execution.workers import Workers, run_workers
+from tactbench.runner.forecasting import forecast
 from tactbench.runner.orchestrate import make_report, render_folder, run, run_until
 from tactbench.runner.presentation.frames import (EXTRA as EXPORT_EXTRA, cells_frame,
                                                   comparisons_frame, write_parquet)

@@ -147,7 +147,7 @@ def test_real_cyskin_recordings_minus_their_baseline(shared_data, tmp_path, capl
 def test_plan_says_the_note_once_though_it_times_a_second_load(signed_folder, tmp_path,
                                                                  caplog):
     from tactbench.runner import Scene
-    from tactbench.runner.analysis.forecast import forecast
+    from tactbench.runner import forecast
 
     scene = Scene(dataset=str(signed_folder), encoders=["raw"], classifiers=["logreg"],
                   seeds=[0, 1, 2], test_per_class=1, out=str(tmp_path / "out"))

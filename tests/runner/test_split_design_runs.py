@@ -167,7 +167,7 @@ def test_plan_says_a_fixed_split_has_no_floor_and_what_its_answer_speaks_of(
     from click.testing import CliRunner
 
     from tactbench.cli import cli
-    from tactbench.runner.analysis.forecast import forecast
+    from tactbench.runner import forecast
 
     scene = tiny_scene(split="fixed-halves", classifiers=["logreg"], seeds=[0, 1, 2])
     f = forecast(scene, design_registry)

@@ -8,8 +8,9 @@ training run as the unit (:mod:`~tactbench.runner.analysis.statistics`,
 (:mod:`~tactbench.runner.analysis.sequential`, :mod:`~tactbench.runner.analysis.answering`),
 a folder's whole analysis, everything a report shows and a run's loop stops on
 (:mod:`~tactbench.runner.analysis.report`: ``analyse``, an ``Analysis``), the records
-event hooks receive (:mod:`~tactbench.runner.analysis.records`) and what a plan forecasts
-(:mod:`~tactbench.runner.analysis.forecast`).
+event hooks receive (:mod:`~tactbench.runner.analysis.records`) and what a plan forecasts,
+decided: its records and pure rules (:mod:`~tactbench.runner.analysis.forecast`; the plan
+itself, execution composed with them, is :mod:`tactbench.runner.forecasting`).
 
 Analysis reads execution's records (rows, scenes, plans) and never imports presentation:
 a verdict is the same whether it is printed, written or not shown at all

@@ -2,9 +2,9 @@
 cells, and what each is called — one place for the run
 (:func:`tactbench.runner.analysis.comparisons.comparisons`), its looks
 (:mod:`tactbench.runner.analysis.answering`) and the plan
-(:mod:`tactbench.runner.analysis.forecast`), so that they agree on the family by
-construction (issue 48: the plan forecast only a question's first comparison, at α
-where the run used α/3)."""
+(:mod:`tactbench.runner.forecasting`, through :mod:`tactbench.runner.analysis.forecast`),
+so that they agree on the family by construction (issue 48: the plan forecast only a
+question's first comparison, at α where the run used α/3)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ def primary_family(cells: Sequence[Mapping[str, Any]], primary: Sequence[str]
     mapping of :data:`FACTORS`, in the run's order): (index of A, index of B, factor,
     value of A, value of B, family "primary") of each comparison, in the run's order.
     The one place the family is decided: the run (:func:`comparisons`) and the plan
-    (:func:`tactbench.runner.analysis.forecast.forecast`) both call it, so a question
+    (:func:`tactbench.runner.forecasting.forecast`, through
+    :func:`tactbench.runner.analysis.forecast._family`) both call it, so a question
     over three classifiers is three primaries in both, each at the family's level."""
     labels = spec_labels(c["classifier"] for c in cells)
     todo: list[tuple] = []

@@ -1,63 +1,51 @@
-"""``tactbench plan``: what a run will cost and what it can answer, before any training.
+"""What ``tactbench plan`` says, decided: the forecast's records and its pure rules.
 
-:func:`forecast` plans the scene (the dataset loaded, the grid checked: no encoding, no
-training) and says, for every cell, its estimated time and where the estimate comes
-from, the peak memory, and for each primary comparison the power at the planned runs
-for a given effect, the smallest effect found at 80 % power, and — for a fixed data set
-— the floor no number of runs goes below and how many recordings would lower it
-(:mod:`tactbench.runner.analysis.power`); where every run draws its own data set
-(``synthetic-forearm:people=per-run``) the runs are independent replications: ratio 0,
-no floor.
+The records a plan is (:class:`Forecast`: its cells, :class:`CellForecast`, and its
+primary comparisons, :class:`PrimaryForecast`) and the functions that decide them from
+records alone — a pilot's rows, the planned cells, the split's sizes —, with no plan,
+cache, store, disk or estimate of their own: :func:`tactbench.runner.forecasting.forecast`
+composes those (execution) with these, as orchestrate composes a run.
 
-Timings and spreads come from a *pilot*: rows already stored in the scene's out folder
-(a run of a seed or two), said so, the spread with its 95 % interval (at 2–3 runs it is
-wide: the power at its upper end is said beside), and never below what test sampling of
-the pilot's own disagreement gives (a pilot of identical differences is not "power
-100 %"). Without one, a cell's time is unknown (said so, with the pilot to run) and a
-comparison's per-run spread is an **assumption**, said with its value: test sampling
-alone with the models disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordings — on
-the stored primaries the observed per-run disagreement was 0–32 %, so it is no bound
-either way (`python benchmarks/statistics_checks.py --part disagreement`).
+A cell's time comes from a *pilot*: rows already stored in the scene's out folder (a run
+of a seed or two), the median of its encoder × classifier's, said so; without one it is
+unknown here, said with the pilot to run (:func:`_cells`). A comparison's per-run spread
+comes from the pilot too, with its 95 % interval (at 2–3 runs it is wide: the power at
+its upper end is said beside), and never below what test sampling of the pilot's own
+disagreement gives (a pilot of identical differences is not "power 100 %"); without one
+it is an **assumption**, said with its value: test sampling alone with the models
+disagreeing on :data:`ASSUMED_DISCORDANCE` of the recordings — on the stored primaries
+the observed per-run disagreement was 0–32 %, so it is no bound either way
+(`python benchmarks/statistics_checks.py --part disagreement`) (:func:`_spread`). For a
+fixed data set the floor no number of runs goes below, and how many recordings would
+lower it (:mod:`tactbench.runner.analysis.power`); where every run draws its own data
+set (``synthetic-forearm:people=per-run``) the runs are independent replications: ratio
+0, no floor.
 
 Every comparison of the primary family the run makes is forecast (the family decided by
-:func:`tactbench.runner.analysis.family.primary_family`, the run's own), each at the
-family's level (Holm's first step, α/m for m primary comparisons), exactly
-(:func:`tactbench.runner.analysis.power.power`); :func:`family_answered` gives the
-family's chance of every one being answered, simulated through the run's own procedure
-(Holm as the run spends it, the looks with ``--until``, comparisons sharing a cell
-correlated: :func:`tactbench.runner.analysis.family_paths.family_forecast`). For a run
-``--until answered`` the forecast
-is of the sequential procedure itself
+:func:`tactbench.runner.analysis.family.primary_family`, the run's own: :func:`_family`),
+each at the family's level (Holm's first step, α/m for m primary comparisons), exactly
+(:func:`tactbench.runner.analysis.power.power`: :func:`_primary`); :func:`family_answered`
+gives the family's chance of every one being answered, simulated through the run's own
+procedure (Holm as the run spends it, the looks with ``--until``, comparisons sharing a
+cell correlated: :func:`tactbench.runner.analysis.family_paths.family_forecast`). For a
+run ``--until answered`` the forecast is of the sequential procedure itself
 (:func:`tactbench.runner.analysis.sequential.procedure`: found, equivalent, the other
-side, stopped early as futile, reached the maximum undecided, expected and largest
-runs, by the simulation and rule the looks use, at that level and with the margin). :attr:`PrimaryForecast.warnings` says, a line
-each, an effect inside the margin and a design short of 80 % power at its runs.
+side, stopped early as futile, reached the maximum undecided, expected and largest runs,
+by the simulation and rule the looks use, at that level and with the margin).
+:attr:`PrimaryForecast.warnings` says, a line each (:func:`warnings`), an effect inside
+the margin and a design short of 80 % power at its runs.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import statistics
-import time
 from dataclasses import asdict, dataclass
-from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, Sequence
 
-from tactbench.data.splits import SplitData, split_design
-from tactbench.plugins import load_registry
 from tactbench.runner.analysis.comparisons import Comparison, comparisons
 from tactbench.runner.analysis.family import pair_name, pair_where, primary_family
-from tactbench.runner.execution.planning import (
-    Cell,
-    Plan,
-    digest,
-    imaging_identity,
-    other_run_identity,
-    plan_runs,
-    run_datasets,
-)
-from tactbench.runner.analysis.paired_tests import choose_paired_test
+from tactbench.runner.analysis.family_paths import family_forecast
 from tactbench.runner.analysis.power import (
     TARGET_POWER,
     detectable_effect,
@@ -67,20 +55,25 @@ from tactbench.runner.analysis.power import (
     recordings_for,
     runs_for_power,
     sampling_sd,
-    seed_mean_ratio,
 )
-from tactbench.runner.execution.cache import EncodingCache, entries_bytes
-from tactbench.runner.execution.estimate import estimate_run, missing_entries
-from tactbench.runner.analysis.family_paths import family_forecast
 from tactbench.runner.analysis.sequential import procedure, unanswerable
-from tactbench.runner.execution.results import ResultStore, ok_rows
-from tactbench.runner.execution.scene import Scene
-from tactbench.runner.execution.workers import run_workers
-from tactbench.machine import memory_mb
 
 #: The share of test recordings two models are assumed to disagree on without a pilot
 #: (two models near 80 % whose errors are independent disagree on about 32 %).
 ASSUMED_DISCORDANCE = 0.3
+
+
+
+class PlannedCell(Protocol):
+    """What the pure rules read of a planned cell (a plan's
+    :class:`~tactbench.runner.execution.planning.Cell` is one)."""
+
+    encoder: str
+    classifier: str
+    L: int
+    key: str
+
+    def label(self) -> str: ...
 
 
 @dataclass
@@ -159,93 +152,6 @@ class Forecast:
         return asdict(self)
 
 
-def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float = 0.05,
-             progress=None) -> Forecast:
-    """The forecast of ``scene`` (see the module docstring); ``effect`` in points.
-
-    With ``until``, the cells of every seed the looks may reach (the most the run
-    costs). Where every run draws its own data set, only the first run's is made (the
-    split's sizes and every check come from it): the other runs' cells are derived from
-    the first's (:func:`_other_runs`)."""
-    registry = registry or load_registry()
-    if scene.until:
-        scene = dataclasses.replace(scene, seeds=list(scene.design.seed_order))
-    made: list[int] = []  # the dataset was made while planning: its load is not timed
-
-    def making(done: int, total: int | None = None) -> None:
-        made.append(done)
-        if progress is not None:
-            progress(done, total)
-
-    t0 = time.perf_counter()
-    [p] = plan_runs(scene, registry, progress=making, first_only=True)
-    planned_s = time.perf_counter() - t0
-    pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
-    runs = len(scene.seeds)
-    data = SplitData.of(p.dataset, test_per_class=scene.test_per_class)
-    splits = p.split.split(data, seed=scene.seeds[0])
-    n_test = sum(len(s.test) for s in splits)
-    n_train = len(splits[0].train)
-    independent = p.run_dataset is not None  # each run its own data set: no overlap
-    design = "independent" if independent else split_design(p.split, splits)
-    # what run refuses, refused here in its words (its power is still the corrected t's)
-    choose_paired_test(scene.paired_test, registry).check(design, sequential=bool(scene.until))
-    ratio = 0.0 if design in ("independent", "fixed") else \
-        seed_mean_ratio(len(splits)) if design == "kfold" else n_test / n_train
-    others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
-    # what run's claim refuses, refused here in its words (nothing written)
-    ResultStore(scene.out).check_grid([c.key for c in p.cells + others if c.key],
-                                      p.identities)
-    cells = _cells(p.cells + others, pilot)
-    looks = list(scene.design.looks) or None
-    cache = EncodingCache()
-    missing = missing_entries(p, p.cells + others, cache)
-    workers = run_workers(scene, pilot, plan=p, parent_peak_mb=memory_mb()[1])
-    wall = _walls(p, p.cells + others, cells, looks, missing, workers.count,
-                  load_s=None if made and p.run_dataset is None else planned_s)
-    known = [c.seconds for c in cells if c.seconds is not None]
-    distinct = (_distinct_splits(p, data, scene.seeds) if design == "resampled"
-                and scene.split != "paper" else runs)
-    family = _family(p.cells, scene.design.primary, pilot)
-    level = alpha / max(1, len(family))  # Holm's first step over the family the run makes
-    usable = min(runs, distinct)  # repeated splits add no evidence: the looks stop there
-    capped = None if not looks else [x for x in looks if x < usable] + [usable]
-    capped = capped if capped and capped[0] >= 2 else None
-    primaries = [_primary(name, found, usable, effect / 100, ratio, n_test, level,
-                          len(p.dataset.labels), margin=scene.margin, looks=capped,
-                          n_train=n_train)
-                 for name, found, _ in family]
-    together = family_answered(primaries, [pair for _, _, pair in family], alpha=alpha,
-                               looks=capped, margin=scene.margin)
-    return Forecast(
-        cells=cells, seconds=sum(known) if known else None,
-        unknown=sum(c.seconds is None for c in cells),
-        peak_mb=max((float(r["peak_rss_mb"]) for r in pilot if r.get("peak_rss_mb")),
-                    default=None),
-        primaries=primaries, family=together,
-        family_answered=None if together is None else together["answered"],
-        distinct_splits=distinct, runs_asked=runs,
-
-        n_test=n_test, n_train=n_train, alpha=alpha, independent=independent,
-        design=design,
-        runs_not_made=len({c.seed for c in others}), wall_s=wall, looks=looks,
-        workers=workers.count, workers_limit=workers.limit,
-        worker_peak_mb=workers.worker_peak_mb, worker_peak_source=workers.peak_source,
-        run_peak_mb=workers.run_peak_mb, memory_mb=workers.memory_mb,
-        cache_bytes=entries_bytes(p, missing) + _other_runs_bytes(p, others, pilot, cache),
-        cache_free=_free_bytes(cache.root))
-
-
-def _distinct_splits(p: Plan, data: SplitData, seeds: list[int]) -> int:
-    """How many distinct splits (test recordings of every fold) the planned seeds draw:
-    over few groups (sessions, people) seeds repeat splits, and a run counts a repeated
-    one once (:func:`tactbench.runner.analysis.pairing.distinct_splits`), so the power is
-    that of the distinct splits."""
-    drawn = {tuple(tuple(sorted(int(i) for i in s.test)) for s in p.split.split(data, seed=seed))
-             for seed in seeds}
-    return len(drawn)
-
-
 def family_answered(primaries: list[PrimaryForecast], pairs: list[tuple], *,
                     alpha: float, looks: list[int] | None = None,
                     margin: float | None = None) -> dict[str, Any] | None:
@@ -265,95 +171,7 @@ def family_answered(primaries: list[PrimaryForecast], pairs: list[tuple], *,
     return f.as_dict()
 
 
-def _free_bytes(root: Path) -> int | None:
-    """Bytes free on the disk of ``root``; None when it cannot say."""
-    try:
-        return int(shutil.disk_usage(root).free)
-    except OSError:
-        return None
-
-
-def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],
-           looks: list[int] | None, missing: list[tuple[str, str]], workers: int, *,
-           load_s: float | None) -> list[float] | None:
-    """The run's wall time (:func:`~tactbench.runner.execution.estimate.estimate_run`), cumulative
-    at each look (one number without looks); cells without a pilot timing get the
-    classifier's own estimate (``cells`` updated in place). None when a cell has
-    neither."""
-    order = list(dict.fromkeys(c.seed for c in planned))
-    ends = looks or [len(order)]
-    known = {c.key: f.seconds for c, f in zip(planned, cells)
-             if f.seconds is not None and c.key}
-    memo: dict[Any, Any] = {} if load_s is None else {"load": load_s}  # else timed there
-    total, out, start = 0.0, [], 0
-    for i, end in enumerate(ends):
-        seeds = set(order[start:end])
-        batch = [c for c, f in zip(planned, cells) if c.seed in seeds
-                 and not f.source.startswith("finished")]
-        est = estimate_run(p, batch, missing if i == 0 else [], known=known, memo=memo,
-                           workers=workers)
-        if est.unknown:
-            return None
-        total += est.seconds if batch or i == 0 else 0.0
-        out.append(total)
-        start = end
-    for c, f in zip(planned, cells):
-        if f.seconds is None:
-            f.seconds = memo.get((c.encoder, c.classifier, c.L))
-            f.source = "estimated here: a few of its training steps timed"
-    return out
-
-
-def _other_runs(first: Plan, specs: dict[int, str], pilot: list[dict[str, Any]]
-                ) -> list[Cell]:
-    """The cells of the runs after ``first`` where every run draws its own data set,
-    without making their data sets: a cell's key hashes its data set's content, unknown
-    until the data set is made, so each cell's key is the one it has with the content
-    hash of a stored row of its run's data set (the row's ``run_dataset``) where that key
-    is a stored row's — the cell is finished, as run will find it unless that data set's
-    content changed since (then run computes it again) — and empty otherwise (not yet
-    computed)."""
-    hashes: dict[str, set[str]] = {}
-    for r in pilot:
-        if r.get("run_dataset") and r.get("dataset_hash"):
-            hashes.setdefault(r["run_dataset"], set()).add(r["dataset_hash"])
-    stored = {r["key"] for r in pilot}
-    out = []
-    for seed, spec in list(specs.items())[1:]:
-        for cell in first.cells:
-            keys = {digest(other_run_identity(first.identities[cell.key], seed, spec, h))
-                    for h in sorted(hashes.get(spec, ()))}
-            out.append(dataclasses.replace(cell, seed=int(seed),
-                                           key=min(keys & stored, default="")))
-    return out
-
-
-def _other_runs_bytes(first: Plan, others: list[Cell], pilot: list[dict[str, Any]],
-                      cache: EncodingCache) -> int:
-    """The bytes of new encodings the runs after ``first`` add where every run draws its
-    own data set (each run's entries are its own): each run's entries sized as the first
-    run's (its data set is not made here), less those the cache holds for a run's data
-    set a stored row names."""
-    hashes: dict[int, set[str]] = {}
-    for r in pilot:
-        if r.get("run_dataset") and r.get("dataset_hash"):
-            hashes.setdefault(int(r["seed"]), set()).add(r["dataset_hash"])
-    pending: dict[int, dict[tuple[str, str], None]] = {}
-    for c in others:
-        if not c.key:  # not yet computed: its run needs the entry
-            pending.setdefault(c.seed, {})[(c.encoder, first.input_kind[c.classifier])] = None
-    precision = first.scene.resolved_precision()
-    total = 0
-    for seed, pairs in pending.items():
-        missing = [(enc, kind) for enc, kind in pairs
-                   if not any(cache.has(cache.key(h, imaging_identity(first.scene, kind), enc,
-                                                  first.encoder_versions[enc], precision))
-                              for h in hashes.get(seed, ()))]
-        total += entries_bytes(first, missing)
-    return total
-
-
-def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]:
+def _cells(cells: Sequence[PlannedCell], pilot: list[dict[str, Any]]) -> list[CellForecast]:
     """Each planned cell's time: 0 when finished, the pilot's median training and
     inference time of its encoder × classifier (whose encoding the pilot has cached),
     else unknown."""
@@ -379,7 +197,7 @@ def _cells(cells: list[Cell], pilot: list[dict[str, Any]]) -> list[CellForecast]
     return out
 
 
-def _family(cells: list[Cell], primary: tuple[str, ...] | list[str],
+def _family(cells: Sequence[PlannedCell], primary: tuple[str, ...] | list[str],
             pilot: list[dict[str, Any]]
             ) -> list[tuple[str, Comparison | None, tuple[int, int]]]:
     """Each comparison of the primary family, by the one function the run decides it

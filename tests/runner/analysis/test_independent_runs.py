@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tactbench.runner import run
+from tactbench.runner import forecast, run
 from tactbench.runner.analysis.comparisons import comparisons
-from tactbench.runner.analysis.forecast import forecast
 from tactbench.runner.execution.planning import plan, plan_runs
 from tactbench.runner.analysis.power import detectable_effect, effect_floor, runs_for_power
 from tactbench.runner.execution.results import INDEPENDENT_RUNS
