@@ -93,8 +93,9 @@ def look_finished(look, out):
     """A look of ``run --until answered`` ended and wrote its report: ``look`` is its
     record (a dict of plain values, :func:`~tactbench.runner.analysis.records.look_record`:
     ``look``, ``runs``, ``answered``, ``stopped``, ``decisions``, ``rows`` as stored and
-    ``comparisons``, each a :func:`~tactbench.runner.comparison_record`), ``out`` the run
-    folder."""
+    ``comparisons``, each a :func:`~tactbench.runner.comparison_record`, and ``record``,
+    the run's resolved record, :meth:`~tactbench.runner.RunRecord.to_json`), ``out`` the
+    run folder."""
 
 
 @hookspec
@@ -104,6 +105,7 @@ def run_finished(summary, out):
     ``summary`` is its record (a dict of plain values,
     :func:`~tactbench.runner.analysis.records.run_summary`: ``rows`` as stored,
     ``comparisons``, the keys ``ok`` and ``failed``, ``computed``, ``skipped``,
-    ``seconds``, and ``until``: the last look of ``--until answered``, None for a plain
-    run), ``out`` the run folder. The place to close what ``cell_finished`` opened (a
+    ``seconds``, ``until``: the last look of ``--until answered``, None for a plain
+    run, and ``record``: the run's resolved record, as ``look_finished``'s), ``out`` the
+    run folder. The place to close what ``cell_finished`` opened (a
     tracking run)."""

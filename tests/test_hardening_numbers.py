@@ -188,7 +188,7 @@ def test_readings_near_the_float32_limit_are_normalised_without_nan(tmp_path):
                                   '{"seeds": [%s]}' % ("1" * 400),
                                   '{"threads": %s}' % ("1" * 400)])
 def test_a_json_scene_number_of_400_digits_is_one_line(tmp_path, body):
-    from tactbench.runner.execution.scene import load_scene_file
+    from tactbench.runner.execution.scene_files import load_scene_file
 
     path = tmp_path / "scene.json"
     path.write_text(body)

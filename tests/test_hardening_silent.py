@@ -114,7 +114,7 @@ def test_a_recording_listed_twice_with_different_users_is_refused(tmp_path):
 
 def test_a_scene_files_paths_are_taken_from_its_folder_and_expand_the_home(tmp_path,
                                                                           monkeypatch):
-    from tactbench.runner.execution.scene import load_scene_file
+    from tactbench.runner.execution.scene_files import load_scene_file
 
     (tmp_path / "study").mkdir()
     scene = tmp_path / "study" / "scene.toml"

@@ -71,7 +71,7 @@ def test_the_shared_check_names_each_kind_before_opening(tmp_path):
 
 
 def test_a_scene_file_that_is_a_fifo_or_a_device_is_one_line(tmp_path):
-    from tactbench.runner.execution.scene import load_scene_file
+    from tactbench.runner.execution.scene_files import load_scene_file
 
     for kind, path in specials(tmp_path, "scene.toml").items():
         with deadline(), pytest.raises(TactbenchError, match=WORDS[kind]):

@@ -34,7 +34,7 @@ import shutil
 import tempfile
 from dataclasses import asdict, fields
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import click
 
@@ -43,8 +43,9 @@ from tactbench.datasets.loading import is_path_spec
 from tactbench.errors import InputError
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
-from tactbench.runner import (IDENTITY_DEFAULTS, OK, PREDICTION_LISTS, ResultStore, Scene, digest,
-                              identity_differences, ok_rows, row_identity, row_scene, run)
+from tactbench.runner import (IDENTITY_DEFAULTS, OK, PREDICTION_LISTS, UNTIL_ONLY, ResultStore,
+                              Scene, digest, folder_record, identity_differences, ok_rows,
+                              read_record, row_identity, row_scene, run)
 
 #: The stored scene's fields a reproduction sets itself: one plain run of the chosen
 #: cells, in its own folder, with no question asked of them.
@@ -126,7 +127,8 @@ def scenes_for(rows: Sequence[dict[str, Any]], out: Path,
 def _scene(rows: Sequence[dict[str, Any]], out: Path, workers: int | None) -> Scene:
     stored = rows[0]["run"]["scene"]
     known = {f.name for f in fields(Scene)}
-    values = {k: v for k, v in stored.items() if k in known}
+    # a plain run: the fields that mean something only with --until are left out
+    values = {k: v for k, v in stored.items() if k in known and k not in UNTIL_ONLY}
     init = rows[0].get("init_seed")
     # the threads the row trained with (a scene of before kept None: "this machine's")
     values.update(PLAIN_RUN, out=str(out), workers=workers,
@@ -169,8 +171,11 @@ def _distinct(values: Iterable[Any]) -> list[Any]:
     return list(dict.fromkeys(values))
 
 
-def compare(old: dict[str, Any], new: dict[str, Any] | None) -> dict[str, Any]:
-    """What training ``old``'s cell again gave: its outcome and the numbers behind it."""
+def compare(old: dict[str, Any], new: dict[str, Any] | None,
+            defaults: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """What training ``old``'s cell again gave: its outcome and the numbers behind it
+    (``defaults``: what the folder's run record leaves out of an identity at its
+    default, for :func:`identity_difference`)."""
     out: dict[str, Any] = {"key": old["key"], "encoder": old["encoder"],
                            "classifier": old["classifier"], "L": old["L"],
                            "seed": old["seed"], "accuracy_before": old["accuracy"]}
@@ -189,7 +194,7 @@ def compare(old: dict[str, Any], new: dict[str, Any] | None) -> dict[str, Any]:
                predictions_same=same)
     if new["key"] != old["key"]:
         return {**out, "outcome": OTHER_IDENTITY,
-                "identity_differs": identity_difference(old, new)}
+                "identity_differs": identity_difference(old, new, defaults)}
     return {**out, "outcome": IDENTICAL if same_predictions(before, now) else DIFFERS}
 
 
@@ -205,12 +210,16 @@ def same_predictions(before: dict[str, Any], now: dict[str, Any]) -> bool:
                if k in before and k in now)
 
 
-def identity_difference(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+def identity_difference(old: dict[str, Any], new: dict[str, Any],
+                        defaults: Mapping[str, Any] | None = None) -> list[str]:
     """``field: THERE there, HERE here`` for each identity field the two rows differ in
     (:func:`~tactbench.runner.execution.results.identity_differences`; a value at its
-    default, 1 thread or the pinned AVX2 kernels, says so)."""
+    default, 1 thread or the pinned AVX2 kernels, says so: ``defaults``, the folder's
+    run record's, else those of this version)."""
+    defaults = IDENTITY_DEFAULTS if defaults is None else defaults
+
     def shown(field: str, value: Any) -> str:
-        default = field in IDENTITY_DEFAULTS and value == IDENTITY_DEFAULTS[field]
+        default = field in defaults and value == defaults[field]
         return f"{value} (the default)" if default and value is not None else f"{value}"
 
     return [f"{field}: {shown(field, there)} there, {shown(field, here)} here"
@@ -224,7 +233,9 @@ def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False
     removed after) and return one :func:`compare` result per cell."""
     if out:  # new, empty or an earlier reproduction's; never in FOLDER or the cache
         check_output_folder(out, inputs=[folder], ours=_is_part)
-    rows = choose(stored_rows(folder), keys, everything)
+    stored = stored_rows(folder)
+    rows = choose(stored, keys, everything)
+    there = folder_record(folder, stored)  # what the folder's run resolved, stored with it
     # a check of stored cells, not results: no plugin's event hook (an MLflow export)
     # hears of them, nor of the temporary folder they are trained in
     registry = (registry or load_registry()).without_events()
@@ -235,9 +246,12 @@ def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False
             run(scene, registry=registry, progress=progress, plots=False)
             store = ResultStore(scene.out)
             made = store.stored_rows()
+            here = read_record(scene.out)  # what this machine resolved for the same cells
             for row in part:
                 new = store.get(row["key"]) or _same_cell(row, made)
-                results.append(compare(row, new))
+                results.append({**compare(row, new, there.identity_defaults),
+                                "compute_there": asdict(there.compute),
+                                "compute_here": asdict(here.compute)})
         return results
     finally:
         if not out:

@@ -16,8 +16,6 @@ from tactbench.runner import (DEFAULT_PRIMARY, EXECUTORS, FIRST_LOOK, INPUT_KIND
                               run_until, show_duration)
 
 
-#: Scene fields that only mean something with ``--until``.
-UNTIL_ONLY = ("max_runs", "look_every", "budget")
 
 
 class SceneOption(click.Option):
@@ -130,6 +128,11 @@ SCENE_OPTIONS = [
                  help="Where cells run: this machine, or a dask cluster."),
     scene_option("--workers", field="workers", type=int, none="cores / --threads, GPUs, memory",
                  help="Cells at once (processes)."),
+    scene_option("--memory", field="memory", metavar="SIZE", none="this machine's",
+                 help="The most memory the run takes in all, its own process and its "
+                      "workers (4GiB, 500MiB): the worker count fits each worker's "
+                      "forecast peak in it, and a run whose forecast is above it is "
+                      "refused before any training."),
     scene_option("--scheduler", field="scheduler", none="a local cluster",
                  help="dask scheduler address tcp://HOST:PORT (with --executor dask)."),
     scene_option("--out", field="out", help="Output folder."),
@@ -199,11 +202,6 @@ def scene_from(ctx: click.Context, scene_file: str | None, options: dict[str, An
                 labels[param.field] = max(param.opts, key=len)
     if fields.get("scheduler") and fields.get("executor", "local") != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
-    if not fields.get("until"):  # options that only mean something with another
-        lone = [labels.get(f, f"scene field '{f}'") for f in UNTIL_ONLY if f in fields]
-        if lone:
-            raise click.UsageError(f"{', '.join(lone)} only mean(s) something with "
-                                   f"--until answered")
     return Scene.of(fields, labels=labels)
 
 

@@ -117,9 +117,12 @@ from tactbench.runner.execution.results import (FAILED, IDENTITY_DEFAULTS, OK, R
                                                 failed_rows, identity_differences, ok_rows,
                                                 row_scene, row_status)
 from tactbench.runner.execution.scene import (DEFAULT_PRIMARY, EXECUTORS, FIRST_LOOK,
-                                              INPUT_KINDS, UNTIL, Scene, load_scene_file,
+                                              INPUT_KINDS, UNTIL, UNTIL_ONLY, Scene,
                                               parse_duration, parse_lengths, parse_seeds,
                                               show_duration)
+from tactbench.runner.execution.record import (RECORD_FILE, Compute, RunRecord, folder_record,
+                                               read_record)
+from tactbench.runner.execution.scene_files import load_scene_file
 from tactbench.runner.execution.workers import Workers, run_workers
 from tactbench.runner.forecasting import forecast
 from tactbench.runner.orchestrate import make_report, render_folder, run, run_until
@@ -134,12 +137,14 @@ from tactbench.runner.presentation.writers import Report, flat_rows, render, wri
 
 __all__ = [
     # a run: its scene, its plan, running it, its report again
-    "Scene", "EXECUTORS", "UNTIL", "FIRST_LOOK", "INPUT_KINDS", "DEFAULT_PRIMARY",
+    "Scene", "EXECUTORS", "UNTIL", "UNTIL_ONLY", "FIRST_LOOK", "INPUT_KINDS", "DEFAULT_PRIMARY",
     "load_scene_file", "parse_lengths", "parse_seeds", "parse_duration", "show_duration",
     "plan", "Plan", "Cell", "ROW_SCHEMA", "forecast", "points",
     "EncodingCache", "KEEP_RECENT_S", "ensure_encodings", "load_encoding",
     "CellJob", "make_jobs", "run_cell", "failed_row", "PREDICTION_LISTS",
     "run", "run_until", "render_folder", "Report", "git_revision", "Workers", "run_workers",
+    # the resolved record of a run, stored with it (OUT/run-record.json)
+    "RunRecord", "Compute", "RECORD_FILE", "read_record", "folder_record",
     # a folder's rows analysed (decided), then rendered (said): make_report does both
     "Analysis", "analyse", "render", "make_report",
     # the rows: the store, a row's status, identity and learning

@@ -54,7 +54,8 @@ from tactbench.runner.execution.planning import (
 )
 from tactbench.runner.execution.results import ResultStore, ok_rows
 from tactbench.runner.execution.scene import Scene
-from tactbench.runner.execution.workers import run_workers
+from tactbench.runner.analysis.family import family_names, grid_cells
+from tactbench.runner.execution.record import resolve_compute, resolve_record
 
 
 def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float = 0.05,
@@ -66,6 +67,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     split's sizes and every check come from it): the other runs' cells are derived from
     the first's (:func:`_other_runs`)."""
     registry = registry or load_registry()
+    asked = scene  # the run's own scene, whose record the plan makes as the run would
+    compute = resolve_compute(asked)
     if scene.until:
         scene = dataclasses.replace(scene, seeds=list(scene.design.seed_order))
     made: list[int] = []  # the dataset was made while planning: its load is not timed
@@ -76,7 +79,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
             progress(done, total)
 
     t0 = time.perf_counter()
-    [p] = plan_runs(scene, registry, progress=making, first_only=True)
+    [p] = plan_runs(scene, registry, progress=making, first_only=True, compute=compute)
     planned_s = time.perf_counter() - t0
     pilot = ok_rows(ResultStore(scene.out).stored_rows())  # none: no folder yet
     runs = len(scene.seeds)
@@ -87,7 +90,8 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     independent = p.run_dataset is not None  # each run its own data set: no overlap
     design = "independent" if independent else split_design(p.split, splits)
     # what run refuses, refused here in its words (its power is still the corrected t's)
-    choose_paired_test(scene.paired_test, registry).check(design, sequential=bool(scene.until))
+    paired = choose_paired_test(scene.paired_test, registry)
+    paired.check(design, sequential=bool(scene.until))
     ratio = 0.0 if design in ("independent", "fixed") else \
         seed_mean_ratio(len(splits)) if design == "kfold" else n_test / n_train
     others = _other_runs(p, run_datasets(scene, registry), pilot) if independent else []
@@ -95,16 +99,17 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
     ResultStore(scene.out).check_grid([c.key for c in p.cells + others if c.key],
                                       p.identities)
     cells = _cells(p.cells + others, pilot)
-    looks = list(scene.design.looks) or None
+    record = _record(asked, p, pilot, paired.name)  # what every number below reads
+    looks = list(record.looks) or None
     cache = EncodingCache()
     missing = missing_entries(p, p.cells + others, cache)
-    workers = run_workers(scene, pilot, plan=p, parent_peak_mb=memory_mb()[1])
+    workers = record.workers
     wall = _walls(p, p.cells + others, cells, looks, missing, workers.count,
                   load_s=None if made and p.run_dataset is None else planned_s)
     known = [c.seconds for c in cells if c.seconds is not None]
     distinct = (_distinct_splits(p, data, scene.seeds) if design == "resampled"
                 and scene.split != "paper" else runs)
-    family = _family(p.cells, scene.design.primary, pilot)
+    family = _family(p.cells, record.primary, pilot)
     level = alpha / max(1, len(family))  # Holm's first step over the family the run makes
     usable = min(runs, distinct)  # repeated splits add no evidence: the looks stop there
     capped = None if not looks else [x for x in looks if x < usable] + [usable]
@@ -131,7 +136,7 @@ def forecast(scene: Scene, registry=None, *, effect: float = 5.0, alpha: float =
         worker_peak_mb=workers.worker_peak_mb, worker_peak_source=workers.peak_source,
         run_peak_mb=workers.run_peak_mb, memory_mb=workers.memory_mb,
         cache_bytes=entries_bytes(p, missing) + _other_runs_bytes(p, others, pilot, cache),
-        cache_free=_free_bytes(cache.root))
+        cache_free=_free_bytes(cache.root), record=record.to_json())
 
 
 def _distinct_splits(p: Plan, data: SplitData, seeds: list[int]) -> int:
@@ -150,6 +155,15 @@ def _free_bytes(root: Path) -> int | None:
         return int(shutil.disk_usage(root).free)
     except OSError:
         return None
+
+
+def _record(scene: Scene, p: Plan, pilot: list[dict[str, Any]], paired_test: str):
+    """The record a run of ``scene`` will make (:func:`~tactbench.runner.execution.record.
+    resolve_record`, as the run's first batch makes it): its design, each primary's
+    family, the computation ``p`` was planned with and the workers over the ``pilot``."""
+    return resolve_record(scene, plan=p, rows=pilot, parent_peak_mb=memory_mb()[1],
+                          paired_test=paired_test, compute=p.compute,
+                          families=family_names(grid_cells(p.cells), scene.design.primary))
 
 
 def _walls(p: Plan, planned: list[Cell], cells: list[CellForecast],

@@ -34,14 +34,16 @@ from tactbench.integrity import path_kind
 from tactbench.machine import git_revision
 from tactbench.paths import discard
 from tactbench.plugins import load_registry
-from tactbench.runner.analysis.answering import History, first_look_to_run
+from tactbench.runner.analysis.answering import History, budget_stop, first_look_to_run
+from tactbench.runner.analysis.family import family_names, grid_cells
 from tactbench.runner.analysis.paired_tests import choose_paired_test
 from tactbench.runner.analysis.records import look_record, run_summary
 from tactbench.runner.analysis.report import Analysis, analyse
 from tactbench.runner.execution.cache import (EncodingCache, check_room_runs,
                                               ensure_encodings)
 from tactbench.runner.execution.cell import make_jobs, model_problem
-from tactbench.runner.execution.workers import run_workers
+from tactbench.runner.execution.record import (RunRecord, folder_record, resolve_compute,
+                                               resolve_record, write_record)
 from tactbench.runner.execution.estimate import packed
 from tactbench.runner.execution.executors import execute
 from tactbench.runner.execution.planning import (
@@ -60,7 +62,7 @@ from tactbench.runner.execution.results import (
     latest_scene,
     ok_rows,
 )
-from tactbench.runner.execution.scene import Scene, design_of
+from tactbench.runner.execution.scene import Scene
 from tactbench.runner.execution.questions import check_contrasts
 from tactbench.runner.execution.system import MemoryTracker
 from tactbench.runner.presentation.frames import EXTRA as EXPORT_EXTRA, refresh_parquet
@@ -113,39 +115,46 @@ def run(scene: Scene, *, registry=None, progress: bool = True,
     (:func:`~tactbench.runner.analysis.records.run_summary`; :mod:`tactbench.hookspecs`).
     """
     registry = registry or load_registry()
-    report = _batch(scene, registry=registry, progress=progress, cache=cache, plots=plots,
-                    on_row=on_row)
-    _finished(registry, report, scene.out)
+    report, record = _batch(scene, registry=registry, progress=progress, cache=cache,
+                            plots=plots, on_row=on_row)
+    _finished(registry, report, record, scene.out)
     return report
 
 
-def _finished(registry, report: Report, out: str | Path) -> None:
+def _finished(registry, report: Report, record: RunRecord, out: str | Path) -> None:
     """A run ended (a plain one, or every look of :func:`run_until`): each plugin's
     ``run_finished`` hook gets its summary, and the hooks are waited for."""
     analysis = report.analysis
     registry.notify("run_finished", out=Path(out), summary=run_summary(
         analysis.rows, analysis.comparisons, computed=report.computed,
         skipped=report.skipped, seconds=report.seconds, looks=analysis.looks,
-        budget_stop=report.budget_stop))
+        budget_stop=analysis.budget_stop, record=record.to_json()))
     registry.settle()  # the hooks' calls, each within its bound
 
 
 def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
            on_row: Callable[[dict[str, Any]], None] | None,
-           cache: EncodingCache | None = None, resume: History | None = None) -> Report:
-    """:func:`run` but its ``run_finished`` event: one look's batch of :func:`run_until`
-    (``resume``: the ``history`` of the run's previous look, whose looks the analysis does
-    not compute again)."""
+           cache: EncodingCache | None = None, resume: History | None = None,
+           record: RunRecord | None = None, seeds: Sequence[int] | None = None,
+           ) -> tuple[Report, RunRecord]:
+    """:func:`run` but its ``run_finished`` event, and its record: one look's batch of
+    :func:`run_until` (``seeds``: the look's; ``resume``: the ``history`` of the run's
+    previous look, whose looks the analysis does not compute again; ``record``: the
+    run's, made by its first batch and read by every later one, never made again)."""
     start = time.perf_counter()
     hook_timeout()  # a bad TACTBENCH_HOOK_TIMEOUT: one line before any work
     cache = cache or EncodingCache()  # an unusable cache folder: before any work
     memory = MemoryTracker()  # which of this process's steps sets its peak memory
+    whole, scene = scene, (dataclasses.replace(scene, seeds=list(seeds))
+                           if seeds is not None else scene)
+    compute = record.compute if record is not None else resolve_compute(whole)
     # the lease: no prune or clear removes an entry this run uses while it lives
     with cache.lease(), Progress(enabled=progress) as bars:
         task = bars.add(f"check grid, load dataset {scene.dataset}", total=1)
         made = bars.callback(f"make dataset {scene.dataset}")
-        plans = plan_runs(scene, registry, progress=made)
-        paired = choose_paired_test(scene.paired_test, plans[0].registry)
+        plans = plan_runs(scene, registry, progress=made, compute=compute)
+        paired = choose_paired_test(record.paired_test if record is not None
+                                    else whole.paired_test, plans[0].registry)
         paired.check(planned_design(plans[0]), sequential=scene.until is not None)
         bars.update(task, 1)
         memory.step("plan (load the dataset)")
@@ -163,6 +172,12 @@ def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
                 jobs += make_jobs(p, todo, ensure_encodings(p, cache, todo, bars), models)
             pending += todo
         memory.step("encode")
+        if record is None:  # made once, before the first cell, and stored with the run
+            record = resolve_record(
+                whole, plan=plans[0], rows=store.stored_rows(quiet=True),
+                parent_peak_mb=memory.peak_mb, paired_test=paired.name, compute=compute,
+                families=family_names(grid_cells(plans[0].cells), whole.design.primary))
+            write_record(scene.out, record)
         run_meta = {"command": command_line(), "git": git_revision(),
                     "scene": asdict(scene),  # its relative paths are from cwd
                     "cwd": str(Path.cwd())}
@@ -176,16 +191,13 @@ def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
             if on_row is not None:
                 on_row(row)
 
-        if jobs:  # the worker count, decided once (cores, GPUs, memory: workers.py)
-            # the rows' measured peaks; a damaged row was named when the cells were planned
-            workers = run_workers(scene, store.stored_rows(quiet=True), plan=plans[0],
-                                  parent_peak_mb=memory.peak_mb)
-            execute(scene, jobs, finish, bars, memory, workers)
+        if jobs:  # on the workers the record decided (cores, GPUs, memory: workers.py)
+            execute(scene, jobs, finish, bars, memory, record.workers)
     claim.unlink(missing_ok=True)
     analysis = analyse(store.stored_rows(), contrasts=scene.contrasts or (),
                        margin=scene.margin,
                        users=known_users(p.dataset.users) if p.run_dataset is None else None,
-                       primary=scene.design.primary, sequential=scene.design,
+                       primary=record.primary, sequential=record.design,
                        resume=resume, paired_test=paired)
     report = render(analysis, rendered="at the end of the run, from the rows of cells/")
     write_report(scene.out, report, plots=plots)
@@ -193,7 +205,7 @@ def _batch(scene: Scene, *, registry, progress: bool, plots: bool,
     report.computed, report.skipped = len(pending), len(identities) - len(pending)
     report.seconds = time.perf_counter() - start
     plans[0].registry.settle()  # the cell hooks' calls, each within its bound
-    return report
+    return report, record
 
 
 def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
@@ -206,10 +218,10 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     trained, and results.json is not read.
 
     ``contrasts``, ``margin``, ``primary`` and ``paired_test`` (statistics options,
-    which change no cell)
-    default to those of the scene that computed the folder's latest row
-    (:func:`~tactbench.runner.execution.results.latest_scene`), so that a report rendered again
-    with no options is the run's own, but for the line saying when and by what. The
+    which change no cell) default to those of the run's record, stored with the folder
+    (:func:`~tactbench.runner.execution.record.folder_record`; a folder from before
+    records: the scene of its latest row), so that a report rendered again with no
+    options is the run's own, but for the line saying when and by what. The
     per-user results need the user of each recording: the dataset is loaded (through
     ``registry``) and used when its content hash is the rows'; otherwise they are left
     out and report.md says why. With ``write=False`` nothing is written: the report of
@@ -248,11 +260,12 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     if write and parquet:  # a missing library: one line before any file is written
         require("pandas", EXPORT_EXTRA)
         require("pyarrow", EXPORT_EXTRA)
-    scene = latest_scene(rows)
+    record = folder_record(out, rows)  # the run's record, stored with it (or its rows')
+    scene = record.scene
     contrasts = list(scene.get("contrasts") or ()) if contrasts is None else list(contrasts)
     margin = scene.get("margin") if margin is None else margin
-    paired = choose_paired_test(paired_test or scene.get("paired_test"), registry)
-    design = design_of(scene)
+    paired = choose_paired_test(paired_test or record.paired_test, registry)
+    design = record.design
     primary = list(design.primary) if primary is None else list(primary)
     check_contrasts([*contrasts, *primary], [{f: r[f] for f in ("encoder", "classifier", "L")}
                                              for r in rows])
@@ -376,34 +389,35 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     ``skipped`` and ``seconds`` are this call's, over all its looks; every plugin's
     ``run_finished`` hook is called once, after the last look (as by :func:`run`)."""
     registry = registry or load_registry()
-    design = scene.design  # the seed order, the looks and the budget: decided once
-    order, looks, budget = design.seed_order, design.looks, design.budget_seconds
+    design = scene.design  # the design the run's record holds (design_of, once)
     stored = {int(r["seed"]) for r in ResultStore(scene.out).stored_rows()}
     start = time.perf_counter()
-    report, computed = None, 0
-    for k in range(first_look_to_run(stored, order, looks), len(looks)):
+    report, record, computed = None, None, 0
+    for k in range(first_look_to_run(stored, design.seed_order, design.looks),
+                   len(design.looks)):
         t0 = time.perf_counter()
-        report = _batch(dataclasses.replace(scene, seeds=list(order[:looks[k]])),
-                        registry=registry, progress=progress, plots=plots, on_row=on_row,
-                        resume=report.analysis.history if report is not None else None)
+        report, record = _batch(
+            scene, seeds=design.seed_order[:design.looks[k]], record=record,
+            registry=registry, progress=progress, plots=plots, on_row=on_row,
+            resume=report.analysis.history if report is not None else None)
+        design = record.design  # from here on, every look reads the run's record
+        looks = design.looks
         analysis: Analysis = report.analysis  # the decisions: analysis's, not the report's
         computed += report.computed
+        if k + 1 < len(looks) and not (analysis.failed or analysis.answered):
+            # a look of stored cells took ~0 s: what the next one costs, from the rows
+            batch = max(time.perf_counter() - t0,
+                        next_batch_seconds(analysis.ok, looks[k + 1] - looks[k],
+                                           record.workers.count))
+            report.analysis = analysis = dataclasses.replace(
+                analysis, budget_stop=budget_stop(record.design,
+                                                  time.perf_counter() - start, batch))
         if on_look is not None:
             on_look(report)
         registry.notify("look_finished", out=Path(scene.out), look=look_record(
-            analysis.rows, analysis.comparisons, analysis.looks))
+            analysis.rows, analysis.comparisons, analysis.looks, record=record.to_json()))
         registry.settle()
-        if analysis.failed or analysis.answered:
-            break
-        elapsed = time.perf_counter() - start
-        batch = time.perf_counter() - t0
-        if k + 1 < len(looks):  # a look of stored cells took ~0 s: what the next costs
-            batch = max(batch, next_batch_seconds(analysis.ok, looks[k + 1] - looks[k],
-                                                  run_workers(scene, analysis.ok).count))
-        if budget is not None and k + 1 < len(looks) and elapsed + batch > budget:
-            report.budget_stop = (f"the budget of {design.budget}: {elapsed / 60:.1f} min "
-                                  f"spent, the next batch would take about "
-                                  f"{batch / 60:.1f} more")
+        if analysis.failed or analysis.answered or analysis.budget_stop:
             break
     # what this command did over all its looks, not its last look's batch alone: a
     # look's run counts the cells of the looks before it as already done
@@ -412,5 +426,5 @@ def run_until(scene, *, registry=None, progress: bool = True, plots: bool = True
     usage = [resource.getrusage(who) for who in (resource.RUSAGE_SELF,
                                                  resource.RUSAGE_CHILDREN)]
     report.cpu_seconds = sum(u.ru_utime + u.ru_stime for u in usage)
-    _finished(registry, report, scene.out)
+    _finished(registry, report, record, scene.out)
     return report

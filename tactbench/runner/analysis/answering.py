@@ -23,6 +23,7 @@ from tactbench.errors import InputError
 from tactbench.runner.analysis.comparisons import Comparison, comparisons
 from tactbench.runner.analysis.family import pair_name
 from tactbench.runner.execution.results import ok_rows
+from tactbench.runner.execution.scene import Design
 from tactbench.runner.analysis.sequential import FUTILE, FamilyState, Look, family_look
 from tactbench.runner.analysis.statistics import NOT_LEARNED
 
@@ -150,3 +151,13 @@ def beyond_looks(looks: Mapping[str, Any]) -> str:
             f"verdicts they give, use the first {used} (the {stored - used} beyond: a "
             "batch not yet complete, or runs made under an earlier stopping rule or by "
             "hand; a verdict a look reached does not change).")
+
+
+def budget_stop(design: Design, elapsed: float, next_batch: float) -> str | None:
+    """Why ``--budget`` ends a run after a look, or None where it goes on: the next
+    batch, taking about ``next_batch`` seconds, would end past the design's budget with
+    ``elapsed`` seconds spent (no batch is begun that the budget cannot hold)."""
+    if design.budget_seconds is None or elapsed + next_batch <= design.budget_seconds:
+        return None
+    return (f"the budget of {design.budget}: {elapsed / 60:.1f} min spent, the next batch "
+            f"would take about {next_batch / 60:.1f} more")

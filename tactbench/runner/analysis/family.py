@@ -8,7 +8,7 @@ question's first comparison, at α where the run used α/3)."""
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 from tactbench.runner.execution.questions import (FACTORS, contrast_pairs, parse_contrast,
                                                   spec_label, spec_labels)
@@ -66,3 +66,20 @@ def parse_contrast_factors(factor: str, label: Any) -> list[str]:
     if factor != "contrast":
         return [factor]
     return [item.partition("=")[0] for item in str(label).split(",")]
+
+
+def family_names(cells: Sequence[Mapping[str, Any]], primary: Sequence[str]
+                 ) -> dict[str, list[str]]:
+    """Each primary question of ``primary`` → the names (:func:`pair_name`) of the
+    comparisons it expands to over ``cells`` (:func:`primary_family`): what a run's
+    record says of its family before any cell is trained."""
+    return {text: [pair_name(a, b, pair_where(cells, i, factor, a))
+                   for i, _, factor, a, b, _ in primary_family(cells, [text])]
+            for text in primary}
+
+
+def grid_cells(cells: Iterable[Any]) -> list[dict[str, Any]]:
+    """The distinct cells of a plan (objects with ``encoder``, ``classifier``, ``L``) as
+    the mappings of :data:`FACTORS` the family is decided over, in the plan's order."""
+    return [dict(zip(FACTORS, key)) for key in
+            dict.fromkeys((c.encoder, c.classifier, c.L) for c in cells)]

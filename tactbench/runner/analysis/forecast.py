@@ -147,6 +147,7 @@ class Forecast:
     family: dict[str, Any] | None = None  # family_paths.family_forecast's, as a dict
     distinct_splits: int | None = None  # the distinct splits the planned seeds draw
     runs_asked: int = 0  # the runs (seeds) planned
+    record: dict[str, Any] | None = None  # the run's record, as the run will make it
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

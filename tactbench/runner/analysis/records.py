@@ -64,7 +64,8 @@ def _same(factor: str, value: Any, wanted: Any) -> bool:
 
 
 def look_record(rows: Sequence[dict[str, Any]], comparisons: Sequence[Comparison],
-                looks: Mapping[str, Any] | None) -> dict[str, Any]:
+                looks: Mapping[str, Any] | None, *,
+                record: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A look of ``run --until answered``, as ``look_finished`` receives it:
 
     ``look``
@@ -75,7 +76,11 @@ def look_record(rows: Sequence[dict[str, Any]], comparisons: Sequence[Comparison
     ``rows``
         every row of the folder as stored (results.json's ``rows[]``);
     ``comparisons``
-        every comparison after the look (:func:`comparison_record` each).
+        every comparison after the look (:func:`comparison_record` each);
+    ``record``
+        the run's resolved record
+        (:meth:`~tactbench.runner.execution.record.RunRecord.to_json`: design, families,
+        compute, workers, paired test), or None.
     """
     looks = dict(looks or {})
     made = looks.get("looks") or []
@@ -83,13 +88,15 @@ def look_record(rows: Sequence[dict[str, Any]], comparisons: Sequence[Comparison
             "answered": bool(looks.get("answered")), "stopped": looks.get("stopped"),
             "decisions": dict(looks.get("decisions") or {}),
             "rows": [dict(r) for r in rows],
-            "comparisons": [comparison_record(c, rows) for c in comparisons]}
+            "comparisons": [comparison_record(c, rows) for c in comparisons],
+            "record": None if record is None else dict(record)}
 
 
 def run_summary(rows: Sequence[dict[str, Any]], comparisons: Sequence[Comparison], *,
                 computed: int, skipped: int, seconds: float,
                 looks: Mapping[str, Any] | None = None,
-                budget_stop: str | None = None) -> dict[str, Any]:
+                budget_stop: str | None = None,
+                record: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """A run that ended (plain, or every look of ``--until answered``), as
     ``run_finished`` receives it:
 
@@ -104,16 +111,19 @@ def run_summary(rows: Sequence[dict[str, Any]], comparisons: Sequence[Comparison
     ``until``
         for ``--until answered`` its last look (:func:`look_record` without ``rows``
         and ``comparisons``) and ``budget_stop``, why ``--budget`` ended it (or None);
-        None for a plain run.
+        None for a plain run;
+    ``record``
+        the run's resolved record (as :func:`look_record`'s), or None.
     """
     summary = {"rows": [dict(r) for r in rows],
                "comparisons": [comparison_record(c, rows) for c in comparisons],
                "ok": [str(r["key"]) for r in ok_rows(rows)],
                "failed": [str(r["key"]) for r in failed_rows(rows)],
                "computed": int(computed), "skipped": int(skipped), "seconds": float(seconds),
-               "until": None}
+               "until": None, "record": None if record is None else dict(record)}
     if looks is not None:
         last = look_record((), (), looks)
         summary["until"] = {**{k: v for k, v in last.items()
-                               if k not in ("rows", "comparisons")}, "budget_stop": budget_stop}
+                               if k not in ("rows", "comparisons", "record")},
+                            "budget_stop": budget_stop}
     return summary

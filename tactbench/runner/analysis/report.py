@@ -45,6 +45,9 @@ class Analysis:
     runs: list[dict[str, Any]]
     looks: dict[str, Any] | None = None
     history: History | None = field(default=None, repr=False, compare=False)
+    #: why ``--budget`` ended a run ``--until answered`` after this look (None: it did not;
+    #: :func:`~tactbench.runner.analysis.answering.budget_stop`)
+    budget_stop: str | None = None
 
     @property
     def ok(self) -> list[dict[str, Any]]:

@@ -36,7 +36,6 @@ from tactbench.encoders.parallel import default_workers
 from tactbench.machine import usable_cores
 from tactbench.runner.execution.cache import EncodingCache, entry_key
 from tactbench.runner.execution.planning import Cell, Plan
-from tactbench.runner.execution.workers import run_workers
 
 #: Recordings imaged and encoded to time the encoding.
 SAMPLE_RECORDINGS = 8
@@ -71,15 +70,15 @@ class RunEstimate:
 
 def estimate_run(p: Plan, pending: Sequence[Cell], missing: Sequence[tuple[str, str]], *,
                  known: dict[str, float] | None = None,
-                 memo: dict[Any, Any] | None = None, workers: int | None = None,
+                 memo: dict[Any, Any] | None = None, workers: int,
                  ) -> RunEstimate:
     """The forecast of running ``pending`` cells of ``p`` after encoding the ``missing``
     (encoder, input kind) entries; ``known`` (cell key → seconds, from a pilot) is taken
     as given for those cells. ``memo`` keeps what was measured for the next call (the
     next look's batch of the same run); its ``"load"``, when given, is the seconds the
     run's planning takes (the dataset loaded and hashed), else timed here. ``workers``:
-    the run's worker count (:func:`~tactbench.runner.execution.workers.run_workers`; the
-    plan's alone where None)."""
+    the run's worker count (its record's, decided once by
+    :func:`~tactbench.runner.execution.workers.run_workers`)."""
     memo = {} if memo is None else memo
     if "load" not in memo:  # the caller did not time the plan's own load: time one
         said = logging.getLogger("tactbench.datasets")  # planning said its notes once
@@ -105,8 +104,7 @@ def estimate_run(p: Plan, pending: Sequence[Cell], missing: Sequence[tuple[str, 
     overhead = memo["load"] + REPORT_S
     # the encoding is timed only when every cell's time is known (else no total is said)
     encode = encode_seconds(p, missing) if None not in cells.values() else 0.0
-    count = run_workers(p.scene, plan=p).count if workers is None else workers
-    workers = max(1, min(count, len(pending)))
+    workers = max(1, min(workers, len(pending)))
     if workers > 1 or p.scene.executor != "local":
         overhead += WORKER_START_S
     times = [t for t in cells.values() if t is not None]

@@ -38,7 +38,7 @@ from tactbench.runner.execution.devices import own_device, start_owning
 from tactbench.runner.execution.questions import spec_labels
 from tactbench.runner.execution.system import (BEFORE, MemoryTracker, main_reimport_problem,
                                                start_worker, stop_workers)
-from tactbench.runner.execution.workers import Workers, run_workers
+from tactbench.runner.execution.workers import Workers
 
 if TYPE_CHECKING:
     from tactbench.runner.execution.scene import Scene
@@ -50,11 +50,11 @@ log = logging.getLogger("tactbench.runner.execution.executors")
 
 
 def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress",
-            memory: "MemoryTracker | None" = None, workers: "Workers | None" = None) -> None:
+            memory: "MemoryTracker | None", workers: "Workers") -> None:
     """Run ``jobs`` on the scene's executor, with an overall bar in ``bars``, on
-    ``workers`` (:func:`~tactbench.runner.execution.workers.run_workers`, the run's, made
-    here from the scene alone where None); ``memory`` has the run's steps so far in this
-    process (see :func:`run_serial`)."""
+    ``workers`` (the run's record's, decided once by
+    :func:`~tactbench.runner.execution.workers.run_workers`); ``memory`` has the run's
+    steps so far in this process (see :func:`run_serial`)."""
     overall = bars.add("cells", total=len(jobs))
     done = 0
 
@@ -64,7 +64,7 @@ def execute(scene: "Scene", jobs: list[CellJob], finish: Finish, bars: "Progress
         done += 1
         bars.update(overall, done)
 
-    decided = workers or run_workers(scene)
+    decided = workers
     workers, devices = decided.count, decided.devices
     problem = main_reimport_problem()  # before the bootstrapping of a spawned worker
     if scene.executor == "dask":

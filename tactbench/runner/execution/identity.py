@@ -65,13 +65,15 @@ def with_defaults(identity: Mapping[str, Any], field: str) -> Any:
     return identity.get(field, IDENTITY_DEFAULTS.get(field))
 
 
-def compute_identity(threads: int, device: str = DEFAULT_DEVICE) -> dict[str, Any]:
+def compute_identity(threads: int, device: str = DEFAULT_DEVICE, *,
+                     kernels: str | None = None) -> dict[str, Any]:
     """What the computation adds to a cell's identity: the torch threads, the CPU kernels
-    (:func:`~tactbench.kernels.kernels_identity`) and the device kind (``cpu``, ``cuda``:
-    :func:`kind_of`), each only where it is not
+    (``kernels``, a run's resolved ones; None: :func:`~tactbench.kernels.kernels_identity`)
+    and the device kind (``cpu``, ``cuda``: :func:`kind_of`), each only where it is not
     the default; all three change the numbers a cell gives (docs/reliability.md,
     "Numbers across machines")."""
-    return without_defaults({"threads": int(threads), "cpu_kernels": kernels_identity(),
+    return without_defaults({"threads": int(threads),
+                             "cpu_kernels": kernels_identity() if kernels is None else kernels,
                              "device": str(device)})
 
 

@@ -34,13 +34,11 @@ from tactbench.data.splits import SplitData, build_split, draw_splits, split_spe
 from tactbench.datasets.loading import check_informative, is_path_spec, load_dataset
 from tactbench.encoders.encoding import CHUNK_BYTES
 from tactbench.errors import BudgetError, InputError
-from tactbench.kernels import pin_cpu_kernels
 from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.profiles import canonical_classifier
 from tactbench.budget import check_budget, memory_budget_bytes
 from tactbench.classifiers.batching import bank_budget_bytes, loader_workers
-from tactbench.runner.execution.devices import resolve_kind
 from tactbench.runner.execution.identity import (  # noqa: F401 — digest and the row's
     COMPUTE_FIELDS, IDENTITY_DEFAULTS, IDENTITY_FIELDS, INDEPENDENT_RUNS,  # identity: said
     compute_identity, digest, row_identity, row_keys, without_defaults)  # there, read here too
@@ -48,6 +46,7 @@ from tactbench.runner.execution.results import ROW_MAX_BYTES
 from tactbench.runner.execution.questions import check_contrasts, parse_contrast, short_name
 from tactbench.specs import format_spec, parse_spec
 from tactbench.runner.execution.scene import Scene
+from tactbench.runner.execution.record import Compute, resolve_compute
 from tactbench.runner.execution.results import run_folder_entries  # what a run writes, said there
 
 #: Part of every cell's identity: bump it when a row's meaning changes, so that old
@@ -96,6 +95,7 @@ class Plan:
     #: the sizes of a let-go data set (:class:`DatasetSizes`): what its cache entries take
     sizes: Any = None
     batch_bytes: int = 0  # the largest batch of windows a cell trains on (bytes)
+    compute: Any = None  # the run's Compute (record.py): threads, kernels, device
 
     def classifier_component(self, spec: str):
         """The registered :class:`~tactbench.plugins.Component` of a classifier spec."""
@@ -323,7 +323,7 @@ def _build_classifiers(scene: Scene, registry) -> tuple[dict[str, int | None], d
 def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: str,
                   encoder_version: str, classifier: str, L: int,
                   seed: int, init_seed: int | None = None, *, split: str,
-                  test_window: str, either_input: bool = False,
+                  test_window: str, compute: Mapping[str, Any], either_input: bool = False,
                   run_dataset: str | None = None) -> dict[str, Any]:
     """Everything that decides a cell's result; its :func:`digest` is the cell's key.
 
@@ -332,7 +332,8 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
     (``either_input``, when ``--input`` is given) enter only where asked for, so every
     other cell keeps its key. ``run_dataset``: the spec of the run's own data set, where
     every run draws one (:func:`plan_runs`); such a cell's identity records it and
-    :data:`INDEPENDENT_RUNS`, every other cell's neither."""
+    :data:`INDEPENDENT_RUNS`, every other cell's neither. ``compute``: what the run's
+    computation adds (:meth:`~tactbench.runner.execution.record.Compute.identity`)."""
     return without_defaults({  # each field left out at its default (identity.py)
         "schema": ROW_SCHEMA,
         "dataset": dataset.name,
@@ -351,7 +352,7 @@ def cell_identity(scene: Scene, dataset, dataset_hash: str, kind: str, encoder: 
         "init_seed": None if init_seed is None else int(init_seed),
         "input": kind if scene.input and either_input else None,
         "run_dataset": run_dataset, INDEPENDENT_RUNS: True if run_dataset else None,
-        **compute_identity(scene.threads, resolve_kind(scene.device, scene.executor)),
+        **compute,
     })
 
 
@@ -427,7 +428,7 @@ def _row_label(row: Mapping[str, Any]) -> str:
 
 
 def plan(scene: Scene, registry=None, *, progress=None,
-         run_dataset: str | None = None) -> Plan:
+         run_dataset: str | None = None, compute: Compute | None = None) -> Plan:
     """Check the whole grid before any work: names, options, L, layout needs, split.
 
     ``registry`` (default: every installed plugin) is the one the cells will use too.
@@ -436,9 +437,11 @@ def plan(scene: Scene, registry=None, *, progress=None,
     Raises a :class:`~tactbench.errors.TactbenchError` naming the problem; nothing is
     computed or written. ``run_dataset``: the data set of the scene's one run where each
     run draws its own (see :func:`plan_runs`), loaded in place of ``scene.dataset``.
+    ``compute``: the run's resolved computation (its record's); None: resolved here
+    (:func:`~tactbench.runner.execution.record.resolve_compute`), the kernels pinned.
     """
     registry = registry or load_registry()
-    pin_cpu_kernels()  # the kernels every cell of the plan computes with (in its identity)
+    compute = compute or resolve_compute(scene)  # in every cell's identity
     check_environment()  # what cells read later, before anything is written
     # The scene checked itself when it was made; here what needs the plugins and the disk.
     check_output_folder(scene.out, option="out folder", ours=run_folder_entries(scene.out))
@@ -477,6 +480,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
                     identity = cell_identity(scene, dataset, dataset_hash, kinds[clf], enc,
                                              versions[enc], clf, length, seed, init,
                                              split=designs[0], test_window=designs[1],
+                                             compute=compute.identity(),
                                              either_input=frame_ranks[clf] is None,
                                              run_dataset=run_dataset)
                     key = digest(identity)
@@ -489,7 +493,7 @@ def plan(scene: Scene, registry=None, *, progress=None,
                                  "L": c.L} for c in cells])
     return Plan(scene, dataset, dataset_hash, encoders, versions, classifier_specs,
                 kinds, cells, identities, registry, split, window, run_dataset,
-                batch_bytes=batch_bytes)
+                batch_bytes=batch_bytes, compute=compute)
 
 
 def run_datasets(scene: Scene, registry) -> dict[int, str] | None:
@@ -511,7 +515,7 @@ def run_datasets(scene: Scene, registry) -> dict[int, str] | None:
 
 
 def plan_runs(scene: Scene, registry=None, *, progress=None,
-              first_only: bool = False) -> list[Plan]:
+              first_only: bool = False, compute: Compute | None = None) -> list[Plan]:
     """The plans of ``scene``: one (:func:`plan`) when its runs share one data set; one per
     seed when every run draws its own (:func:`run_datasets`), each with that seed alone
     and that run's data set, so each is loaded, encoded and cached on its own. Cells of
@@ -520,21 +524,23 @@ def plan_runs(scene: Scene, registry=None, *, progress=None,
 
     ``first_only``: of runs that draw their own data sets, plan the first seed's alone,
     its data set kept (one data set made, not one per seed: ``tactbench plan``, which
-    derives the other runs' cells from it, :func:`other_run_identity`)."""
+    derives the other runs' cells from it, :func:`other_run_identity`). ``compute``: the
+    run's resolved computation, one for every plan (None: resolved once here)."""
     registry = registry or load_registry()
+    compute = compute or resolve_compute(scene)
     specs = run_datasets(scene, registry)
     if specs is None:
-        return [plan(scene, registry, progress=progress)]
+        return [plan(scene, registry, progress=progress, compute=compute)]
     if first_only:
         seed, spec = next(iter(specs.items()))
         return [plan(dataclasses.replace(scene, seeds=[seed]), registry, progress=progress,
-                     run_dataset=spec)]
+                     run_dataset=spec, compute=compute)]
     # each run's data set is let go once planned (a run's may be hundreds of MB): the
     # step that needs it loads it again from the simulator's cache (with_dataset)
     plans = []
     for seed, spec in specs.items():
         p = plan(dataclasses.replace(scene, seeds=[seed]), registry, progress=progress,
-                 run_dataset=spec)
+                 run_dataset=spec, compute=compute)
         plans.append(dataclasses.replace(p, dataset=None,
                                          sizes=DatasetSizes.of(p.dataset, p.scene)))
     return plans

@@ -481,7 +481,7 @@ def _spec_place(spec: str, listed: Sequence[str] | None) -> int:
 FIGURES = ("accuracy_vs_L", "cost_vs_accuracy", "per_class_vs_L", "per_user_accuracy")
 #: Every top-level file a run writes (``confusion_*.png`` besides, one per cell; the
 #: Parquet tables of ``tactbench report --parquet``, :mod:`tactbench.runner.presentation.frames`).
-OUT_FILES = ("results.json", "results.csv", "report.md", "cells.parquet",
+OUT_FILES = ("run-record.json", "results.json", "results.csv", "report.md", "cells.parquet",
              "comparisons.parquet", *(f"{name}.png" for name in FIGURES))
 #: The folders a run writes at the top of its out folder.
 OUT_FOLDERS = ("cells", "models")

@@ -1,10 +1,9 @@
 """The run configuration (a *scene*): what to compare, on what, and how to run it.
 
-A scene file is TOML (or JSON, for a ``.json`` file) with the same fields as
-:class:`Scene`; ``encoder``, ``classifier`` and ``seed`` are accepted for their plural
-fields, and a single value for a list field. The window length is ``L`` everywhere (the
-``-L`` option, this field, cell identities, model metadata); a name that changed
-(``lengths``) is refused with a line naming the new one.
+A scene file (:mod:`~tactbench.runner.execution.scene_files`) holds the same fields as
+:class:`Scene`. The window length is ``L`` everywhere (the ``-L`` option, this field,
+cell identities, model metadata); a name that changed (``lengths``) is refused with a
+line naming the new one.
 
 A :class:`Scene` is frozen and checks itself when it is made, once: every field's type
 and range (:func:`check_fields`: ``seeds = [1.5]``, ``encoders = [1]``, ``threads = 0``,
@@ -13,9 +12,9 @@ profile, precision, executor and input that exist, a grid of at most
 :data:`MAX_CELLS`, a split and test window written in their grammar). What needs the
 plugins or the disk (the split's and test window's names, the out folder, the dataset)
 is checked once by :func:`tactbench.runner.execution.planning.plan`; neither checks the other's
-part again. An unknown field or a field given twice in a scene file (``seed`` and
-``seeds``, or a JSON key twice) is refused in one line naming the file and the field;
-:meth:`Scene.of` names a refused field as its source does (``--threads``).
+part again. :meth:`Scene.of` names a refused field as its source does (``--threads``).
+A field that only means something with ``until`` (:data:`UNTIL_ONLY`) is refused at
+another value than its default without it: the scene's rule, whoever makes the scene.
 
 (The runner's scene is the run configuration; the synthetic flow scenes of
 :mod:`tactbench.encoders.evaluation.flowbench` are a different thing with their own name.)
@@ -23,27 +22,17 @@ part again. An unknown field or a field given twice in a scene file (``seed`` an
 
 from __future__ import annotations
 
-import difflib
 import itertools
-import json
 import math
 import numbers
-import os
 import re
 from dataclasses import MISSING, dataclass, field, fields
 from functools import cached_property
-from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
-
+from tactbench.budget import parse_bytes
 from tactbench.data.splits import parse_split
-from tactbench.datasets.loading import is_path_spec
-from tactbench.errors import InputError, MissingFileError, check_choice
-from tactbench.integrity import check_regular_file, read_regular_bytes
+from tactbench.errors import InputError, check_choice
 from tactbench.profiles import PRECISIONS, get_profile
 from tactbench.runner.execution.system import check_scheduler
 from tactbench.specs import parse_spec
@@ -90,6 +79,8 @@ class Scene:
     threads: int = 1
     executor: str = "local"
     workers: int | None = None  # cells at once; None: cores, GPUs, memory (workers.py)
+    # the run's memory in all, its process and its workers ("4GiB"); None: this machine's
+    memory: str | None = None
     scheduler: str | None = None
     out: str = "tactbench-out"
     rerun: bool = False
@@ -134,6 +125,21 @@ class Scene:
 
         return get_profile(self.profile).pixel_mm
 
+    def memory_mb(self) -> float | None:
+        """The run's memory in all (``memory``) in MiB; None: not capped (this machine's).
+        A size that is not one, or below 64 MiB, is one line naming the field."""
+        if self.memory is None:
+            return None
+        try:
+            nbytes = parse_bytes(self.memory, "memory")
+        except InputError:
+            raise FieldError("memory", f" must be a size such as 4GiB or 500MiB, got "
+                                       f"{_show(self.memory)}") from None
+        if nbytes < 64 << 20:
+            raise FieldError("memory", f" must be at least 64MiB (a worker's imports "
+                                       f"alone take more), got {self.memory!r}")
+        return nbytes / (1 << 20)
+
     def resolved_precision(self) -> str:
         """How cached encodings are stored: the scene's precision, else its profile's."""
         if self.precision is not None:
@@ -155,8 +161,6 @@ MAX_LENGTHS = 1000
 MAX_WORKERS = 1024
 #: The longest text field (a dataset path, a component spec): about a path's limit.
 MAX_TEXT = 4096
-#: A scene file is a few lines; a larger file is refused before it is read.
-MAX_SCENE_FILE_BYTES = 1 << 20
 
 #: "N" or "A-B" (both ends included), spaces allowed around the numbers; at most 20
 #: digits each, so that a number of thousands of digits is refused before ``int()``.
@@ -221,7 +225,8 @@ _KINDS: dict[str, str] = {
     "dataset": "text", "encoders": "texts", "classifiers": "texts", "L": "lengths",
     "seeds": "seeds", "split": "text", "test_window": "text", "test_per_class": "count", "profile": "text",
     "pixel_mm": "number?", "imaging": "text", "precision": "text?", "device": "text",
-    "threads": "workers", "executor": "text", "workers": "workers?", "scheduler": "text?",
+    "threads": "workers", "executor": "text", "workers": "workers?", "memory": "text?",
+    "scheduler": "text?",
     "out": "text", "rerun": "bool", "save_models": "bool",
     "margin": "number?", "contrasts": "texts?", "input": "text?", "init_seeds": "seeds?",
     "primary": "texts?", "until": "text?", "max_runs": "count", "look_every": "count",
@@ -403,14 +408,32 @@ def _stored_design_fields(record: Mapping[str, Any]) -> dict[str, Any]:
     try:
         v = {**defaults, **check_fields({name: record[name] for name in _DESIGN_FIELDS
                                          if name in record})}
-        if v["until"] is not None and not FIRST_LOOK <= v["max_runs"] <= MAX_LENGTHS:
-            raise InputError(f"scene field 'max_runs' must be from {FIRST_LOOK} to "
-                             f"{MAX_LENGTHS}, got {v['max_runs']}")
+        if v["until"] is not None:
+            check_max_runs(v["max_runs"], "scene field 'max_runs'")
         if v["budget"] is not None:
             parse_duration(v["budget"])
     except InputError as exc:
         raise InputError(f"the rows' stored scene: {exc}") from None
     return v
+
+
+def check_max_runs(max_runs: int, label: str) -> None:
+    """The one bound of ``max_runs`` (with ``until``): from the first look to the most
+    seeds a run takes; refused in one line naming it as ``label``."""
+    if not FIRST_LOOK <= max_runs <= MAX_LENGTHS:
+        raise InputError(f"{label} must be from {FIRST_LOOK} (the first look) to "
+                         f"{MAX_LENGTHS} (the most seeds a run takes), got {max_runs}")
+
+
+#: Scene fields that only mean something with ``until`` (refused at another value
+#: without it: :func:`_check_together`).
+UNTIL_ONLY = ("max_runs", "look_every", "budget")
+
+
+def _field_default(name: str) -> Any:
+    """The :class:`Scene` field ``name``'s default."""
+    f = next(f for f in fields(Scene) if f.name == name)
+    return f.default_factory() if f.default is MISSING else f.default
 
 
 def _check_together(scene: Scene) -> None:
@@ -429,16 +452,20 @@ def _check_together(scene: Scene) -> None:
     parse_spec(scene.test_window)
     if scene.until is not None:
         check_choice(scene.until, "--until", UNTIL)
-        if not FIRST_LOOK <= scene.max_runs <= MAX_LENGTHS:
-            raise InputError(f"--max-runs must be from {FIRST_LOOK} (the first look) to "
-                             f"{MAX_LENGTHS} (the most seeds a run takes), got "
-                             f"{scene.max_runs}")
-        if not primary_of(scene.primary, scene.encoders):
+        check_max_runs(scene.max_runs, "--max-runs")
+        if not scene.design.primary:  # the design, made once and kept (Scene.design)
             raise InputError("--until answered needs a primary comparison: give --primary "
                              f"A..B (the default, {DEFAULT_PRIMARY}, needs both "
                              "encoders)")
+    else:  # what only means something with --until, given without it
+        lone = [name for name in UNTIL_ONLY
+                if getattr(scene, name) != _field_default(name)]
+        if lone:
+            raise FieldError(lone[0], f" only means something with --until answered")
     if scene.budget is not None:
         parse_duration(scene.budget)
+    if scene.memory is not None:
+        scene.memory_mb()
     if scene.primary is not None:
         _check_distinct_questions(scene.primary)
     n_cells = (len(set(scene.encoders)) * len(set(scene.classifiers)) * len(set(scene.L))
@@ -503,90 +530,3 @@ def show_duration(seconds: float) -> str:
 _DURATION = re.compile(r"(?:(\d{1,5}(?:\.\d+)?)d)?"
                        r"(?:(\d{1,7}(?:\.\d+)?)h)?(?:(\d{1,7}(?:\.\d+)?)m)?"
                        r"(?:(\d{1,9}(?:\.\d+)?)s?)?")
-
-
-def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    seen: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in seen:
-            raise InputError(f"key '{key}' is given twice")
-        seen[key] = value
-    return seen
-
-
-def load_scene_file(path: str | Path) -> dict[str, Any]:
-    """Read a scene file (TOML, or JSON when it ends in ``.json``) into a dict of
-    :class:`Scene` fields, checked by the Scene they make (:meth:`Scene.of`, messages
-    naming the file and the field), normalised (lists, parsed lengths and seeds), paths
-    taken from the file's folder."""
-    path = Path(path)
-    raw = read_scene_file(path)
-    labels = {name: f"{path}: field '{name}'" for name in raw}
-    scene = Scene.of(raw, labels=labels)
-    return {name: getattr(scene, name) for name in raw}
-
-
-def read_scene_file(path: str | Path) -> dict[str, Any]:
-    """A scene file's fields as written (TOML, or JSON when it ends in ``.json``): field
-    names checked (an unknown or renamed field, one given twice), aliases taken
-    (``seed`` → ``seeds``), text paths taken from the file's folder; values unchecked
-    (the :class:`Scene` they make checks them)."""
-    path = Path(path)
-    is_json = path.suffix.lower() == ".json"
-    try:
-        size = check_regular_file(path, what="scene file")  # a FIFO, a dangling link
-        if size > MAX_SCENE_FILE_BYTES:
-            raise InputError(f"{path}: a scene file of {size} bytes; scene files are a few "
-                             f"lines (at most {MAX_SCENE_FILE_BYTES} bytes)")
-        text = read_regular_bytes(path, limit=MAX_SCENE_FILE_BYTES,  # never a FIFO
-                                  what="scene file").decode("utf-8")
-    except FileNotFoundError:
-        raise MissingFileError(f"scene file not found: {path}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text file (not UTF-8)") from None
-    except (OSError, ValueError) as exc:  # a folder, no permission, a NUL in the name
-        raise InputError(f"{path}: cannot read the scene file: "
-                         f"{getattr(exc, 'strerror', None) or exc}") from None
-    fmt = "JSON" if is_json else "TOML"
-    try:
-        if is_json:
-            data = json.loads(text, object_pairs_hook=_no_duplicate_keys)
-        else:
-            data = tomllib.loads(text)
-    except InputError as exc:
-        raise InputError(f"{path}: not valid {fmt}: {exc}") from None
-    except (ValueError, RecursionError) as exc:  # TOMLDecodeError, JSONDecodeError: ValueErrors
-        raise InputError(f"{path}: not valid {fmt}: {str(exc).splitlines()[0][:200]}") \
-            from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: a scene file holds a table of fields, got "
-                         f"{type(data).__name__}")
-    known = {f.name for f in fields(Scene)}
-    raw: dict[str, Any] = {}
-    given_as: dict[str, str] = {}
-    for key, value in data.items():
-        if key in RENAMED:
-            raise InputError(f"{path}: field '{key}' is now '{RENAMED[key]}'")
-        name = _ALIASES.get(key, key)
-        if name not in known:
-            close = difflib.get_close_matches(name, sorted(known), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise InputError(f"{path}: unknown field {_show(key)}{hint}")
-        if name in given_as:
-            raise InputError(f"{path}: field '{name}' is given twice (as "
-                             f"'{given_as[name]}' and '{key}')")
-        given_as[name] = key
-        raw[name] = value
-    return _relative_to(raw, path.parent)
-
-
-def _relative_to(values: dict[str, Any], folder: Path) -> dict[str, Any]:
-    """A scene file's paths (``out``, a ``dataset`` path) with ``~`` expanded and,
-    when relative, taken from the scene file's folder, not the working folder."""
-    for name in ("out", "dataset"):
-        text = values.get(name)
-        if isinstance(text, str) and text.strip() and "\x00" not in text \
-                and (name == "out" or is_path_spec(text)):
-            path = Path(os.path.expanduser(text))
-            values[name] = str(path if path.is_absolute() else folder / path)
-    return values

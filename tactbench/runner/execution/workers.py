@@ -7,7 +7,8 @@ count is the scene's ``workers`` where given, else the smallest of:
 - **cores**: this process's usable cores ÷ the torch threads of each cell (CPU cells);
 - **GPUs**: one worker per GPU it owns (``--device cuda``: every GPU here;
   ``cuda:N``: one; :func:`~tactbench.runner.execution.devices.owned_devices`);
-- **memory**: as many workers as fit in this machine's memory beside the run's own
+- **memory**: as many workers as fit in this machine's memory (or the run's
+  ``--memory``, all its processes together) beside the run's own
   process, each at its forecast peak (:func:`worker_peak`): the largest peak a stored
   cell of the grid measured (a pilot, an earlier look or run), else an estimate from the
   plan (a worker's imports, the training frame bank, a batch of windows): a floor, since
@@ -23,7 +24,7 @@ much memory each has: the count there is the scene's or the cores' rule, for est
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 from tactbench.classifiers.batching import bank_budget_bytes
@@ -56,6 +57,7 @@ class Workers:
     peak_source: str = "not forecast"
     parent_peak_mb: float = 0.0
     memory_mb: float | None = None
+    memory_source: str = "this machine"  # or "--memory": the run's cap
 
     @property
     def run_peak_mb(self) -> float | None:
@@ -132,11 +134,34 @@ def run_devices(scene: "Scene") -> list[str] | None:
 def run_workers(scene: "Scene", rows: Iterable[Mapping[str, Any]] = (), *,
                 plan: "Plan | None" = None, parent_peak_mb: float = 0.0) -> Workers:
     """The worker count of a run of ``scene`` on this machine (:func:`decide_workers`):
-    its cores, its GPUs, its memory and a worker's forecast peak (:func:`worker_peak`
-    from ``rows``, the stored rows of the run's folder, and the ``plan``) beside the run's
-    own process at ``parent_peak_mb``. The one place the count is worked out: the
-    executors, the looks, the estimate and ``tactbench plan`` read it."""
+    its cores, its GPUs, its memory (the machine's, or the scene's ``memory`` where it
+    is less) and a worker's forecast peak (:func:`worker_peak` from ``rows``, the stored
+    rows of the run's folder, and the ``plan``) beside the run's own process at
+    ``parent_peak_mb``. The one place the count is worked out: the run's record holds it
+    (:mod:`~tactbench.runner.execution.record`), and the executors, the looks, the
+    estimate and ``tactbench plan`` read it there. With ``memory`` a run whose forecast
+    peak, all processes together, is above it is refused in one line (:func:`check_room`)."""
     peak, source = worker_peak(rows, plan)
-    return decide_workers(scene, worker_peak_mb=peak, peak_source=source,
-                          parent_peak_mb=parent_peak_mb, memory_mb=memory_bytes() / MIB,
-                          devices=run_devices(scene))
+    machine, cap = memory_bytes() / MIB, scene.memory_mb()
+    workers = decide_workers(scene, worker_peak_mb=peak, peak_source=source,
+                             parent_peak_mb=parent_peak_mb,
+                             memory_mb=machine if cap is None else min(machine, cap),
+                             devices=run_devices(scene))
+    if cap is not None and cap < machine:
+        workers = replace(workers, memory_source="--memory")
+        check_room(workers, scene.memory)
+    return workers
+
+
+def check_room(workers: Workers, memory: str) -> None:
+    """Refuse a run whose forecast peak (all its processes) is above its ``--memory``,
+    in one line with the numbers and what lowers the peak."""
+    peak = workers.run_peak_mb
+    if peak is None or workers.memory_mb is None or peak <= workers.memory_mb:
+        return
+    raise InputError(
+        f"--memory {memory}: the run's forecast peak is {peak / 1024:.2f} GiB ({workers.count} "
+        f"worker(s) at {workers.worker_peak_mb / 1024:.2f} GiB, {workers.peak_source}, beside "
+        f"the run's own process at {workers.parent_peak_mb / 1024:.2f} GiB), above "
+        f"{workers.memory_mb / 1024:.2f} GiB; give more memory, or lower a cell's peak (a "
+        f"smaller batch_size of the classifier)")

@@ -70,9 +70,13 @@ class Report:
     paths: dict[str, Path] = field(default_factory=dict)
     computed: int = 0  # cells run now (ok or failed); set by run()
     cpu_seconds: float | None = None  # set by run_until: this process and its workers
-    budget_stop: str | None = None  # set by run_until when --budget ended it
     skipped: int = 0  # cells already finished before this run
     seconds: float = 0.0
+
+    @property
+    def budget_stop(self) -> str | None:
+        """Why ``--budget`` ended the run (the analysis's decision), or None."""
+        return self.analysis.budget_stop
 
     @property
     def rows(self) -> list[dict[str, Any]]:

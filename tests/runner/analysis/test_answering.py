@@ -61,7 +61,7 @@ def test_a_scene_is_resolved_once_into_its_design():
 
 @pytest.mark.parametrize("stored, says", [
     ({"seeds": []}, "scene field 'seeds' is empty"),
-    ({"until": "answered", "max_runs": 10 ** 9}, "'max_runs' must be from 5 to 1000"),
+    ({"until": "answered", "max_runs": 10 ** 9}, "'max_runs' must be from 5 (the first look) to 1000"),
     ({"until": "answered", "budget": "1h30"}, "bad duration '1h30'"),
     ({"look_every": 0, "until": "answered"}, "'look_every' must be ≥ 1"),
     ({"primary": [3]}, "'primary' entry 1 must be text"),

@@ -70,3 +70,22 @@ def test_run_workers_reads_this_machine(monkeypatch):
 def test_no_scene_works_out_its_own_worker_count():
     """One place decides: the scene has no rule of its own any more."""
     assert not hasattr(Scene, "resolved_workers")
+
+
+def test_memory_caps_the_whole_run_and_a_forecast_above_it_is_refused(monkeypatch):
+    """``--memory``: the run's processes together; the count fits in it, and a run whose
+    forecast peak is above it is refused in one line before any training."""
+    monkeypatch.setattr(workers_module, "memory_bytes", lambda: 24 << 30)
+    monkeypatch.setattr(workers_module, "usable_cores", lambda: 2)
+    rows = [{"classifier": "x", "peak_rss_mb": 1500.0}]
+    free = run_workers(Scene(), rows, parent_peak_mb=500)
+    assert (free.count, free.memory_source) == (2, "this machine")
+    capped = run_workers(Scene(memory="3GiB"), rows, parent_peak_mb=500)
+    assert (capped.count, capped.limit, capped.memory_source) == (1, "memory", "--memory")
+    assert capped.memory_mb == 3072 and capped.run_peak_mb <= 3072
+    with pytest.raises(InputError, match=r"--memory 1GiB: the run's forecast peak is 1\.56 GiB"):
+        run_workers(Scene(memory="1GiB"), rows, parent_peak_mb=500)
+    with pytest.raises(InputError, match="scene field 'memory' must be a size"):
+        Scene(memory="lots")
+    with pytest.raises(InputError, match="--memory must be at least 64MiB"):
+        Scene.of({"memory": "1MiB"}, labels={"memory": "--memory"})
