@@ -81,6 +81,9 @@ def test_a_cell_planned_with_other_kernels_here_says_which_field_differs(folder,
     assert cell["key_now"] != cell["key"]
     (field,) = cell["identity_differs"]
     assert field.startswith("cpu_kernels: avx2 (the default) there, ")
+    # what each side's run record resolved: the folder's, and this machine's
+    assert cell["compute_there"]["cpu_kernels"] == "avx2"
+    assert cell["compute_here"]["cpu_kernels"] != "avx2"
 
 
 def test_every_cell_with_all_and_the_cells_kept_where_asked(folder, tmp_path):

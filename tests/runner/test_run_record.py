@@ -120,3 +120,10 @@ def test_until_only_fields_are_refused_by_the_scene_itself(tmp_path):
     with pytest.raises(InputError, match="--budget only means something with --until"):
         Scene.of({"budget": "1h"}, labels={"budget": "--budget"})
     assert _scene(tmp_path, until="answered", primary=[PRIMARY], budget="1h").design.budget == "1h"
+
+
+def test_the_records_default_paired_test_is_the_analysiss():
+    """execution does not import analysis, so the default is written twice: kept equal."""
+    from tactbench.runner.analysis.paired_tests import DEFAULT_PAIRED_TEST
+
+    assert record_module.DEFAULT_PAIRED_TEST == DEFAULT_PAIRED_TEST
