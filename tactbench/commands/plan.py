@@ -148,7 +148,9 @@ def _print_memory(f) -> None:
     if f.worker_peak_mb is None:
         click.echo(f"memory: {f.workers} worker(s) ({f.workers_limit}); peak not forecast")
         return
-    of = "" if f.memory_mb is None else f" of this machine's {f.memory_mb / 1024:.1f} GiB"
+    capped = ((f.record or {}).get("workers") or {}).get("memory_source") == "--memory"
+    whose = "the --memory cap's" if capped else "this machine's"
+    of = "" if f.memory_mb is None else f" of {whose} {f.memory_mb / 1024:.1f} GiB"
     click.echo(f"memory: {f.workers} worker(s) at once (set by {f.workers_limit}), each "
                f"at about {f.worker_peak_mb / 1024:.2f} GiB ({f.worker_peak_source}); "
                f"the whole run, its own process and every worker, about "
