@@ -51,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--paper", action="store_true")
     args = ap.parse_args(argv)
+    import tactbench  # noqa: F401 — first, so that it pins the CPU kernels before torch loads
     import torch
 
     out = Path(args.out)
