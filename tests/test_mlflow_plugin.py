@@ -47,6 +47,10 @@ def test_each_finished_cell_is_a_run_under_the_folders_parent(logged):
     out, uri, report = logged
     (parent,) = runs_of(uri, "folder")
     assert parent.data.tags["tactbench.folder"] == str(out.resolve())
+    # what the run resolved once (its record, run_finished's summary) tags the parent
+    assert parent.data.tags["tactbench.record.paired_test"] == "corrected-t"
+    assert '"device": "cpu"' in parent.data.tags["tactbench.record.compute"]
+    assert parent.data.tags["tactbench.record.workers"].split()[0].isdigit()
     cells = runs_of(uri, "cell")
     assert len(cells) == 6
     assert {r.data.tags["mlflow.parentRunId"] for r in cells} == {parent.info.run_id}

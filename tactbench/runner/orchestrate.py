@@ -23,7 +23,7 @@ import resource
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from tactbench.contracts import SPLIT
 from tactbench.data.splits import SplitData, draw_splits, split_design
@@ -269,7 +269,7 @@ def render_folder(out: str | Path, *, contrasts: Sequence[str] | None = None,
     primary = list(design.primary) if primary is None else list(primary)
     check_contrasts([*contrasts, *primary], [{f: r[f] for f in ("encoder", "classifier", "L")}
                                              for r in rows])
-    users, missing = dataset_users(rows, registry)
+    users, missing = dataset_users(rows, registry, scene=scene)
     how = "re-rendered from the stored rows of cells/ (nothing trained)"
     report = render(analyse(rows, contrasts=contrasts, margin=margin, users=users,
                             primary=primary, sequential=design, paired_test=paired),
@@ -328,12 +328,14 @@ def _keyed_rows(store: ResultStore) -> list[dict[str, Any]]:
     return rows
 
 
-def dataset_users(rows: Sequence[dict[str, Any]], registry=None,
+def dataset_users(rows: Sequence[dict[str, Any]], registry=None, *,
+                  scene: Mapping[str, Any] | None = None,
                   ) -> tuple[list[str] | None, str | None]:
     """``(the user of every sample of the rows' dataset, None)``, loading the dataset
-    the rows' scene names; ``(None, why)`` when it cannot be loaded here or is not the
-    one the rows were computed on (another content hash)."""
-    spec = latest_scene(rows).get("dataset")
+    the run's ``scene`` names (its record's; None: the scene of the rows' latest row);
+    ``(None, why)`` when it cannot be loaded here or is not the one the rows were
+    computed on (another content hash)."""
+    spec = (latest_scene(rows) if scene is None else scene).get("dataset")
     done = ok_rows(rows) or list(rows)
     digest = done[0].get("dataset_hash") if done else None
     if not isinstance(spec, str) or not digest:

@@ -128,7 +128,7 @@ def make_jobs(p: Plan, cells: Sequence[Cell], folders: dict[tuple[str, str], str
                     classifier=p.classifier_component(c.classifier),
                     split=split, test_window=window,
                     encoding_dir=folders[(c.encoder, p.input_kind[c.classifier])],
-                    scene=scene, data=data, threads=scene.threads,
+                    scene=scene, data=data, threads=p.compute.threads,  # the record's
                     model_path=str(models / f"{c.key}.safetensors") if models else None,
                     model_meta=model_metadata(p, c) if models else None)
             for c in cells]

@@ -342,7 +342,24 @@ class Exporter:
         done = [self.log_cell(out, row, grid, judged.get(_cell_of(row))) for row in rows
                 ] if cells else []
         done += [self.log_comparison(out, c, rows[0], grid) for c in record["comparisons"]]
+        self.tag_record(record.get("record"))
         return {"logged": sum(done), "unchanged": len(done) - sum(done)}
+
+    def tag_record(self, resolved: dict[str, Any] | None) -> None:
+        """What the run resolved once (its record, ``RunRecord.to_json``: computation,
+        workers, paired test, primary questions) as tags of each parent run it logged
+        to; nothing for a record of a folder exported after the fact (no run record)."""
+        if not resolved:
+            return
+        workers = resolved.get("workers") or {}
+        tags = {"tactbench.record.compute": json.dumps(resolved.get("compute"), sort_keys=True),
+                "tactbench.record.workers": f"{workers.get('count')} ({workers.get('limit')})",
+                "tactbench.record.paired_test": str(resolved.get("paired_test")),
+                "tactbench.record.primary": json.dumps(
+                    (resolved.get("design") or {}).get("primary") or [])[:5000]}
+        for run_id in sorted(self._opened):
+            for name, value in tags.items():
+                self.client.set_tag(run_id, name, value)
 
 
 def _of_grid(params: dict[str, str], grid: dict[str, Any]) -> bool:
