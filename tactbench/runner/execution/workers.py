@@ -149,8 +149,18 @@ def run_workers(scene: "Scene", rows: Iterable[Mapping[str, Any]] = (), *,
                              devices=run_devices(scene))
     if cap is not None and cap < machine:
         workers = replace(workers, memory_source="--memory")
+        if workers.count > 1 and scene.workers is None and not measured(workers):
+            # a forecast from the plan is a floor (no network's activations): under a
+            # cap, cells side by side need a measured peak; one at a time until then
+            workers = replace(workers, count=1, limit="--memory without a measured peak")
         check_room(workers, scene.memory)
     return workers
+
+
+def measured(workers: Workers) -> bool:
+    """Whether a worker's forecast peak was measured (a stored cell's), not a floor
+    estimated from the plan."""
+    return workers.worker_peak_mb is not None and not workers.peak_source.startswith("at least")
 
 
 def check_room(workers: Workers, memory: str) -> None:

@@ -89,3 +89,16 @@ def test_memory_caps_the_whole_run_and_a_forecast_above_it_is_refused(monkeypatc
         Scene(memory="lots")
     with pytest.raises(InputError, match="--memory must be at least 64MiB"):
         Scene.of({"memory": "1MiB"}, labels={"memory": "--memory"})
+
+
+def test_under_a_memory_cap_cells_run_side_by_side_only_on_a_measured_peak(monkeypatch):
+    """Without a pilot, a worker's forecast is a floor: under --memory one cell runs at a
+    time until a stored cell has measured a peak."""
+    monkeypatch.setattr(workers_module, "memory_bytes", lambda: 24 << 30)
+    monkeypatch.setattr(workers_module, "usable_cores", lambda: 2)
+    floor = run_workers(Scene(memory="4GiB"), [], parent_peak_mb=500)
+    assert (floor.count, floor.limit) == (1, "--memory without a measured peak")
+    measured = run_workers(Scene(memory="4GiB"), [{"classifier": "x", "peak_rss_mb": 1000.0}],
+                           parent_peak_mb=500)
+    assert measured.count == 2  # 500 + 2 × 1000 MiB fit in 4 GiB
+    assert run_workers(Scene(memory="4GiB", workers=2), [], parent_peak_mb=500).count == 2
