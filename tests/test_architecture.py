@@ -383,7 +383,21 @@ ORCHESTRATE_FROM_PRESENTATION = {"Report", "render", "write_report", "refresh_pa
                                  "EXTRA"}
 #: The decided parts of a report, which orchestrate reads from the analysis instead.
 DECIDED_ATTRIBUTES = {"rows", "summaries", "comparisons", "looks", "history", "ok", "failed",
-                      "statistics", "variance"}
+                      "statistics", "variance", "budget_stop"}
+#: The parts of execution that do the work (plan, cache, encode, run cells, decide the
+#: workers): analysis reads execution's records and never these (``plan`` composes them
+#: with analysis in runner/forecasting.py, as orchestrate does for a run).
+WORK = ("planning", "cache", "entries", "leases", "estimate", "workers", "executors",
+        "cell", "system")
+
+
+def test_analysis_reads_records_and_never_does_the_work():
+    wrong = [f"{module}:{node.lineno} imports {node.module}"
+             for module, path in MODULES.items() if room_of(module) == "analysis"
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.ImportFrom) and any(
+                 (node.module or "") == f"tactbench.runner.execution.{w}" for w in WORK)]
+    assert not wrong, "analysis does execution's work: " + "; ".join(wrong)
 
 
 def names_from(path: Path, package: str) -> list[tuple[str, int]]:
