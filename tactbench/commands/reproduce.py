@@ -45,7 +45,7 @@ from tactbench.paths import check_output_folder
 from tactbench.plugins import load_registry
 from tactbench.runner import (IDENTITY_DEFAULTS, OK, PREDICTION_LISTS, UNTIL_ONLY, ResultStore,
                               Scene, digest, folder_record, identity_differences, ok_rows,
-                              read_record, row_identity, row_scene, run)
+                              row_identity, row_scene, run)
 
 #: The stored scene's fields a reproduction sets itself: one plain run of the chosen
 #: cells, in its own folder, with no question asked of them.
@@ -246,7 +246,7 @@ def reproduce(folder: str, *, keys: Sequence[str] = (), everything: bool = False
             run(scene, registry=registry, progress=progress, plots=False)
             store = ResultStore(scene.out)
             made = store.stored_rows()
-            here = read_record(scene.out)  # what this machine resolved for the same cells
+            here = folder_record(scene.out, made)  # what this machine resolved for them
             for row in part:
                 new = store.get(row["key"]) or _same_cell(row, made)
                 results.append({**compare(row, new, there.identity_defaults),

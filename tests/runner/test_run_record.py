@@ -93,6 +93,13 @@ def test_a_stored_record_is_verified_when_read_back(tmp_path, private_cache, cap
     rows = report.rows
     assert record_of_rows(rows).compute == record.compute
     assert record_of_rows(rows).design == record.design
+    # sealed again after an edit, a design that is not its scene's is still refused
+    edited = dataclasses.replace(record, design=dataclasses.replace(record.design,
+                                                                    looks=(5, 6)))
+    write_record(out, edited)
+    assert read_record(out) is None and "its design is not its scene's" in caplog.text
+    path.write_text("[" * 100_000)  # nested past the parser's depth: one line
+    assert read_record(out) is None
     path.write_text("[1, 2]")  # not a record at all
     assert read_record(out) is None
     with pytest.raises(InputError, match="not a run record"):
@@ -107,7 +114,7 @@ def test_a_report_rendered_again_takes_its_statistics_from_the_record(tmp_path,
     assert not [c for c in before.comparisons if c.family == "primary"]  # none asked
     record = read_record(out)
     asked = dataclasses.replace(record, design=dataclasses.replace(
-        record.design, primary=(PRIMARY,)))
+        record.design, primary=(PRIMARY,)), scene={**record.scene, "primary": [PRIMARY]})
     write_record(out, asked)
     again = render_folder(out, plots=False, write=False)
     [primary] = [c for c in again.comparisons if c.family == "primary"]

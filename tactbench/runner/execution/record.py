@@ -134,27 +134,35 @@ class RunRecord:
         """The record of :meth:`to_json`'s document; a malformed one raises
         :class:`InputError` naming what is wrong."""
         try:
-            design = doc["design"]
+            design, scene = doc["design"], dict(doc["scene"])
             workers = doc.get("workers")
             if workers is not None:
                 workers = {k: v for k, v in workers.items() if k != "run_peak_mb"}
                 if workers.get("devices") is not None:
                     workers["devices"] = tuple(workers["devices"])
                 workers = Workers(**workers)
-            return cls(
+            compute = doc["compute"]
+            record = cls(
                 design=Design(primary=tuple(design["primary"]),
                               seed_order=tuple(int(s) for s in design["seed_order"]),
                               looks=tuple(int(n) for n in design["looks"]),
                               budget=design.get("budget"),
                               budget_seconds=design.get("budget_seconds")),
-                compute=Compute(**doc["compute"]), paired_test=str(doc["paired_test"]),
+                compute=Compute(int(compute["threads"]), str(compute["cpu_kernels"]),
+                                str(compute["device"])),
+                paired_test=str(doc["paired_test"]),
                 families={str(q): tuple(v) for q, v in dict(doc["families"]).items()},
                 workers=workers, identity_defaults=dict(doc["identity_defaults"]),
-                scene=dict(doc["scene"]), machine=dict(doc["machine"]),
+                scene=scene, machine=dict(doc["machine"]),
                 made=str(doc["made"]), source=source)
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise InputError(f"{source}: not a run record ({type(exc).__name__}: {exc})"
                              ) from None
+        # the design is its scene's (design_of checks the stored fields as a scene does):
+        # a record edited and sealed again cannot hand the looks a design of its own
+        if record.design != design_of(scene):
+            raise InputError(f"{source}: its design is not its scene's (edited)")
+        return record
 
 
 def resolve_record(scene: "Scene", *, plan: "Plan", rows: Iterable[Mapping[str, Any]] = (),
@@ -207,7 +215,7 @@ def read_record(out: str | Path) -> RunRecord | None:
         if doc.get("checksum") != record_checksum(doc):
             raise InputError(f"{path} does not match its checksum (edited or damaged)")
         return RunRecord.from_json(doc, source=str(path))
-    except (InputError, OSError, ValueError) as exc:
+    except (InputError, OSError, ValueError, RecursionError) as exc:
         log.warning("tactbench: warning: %s; the folder's rows are read instead "
                     "(the next run writes the record again)", exc)
         return None

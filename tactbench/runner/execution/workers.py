@@ -41,6 +41,9 @@ MIB = float(1 << 20)
 #: numpy, scikit-learn and the runner imported; the smallest peak any committed cell row
 #: recorded (a logreg cell, quick profile: docs/results, 406 MiB on the project's VM).
 WORKER_BASE_MB = 406.0
+#: The source of a worker's peak estimated from the plan: a floor, not a measurement.
+ESTIMATED = ("at least: estimated from the plan, no stored cell measured one (a pilot of "
+             "one seed measures it)")
 
 
 @dataclass(frozen=True)
@@ -117,8 +120,7 @@ def worker_peak(rows: Iterable[Mapping[str, Any]] = (), p: "Plan | None" = None,
     if p is None:
         return None, "not forecast"
     estimate = WORKER_BASE_MB + (bank_budget_bytes() + 2 * p.batch_bytes) / MIB
-    return estimate, ("at least: estimated from the plan, no stored cell measured one "
-                      "(a pilot of one seed measures it)")
+    return estimate, ESTIMATED
 
 
 def run_devices(scene: "Scene") -> list[str] | None:
@@ -160,7 +162,7 @@ def run_workers(scene: "Scene", rows: Iterable[Mapping[str, Any]] = (), *,
 def measured(workers: Workers) -> bool:
     """Whether a worker's forecast peak was measured (a stored cell's), not a floor
     estimated from the plan."""
-    return workers.worker_peak_mb is not None and not workers.peak_source.startswith("at least")
+    return workers.worker_peak_mb is not None and workers.peak_source != ESTIMATED
 
 
 def check_room(workers: Workers, memory: str) -> None:
